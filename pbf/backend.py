@@ -1,0 +1,61 @@
+"""Choosing and starting Taichi's backend, once per process.
+
+``arch="auto"`` takes CUDA when an NVIDIA GPU answers and Taichi's CPU backend otherwise. The choice
+can also come from the ``PBF_ARCH`` environment variable. Asking for CUDA where there is none is an
+error, never a silent fallback. The chosen backend is printed once.
+"""
+import os
+
+import taichi as ti
+
+ARCHES = ("auto", "cpu", "cuda")
+ENV_VAR = "PBF_ARCH"
+
+
+class BackendError(RuntimeError):
+    """The requested backend cannot be started."""
+
+
+_started: str | None = None
+
+
+def _cuda_present() -> bool:
+    """Whether Taichi can start CUDA here (it initialises CUDA once to find out)."""
+    try:
+        ti.init(arch=ti.cuda, log_level=ti.ERROR)
+        found = ti.lang.impl.current_cfg().arch == ti.cuda
+    except Exception:  # Taichi raises several types when the driver is missing
+        found = False
+    ti.reset()
+    return found
+
+
+def start(arch: str | None = None, quiet: bool = False) -> str:
+    """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto") and return "cpu" or "cuda".
+
+    Taichi can only run one backend per process: a second call with a different explicit request
+    raises BackendError; a matching or "auto" request returns the backend already running.
+    """
+    global _started
+    requested = (arch or os.environ.get(ENV_VAR) or "auto").lower()
+    if requested not in ARCHES:
+        source = "arch" if arch else ENV_VAR
+        raise BackendError(f"{source}={requested!r}: unknown backend; allowed: {', '.join(ARCHES)}")
+    if _started is not None:
+        if requested not in ("auto", _started):
+            raise BackendError(f"Taichi already runs on {_started} in this process; cannot switch to {requested}")
+        return _started
+    if requested == "cpu":
+        chosen = "cpu"
+    elif _cuda_present():
+        chosen = "cuda"
+    elif requested == "cuda":
+        raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
+    else:
+        chosen = "cpu"
+    ti.init(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
+    _started = chosen
+    if not quiet:
+        reason = "CUDA GPU found" if chosen == "cuda" else ("requested" if requested == "cpu" else "no CUDA GPU found")
+        print(f"[pbf] backend: {chosen} ({reason})", flush=True)
+    return chosen

@@ -1,0 +1,374 @@
+"""Scene parameters: one validated place for everything a preset sets, and the values derived from it.
+
+A scene is a TOML file (see ``scenes/``) or a dict of the same shape. Loading checks every key:
+unknown keys, wrong types, non-finite, negative or zero values, fluid blocks outside the container or
+overlapping each other, and more particles than memory holds all raise :class:`SceneError`, whose
+message names the file, the key and what is allowed. Nothing is allocated before a scene validates.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pbf import sph
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+Vec3 = tuple[float, float, float]
+
+
+class SceneError(ValueError):
+    """A scene that cannot be run; the message names the source, the key and what is allowed."""
+
+
+def _positive(value):
+    return None if value > 0 else "a value > 0"
+
+
+def _non_negative(value):
+    return None if value >= 0 else "a value ≥ 0"
+
+
+def _unit_interval(value):
+    return None if 0 <= value <= 1 else "a value in [0, 1]"
+
+
+def _at_least(lowest):
+    return lambda value: None if value >= lowest else f"a value ≥ {lowest}"
+
+
+def _between(lowest, highest):
+    return lambda value: None if lowest <= value <= highest else f"a value in [{lowest}, {highest}]"
+
+
+def _vec_positive(value):
+    return None if all(c > 0 for c in value) else "three values > 0"
+
+
+def key(default=dataclasses.MISSING, check=None, doc=""):
+    """A scene key: its default (none means required), a check returning what is allowed, and a doc line."""
+    return field(default=default, metadata={"check": check, "doc": doc})
+
+
+@dataclass(frozen=True)
+class Container:
+    """Axis-aligned box the fluid lives in."""
+
+    min_m: Vec3 = key((0.0, 0.0, 0.0), doc="lower corner of the box, m")
+    max_m: Vec3 = key((1.0, 1.0, 1.0), doc="upper corner of the box, m")
+
+
+@dataclass(frozen=True)
+class Block:
+    """A box of fluid filled with a simple-cubic lattice at the fluid spacing."""
+
+    min_m: Vec3 = key(doc="lower corner, m")
+    max_m: Vec3 = key(doc="upper corner, m")
+    velocity_m_s: Vec3 = key((0.0, 0.0, 0.0), doc="initial velocity, m/s")
+
+
+@dataclass(frozen=True)
+class Fluid:
+    spacing_m: float = key(0.025, _positive, "particle spacing s (the lattice pitch), m")
+    rest_density_kg_m3: float = key(1000.0, _positive, "rest density ρ0, kg/m³")
+    blocks: tuple[Block, ...] = key((), doc="fluid blocks ([[fluid.blocks]] tables)")
+
+
+@dataclass(frozen=True)
+class Time:
+    frame_dt_s: float = key(1.0 / 60.0, _positive, "time per rendered frame, s")
+    substeps: int = key(2, _at_least(1), "PBF steps per frame (Δt = frame_dt_s / substeps)")
+
+
+@dataclass(frozen=True)
+class Solver:
+    iterations: int = key(4, _at_least(1), "Jacobi iterations of the density constraint per substep")
+    kernel_ratio: float = key(2.2, _between(1.5, 4.0), "smoothing radius over spacing, h/s")
+    relaxation: float = key(0.1, _positive, "ε of Eq. (10) in the dimensionless form (ε h²/…); see solver.py")
+    clamp_pressure: bool = key(True, doc="use C_i = max(ρ_i/ρ0 − 1, 0): only compressed particles push")
+    scorr_k: float = key(0.01, _non_negative, "s_corr strength k (Eq. 11), dimensionless form; 0 disables")
+    scorr_n: int = key(4, _at_least(1), "s_corr exponent n (Eq. 11)")
+    scorr_dq: float = key(0.2, _between(0.0, 0.9), "s_corr reference distance Δq/h (Eq. 11)")
+    wall_density: bool = key(True, doc="add the density of the ghost fluid behind walls (no stacking)")
+
+
+@dataclass(frozen=True)
+class Viscosity:
+    xsph: float = key(0.01, _unit_interval, "XSPH coefficient c (Eq. 15), dimensionless; 0 disables")
+
+
+@dataclass(frozen=True)
+class Vorticity:
+    epsilon: float = key(0.0, _non_negative, "vorticity confinement ε (Eqs. 13-14), dimensionless; 0 disables")
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str = key("scene", doc="short name")
+    description: str = key("", doc="one line shown by --list")
+    gravity_m_s2: Vec3 = key((0.0, -9.81, 0.0), doc="gravitational acceleration, m/s² (y is up)")
+    container: Container = key(Container())
+    fluid: Fluid = key(Fluid())
+    time: Time = key(Time())
+    solver: Solver = key(Solver())
+    viscosity: Viscosity = key(Viscosity())
+    vorticity: Vorticity = key(Vorticity())
+
+    @property
+    def dt_s(self) -> float:
+        return self.time.frame_dt_s / self.time.substeps
+
+    @property
+    def kernel_radius_m(self) -> float:
+        return self.solver.kernel_ratio * self.fluid.spacing_m
+
+    @property
+    def particle_radius_m(self) -> float:
+        return 0.5 * self.fluid.spacing_m
+
+
+# ----------------------------------------------------------------------------- loading and validation
+
+
+def _type_name(annotation) -> str:
+    return {float: "a number", int: "an integer", bool: "true or false", str: "a string"}.get(
+        annotation, "three numbers [x, y, z]"
+    )
+
+
+def _convert(value, annotation, where):
+    """Convert one TOML value to the annotated type, or raise SceneError naming what was expected."""
+    if annotation is bool:
+        if isinstance(value, bool):
+            return value
+    elif annotation is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+    elif annotation is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not math.isfinite(value):
+                raise SceneError(f"{where}: expected a finite number, got {value}")
+            return float(value)
+    elif annotation is str:
+        if isinstance(value, str):
+            return value
+    elif annotation == Vec3:
+        if (
+            isinstance(value, (list, tuple))
+            and len(value) == 3
+            and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)
+        ):
+            if not all(math.isfinite(c) for c in value):
+                raise SceneError(f"{where}: expected three finite numbers, got {list(value)}")
+            return tuple(float(c) for c in value)
+    else:
+        raise TypeError(annotation)
+    raise SceneError(f"{where}: expected {_type_name(annotation)}, got {value!r}")
+
+
+def _build(cls, table, source, prefix=""):
+    """Build dataclass ``cls`` from a TOML table, refusing unknown keys and checking each value."""
+    where_table = f"{source}: [{prefix.rstrip('.')}]" if prefix else f"{source}"
+    if not isinstance(table, dict):
+        raise SceneError(f"{where_table}: expected a table, got {table!r}")
+    hints = typing.get_type_hints(cls)
+    known = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(table) - set(known))
+    if unknown:
+        raise SceneError(
+            f"{source}: unknown key '{prefix}{unknown[0]}'; allowed keys here: {', '.join(sorted(known))}"
+        )
+    values = {}
+    for name, f in known.items():
+        where = f"{source}: key '{prefix}{name}'"
+        if name not in table:
+            if f.default is dataclasses.MISSING:
+                raise SceneError(f"{where} is required ({f.metadata['doc']})")
+            continue
+        annotation = hints[name]
+        raw = table[name]
+        if dataclasses.is_dataclass(annotation):
+            values[name] = _build(annotation, raw, source, f"{prefix}{name}.")
+            continue
+        if typing.get_origin(annotation) is tuple and dataclasses.is_dataclass(typing.get_args(annotation)[0]):
+            if not isinstance(raw, list):
+                raise SceneError(f"{where}: expected a list of tables ([[{prefix}{name}]]), got {raw!r}")
+            item = typing.get_args(annotation)[0]
+            values[name] = tuple(_build(item, t, source, f"{prefix}{name}[{i}].") for i, t in enumerate(raw))
+            continue
+        value = _convert(raw, annotation, where)
+        check = f.metadata["check"]
+        if check is not None:
+            allowed = check(value)
+            if allowed is not None:
+                raise SceneError(f"{where}: expected {allowed} ({f.metadata['doc']}), got {raw!r}")
+        values[name] = value
+    return cls(**values)
+
+
+def _block_counts(block: Block, spacing: float) -> tuple[int, int, int]:
+    """Lattice sites per axis: as many spacings as fit in the block (a rounding tolerance of 1e-6 s)."""
+    return tuple(int(math.floor((hi - lo) / spacing + 1e-6)) for lo, hi in zip(block.min_m, block.max_m))
+
+
+def _check_geometry(scene: Scene, source: str) -> None:
+    lo, hi = np.array(scene.container.min_m), np.array(scene.container.max_m)
+    if np.any(hi <= lo):
+        raise SceneError(
+            f"{source}: key 'container.max_m' must exceed 'container.min_m' on every axis, "
+            f"got min {list(lo)} and max {list(hi)}"
+        )
+    spacing = scene.fluid.spacing_m
+    if np.any(hi - lo < 2 * scene.kernel_radius_m):
+        raise SceneError(
+            f"{source}: key 'container.max_m': the box must be at least two smoothing radii "
+            f"(2 h = {2 * scene.kernel_radius_m:g} m) wide on every axis for fluid.spacing_m = {spacing:g}"
+        )
+    if not scene.fluid.blocks:
+        raise SceneError(f"{source}: key 'fluid.blocks': at least one [[fluid.blocks]] table is required")
+    tolerance = 1e-9 * float(np.max(np.abs(np.concatenate([lo, hi]))) + 1.0)
+    boxes = []
+    for i, block in enumerate(scene.fluid.blocks):
+        b_lo, b_hi = np.array(block.min_m), np.array(block.max_m)
+        where = f"{source}: key 'fluid.blocks[{i}]"
+        if np.any(b_hi <= b_lo):
+            raise SceneError(f"{where}.max_m' must exceed min_m on every axis, got {list(b_lo)} and {list(b_hi)}")
+        if np.any(b_lo < lo - tolerance) or np.any(b_hi > hi + tolerance):
+            raise SceneError(
+                f"{where}': block {list(b_lo)}–{list(b_hi)} m lies outside the container "
+                f"{list(lo)}–{list(hi)} m; allowed: min_m ≥ container.min_m and max_m ≤ container.max_m"
+            )
+        if min(_block_counts(block, spacing)) < 1:
+            raise SceneError(
+                f"{where}': block {list(b_lo)}–{list(b_hi)} m is thinner than one spacing "
+                f"({spacing:g} m) on some axis, so it holds no particle"
+            )
+        for j, (o_lo, o_hi) in enumerate(boxes):
+            overlap = np.minimum(b_hi, o_hi) - np.maximum(b_lo, o_lo)
+            if np.all(overlap > tolerance):
+                raise SceneError(f"{where}' overlaps fluid.blocks[{j}]; blocks must not share volume")
+        boxes.append((b_lo, b_hi))
+
+
+BYTES_PER_PARTICLE = 600
+"""Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its neighbour list, sized for
+about 60 neighbours at 4 B and grown ×1.5 (~360 B); rounded up."""
+BYTES_PER_CELL = 12
+"""Grid memory per cell: count, start and a scan scratch, int32 each."""
+
+
+def available_memory_bytes() -> int:
+    """Physical memory that is free now (Linux/macOS), falling back to total memory."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def _check_memory(scene: Scene, source: str) -> None:
+    particles = particle_count(scene)
+    cells = int(np.prod(grid_resolution(scene)))
+    need = particles * BYTES_PER_PARTICLE + cells * BYTES_PER_CELL
+    have = available_memory_bytes()
+    if need > 0.8 * have:
+        raise SceneError(
+            f"{source}: key 'fluid.spacing_m': {particles:,} particles and {cells:,} grid cells need about "
+            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; "
+            f"use a larger spacing or smaller blocks"
+        )
+
+
+def from_dict(table: dict, source: str = "<dict>") -> Scene:
+    """Validate a scene given as a dict shaped like the TOML file."""
+    scene = _build(Scene, table, source)
+    _check_geometry(scene, source)
+    _check_memory(scene, source)
+    return scene
+
+
+def resolve_path(name_or_path: str | os.PathLike) -> Path:
+    """A preset name (``dam_break``) or a path to a TOML file; a clear error if neither exists."""
+    path = Path(name_or_path)
+    if path.suffix != ".toml" and not path.exists():
+        path = SCENES_DIR / f"{name_or_path}.toml"
+    if not path.is_file():
+        presets = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml")))
+        raise SceneError(f"{name_or_path}: no such scene file; presets: {presets}")
+    return path
+
+
+def parse_override(assignment: str) -> tuple[list[str], object]:
+    """Split ``solver.iterations=6`` into a key path and a TOML value (bare words are strings)."""
+    if "=" not in assignment:
+        raise SceneError(f"--set {assignment}: expected KEY=VALUE, e.g. solver.iterations=6")
+    dotted, text = assignment.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return dotted.strip().split("."), value
+
+
+def load(name_or_path: str | os.PathLike, overrides: typing.Sequence[str] = ()) -> Scene:
+    """Load and validate a preset or TOML file, applying ``KEY=VALUE`` overrides first."""
+    path = resolve_path(name_or_path)
+    try:
+        table = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path}: not valid TOML: {error}") from None
+    for assignment in overrides:
+        keys, value = parse_override(assignment)
+        target = table
+        for part in keys[:-1]:
+            target = target.setdefault(part, {})
+            if not isinstance(target, dict):
+                raise SceneError(f"{path}: --set {assignment}: '{part}' is not a table")
+        target[keys[-1]] = value
+    return from_dict(table, str(path))
+
+
+# ----------------------------------------------------------------------------- derived values
+
+
+def initial_positions(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Lattice positions (m) and velocities (m/s) of every block, float32 arrays of shape (n, 3).
+
+    Sites sit at min + (i + ½) s, so a block touching a wall starts half a spacing from it, exactly
+    where the ghost planes of :func:`pbf.sph.wall_density_table` complete its neighbourhood.
+    """
+    spacing = scene.fluid.spacing_m
+    positions, velocities = [], []
+    for block in scene.fluid.blocks:
+        counts = _block_counts(block, spacing)
+        axes = [lo + (np.arange(n) + 0.5) * spacing for lo, n in zip(block.min_m, counts)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        positions.append(grid)
+        velocities.append(np.broadcast_to(np.array(block.velocity_m_s), grid.shape))
+    return (
+        np.concatenate(positions).astype(np.float32),
+        np.concatenate(velocities).astype(np.float32),
+    )
+
+
+def particle_count(scene: Scene) -> int:
+    return sum(int(np.prod(_block_counts(b, scene.fluid.spacing_m))) for b in scene.fluid.blocks)
+
+
+def grid_resolution(scene: Scene) -> tuple[int, int, int]:
+    """Cells per axis of the neighbour grid; cells are at least h wide (with a 1e-4 margin against float32
+    rounding), so the 3×3×3 cells around a particle hold all its neighbours."""
+    extent = np.array(scene.container.max_m) - np.array(scene.container.min_m)
+    return tuple(max(1, int(math.floor(e / (scene.kernel_radius_m * (1 + 1e-4))))) for e in extent)
+
+
+def particle_mass_kg(scene: Scene) -> float:
+    """m = ρ0 / Σ_j W(x_j): the mass that puts a lattice at exactly ρ0 (see sph.lattice_density_sum)."""
+    return scene.fluid.rest_density_kg_m3 / sph.lattice_density_sum(scene.fluid.spacing_m, scene.kernel_radius_m)
+

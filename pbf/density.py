@@ -1,0 +1,97 @@
+"""The density constraint of PBF (Macklin & Müller 2013, Sec. 3-4), in a dimensionless form.
+
+The paper's λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Eq. 10) carries units of length², so ε and the s_corr
+term added to λ (Eqs. 11-12) only work at the scale they were tuned for. We measure lengths in h:
+with volume V = m/ρ0 and the dimensionless gradient ĝ_ij = V h ∇W(x_i − x_j),
+
+    C_i  = ρ_i/ρ0 − 1,  ρ_i/ρ0 = V Σ_j W_ij + ρ_wall/ρ0            (clamped to C_i ≥ 0 by default)
+    λ̂_i  = −C_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂)        (λ = h² λ̂, ε = ε̂ / h²)
+    Δx_i = h [Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij + λ̂_i ĝ_wall],  s_corr = −k (W_ij / W(Δq))ⁿ
+
+Every constant (ε̂, k, n, Δq/h) is dimensionless, so one set behaves the same at any particle spacing.
+Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once.
+"""
+import taichi as ti
+
+from pbf.sph import kernel, kernel_gradient, kernel_np
+
+NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+
+@ti.data_oriented
+class DensityConstraint:
+    def __init__(self, particle_count, kernel_radius_m, particle_volume_m3, relaxation, clamp_pressure,
+                 scorr_k, scorr_n, scorr_dq, box, grid):
+        self.count = particle_count
+        self.h = float(kernel_radius_m)
+        self.volume = float(particle_volume_m3)
+        self.relaxation = float(relaxation)
+        self.clamp_pressure = bool(clamp_pressure)
+        self.scorr_k = float(scorr_k)
+        self.scorr_n = int(scorr_n)
+        self.inverse_w_dq = 1.0 / float(kernel_np(scorr_dq * kernel_radius_m, kernel_radius_m))
+        self.box = box
+        self.grid = grid
+        self.lam = ti.field(ti.f32, shape=particle_count)
+        """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
+        self.density_ratio = ti.field(ti.f32, shape=particle_count)
+        """ρ_i/ρ0 at the last λ pass (or statistics pass)."""
+        self.x_next = ti.Vector.field(3, ti.f32, shape=particle_count)
+
+    @ti.func
+    def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
+        """ρ_i/ρ0, Σ_j ĝ_ij + ĝ_wall and Σ_j |ĝ_ij|² for particle i (the parts of Eq. 10)."""
+        xi = x[i]
+        h = self.h
+        ratio = self.volume * kernel(0.0, h)
+        gradient_i = ti.Vector([0.0, 0.0, 0.0])
+        sum_sq = 0.0
+        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+            r = xi - x[neighbours[k]]
+            ratio += self.volume * kernel(r.norm_sqr(), h)
+            g = self.volume * h * kernel_gradient(r, h)
+            gradient_i += g
+            sum_sq += g.norm_sqr()
+        wall, wall_gradient = self.box.wall_density(xi)
+        return ratio + wall, gradient_i + h * wall_gradient, sum_sq
+
+    @ti.kernel
+    def compute_lambda(self, x: ti.template(), neighbours: NeighbourList):
+        """λ̂_i for every particle (Eq. 10, dimensionless)."""
+        for i in range(self.count):
+            ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
+            self.density_ratio[i] = ratio
+            c = ratio - 1.0
+            if ti.static(self.clamp_pressure):
+                c = ti.max(c, 0.0)
+            self.lam[i] = -c / (gradient_i.norm_sqr() + sum_sq + self.relaxation)
+
+    @ti.kernel
+    def compute_correction(self, x: ti.template(), neighbours: NeighbourList):
+        """x_next_i = collide(x_i + Δx_i) (Eqs. 11-12, then the box); Jacobi, so x is only read."""
+        h = self.h
+        for i in range(self.count):
+            xi = x[i]
+            lam_i = self.lam[i]
+            dx = ti.Vector([0.0, 0.0, 0.0])
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+                j = neighbours[k]
+                r = xi - x[j]
+                s_corr = 0.0
+                if ti.static(self.scorr_k > 0.0):
+                    s_corr = -self.scorr_k * (kernel(r.norm_sqr(), h) * self.inverse_w_dq) ** self.scorr_n
+                dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * kernel_gradient(r, h)
+            _, wall_gradient = self.box.wall_density(xi)
+            dx += lam_i * h * wall_gradient
+            self.x_next[i] = self.box.clamp(xi + h * dx)
+
+    @ti.kernel
+    def apply(self, x: ti.template()):
+        for i in range(self.count):
+            x[i] = self.x_next[i]
+
+    def project(self, x, neighbours):
+        """One Jacobi iteration of the density constraint on positions x (Algorithm 1, lines 9-19)."""
+        self.compute_lambda(x, neighbours)
+        self.compute_correction(x, neighbours)
+        self.apply(x)

@@ -1,0 +1,53 @@
+"""Statistics of the current state, reduced inside a kernel (no Python loop over particles)."""
+import taichi as ti
+
+NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+
+@ti.data_oriented
+class Diagnostics:
+    def __init__(self, state, density, grid, particle_mass_kg):
+        self.state = state
+        self.density = density
+        self.grid = grid
+        self.count = state.count
+        self.mass = float(particle_mass_kg)
+        self.sums = ti.field(ti.f64, shape=3)
+        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours."""
+        self.maxima = ti.field(ti.f32, shape=3)
+        """max max(ρ/ρ0 − 1, 0), max |v|, max neighbours."""
+
+    @ti.kernel
+    def _reduce(self, neighbours: NeighbourList):
+        for k in ti.static(range(3)):
+            self.sums[k] = 0.0
+            self.maxima[k] = 0.0
+        for i in range(self.count):
+            ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
+            error = ti.max(ratio - 1.0, 0.0)
+            speed2 = self.state.v[i].norm_sqr()
+            count = self.grid.neighbour_start[i + 1] - self.grid.neighbour_start[i]
+            self.sums[0] += ti.cast(error, ti.f64)
+            self.sums[1] += ti.cast(speed2, ti.f64)
+            self.sums[2] += ti.cast(count, ti.f64)
+            ti.atomic_max(self.maxima[0], error)
+            ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
+            ti.atomic_max(self.maxima[2], ti.cast(count, ti.f32))
+
+    def compute(self, neighbours) -> dict:
+        """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts.
+
+        Densities use the neighbour lists of the last substep with the current positions, as the
+        solver's final iteration did.
+        """
+        self._reduce(neighbours)
+        sums, maxima = self.sums.to_numpy(), self.maxima.to_numpy()
+        n = self.count
+        return {
+            "mean_density_error": float(sums[0] / n),
+            "max_density_error": float(maxima[0]),
+            "max_speed_m_s": float(maxima[1]),
+            "kinetic_energy_j": float(0.5 * self.mass * sums[1]),
+            "mean_neighbours": float(sums[2] / n),
+            "max_neighbours": int(maxima[2]),
+        }

@@ -1,0 +1,72 @@
+"""Velocity post-processing: vorticity confinement (Eqs. 13-14) and XSPH viscosity (Eq. 15).
+
+Both are made dimensionless like the density constraint (V = m/ρ0 is the particle volume):
+
+    ω_i   = Σ_j V ∇_i W_ij × (v_j − v_i)                  SPH curl of v (1/s), Eq. 13
+    η_i   = Σ_j V (|ω_j| − |ω_i|) ∇_i W_ij,  N = η/|η|    location vector
+    Δv_i  = Δt ε h |ω_i| (N × ω_i)                        Eq. 14; ε h |ω|² is an acceleration
+    Δv_i += c Σ_j V (v_j − v_i) W_ij                      Eq. 15
+
+The h in Eq. 14 makes confinement fade as resolution rises, as the vorticity it restores is the part
+lost to coarse particles. Both read velocities and write new ones (Jacobi), then copy back.
+"""
+import taichi as ti
+
+from pbf.sph import kernel, kernel_gradient
+
+NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+
+@ti.data_oriented
+class VelocityPostprocess:
+    def __init__(self, state, particle_volume_m3, kernel_radius_m, grid):
+        self.state = state
+        self.count = state.count
+        self.volume = float(particle_volume_m3)
+        self.h = float(kernel_radius_m)
+        self.grid = grid
+        self.omega = ti.Vector.field(3, ti.f32, shape=state.count)
+        self.v_next = ti.Vector.field(3, ti.f32, shape=state.count)
+
+    @ti.kernel
+    def compute_vorticity(self, x: ti.template(), neighbours: NeighbourList):
+        for i in range(self.count):
+            xi, vi = x[i], self.state.v[i]
+            omega = ti.Vector([0.0, 0.0, 0.0])
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+                j = neighbours[k]
+                omega += self.volume * kernel_gradient(xi - x[j], self.h).cross(self.state.v[j] - vi)
+            self.omega[i] = omega
+
+    @ti.kernel
+    def apply(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
+              xsph: ti.f32, with_vorticity: ti.template()):
+        h = self.h
+        for i in range(self.count):
+            xi, vi = x[i], self.state.v[i]
+            eta = ti.Vector([0.0, 0.0, 0.0])
+            smoothing = ti.Vector([0.0, 0.0, 0.0])
+            omega_i = ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(with_vorticity):
+                omega_i = self.omega[i]
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+                j = neighbours[k]
+                r = xi - x[j]
+                smoothing += self.volume * (self.state.v[j] - vi) * kernel(r.norm_sqr(), h)
+                if ti.static(with_vorticity):
+                    eta += self.volume * (self.omega[j].norm() - omega_i.norm()) * kernel_gradient(r, h)
+            dv = xsph * smoothing
+            if ti.static(with_vorticity):
+                eta_norm = eta.norm()
+                if eta_norm > 0.0:
+                    dv += dt * vorticity * h * omega_i.norm() * (eta / eta_norm).cross(omega_i)
+            self.v_next[i] = vi + dv
+        for i in range(self.count):
+            self.state.v[i] = self.v_next[i]
+
+    def run(self, x, neighbours, dt, vorticity, xsph):
+        """Apply confinement (if ε > 0) and XSPH (if c > 0) to the state's velocities."""
+        if vorticity > 0.0:
+            self.compute_vorticity(x, neighbours)
+        if vorticity > 0.0 or xsph > 0.0:
+            self.apply(x, neighbours, dt, vorticity, xsph, vorticity > 0.0)

@@ -1,0 +1,103 @@
+"""The SPH smoothing kernel: the cubic B-spline (Monaghan 1992), as Taichi functions and NumPy twins.
+
+The paper pairs poly6 for density with the spiky gradient. That gradient is not the gradient of the
+density it constrains, so each projection moves particles off the constraint's true gradient and
+feeds energy into a resting fluid: a column at rest jittered at 0.1-0.8 m/s, and more iterations made
+it worse. The cubic spline gives density and gradient from one function, so the projection is a true
+Gauss-Newton step; the same column's kinetic energy fell 25-50× and now falls with iterations.
+h is the support radius (W = 0 for r ≥ h).
+
+The NumPy twins compute derived constants once (particle mass, wall density table) and give tests an
+independent implementation to check the Taichi versions against.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+SIGMA_3D = 8.0 / math.pi
+
+
+@ti.func
+def kernel(r2: ti.f32, h: ti.f32) -> ti.f32:
+    """W(r, h) from r², with q = r/h: σ(6q³ − 6q² + 1) for q ≤ ½, 2σ(1 − q)³ for q < 1, σ = 8/(π h³)."""
+    q = ti.sqrt(r2) / h
+    w = 0.0
+    if q <= 0.5:
+        w = SIGMA_3D / h**3 * (6.0 * q * q * (q - 1.0) + 1.0)
+    elif q < 1.0:
+        w = SIGMA_3D / h**3 * 2.0 * (1.0 - q) ** 3
+    return w
+
+
+@ti.func
+def kernel_gradient(r: ti.template(), h: ti.f32):
+    """∇W(r, h) = W'(|r|) r/|r|; zero at r = 0 (no self-force)."""
+    g = ti.Vector([0.0, 0.0, 0.0])
+    norm = r.norm()
+    q = norm / h
+    if 0.0 < norm < h:
+        slope = 0.0
+        if q <= 0.5:
+            slope = SIGMA_3D / h**4 * 6.0 * q * (3.0 * q - 2.0)
+        else:
+            slope = -SIGMA_3D / h**4 * 6.0 * (1.0 - q) ** 2
+        g = slope / norm * r
+    return g
+
+
+def kernel_np(r, h):
+    """NumPy twin of :func:`kernel`, taking distances (not squared)."""
+    q = np.asarray(r, dtype=np.float64) / h
+    inner = 6.0 * q * q * (q - 1.0) + 1.0
+    outer = 2.0 * np.clip(1.0 - q, 0.0, None) ** 3
+    return SIGMA_3D / h**3 * np.where(q <= 0.5, inner, np.where(q < 1.0, outer, 0.0))
+
+
+def kernel_gradient_np(r_vec, h):
+    """NumPy twin of :func:`kernel_gradient` for an (n, 3) array of offsets."""
+    r_vec = np.asarray(r_vec, dtype=np.float64)
+    norm = np.linalg.norm(r_vec, axis=-1, keepdims=True)
+    q = norm / h
+    slope = SIGMA_3D / h**4 * np.where(q <= 0.5, 6.0 * q * (3.0 * q - 2.0), -6.0 * np.clip(1.0 - q, 0.0, None) ** 2)
+    inside = (norm > 0.0) & (norm < h)
+    return np.where(inside, slope / np.where(inside, norm, 1.0) * r_vec, 0.0)
+
+
+def lattice_offsets(spacing, h):
+    """Offsets of all simple-cubic lattice sites (spacing s) within distance h of the origin, origin included."""
+    n = int(math.ceil(h / spacing))
+    axis = np.arange(-n, n + 1) * spacing
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    return grid[np.linalg.norm(grid, axis=1) < h]
+
+
+def lattice_density_sum(spacing, h):
+    """Σ_j W(x_j) over a full lattice: the number density a truncated kernel actually sees, in 1/m³.
+
+    It differs from 1/s³ by a few per cent, so the particle mass is derived from it (not from ρ0 s³)
+    to make the initial block sit exactly at rest density.
+    """
+    return float(kernel_np(np.linalg.norm(lattice_offsets(spacing, h), axis=1), h).sum())
+
+
+def wall_density_table(spacing, h, samples):
+    """Missing density ρ_wall(d)/ρ0 of a particle at distance d from a flat wall, for d in [0, h].
+
+    A particle next to a wall lacks the neighbours that would lie behind it. We restore them as ghost
+    lattice planes behind the wall, mirroring the fluid lattice: the ghost planes sit at distances
+    d + s/2 + k s from the particle (k = 0, 1, ...), each plane a square lattice of spacing s. At the
+    initial lattice (d = s/2) this restores the interior density exactly, so a block resting against a
+    wall neither stacks nor shows a density dip. Returned as the table and its derivative in d.
+    """
+    n = int(math.ceil(h / spacing))
+    lateral = np.arange(-n, n + 1) * spacing
+    la, lb = np.meshgrid(lateral, lateral, indexing="ij")
+    lateral_r2 = (la * la + lb * lb).ravel()
+    d = np.linspace(0.0, h, samples)
+    density = np.zeros(samples)
+    for k in range(n + 1):
+        plane = d + 0.5 * spacing + k * spacing
+        density += kernel_np(np.sqrt(plane[:, None] ** 2 + lateral_r2[None, :]), h).sum(axis=1)
+    density /= lattice_density_sum(spacing, h)
+    return density, np.gradient(density, d)

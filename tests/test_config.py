@@ -1,0 +1,108 @@
+"""Bad scenes fail at load with one clear error naming the file, the key and what is allowed."""
+import copy
+import math
+import subprocess
+import sys
+
+import pytest
+from conftest import small_dam_break
+
+from pbf import backend, config
+from pbf.config import SceneError
+from pbf.simulation import Simulation
+
+
+def with_change(path, value):
+    scene = copy.deepcopy(small_dam_break())
+    target = scene
+    for part in path[:-1]:
+        target = target.setdefault(part, {}) if not isinstance(part, int) else target[part]
+    target[path[-1]] = value
+    return scene
+
+
+@pytest.mark.parametrize(
+    "path, value, expected",
+    [
+        (("fluid", "spacing_m"), -0.02, "key 'fluid.spacing_m': expected a value > 0"),
+        (("fluid", "spacing_m"), 0.0, "key 'fluid.spacing_m': expected a value > 0"),
+        (("fluid", "spacing_m"), math.nan, "key 'fluid.spacing_m': expected a finite number"),
+        (("fluid", "spacing_m"), "fine", "key 'fluid.spacing_m': expected a number"),
+        (("solver", "iterations"), 0, "key 'solver.iterations': expected a value ≥ 1"),
+        (("solver", "iterations"), 2.5, "key 'solver.iterations': expected an integer"),
+        (("solver", "clamp_pressure"), 1, "key 'solver.clamp_pressure': expected true or false"),
+        (("time", "frame_dt_s"), math.inf, "key 'time.frame_dt_s': expected a finite number"),
+        (("viscosity", "xsph"), 1.5, "key 'viscosity.xsph': expected a value in [0, 1]"),
+        (("gravity_m_s2",), [0, -9.81], "key 'gravity_m_s2': expected three numbers"),
+        (("solver", "iteratons"), 4, "unknown key 'solver.iteratons'; allowed keys here:"),
+        (("colour",), "blue", "unknown key 'colour'"),
+        (("fluid", "blocks", 0, "max_m"), [0.4, 0.4, 0.9], "'fluid.blocks[0]': block"),
+        (("fluid", "blocks"), [], "at least one [[fluid.blocks]]"),
+        (("container", "max_m"), [0.8, -1.0, 0.4], "container.max_m' must exceed"),
+    ],
+)
+def test_bad_values_name_the_key(path, value, expected):
+    with pytest.raises(SceneError) as error:
+        config.from_dict(with_change(path, value), "test.toml")
+    assert str(error.value).startswith("test.toml")
+    assert expected in str(error.value)
+
+
+def test_block_outside_box_names_the_allowed_range():
+    with pytest.raises(SceneError, match="lies outside the container.*allowed: min_m ≥ container.min_m"):
+        config.from_dict(with_change(("fluid", "blocks", 0, "min_m"), [-0.1, 0.0, 0.0]))
+
+
+def test_overlapping_blocks():
+    scene = small_dam_break()
+    scene["fluid"]["blocks"].append({"min_m": [0.3, 0.3, 0.0], "max_m": [0.5, 0.5, 0.2]})
+    with pytest.raises(SceneError, match=r"fluid.blocks\[1\]' overlaps fluid.blocks\[0\]"):
+        config.from_dict(scene)
+
+
+def test_too_many_particles_for_memory():
+    scene = small_dam_break()
+    scene["container"]["max_m"] = [100.0, 100.0, 100.0]
+    scene["fluid"]["blocks"][0]["max_m"] = [100.0, 100.0, 100.0]
+    scene["fluid"]["spacing_m"] = 0.01
+    with pytest.raises(SceneError, match="key 'fluid.spacing_m': .* particles .* GiB"):
+        config.from_dict(scene)
+
+
+def test_missing_scene_lists_presets():
+    with pytest.raises(SceneError, match="no_such_scene: no such scene file; presets: .*dam_break"):
+        config.load("no_such_scene")
+
+
+def test_override_and_preset_load(tmp_path):
+    scene = config.load("dam_break", ["solver.iterations=6", "fluid.spacing_m=0.05"])
+    assert scene.solver.iterations == 6 and scene.fluid.spacing_m == 0.05
+    assert config.particle_count(config.load("dam_break")) == 8000
+    with pytest.raises(SceneError, match="key 'solver.iterations': expected a value ≥ 1"):
+        config.load("dam_break", ["solver.iterations=0"])
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[solver\niterations = 3")
+    with pytest.raises(SceneError, match="broken.toml: not valid TOML"):
+        config.load(broken)
+
+
+def test_unknown_backend(monkeypatch):
+    with pytest.raises(backend.BackendError, match="unknown backend; allowed: auto, cpu, cuda"):
+        backend.start("metal")
+    monkeypatch.setenv(backend.ENV_VAR, "vulkan")
+    with pytest.raises(backend.BackendError, match="PBF_ARCH='vulkan'"):
+        backend.start()
+
+
+def test_cuda_without_gpu_is_a_clear_error():
+    # A fresh process: this one already runs Taichi on the CPU.
+    code = "from pbf import backend; backend.start('cuda')"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    if result.returncode == 0:
+        pytest.skip("a CUDA GPU is present here")
+    assert "BackendError: arch='cuda' was requested but no CUDA GPU is available" in result.stderr
+
+
+def test_bad_scene_allocates_nothing():
+    with pytest.raises(SceneError):
+        Simulation(with_change(("solver", "iterations"), -1))

@@ -1,0 +1,98 @@
+"""Neighbour lists from the counting-sort grid equal brute force, including the hard layouts."""
+import numpy as np
+import pytest
+import taichi as ti
+
+from pbf.grid import NeighbourGrid
+from pbf.scan import ExclusiveScan
+
+
+def brute_force(points, h):
+    d2 = ((points[:, None, :] - points[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    return [set(np.nonzero(row < h * h)[0]) for row in d2]
+
+
+def grid_neighbours(points, lower, upper, h):
+    n = len(points)
+    resolution = [max(1, int(np.floor((u - l) / (h * (1 + 1e-4))))) for l, u in zip(lower, upper)]
+    grid = NeighbourGrid(n, lower, upper, h, resolution)
+    x = ti.Vector.field(3, ti.f32, shape=n)
+    x.from_numpy(points.astype(np.float32))
+    grid.sort(x)
+    order = grid.sorted_from.to_numpy()
+    assert sorted(order) == list(range(n)), "the sort must be a permutation"
+    sorted_points = points[order]
+    x.from_numpy(sorted_points.astype(np.float32))
+    total = grid.build_neighbours(x)
+    lists = grid.neighbour_lists()
+    assert total == sum(len(l) for l in lists)
+    # Back to original indices; also check the sort put cells in ascending order.
+    cells = grid.particle_cell.to_numpy()[order]
+    assert np.all(np.diff(cells) >= 0)
+    return [set(order[l].tolist()) for l in lists], order
+
+
+def float32_brute_force(points, h):
+    # The grid compares float32 distances; brute force on the same float32 values.
+    return brute_force(points.astype(np.float32), np.float32(h))
+
+
+def check(points, lower, upper, h):
+    got, order = grid_neighbours(points, lower, upper, h)
+    expected = float32_brute_force(points, h)
+    by_original = [None] * len(points)
+    for slot, original in enumerate(order):
+        by_original[original] = got[slot]
+    mismatches = [i for i in range(len(points)) if by_original[i] != expected[i]]
+    assert not mismatches, f"{len(mismatches)} particles with wrong neighbours, e.g. {mismatches[:5]}"
+    return expected
+
+
+def test_random_points():
+    rng = np.random.default_rng(0)
+    points = rng.uniform(0.0, 1.0, size=(3000, 3))
+    expected = check(points, (0, 0, 0), (1, 1, 1), 0.07)
+    assert sum(map(len, expected)) > 3000  # the test is not vacuous
+
+
+def test_points_on_cell_borders():
+    # Every point has one, two or three coordinates exactly on a cell face (so it sits on a face, an
+    # edge or a corner); the others are random, so no pair sits at exactly h (a float32 tie).
+    h = 0.1
+    cell = 1.0 / int(np.floor(1.0 / (h * (1 + 1e-4))))
+    rng = np.random.default_rng(4)
+    points = rng.uniform(0.0, 1.0, size=(3000, 3))
+    snap = rng.random((3000, 3)) < 0.6
+    snap[np.arange(3000), rng.integers(0, 3, 3000)] = True
+    points = np.where(snap, np.round(points / cell) * cell, points)
+    expected = check(points, (0, 0, 0), (1.0, 1.0, 1.0), h)
+    assert sum(map(len, expected)) > 3000
+
+
+def test_all_points_in_one_cell():
+    # 8,000 particles in one cell: 63,992,000 pairs, more than any fixed capacity would hold.
+    rng = np.random.default_rng(2)
+    h = 0.1
+    points = rng.uniform(0.45, 0.45 + h / 3, size=(8000, 3))
+    got, _ = grid_neighbours(points, (0, 0, 0), (1, 1, 1), h)
+    assert all(len(s) == 7999 for s in got)
+
+
+def test_points_outside_grid_are_clamped_not_lost():
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.2, 1.2, size=(1500, 3))
+    check(points, (0, 0, 0), (1, 1, 1), 0.15)
+
+
+@pytest.mark.parametrize("length", [1, 63, 64, 65, 5000, 100_003])
+def test_exclusive_scan(length):
+    rng = np.random.default_rng(length)
+    values = rng.integers(0, 50, size=length).astype(np.int32)
+    source = ti.field(ti.i32, shape=length)
+    starts = ti.field(ti.i32, shape=length + 1)
+    source.from_numpy(values)
+    total = ExclusiveScan(length).run(source, starts)
+    expected = np.concatenate([[0], np.cumsum(values)])
+    assert total == expected[-1]
+    assert np.array_equal(starts.to_numpy(), expected)
