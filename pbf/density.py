@@ -13,7 +13,7 @@ Iterations are Jacobi: all λ from the same positions, then all Δx, then all po
 """
 import taichi as ti
 
-from pbf.sph import kernel, kernel_gradient, kernel_np
+from pbf.sph import kernel, kernel_and_gradient, kernel_np
 
 NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
 
@@ -46,10 +46,10 @@ class DensityConstraint:
         ratio = self.volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
-        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
-            r = xi - x[neighbours[k]]
-            ratio += self.volume * kernel(r.norm_sqr(), h)
-            g = self.volume * h * kernel_gradient(r, h)
+        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+            w, grad_w = kernel_and_gradient(xi - x[neighbours[k]], h)
+            ratio += self.volume * w
+            g = self.volume * h * grad_w
             gradient_i += g
             sum_sq += g.norm_sqr()
         wall, wall_gradient = self.box.wall_density(xi)
@@ -74,13 +74,13 @@ class DensityConstraint:
             xi = x[i]
             lam_i = self.lam[i]
             dx = ti.Vector([0.0, 0.0, 0.0])
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                r = xi - x[j]
+                w, grad_w = kernel_and_gradient(xi - x[j], h)
                 s_corr = 0.0
                 if ti.static(self.scorr_k > 0.0):
-                    s_corr = -self.scorr_k * (kernel(r.norm_sqr(), h) * self.inverse_w_dq) ** self.scorr_n
-                dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * kernel_gradient(r, h)
+                    s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** self.scorr_n
+                dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * grad_w
             _, wall_gradient = self.box.wall_density(xi)
             dx += lam_i * h * wall_gradient
             self.x_next[i] = self.box.clamp(xi + h * dx)

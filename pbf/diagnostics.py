@@ -26,7 +26,7 @@ class Diagnostics:
             ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
             error = ti.max(ratio - 1.0, 0.0)
             speed2 = self.state.v[i].norm_sqr()
-            count = self.grid.neighbour_start[i + 1] - self.grid.neighbour_start[i]
+            count = self.grid.neighbour_end[i] - self.grid.neighbour_start[i]
             self.sums[0] += ti.cast(error, ti.f64)
             self.sums[1] += ti.cast(speed2, ti.f64)
             self.sums[2] += ti.cast(count, ti.f64)

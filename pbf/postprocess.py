@@ -12,7 +12,7 @@ lost to coarse particles. Both read velocities and write new ones (Jacobi), then
 """
 import taichi as ti
 
-from pbf.sph import kernel, kernel_gradient
+from pbf.sph import kernel_and_gradient, kernel_gradient
 
 NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
 
@@ -33,7 +33,7 @@ class VelocityPostprocess:
         for i in range(self.count):
             xi, vi = x[i], self.state.v[i]
             omega = ti.Vector([0.0, 0.0, 0.0])
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
                 omega += self.volume * kernel_gradient(xi - x[j], self.h).cross(self.state.v[j] - vi)
             self.omega[i] = omega
@@ -49,12 +49,12 @@ class VelocityPostprocess:
             omega_i = ti.Vector([0.0, 0.0, 0.0])
             if ti.static(with_vorticity):
                 omega_i = self.omega[i]
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_start[i + 1]):
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                r = xi - x[j]
-                smoothing += self.volume * (self.state.v[j] - vi) * kernel(r.norm_sqr(), h)
+                w, grad_w = kernel_and_gradient(xi - x[j], h)
+                smoothing += self.volume * (self.state.v[j] - vi) * w
                 if ti.static(with_vorticity):
-                    eta += self.volume * (self.omega[j].norm() - omega_i.norm()) * kernel_gradient(r, h)
+                    eta += self.volume * (self.omega[j].norm() - omega_i.norm()) * grad_w
             dv = xsph * smoothing
             if ti.static(with_vorticity):
                 eta_norm = eta.norm()

@@ -46,6 +46,25 @@ def kernel_gradient(r: ti.template(), h: ti.f32):
     return g
 
 
+@ti.func
+def kernel_and_gradient(r: ti.template(), h: ti.f32):
+    """(W, ∇W) at offset r, sharing one square root: the solver's inner loops need both."""
+    norm = r.norm()
+    q = norm / h
+    w = 0.0
+    slope = 0.0
+    if q <= 0.5:
+        w = SIGMA_3D / h**3 * (6.0 * q * q * (q - 1.0) + 1.0)
+        slope = SIGMA_3D / h**4 * 6.0 * q * (3.0 * q - 2.0)
+    elif q < 1.0:
+        w = SIGMA_3D / h**3 * 2.0 * (1.0 - q) ** 3
+        slope = -SIGMA_3D / h**4 * 6.0 * (1.0 - q) ** 2
+    g = ti.Vector([0.0, 0.0, 0.0])
+    if norm > 0.0:
+        g = slope / norm * r
+    return w, g
+
+
 def kernel_np(r, h):
     """NumPy twin of :func:`kernel`, taking distances (not squared)."""
     q = np.asarray(r, dtype=np.float64) / h
