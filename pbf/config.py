@@ -258,8 +258,8 @@ def _check_geometry(scene: Scene, source: str) -> None:
 
 
 BYTES_PER_PARTICLE = 600
-"""Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its neighbour list, sized for
-about 60 neighbours at 4 B and grown ×1.5 (~360 B); rounded up."""
+"""Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its 64 neighbour slots at
+4 B (256 B, pbf.grid.SLOTS); rounded up for the compact list that replaces them after an overflow."""
 BYTES_PER_CELL = 12
 """Grid memory per cell: count, start and a scan scratch, int32 each."""
 

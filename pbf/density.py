@@ -34,8 +34,6 @@ class DensityConstraint:
         self.grid = grid
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
-        self.density_ratio = ti.field(ti.f32, shape=particle_count)
-        """ρ_i/ρ0 at the last λ pass (or statistics pass)."""
         self.x_next = ti.Vector.field(3, ti.f32, shape=particle_count)
 
     @ti.func
@@ -60,7 +58,6 @@ class DensityConstraint:
         """λ̂_i for every particle (Eq. 10, dimensionless)."""
         for i in range(self.count):
             ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
-            self.density_ratio[i] = ratio
             c = ratio - 1.0
             if ti.static(self.clamp_pressure):
                 c = ti.max(c, 0.0)
