@@ -21,10 +21,14 @@ from pbf.simulation import Simulation
 
 
 def dam_break(particles: int, iterations: int) -> config.Scene:
+    """The dam break with the spacing scaled to ``particles``, and Δt with it (Δt ∝ spacing keeps the
+    distance a particle moves per substep, in spacings, the same: the scene stays equally hard)."""
     per_side = round(particles ** (1 / 3))
     base = config.load("dam_break")
     spacing = base.fluid.spacing_m * 20 / per_side
-    return config.load("dam_break", [f"fluid.spacing_m={spacing!r}", f"solver.iterations={iterations}"])
+    substeps = max(1, round(base.time.substeps * per_side / 20))
+    return config.load("dam_break", [f"fluid.spacing_m={spacing!r}", f"solver.iterations={iterations}",
+                                     f"time.substeps={substeps}"])
 
 
 def timed(function, *args):

@@ -62,8 +62,8 @@ class Simulation:
         self.grid = NeighbourGrid(n, lower, upper, h, config.grid_resolution(scene))
         self.integrator = Integrator(self.state, self.box)
         s = scene.solver
-        self.density = DensityConstraint(n, h, volume, s.relaxation, s.clamp_pressure, s.scorr_k, s.scorr_n,
-                                         s.scorr_dq, self.box, self.grid)
+        self.density = DensityConstraint(n, h, scene.fluid.spacing_m, volume, s.relaxation, s.clamp_pressure,
+                                         s.scorr_k, s.scorr_n, s.scorr_dq, self.box, self.grid)
         self.postprocess = VelocityPostprocess(self.state, volume, h, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, self.particle_mass_kg)
         self.reset()

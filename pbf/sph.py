@@ -120,3 +120,22 @@ def wall_density_table(spacing, h, samples):
         density += kernel_np(np.sqrt(plane[:, None] ** 2 + lateral_r2[None, :]), h).sum(axis=1)
     density /= lattice_density_sum(spacing, h)
     return density, np.gradient(density, d)
+
+
+def jacobi_gain(kernel_ratio, relaxation, samples=24):
+    """Largest gain μ of one Jacobi density projection over all wave vectors of an interior lattice.
+
+    Linearised about a lattice of spacing s, one projection maps the constraint error C to
+    (1 − μ(k)) C for each Fourier mode k, with μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂)
+    (ĝ_j the dimensionless gradient of pbf.density). A mode with μ > 2 grows every iteration: for
+    the cubic spline at h = 2.2 s, μ reaches 3.1 at wavelengths near 4 s, and a 64,000-particle dam
+    break exploded at the first impact. Depends only on h/s and ε̂, so it is computed in units of s.
+    """
+    h = float(kernel_ratio)
+    offsets = lattice_offsets(1.0, h)
+    offsets = offsets[np.linalg.norm(offsets, axis=1) > 0.0]
+    gradients = lattice_density_sum(1.0, h) ** -1 * h * kernel_gradient_np(offsets, h)
+    axis = np.linspace(0.0, math.pi, samples)
+    waves = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    symbols = np.exp(1j * waves @ offsets.T) @ gradients
+    return float((np.abs(symbols) ** 2).sum(axis=1).max() / ((gradients**2).sum() + relaxation))

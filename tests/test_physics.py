@@ -26,7 +26,7 @@ def colour_surface_height(positions, volume_m3, h, xs, zs, y_range):
     return float(np.mean(heights))
 
 
-@pytest.mark.parametrize("spacing_m, substeps", [(0.025, 6), (0.0125, 12)])
+@pytest.mark.parametrize("spacing_m, substeps", [(0.025, 8), (0.0125, 16)])
 def test_column_at_rest_stays_at_rest(spacing_m, substeps):
     # Halving the spacing with Δt ∝ spacing must give the same figures: the formulation is scale-free.
     height = 0.4

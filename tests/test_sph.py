@@ -75,3 +75,27 @@ def test_wall_table_restores_lattice_density():
     ghost = np.interp(s / 2, np.linspace(0, h, 2001), density)
     assert fluid + ghost == pytest.approx(1.0, abs=2e-4)
     assert np.all(slope <= 1e-9)  # closer to the wall means more ghost density: the wall repels
+
+
+@pytest.mark.parametrize("ratio", [2.0, 2.2])
+def test_jacobi_gain_matches_the_projection_matrix(ratio):
+    # Build the linearised projection of a periodic 8³ lattice as a matrix and take its spectrum: the
+    # Fourier formula must find the same largest gain, and plain Jacobi (gain > 2) must be unstable.
+    period, relaxation = 8, 0.1
+    offsets = sph.lattice_offsets(1.0, ratio)
+    offsets = offsets[np.linalg.norm(offsets, axis=1) > 0.0]
+    gradients = ratio * sph.kernel_gradient_np(offsets, ratio) / sph.lattice_density_sum(1.0, ratio)
+    sites = np.stack(np.meshgrid(*[np.arange(period)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    n = len(sites)
+    jacobian = np.zeros((n, 3 * n))  # ∂C_i/∂x_j, dimensionless: row i holds ĝ_ij at j and −Σ_j ĝ_ij at i
+    for i, site in enumerate(sites):
+        for offset, g in zip(offsets, gradients):
+            j = np.ravel_multi_index(tuple((site + offset.astype(int)) % period), (period,) * 3)
+            jacobian[i, 3 * j:3 * j + 3] += g
+            jacobian[i, 3 * i:3 * i + 3] -= g
+    system = jacobian @ jacobian.T
+    gain = np.linalg.eigvalsh(system).max() / (np.diag(system)[0] + relaxation)
+    # The periodic lattice holds the wave vectors k = 2πm/8: sample the formula at exactly those.
+    assert gain == pytest.approx(sph.jacobi_gain(ratio, relaxation, samples=period // 2 + 1), rel=1e-9)
+    assert gain > 2.0
+    assert sph.jacobi_gain(ratio, relaxation) >= gain
