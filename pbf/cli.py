@@ -1,10 +1,17 @@
-"""Command line: run a scene and print its statistics every second of simulated time."""
+"""Command line: open a scene in a window, render it headless to PNG/video/particle files, or list presets.
+
+    python run.py [SCENE] [--set KEY=VALUE]...               # the window (headless when none can open)
+    python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz]
+    python run.py --list
+"""
 import argparse
 import sys
 import time
+from pathlib import Path
 
-from pbf import backend, config
-from pbf.simulation import Simulation
+from pbf import backend, config, export
+
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
 
 
 def parse_args(argv=None):
@@ -12,20 +19,90 @@ def parse_args(argv=None):
     parser.add_argument("scene", nargs="?", default="dam_break", help="preset name or path to a TOML file")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")
-    parser.add_argument("--frames", type=int, default=180, help="frames to simulate (default 180: 3 s at 60 fps)")
     parser.add_argument("--arch", choices=backend.ARCHES, default=None,
                         help=f"Taichi backend (default: ${backend.ENV_VAR} or auto)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
+    output = parser.add_argument_group("headless output")
+    output.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
+    output.add_argument("--stats-only", action="store_true", help="simulate and print statistics, render nothing")
+    output.add_argument("--frames", type=int, default=180, help="frames to simulate (default 180: 3 s at 60 fps)")
+    output.add_argument("--out", type=Path, default=None, help="folder for PNG frames (default out/SCENE)")
+    output.add_argument("--video", type=Path, default=None, help="also encode the frames as a video (.mp4)")
+    output.add_argument("--export", choices=export.FORMATS, default=None,
+                        help="also write particle positions and velocities per frame")
+    view = parser.add_argument_group("view (shortcuts for --set camera.* and render.*)")
+    view.add_argument("--size", metavar="WxH", help="image size in pixels, e.g. 1920x1080")
+    view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
+    view.add_argument("--look-at", metavar="X,Y,Z", help="point at the image centre, m")
+    view.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees")
+    view.add_argument("--colour-by", choices=("speed", "density"), help="particle colour")
+    view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
     args = parser.parse_args(argv)
     if args.frames < 1:
         parser.error("--frames: expected an integer ≥ 1")
+    if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
+        parser.error(f"--video {args.video}: expected a file ending in {', '.join(VIDEO_SUFFIXES)}")
+    args.set = view_overrides(parser, args) + args.set
     return args
+
+
+def view_overrides(parser, args) -> list[str]:
+    """The view options as --set assignments, so the scene validates them like any other key."""
+    sets = []
+    if args.size:
+        width, _, height = args.size.lower().partition("x")
+        if not (width.isdigit() and height.isdigit()):
+            parser.error(f"--size {args.size}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720")
+        sets += [f"render.width_px={width}", f"render.height_px={height}"]
+    for option, key in (("camera", "camera.position_m"), ("look_at", "camera.look_at_m")):
+        value = getattr(args, option)
+        if value:
+            sets.append(f"{key}=[{value}]")
+    if args.fov:
+        sets.append(f"camera.fov_deg={args.fov}")
+    if args.colour_by:
+        sets.append(f'render.colour_by="{args.colour_by}"')
+    if args.colour_map:
+        sets.append(f'render.colour_map="{args.colour_map}"')
+    return sets
 
 
 def list_presets() -> None:
     for path in sorted(config.SCENES_DIR.glob("*.toml")):
         scene = config.load(path)
-        print(f"{path.stem:20s} {config.particle_count(scene):>9,} particles  {scene.description}")
+        print(f"{path.stem:18s} {config.particle_count(scene):>10,} particles  {scene.description}")
+
+
+def print_stats(sim) -> None:
+    s = sim.stats()
+    print(f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
+          f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
+          f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})")
+
+
+def run_stats(sim, frames: int) -> None:
+    frames_per_report = max(1, round(1.0 / sim.scene.time.frame_dt_s))
+    started = time.perf_counter()
+    for frame in range(1, frames + 1):
+        sim.step()
+        if frame % frames_per_report == 0 or frame == frames:
+            print_stats(sim)
+    elapsed = time.perf_counter() - started
+    print(f"[pbf] {frames} frames in {elapsed:.1f} s ({frames / elapsed:.1f} frames/s, JIT included)")
+
+
+def run_headless(sim, args) -> None:
+    from pbf import headless
+
+    out = args.out or Path("out") / sim.scene.name
+    paths = headless.render(sim, args.frames, out, video=args.video, export=args.export)
+    print_stats(sim)
+    written = f"{len(paths)} frames in {out}/"
+    if args.video:
+        written += f", video {args.video}"
+    if args.export:
+        written += f", particles as {args.export} in {out}/"
+    print(f"[pbf] wrote {written}")
 
 
 def main(argv=None) -> int:
@@ -33,6 +110,8 @@ def main(argv=None) -> int:
     if args.list:
         list_presets()
         return 0
+    from pbf.simulation import Simulation
+
     try:
         scene = config.load(args.scene, args.set)
         sim = Simulation(scene, arch=args.arch)
@@ -41,15 +120,19 @@ def main(argv=None) -> int:
         return 2
     print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
           f"{sim.settings.iterations} iterations")
-    frames_per_report = max(1, round(1.0 / scene.time.frame_dt_s))
-    started = time.perf_counter()
-    for frame in range(1, args.frames + 1):
-        sim.step()
-        if frame % frames_per_report == 0 or frame == args.frames:
-            s = sim.stats()
-            print(f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
-                  f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
-                  f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})")
-    elapsed = time.perf_counter() - started
-    print(f"[pbf] {args.frames} frames in {elapsed:.1f} s ({args.frames / elapsed:.1f} frames/s, JIT included)")
+    if args.stats_only:
+        run_stats(sim, args.frames)
+    elif args.headless:
+        run_headless(sim, args)
+    else:
+        from pbf import window
+
+        try:
+            app = window.InteractiveApp(sim, window.open_window(f"pbf: {scene.name}", scene.render.width_px,
+                                                               scene.render.height_px))
+        except window.WindowUnavailable as reason:
+            print(f"[pbf] no window ({reason}); rendering {args.frames} frames headless instead")
+            run_headless(sim, args)
+        else:
+            app.run()
     return 0

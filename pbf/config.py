@@ -11,6 +11,7 @@ import dataclasses
 import math
 import os
 import tomllib
+import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +51,24 @@ def _between(lowest, highest):
 
 def _vec_positive(value):
     return None if all(c > 0 for c in value) else "three values > 0"
+
+
+def _rgb(value):
+    return None if all(0 <= c <= 1 for c in value) else "three values in [0, 1] (red, green, blue)"
+
+
+def _even_pixels(value):
+    return None if 16 <= value <= 8192 and value % 2 == 0 else "an even number of pixels in [16, 8192] (video needs even sizes)"
+
+
+def _one_of(*choices):
+    return lambda value: None if value in choices else "one of " + ", ".join(repr(c) for c in choices)
+
+
+def _colour_map(value):
+    import matplotlib
+
+    return None if value in matplotlib.colormaps else "a Matplotlib colour map name such as 'viridis' or 'Blues'"
 
 
 def key(default=dataclasses.MISSING, check=None, doc=""):
@@ -110,6 +129,27 @@ class Vorticity:
 
 
 @dataclass(frozen=True)
+class Camera:
+    """Where the window opens and what headless frames show; omitted points are derived from the box."""
+
+    position_m: Vec3 | None = key(None, doc="eye position, m (default: in front of the box, above it)")
+    look_at_m: Vec3 | None = key(None, doc="point at the image centre, m (default: the box centre)")
+    fov_deg: float = key(45.0, _between(5.0, 150.0), "vertical field of view, degrees")
+
+
+@dataclass(frozen=True)
+class Render:
+    colour_by: str = key("speed", _one_of("speed", "density"), "particle colour: speed or density")
+    colour_map: str = key("coolwarm", _colour_map, "Matplotlib colour map")
+    speed_max_m_s: float = key(3.0, _positive, "speed at the top of the colour map, m/s")
+    density_error_max: float = key(0.05, _positive, "colour map spans ρ/ρ0 from 1 − this to 1 + this")
+    background_rgb: Vec3 = key((0.96, 0.96, 0.94), _rgb, "background colour")
+    container_rgb: Vec3 = key((0.25, 0.25, 0.3), _rgb, "colour of the container's edges")
+    width_px: int = key(1280, _even_pixels, "image width, pixels")
+    height_px: int = key(720, _even_pixels, "image height, pixels")
+
+
+@dataclass(frozen=True)
 class Scene:
     name: str = key("scene", doc="short name")
     description: str = key("", doc="one line shown by --list")
@@ -120,6 +160,8 @@ class Scene:
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
     vorticity: Vorticity = key(Vorticity())
+    camera: Camera = key(Camera())
+    render: Render = key(Render())
 
     @property
     def dt_s(self) -> float:
@@ -145,6 +187,8 @@ def _type_name(annotation) -> str:
 
 def _convert(value, annotation, where):
     """Convert one TOML value to the annotated type, or raise SceneError naming what was expected."""
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):  # X | None: TOML has no None
+        annotation = next(a for a in typing.get_args(annotation) if a is not type(None))
     if annotation is bool:
         if isinstance(value, bool):
             return value

@@ -1,0 +1,23 @@
+"""Particle data for other tools: binary PLY (Blender, Houdini, ParaView) or NumPy .npz, one file per frame."""
+from pathlib import Path
+
+import numpy as np
+from plyfile import PlyData, PlyElement
+
+FORMATS = ("ply", "npz")
+
+
+def write_particles(path: Path, positions: np.ndarray, velocities: np.ndarray, time_s: float) -> Path:
+    """Write positions (m) and velocities (m/s) to ``path`` with the suffix of its format; returns the path."""
+    if path.suffix == ".ply":
+        vertices = np.empty(len(positions), dtype=[(name, "<f4") for name in ("x", "y", "z", "vx", "vy", "vz")])
+        for k, axis in enumerate("xyz"):
+            vertices[axis] = positions[:, k]
+            vertices["v" + axis] = velocities[:, k]
+        element = PlyElement.describe(vertices, "vertex")
+        PlyData([element], comments=[f"pbf frame at t = {time_s:.6f} s; units m and m/s"]).write(str(path))
+    elif path.suffix == ".npz":
+        np.savez_compressed(path, positions_m=positions, velocities_m_s=velocities, time_s=np.float64(time_s))
+    else:
+        raise ValueError(f"{path}: unknown particle format; allowed: {', '.join(FORMATS)}")
+    return path

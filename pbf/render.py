@@ -1,0 +1,233 @@
+"""Drawing particles: the camera, particle colours, and a ray-cast sphere renderer for headless frames.
+
+The headless renderer needs no Vulkan and no display (see ../shared/docs/FACTS.md): each particle
+projects its bounding square, each pixel in it intersects its view ray with the particle's sphere,
+and the nearest hit wins through one 64-bit ``atomic_min`` on (depth bits, particle id). A second
+pass shades the winners. The result is the same on every run. The interactive window (pbf.window)
+uses the same View, colours and background, so its frames look like these.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from pbf import config
+
+EMPTY = np.iinfo(np.int64).max
+LIGHT_DIRECTION = np.array([0.35, 0.8, 0.5]) / np.linalg.norm([0.35, 0.8, 0.5])
+LUT_SIZE = 256
+vec3 = ti.types.vector(3, ti.f32)
+
+
+@dataclass
+class View:
+    """A pinhole camera: eye and target in metres, vertical field of view in degrees, y up."""
+
+    eye: np.ndarray
+    target: np.ndarray
+    fov_deg: float
+
+    @classmethod
+    def of_scene(cls, scene: config.Scene) -> "View":
+        """The scene's camera, with omitted points derived so the whole container is in view."""
+        lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
+        centre = 0.5 * (lower + upper)
+        target = np.array(scene.camera.look_at_m) if scene.camera.look_at_m is not None else centre
+        if scene.camera.position_m is not None:
+            eye = np.array(scene.camera.position_m)
+        else:
+            # Back far enough that the box nearly fits the vertical field of view (its bounding sphere is larger).
+            radius = 0.5 * np.linalg.norm(upper - lower)
+            direction = np.array([0.55, 0.45, 1.0]) / np.linalg.norm([0.55, 0.45, 1.0])
+            eye = target + direction * 0.95 * radius / math.sin(math.radians(scene.camera.fov_deg) / 2)
+        return cls(eye.astype(float), target.astype(float), scene.camera.fov_deg)
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit right, up and forward vectors of the camera."""
+        forward = self.target - self.eye
+        forward = forward / np.linalg.norm(forward)
+        right = np.cross(forward, [0.0, 1.0, 0.0])
+        if np.linalg.norm(right) < 1e-6:  # looking straight up or down
+            right = np.array([1.0, 0.0, 0.0])
+        right = right / np.linalg.norm(right)
+        return right, np.cross(right, forward), forward
+
+    def focal_px(self, height_px: int) -> float:
+        """f = (H/2) / tan(fov/2): pixels per unit of image-plane distance."""
+        return 0.5 * height_px / math.tan(math.radians(self.fov_deg) / 2)
+
+
+def box_edges(lower, upper) -> np.ndarray:
+    """The 12 edges of an axis-aligned box as a (24, 3) array of segment end points."""
+    corners = np.array([[(lower, upper)[(k >> a) & 1][a] for a in range(3)] for k in range(8)], dtype=np.float32)
+    pairs = [(k, k | 1 << a) for k in range(8) for a in range(3) if not k >> a & 1]
+    return np.array([corners[p] for pair in pairs for p in pair], dtype=np.float32)
+
+
+@ti.data_oriented
+class ParticleColours:
+    """Per-particle RGB from speed or density through a Matplotlib colour map (a 256-entry table)."""
+
+    def __init__(self, sim, render: config.Render):
+        import matplotlib
+
+        self.sim = sim
+        self.render = render
+        self.colours = ti.Vector.field(3, ti.f32, shape=sim.particle_count)
+        table = matplotlib.colormaps[render.colour_map](np.linspace(0.0, 1.0, LUT_SIZE))[:, :3]
+        self.table = ti.Vector.field(3, ti.f32, shape=LUT_SIZE)
+        self.table.from_numpy(table.astype(np.float32))
+
+    @ti.func
+    def _lookup(self, u):
+        k = ti.cast(ti.math.clamp(u, 0.0, 1.0) * (LUT_SIZE - 1) + 0.5, ti.i32)
+        return self.table[k]
+
+    @ti.kernel
+    def _by_speed(self, v: ti.template(), speed_max: ti.f32):
+        for i in range(self.colours.shape[0]):
+            self.colours[i] = self._lookup(v[i].norm() / speed_max)
+
+    @ti.kernel
+    def _by_density(self, x: ti.template(), neighbours: ti.types.ndarray(dtype=ti.i32, ndim=1), span: ti.f32):
+        for i in range(self.colours.shape[0]):
+            ratio, _, _ = self.sim.density.ratio_and_gradients(x, i, neighbours)
+            self.colours[i] = self._lookup((ratio - 1.0 + span) / (2.0 * span))
+
+    def update(self):
+        """Recolour every particle from the current state; returns the colour field (same order as state.x)."""
+        if self.render.colour_by == "speed":
+            self._by_speed(self.sim.state.v, self.render.speed_max_m_s)
+        else:
+            self._by_density(self.sim.state.x, self.sim.grid.neighbours, self.render.density_error_max)
+        return self.colours
+
+
+@ti.data_oriented
+class SphereRenderer:
+    """Ray-cast shaded spheres with a depth test, plus depth-tested line segments, into an RGB image."""
+
+    def __init__(self, width_px: int, height_px: int, background_rgb, line_rgb=(0.0, 0.0, 0.0), segments=None):
+        self.width, self.height = int(width_px), int(height_px)
+        self.background = ti.Vector([float(c) for c in background_rgb])
+        self.line_colour = ti.Vector([float(c) for c in line_rgb])
+        self.keys = ti.field(ti.i64, shape=(self.height, self.width))
+        """(depth bits << 32) | particle id of the nearest hit per pixel, EMPTY where none."""
+        self.image = ti.Vector.field(3, ti.f32, shape=(self.height, self.width))
+        points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
+        self.segment_count = len(points) // 2
+        self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
+        if len(points):
+            self.segments.from_numpy(points)
+
+    @ti.func
+    def _ray(self, row, col, right, up, forward, focal):
+        """Unit direction of the ray through the centre of pixel (row, col); row 0 is the top."""
+        u = (col + 0.5 - 0.5 * self.width) / focal
+        w = (0.5 * self.height - row - 0.5) / focal
+        return (right * u + up * w + forward).normalized()
+
+    @ti.func
+    def _hit(self, centre, direction, radius):
+        """Distance along a unit ray from the eye to a sphere at ``centre`` (eye-relative), or -1."""
+        b = direction.dot(centre)
+        disc = b * b - (centre.norm_sqr() - radius * radius)
+        t = -1.0
+        if disc >= 0.0:
+            t = b - ti.sqrt(disc)
+        return t
+
+    @ti.kernel
+    def _clear(self):
+        for row, col in self.keys:
+            self.keys[row, col] = ti.i64(EMPTY)
+
+    @ti.kernel
+    def _splat(self, x: ti.template(), count: ti.i32, radius: ti.f32, eye: vec3, right: vec3, up: vec3,
+               forward: vec3, focal: ti.f32):
+        for i in range(count):
+            centre = x[i] - eye
+            depth = centre.dot(forward)
+            if depth > radius * 1.01:
+                col = 0.5 * self.width + focal * centre.dot(right) / depth
+                row = 0.5 * self.height - focal * centre.dot(up) / depth
+                # Off the axis by θ the sphere's image is an ellipse of semi-major axis about
+                # f r / (d cos θ) = f r |c| / d²; bound it with 10% and a pixel to spare.
+                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
+                r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(self.height, ti.cast(row + extent, ti.i32) + 1)
+                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
+                for r in range(r0, r1):
+                    for c in range(c0, c1):
+                        t = self._hit(centre, self._ray(r, c, right, up, forward, focal), radius)
+                        if t > 0.0:
+                            key = (ti.cast(ti.bit_cast(t, ti.i32), ti.i64) << 32) | ti.cast(i, ti.i64)
+                            ti.atomic_min(self.keys[r, c], key)
+
+    @ti.kernel
+    def _shade(self, x: ti.template(), colours: ti.template(), radius: ti.f32, eye: vec3, right: vec3, up: vec3,
+               forward: vec3, focal: ti.f32, light: vec3):
+        for row, col in self.keys:
+            key = self.keys[row, col]
+            colour = self.background
+            if key != ti.i64(EMPTY):
+                i = ti.cast(key & ti.i64(0xFFFFFFFF), ti.i32)
+                direction = self._ray(row, col, right, up, forward, focal)
+                centre = x[i] - eye
+                t = self._hit(centre, direction, radius)
+                normal = (direction * t - centre) / radius
+                diffuse = ti.max(normal.dot(light), 0.0)
+                halfway = (light - direction).normalized()
+                specular = ti.max(normal.dot(halfway), 0.0) ** 40
+                colour = ti.min(colours[i] * (0.35 + 0.65 * diffuse) + 0.25 * specular, 1.0)
+            self.image[row, col] = colour
+
+    @ti.kernel
+    def _lines(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
+        for s in range(self.segment_count):
+            a, b = self.segments[2 * s], self.segments[2 * s + 1]
+            samples = 2 * (self.width + self.height)
+            for k in range(samples + 1):
+                p = a + (b - a) * (k / samples) - eye
+                depth = p.dot(forward)
+                if depth > 1e-6:
+                    col = ti.cast(0.5 * self.width + focal * p.dot(right) / depth, ti.i32)
+                    row = ti.cast(0.5 * self.height - focal * p.dot(up) / depth, ti.i32)
+                    if 0 <= row < self.height and 0 <= col < self.width:
+                        key = self.keys[row, col]
+                        hit = ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
+                        if key == ti.i64(EMPTY) or p.norm() < hit:
+                            self.image[row, col] = self.line_colour
+
+    def render(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:
+        """(H, W, 3) uint8 image of ``count`` spheres of ``radius_m`` (Taichi fields) and the segments."""
+        right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
+        eye = ti.Vector(view.eye.astype(np.float32))
+        focal = view.focal_px(self.height)
+        self._clear()
+        self._splat(positions, count, radius_m, eye, right, up, forward, focal)
+        self._shade(positions, colours, radius_m, eye, right, up, forward, focal,
+                    ti.Vector(LIGHT_DIRECTION.astype(np.float32)))
+        if self.segment_count:
+            self._lines(eye, right, up, forward, focal)
+        return (self.image.to_numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
+class SceneRenderer:
+    """A Simulation's frames as images: its camera, colours and container, ray-cast headless."""
+
+    def __init__(self, sim, width_px=None, height_px=None):
+        render = sim.scene.render
+        self.sim = sim
+        self.view = View.of_scene(sim.scene)
+        self.colours = ParticleColours(sim, render)
+        self.spheres = SphereRenderer(width_px or render.width_px, height_px or render.height_px,
+                                      render.background_rgb, render.container_rgb,
+                                      box_edges(sim.scene.container.min_m, sim.scene.container.max_m))
+
+    def frame(self) -> np.ndarray:
+        """The current state as an (H, W, 3) uint8 image."""
+        colours = self.colours.update()
+        return self.spheres.render(self.view, self.sim.state.x, colours, self.sim.particle_count,
+                                   self.sim.scene.particle_radius_m)

@@ -1,0 +1,174 @@
+"""The interactive window (Taichi GGUI): orbit camera, keys, a panel of live figures and sliders.
+
+Mouse: left drag orbits around the target, right drag zooms. Keys: W/A/S/D move the target forward,
+left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
+r resets, esc quits. Particles are drawn at their simulated radius with the colours of the headless
+renderer (pbf.render), the container as lines.
+"""
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from pbf.render import ParticleColours, View, box_edges
+
+HELP = ("mouse: left drag orbits, right drag zooms", "keys: WASD/QE move, space pauses, '.' steps,",
+        "r resets, esc quits")
+PANEL = (0.01, 0.01, 0.3, 0.42)
+"""The panel's x, y, width and height as fractions of the window (origin top left)."""
+
+
+class WindowUnavailable(RuntimeError):
+    """No window can open here (no display, no Vulkan); the message says why."""
+
+
+@dataclass
+class OrbitCamera:
+    """Eye on a sphere around a target: yaw about y, pitch above the horizon, distance in metres."""
+
+    target: np.ndarray
+    yaw: float
+    pitch: float
+    distance: float
+    fov_deg: float
+
+    @classmethod
+    def from_view(cls, view: View) -> "OrbitCamera":
+        offset = view.eye - view.target
+        distance = float(np.linalg.norm(offset))
+        return cls(view.target.astype(float), math.atan2(offset[0], offset[2]),
+                   math.asin(offset[1] / distance), distance, view.fov_deg)
+
+    def view(self) -> View:
+        direction = np.array([math.cos(self.pitch) * math.sin(self.yaw), math.sin(self.pitch),
+                              math.cos(self.pitch) * math.cos(self.yaw)])
+        return View(self.target + self.distance * direction, self.target.copy(), self.fov_deg)
+
+    def orbit(self, dx: float, dy: float) -> None:
+        """Turn by a drag of (dx, dy) window widths/heights: a full width is half a turn."""
+        self.yaw -= math.pi * dx
+        self.pitch = min(max(self.pitch - math.pi * dy, -1.5), 1.5)
+
+    def zoom(self, dy: float) -> None:
+        """Dolly in (drag up) or out (drag down); each window height of drag is a factor e."""
+        self.distance = max(1e-3, self.distance * math.exp(-dy))
+
+    def move(self, forward: float, right: float, up: float) -> None:
+        """Move eye and target together, in metres, along the horizontal view direction, right and up."""
+        ahead = np.array([-math.sin(self.yaw), 0.0, -math.cos(self.yaw)])
+        side = np.array([math.cos(self.yaw), 0.0, -math.sin(self.yaw)])
+        self.target = self.target + forward * ahead + right * side + np.array([0.0, up, 0.0])
+
+
+def open_window(title: str, width: int, height: int):
+    """A GGUI window, or WindowUnavailable with the reason in one line."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise WindowUnavailable("no display (DISPLAY is not set)")
+    try:
+        return ti.ui.Window(title, (width, height), vsync=True)
+    except RuntimeError as error:
+        raise WindowUnavailable(str(error).strip().splitlines()[-1]) from None
+
+
+class InteractiveApp:
+    """Runs a Simulation in a window until the user quits."""
+
+    def __init__(self, sim, window):
+        self.sim = sim
+        self.window = window
+        self.render = sim.scene.render
+        self.camera = OrbitCamera.from_view(View.of_scene(sim.scene))
+        self.colours = ParticleColours(sim, self.render)
+        edges = box_edges(sim.scene.container.min_m, sim.scene.container.max_m)
+        self.edges = ti.Vector.field(3, ti.f32, shape=len(edges))
+        self.edges.from_numpy(edges)
+        self.paused = False
+        self.step_once = False
+        self.drag = None
+        self.fps = 0.0
+
+    def handle_input(self, seconds: float) -> bool:
+        """Keys and mouse since the last frame; False when the user quits."""
+        window = self.window
+        for event in window.get_events(ti.ui.PRESS):
+            if event.key == ti.ui.ESCAPE:
+                return False
+            if event.key == ti.ui.SPACE:
+                self.paused = not self.paused
+            elif event.key == "." and self.paused:
+                self.step_once = True
+            elif event.key == "r":
+                self.sim.reset()
+        speed = 0.5 * self.camera.distance * seconds  # half the viewing distance per second
+        keys = {key: window.is_pressed(key) for key in "wasdqe"}
+        self.camera.move(speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]),
+                         speed * (keys["e"] - keys["q"]))
+        x, y = window.get_cursor_pos()
+        button = ti.ui.LMB if window.is_pressed(ti.ui.LMB) else ti.ui.RMB if window.is_pressed(ti.ui.RMB) else None
+        over_panel = PANEL[0] <= x <= PANEL[0] + PANEL[2] and PANEL[1] <= 1.0 - y <= PANEL[1] + PANEL[3]
+        if button is None or (self.drag is None and over_panel):
+            self.drag = None
+        elif self.drag is not None:
+            dx, dy = x - self.drag[0], y - self.drag[1]
+            self.camera.orbit(dx, -dy) if button == ti.ui.LMB else self.camera.zoom(dy)
+            self.drag = (x, y)
+        else:
+            self.drag = (x, y)
+        return True
+
+    def panel(self, stats: dict) -> None:
+        settings = self.sim.settings
+        with self.window.get_gui().sub_window("pbf", *PANEL) as gui:
+            gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
+            gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
+            gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
+            gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
+            gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
+            settings.iterations = gui.slider_int("iterations", settings.iterations, 1, 20)
+            settings.substeps = gui.slider_int("substeps", settings.substeps, 1, 16)
+            settings.xsph = gui.slider_float("XSPH c", settings.xsph, 0.0, 0.1)
+            settings.vorticity = gui.slider_float("vorticity", settings.vorticity, 0.0, 0.5)
+            gx, gy, gz = settings.gravity_m_s2
+            settings.gravity_m_s2 = (gx, gui.slider_float("gravity y m/s²", gy, -20.0, 0.0), gz)
+            for line in HELP:
+                gui.text(line)
+
+    def draw(self) -> None:
+        view = self.camera.view()
+        camera = ti.ui.Camera()
+        camera.position(*view.eye)
+        camera.lookat(*view.target)
+        camera.up(0.0, 1.0, 0.0)
+        camera.fov(view.fov_deg)
+        scene = self.window.get_scene()
+        scene.set_camera(camera)
+        scene.ambient_light((0.35, 0.35, 0.35))
+        light = view.eye + 10.0 * np.array([0.35, 0.8, 0.5])
+        scene.point_light(pos=tuple(light), color=(0.9, 0.9, 0.9))
+        width, height = self.window.get_window_shape()
+        # GGUI scales particle radii by width/height: undo it so particles show their simulated size.
+        scene.particles(self.sim.state.x, radius=self.sim.scene.particle_radius_m * height / width,
+                        per_vertex_color=self.colours.update())
+        scene.lines(self.edges, width=1.5, color=tuple(self.render.container_rgb))
+        canvas = self.window.get_canvas()
+        canvas.set_background_color(tuple(self.render.background_rgb))
+        canvas.scene(scene)
+
+    def run(self) -> None:
+        last = time.perf_counter()
+        while self.window.running:
+            now = time.perf_counter()
+            seconds, last = now - last, now
+            self.fps = 0.9 * self.fps + 0.1 / max(seconds, 1e-6)
+            if not self.handle_input(seconds):
+                break
+            if not self.paused or self.step_once:
+                self.sim.step()
+                self.step_once = False
+            self.draw()
+            self.panel(self.sim.stats())
+            self.window.show()
