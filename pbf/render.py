@@ -34,14 +34,16 @@ class View:
         """The scene's camera, with omitted points derived so the whole container is in view."""
         lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
         centre = 0.5 * (lower + upper)
-        target = np.array(scene.camera.look_at_m) if scene.camera.look_at_m is not None else centre
+        # A little below the centre: seen from above, the box's near bottom corner reaches lowest.
+        below_centre = centre - np.array([0.0, 0.08 * (upper[1] - lower[1]), 0.0])
+        target = np.array(scene.camera.look_at_m) if scene.camera.look_at_m is not None else below_centre
         if scene.camera.position_m is not None:
             eye = np.array(scene.camera.position_m)
         else:
             # Back far enough that the box nearly fits the vertical field of view (its bounding sphere is larger).
             radius = 0.5 * np.linalg.norm(upper - lower)
             direction = np.array([0.55, 0.45, 1.0]) / np.linalg.norm([0.55, 0.45, 1.0])
-            eye = target + direction * 0.95 * radius / math.sin(math.radians(scene.camera.fov_deg) / 2)
+            eye = target + direction * radius / math.sin(math.radians(scene.camera.fov_deg) / 2)
         return cls(eye.astype(float), target.astype(float), scene.camera.fov_deg)
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -39,6 +39,12 @@ def with_change(path, value):
         (("fluid", "blocks", 0, "max_m"), [0.4, 0.4, 0.9], "'fluid.blocks[0]': block"),
         (("fluid", "blocks"), [], "at least one [[fluid.blocks]]"),
         (("container", "max_m"), [0.8, -1.0, 0.4], "container.max_m' must exceed"),
+        (("render", "colour_by"), "pressure", "key 'render.colour_by': expected one of 'speed', 'density'"),
+        (("render", "colour_map"), "rainbowz", "key 'render.colour_map': expected a Matplotlib colour map"),
+        (("render", "width_px"), 641, "key 'render.width_px': expected an even number of pixels"),
+        (("render", "background_rgb"), [0, 0, 2], "key 'render.background_rgb': expected three values in [0, 1]"),
+        (("camera", "position_m"), "front", "key 'camera.position_m': expected three numbers"),
+        (("camera", "fov_deg"), 0, "key 'camera.fov_deg': expected a value in [5.0, 150.0]"),
     ],
 )
 def test_bad_values_name_the_key(path, value, expected):

@@ -1,0 +1,134 @@
+"""The headless renderer against the pinhole-camera formula, and the application's outputs end to end."""
+import math
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import taichi as ti
+from conftest import small_dam_break
+from plyfile import PlyData
+
+from pbf import cli, config
+from pbf.render import SceneRenderer, SphereRenderer, View
+from pbf.simulation import Simulation
+from pbf.window import OrbitCamera
+
+WHITE = (1.0, 1.0, 1.0)
+W, H = 320, 240
+
+
+def spheres(centres, rgbs, radius, view, background=WHITE):
+    """Render spheres (NumPy arrays) with the headless renderer; returns the uint8 image."""
+    n = len(centres)
+    x = ti.Vector.field(3, ti.f32, shape=n)
+    c = ti.Vector.field(3, ti.f32, shape=n)
+    x.from_numpy(np.asarray(centres, np.float32))
+    c.from_numpy(np.asarray(rgbs, np.float32))
+    return SphereRenderer(W, H, background).render(view, x, c, n, radius)
+
+
+def covered(image, background=WHITE):
+    return np.any(image != np.round(np.array(background) * 255).astype(np.uint8), axis=2)
+
+
+def test_background_only():
+    view = View(np.array([0.0, 0.0, 2.0]), np.zeros(3), 45.0)
+    image = spheres(np.array([[0.0, 0.0, 5.0]]), [[1, 0, 0]], 0.1, view, background=(0.2, 0.4, 0.6))
+    assert image.shape == (H, W, 3)
+    assert (image == np.array([51, 102, 153], np.uint8)).all()  # the sphere is behind the eye
+
+
+@pytest.mark.parametrize("distance, radius", [(2.0, 0.1), (1.0, 0.25)])
+def test_sphere_centroid_and_radius_follow_the_pinhole_formula(distance, radius):
+    eye = np.array([0.3, 0.2, 0.1])
+    direction = np.array([0.6, 0.0, -0.8])
+    view = View(eye, eye + distance * direction, 50.0)
+    mask = covered(spheres([view.target], [[1, 0, 0]], radius, view))
+    rows, cols = np.nonzero(mask)
+    focal = (H / 2) / math.tan(math.radians(50.0) / 2)
+    expected = focal * radius / math.sqrt(distance**2 - radius**2)
+    assert cols.mean() + 0.5 == pytest.approx(W / 2, abs=0.05)
+    assert rows.mean() + 0.5 == pytest.approx(H / 2, abs=0.05)
+    assert math.sqrt(mask.sum() / math.pi) == pytest.approx(expected, abs=0.6)
+
+
+def test_nearer_sphere_wins():
+    view = View(np.array([0.0, 0.0, 3.0]), np.zeros(3), 45.0)
+    near, far = [0.05, 0.0, 0.2], [-0.05, 0.0, 0.0]
+    # Particle 0 is green, particle 1 red; they overlap at the image centre, whichever is drawn first.
+    for centres, expected in (([near, far], "green"), ([far, near], "red")):
+        image = spheres(np.array(centres), [[0, 1, 0], [1, 0, 0]], 0.15, view)
+        red, green, _ = image[H // 2, W // 2].astype(int)
+        assert ("green" if green > red else "red") == expected
+
+
+def test_headless_frame_shows_water_where_the_particles_are():
+    scene = small_dam_break()
+    scene["render"] = {"width_px": W, "height_px": H, "background_rgb": list(WHITE), "container_rgb": [1, 1, 1]}
+    sim = Simulation(scene)
+    renderer = SceneRenderer(sim)
+    water = covered(renderer.frame())
+    # Project every particle centre: each lands on water (the front ones are seen, the others are
+    # hidden behind water), and no water lies outside the particles' projected extent.
+    view = renderer.view
+    right, up, forward = view.basis()
+    rel = sim.positions() - view.eye
+    depth = rel @ forward
+    focal = view.focal_px(H)
+    cols = (W / 2 + focal * (rel @ right) / depth).astype(int)
+    rows = (H / 2 - focal * (rel @ up) / depth).astype(int)
+    assert water[rows, cols].mean() > 0.99
+    margin = focal * sim.scene.particle_radius_m / depth.min() + 2
+    wr, wc = np.nonzero(water)
+    assert wr.min() >= rows.min() - margin and wr.max() <= rows.max() + margin
+    assert wc.min() >= cols.min() - margin and wc.max() <= cols.max() + margin
+    assert 0.05 < water.mean() < 0.9
+
+
+def test_orbit_camera_round_trip():
+    view = View(np.array([1.0, 0.7, 2.0]), np.array([0.2, 0.1, 0.3]), 45.0)
+    again = OrbitCamera.from_view(view).view()
+    assert np.allclose(again.eye, view.eye) and np.allclose(again.target, view.target)
+
+
+def test_headless_run_writes_frames_video_and_particles(tmp_path):
+    out = tmp_path / "frames"
+    argv = ["dam_break", "--headless", "--frames", "3", "--out", str(out), "--video", str(tmp_path / "v.mp4"),
+            "--export", "ply", "--size", "160x90", "--set", "fluid.spacing_m=0.05"]
+    assert cli.main(argv) == 0
+    frames = sorted(out.glob("frame_*.png"))
+    assert [p.name for p in frames] == [f"frame_{k:05d}.png" for k in range(4)]
+    assert iio.imread(frames[0]).shape == (90, 160, 3)
+    assert len(list(iio.imiter(tmp_path / "v.mp4"))) == 4
+    ply = PlyData.read(str(out / "particles_00003.ply"))
+    assert ply["vertex"].count == config.particle_count(config.load("dam_break", ["fluid.spacing_m=0.05"]))
+    assert np.isfinite(ply["vertex"]["vy"]).all() and ply["vertex"]["vy"].min() < -0.1  # falling
+
+
+def test_npz_export(tmp_path):
+    assert cli.main(["dam_break", "--headless", "--frames", "1", "--out", str(tmp_path), "--export", "npz",
+                     "--size", "64x48", "--set", "fluid.spacing_m=0.05"]) == 0
+    data = np.load(tmp_path / "particles_00001.npz")
+    assert data["positions_m"].shape == data["velocities_m_s"].shape == (1000, 3)
+    assert data["time_s"] == pytest.approx(1 / 60)
+
+
+def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert cli.main(["dam_break", "--frames", "1", "--out", str(tmp_path), "--size", "64x48",
+                     "--set", "fluid.spacing_m=0.05"]) == 0
+    assert "no window (no display" in capsys.readouterr().out
+    assert len(list(tmp_path.glob("frame_*.png"))) == 2
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["no_such_scene"], "no such scene file"),
+    (["dam_break", "--set", "render.colour_by=pressure"], "render.colour_by"),
+    (["dam_break", "--size", "641x480"], "render.width_px"),
+])
+def test_bad_input_writes_nothing(tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    assert cli.main(argv + ["--headless", "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
