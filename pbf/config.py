@@ -104,11 +104,17 @@ class Fluid:
 class Time:
     frame_dt_s: float = key(1.0 / 60.0, _positive, "time per rendered frame, s")
     substeps: int = key(2, _at_least(1), "PBF steps per frame (Δt = frame_dt_s / substeps)")
+    max_cfl: float = key(1.2, _positive, "most particle spacings the fastest particle may travel in one "
+                         "substep; a frame takes more substeps when it would go further")
+    max_substeps: int = key(64, _at_least(1), "cap on the substeps one frame may take (a warning when reached)")
 
 
 @dataclass(frozen=True)
 class Solver:
-    iterations: int = key(4, _at_least(1), "Jacobi iterations of the density constraint per substep")
+    iterations: int = key(4, _at_least(1), "Jacobi iterations of the density constraint per substep (the most, "
+                          "with target_density_error)")
+    target_density_error: float = key(0.0, _non_negative, "stop iterating once the mean of max(ρ/ρ0 − 1, 0) is "
+                                      "below this; 0 always runs all iterations")
     kernel_ratio: float = key(2.2, _between(1.5, 4.0), "smoothing radius over spacing, h/s")
     relaxation: float = key(0.1, _positive, "ε of Eq. (10) in the dimensionless form (ε h²/…); see pbf/density.py")
     clamp_pressure: bool = key(True, doc="use C_i = max(ρ_i/ρ0 − 1, 0): only compressed particles push")

@@ -44,6 +44,10 @@ class DensityConstraint:
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
         self.x_next = ti.Vector.field(3, ti.f32, shape=particle_count)
+        self.error_sum = ti.field(ti.f64, shape=())
+        """Σ_i max(C_i, 0) of the last λ pass that measured it."""
+        self.lam_total = ti.field(ti.f32, shape=particle_count)
+        """Σ of λ̂_i over this substep's iterations: the pressure impulse (see pressure_scale)."""
 
     @ti.func
     def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
@@ -63,14 +67,19 @@ class DensityConstraint:
         return ratio + wall, gradient_i + h * wall_gradient, sum_sq
 
     @ti.kernel
-    def compute_lambda(self, x: ti.template(), neighbours: NeighbourList):
-        """λ̂_i for every particle (Eq. 10, dimensionless)."""
+    def compute_lambda(self, x: ti.template(), neighbours: NeighbourList, measure: ti.i32):
+        """λ̂_i for every particle (Eq. 10, dimensionless); with ``measure``, also Σ max(C_i, 0)."""
+        self.error_sum[None] = 0.0
         for i in range(self.count):
             ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
             c = ratio - 1.0
+            if measure:
+                self.error_sum[None] += ti.cast(ti.max(c, 0.0), ti.f64)
             if ti.static(self.clamp_pressure):
                 c = ti.max(c, 0.0)
-            self.lam[i] = -self.omega * c / (gradient_i.norm_sqr() + sum_sq + self.relaxation)
+            lam = -self.omega * c / (gradient_i.norm_sqr() + sum_sq + self.relaxation)
+            self.lam[i] = lam
+            self.lam_total[i] += lam
 
     @ti.kernel
     def compute_correction(self, x: ti.template(), neighbours: NeighbourList):
@@ -96,8 +105,17 @@ class DensityConstraint:
         for i in range(self.count):
             x[i] = self.x_next[i]
 
-    def project(self, x, neighbours):
-        """One Jacobi iteration of the density constraint on positions x (Algorithm 1, lines 9-19)."""
-        self.compute_lambda(x, neighbours)
+    def pressure_scale(self, dt: float) -> float:
+        """p_i = −ρ0 h² Σλ̂_i / Δt² (Pa per unit ρ0): matching Δx_i = h Σ_j (λ̂_i + λ̂_j) ĝ_ij with the SPH
+        pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
+        return -self.h**2 / dt**2
+
+    def project(self, x, neighbours, measure: bool = False):
+        """One Jacobi iteration of the density constraint on positions x (Algorithm 1, lines 9-19).
+
+        With ``measure``, returns the mean density error max(ρ/ρ0 − 1, 0) the iteration started from.
+        """
+        self.compute_lambda(x, neighbours, measure)
         self.compute_correction(x, neighbours)
         self.apply(x)
+        return self.error_sum[None] / self.count if measure else None

@@ -34,6 +34,17 @@ class Diagnostics:
             ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
             ti.atomic_max(self.maxima[2], ti.cast(count, ti.f32))
 
+    @ti.kernel
+    def _max_speed(self) -> ti.f32:
+        fastest = 0.0
+        for i in range(self.count):
+            ti.atomic_max(fastest, self.state.v[i].norm())
+        return fastest
+
+    def max_speed(self) -> float:
+        """The largest particle speed, m/s (one reduction, no neighbour pass)."""
+        return float(self._max_speed())
+
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts.
 

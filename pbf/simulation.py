@@ -1,7 +1,9 @@
 """The Simulation: a scene's particles, the PBF step (Macklin & Müller 2013, Algorithm 1) and its readouts."""
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,14 +24,15 @@ class LiveSettings:
 
     iterations: int
     substeps: int
+    target_density_error: float
     xsph: float
     vorticity: float
     gravity_m_s2: tuple[float, float, float]
 
     @classmethod
     def from_scene(cls, scene: config.Scene) -> LiveSettings:
-        return cls(scene.solver.iterations, scene.time.substeps, scene.viscosity.xsph, scene.vorticity.epsilon,
-                   scene.gravity_m_s2)
+        return cls(scene.solver.iterations, scene.time.substeps, scene.solver.target_density_error,
+                   scene.viscosity.xsph, scene.vorticity.epsilon, scene.gravity_m_s2)
 
 
 class Simulation:
@@ -86,27 +89,47 @@ class Simulation:
             self.state.load(snapshot["positions"], snapshot["velocities"])
         self.time_s = snapshot["time_s"]
         self.frame = snapshot["frame"]
+        self.frame_substeps = self.settings.substeps
+        self.iterations_used = 0
         self.integrator.x_pred.copy_from(self.state.x)
         self._find_neighbours(self.state.x)
 
     @property
     def dt_s(self) -> float:
-        return self.scene.time.frame_dt_s / self.settings.substeps
+        """The substep of the last frame (more than frame_dt_s / substeps when the CFL limit added some)."""
+        return self.scene.time.frame_dt_s / self.frame_substeps
+
+    def substeps_needed(self) -> int:
+        """Substeps for the next frame: the scene's, or more so that no particle travels more than
+        time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
+        t = self.scene.time
+        speed = self.diagnostics.max_speed() + float(np.linalg.norm(self.settings.gravity_m_s2)) * t.frame_dt_s
+        needed = max(self.settings.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
+        if needed > t.max_substeps:
+            warnings.warn(f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
+                          f"time.max_cfl = {t.max_cfl}; capped at time.max_substeps = {t.max_substeps}",
+                          RuntimeWarning, stacklevel=3)
+        return min(needed, t.max_substeps)
 
     def _find_neighbours(self, x) -> None:
         self.grid.sort(x)
         self.integrator.reorder(self.grid.sorted_from)
         self.grid.build_neighbours(x)
 
-    def substep(self) -> None:
-        """One PBF step of Δt (Algorithm 1)."""
-        dt = self.dt_s
+    def substep(self, dt: float | None = None) -> None:
+        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / settings.substeps."""
         settings = self.settings
+        dt = dt or self.scene.time.frame_dt_s / settings.substeps
+        target = settings.target_density_error
         x_pred = self.integrator.x_pred
         self.integrator.predict(dt, settings.gravity_m_s2)         # lines 1-4: v += Δt g, x* = x + Δt v
         self._find_neighbours(x_pred)                              # lines 5-7: sorted grid, neighbour lists
-        for _ in range(settings.iterations):                       # lines 8-19
-            self.density.project(x_pred, self.grid.neighbours)     # λ, Δx, collision, x* += Δx
+        self.density.lam_total.fill(0.0)
+        for k in range(settings.iterations):                       # lines 8-19: λ, Δx, collision, x* += Δx
+            error = self.density.project(x_pred, self.grid.neighbours, measure=target > 0.0)
+            self.iterations_used = k + 1
+            if target > 0.0 and error < target:                    # the error this iteration started from
+                break
         self.integrator.update_velocity(dt)                        # lines 20-21: v = (x* − x) / Δt
         self.postprocess.run(x_pred, self.grid.neighbours, dt,     # line 22: vorticity confinement, XSPH
                              settings.vorticity, settings.xsph)
@@ -114,10 +137,12 @@ class Simulation:
         self.time_s += dt
 
     def step(self, frames: int = 1) -> None:
-        """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each."""
+        """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
         for _ in range(frames):
-            for _ in range(self.settings.substeps):
-                self.substep()
+            self.frame_substeps = self.substeps_needed()
+            dt = self.scene.time.frame_dt_s / self.frame_substeps
+            for _ in range(self.frame_substeps):
+                self.substep(dt)
             self.frame += 1
 
     def positions(self) -> np.ndarray:
@@ -128,9 +153,14 @@ class Simulation:
         """(n, 3) float32 particle velocities in m/s, in creation order."""
         return self.state.velocities()
 
+    def pressures(self) -> np.ndarray:
+        """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers, in creation order."""
+        scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
+        return self.state.in_creation_order(self.density.lam_total) * np.float32(scale)
+
     def stats(self) -> dict:
         """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
         figures = self.diagnostics.compute(self.grid.neighbours)
         figures.update(time_s=self.time_s, frame=self.frame, particles=self.particle_count,
-                       backend=self.backend, iterations=self.settings.iterations, substeps=self.settings.substeps)
+                       backend=self.backend, iterations=self.iterations_used, substeps=self.frame_substeps)
         return figures

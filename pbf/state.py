@@ -17,6 +17,7 @@ class ParticleState:
         self.v = ti.Vector.field(3, ti.f32, shape=particle_count)
         self.index = ti.field(ti.i32, shape=particle_count)
         self._unsorted = ti.Vector.field(3, ti.f32, shape=particle_count)
+        self._unsorted_scalar = ti.field(ti.f32, shape=particle_count)
 
     def load(self, positions: np.ndarray, velocities: np.ndarray) -> None:
         self.x.from_numpy(positions.astype(np.float32))
@@ -27,6 +28,16 @@ class ParticleState:
     def _unsort(self, values: ti.template()):
         for i in range(self.count):
             self._unsorted[self.index[i]] = values[i]
+
+    @ti.kernel
+    def _unsort_scalar(self, values: ti.template()):
+        for i in range(self.count):
+            self._unsorted_scalar[self.index[i]] = values[i]
+
+    def in_creation_order(self, values) -> np.ndarray:
+        """A per-particle scalar field (in the current sorted order) as a NumPy array in creation order."""
+        self._unsort_scalar(values)
+        return self._unsorted_scalar.to_numpy()
 
     def positions(self) -> np.ndarray:
         """(n, 3) float32 positions in metres, in the order the particles were created."""
