@@ -3,8 +3,9 @@
 A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
 the solver pulls it into the wall, where clamping stacks it. We add the density of ghost fluid behind
 each wall (``pbf.sph.wall_density_table``), and its gradient, to the density constraint; the table is
-computed once per scene and looked up by wall distance. At a corner or edge the terms of the two or
-three walls add up; the small region behind both walls is not counted.
+computed once per scene and looked up by wall distance. Near an edge or a corner the ghost lattices
+of two or three walls overlap; inclusion–exclusion tables (``pbf.sph.wall_overlap_tables``) remove
+what would be counted twice, so a block in a corner also starts exactly at ρ0.
 """
 import numpy as np
 import taichi as ti
@@ -12,6 +13,7 @@ import taichi as ti
 from pbf import sph
 
 TABLE_SAMPLES = 512
+OVERLAP_SAMPLES = 32
 
 
 @ti.data_oriented
@@ -28,6 +30,15 @@ class Box:
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.density_table.from_numpy(density.astype(np.float32))
         self.slope_table.from_numpy(slope.astype(np.float32))
+        n = OVERLAP_SAMPLES
+        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if wall_density else (
+            np.zeros((n, n)), np.zeros((n, n, 2)), np.zeros((n, n, n)), np.zeros((n, n, n, 3)))
+        self.edge = ti.field(ti.f32, shape=(n, n))
+        self.edge_gradient = ti.Vector.field(2, ti.f32, shape=(n, n))
+        self.corner = ti.field(ti.f32, shape=(n, n, n))
+        self.corner_gradient = ti.Vector.field(3, ti.f32, shape=(n, n, n))
+        for field, table in zip((self.edge, self.edge_gradient, self.corner, self.corner_gradient), tables):
+            field.from_numpy(table.astype(np.float32))
 
     @ti.func
     def clamp(self, p):
@@ -45,20 +56,65 @@ class Box:
         return density, slope
 
     @ti.func
+    def _cell(self, distance):
+        """Cell index and fraction of a wall distance on the overlap tables' grid."""
+        u = ti.min(ti.max(distance, 0.0) / self.kernel_radius, 1.0) * (OVERLAP_SAMPLES - 1)
+        k = ti.min(ti.cast(u, ti.i32), OVERLAP_SAMPLES - 2)
+        return k, u - k
+
+    @ti.func
+    def _edge(self, da, db):
+        """Bilinear quadrant density and its gradient in (da, db)."""
+        i, s = self._cell(da)
+        k, t = self._cell(db)
+        value = 0.0
+        gradient = ti.Vector([0.0, 0.0])
+        for a, b in ti.static(ti.ndrange(2, 2)):
+            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t)
+            value += weight * self.edge[i + a, k + b]
+            gradient += weight * self.edge_gradient[i + a, k + b]
+        return value, gradient
+
+    @ti.func
+    def _corner(self, d):
+        """Trilinear octant density and its gradient in the three wall distances d."""
+        i, s = self._cell(d[0])
+        j, t = self._cell(d[1])
+        k, u = self._cell(d[2])
+        value = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        for a, b, c in ti.static(ti.ndrange(2, 2, 2)):
+            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t) * (u if c else 1.0 - u)
+            value += weight * self.corner[i + a, j + b, k + c]
+            gradient += weight * self.corner_gradient[i + a, j + b, k + c]
+        return value, gradient
+
+    @ti.func
     def wall_density(self, p):
-        """Σ over walls within h of ρ_wall/ρ0, and its gradient with respect to p (1/m)."""
+        """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner), and its gradient
+        with respect to p (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.with_wall_density):
+            distance = ti.Vector([0.0, 0.0, 0.0])
+            side = ti.Vector([0.0, 0.0, 0.0])  # +1: near the lower wall, −1: the upper, 0: neither
             for axis in ti.static(range(3)):
                 below = p[axis] - self.lower[axis]
-                if below < self.kernel_radius:
-                    d, s = self._lookup(below)
-                    density += d
-                    gradient[axis] += s
                 above = self.upper[axis] - p[axis]
-                if above < self.kernel_radius:
-                    d, s = self._lookup(above)
+                distance[axis] = ti.min(below, above)
+                if distance[axis] < self.kernel_radius:
+                    side[axis] = 1.0 if below <= above else -1.0
+                    d, s = self._lookup(distance[axis])
                     density += d
-                    gradient[axis] -= s
+                    gradient[axis] += side[axis] * s
+            for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
+                if side[a] != 0.0 and side[b] != 0.0:
+                    q, g = self._edge(distance[a], distance[b])
+                    density -= q
+                    gradient[a] -= side[a] * g[0]
+                    gradient[b] -= side[b] * g[1]
+            if side[0] != 0.0 and side[1] != 0.0 and side[2] != 0.0:
+                o, g = self._corner(distance)
+                density += o
+                gradient += side * g
         return density, gradient

@@ -21,6 +21,8 @@ from pbf.sph import jacobi_gain, kernel, kernel_and_gradient, kernel_np
 
 NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
 
+MAX_CORRECTION = 0.1
+"""Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
 STABLE_GAIN = 1.8
 """Largest per-iteration gain ω·μ allowed for any error mode: below 2, so every mode decays."""
 
@@ -98,6 +100,9 @@ class DensityConstraint:
                 dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * grad_w
             _, wall_gradient = self.box.wall_density(xi)
             dx += lam_i * h * wall_gradient
+            # A bound on one iteration's move (in units of h): particles piled on one point have tiny
+            # gradients and huge λ, and their product would throw them out at thousands of m/s.
+            dx *= ti.min(1.0, MAX_CORRECTION / (dx.norm() + 1e-12))
             self.x_next[i] = self.box.clamp(xi + h * dx)
 
     @ti.kernel

@@ -122,6 +122,36 @@ def wall_density_table(spacing, h, samples):
     return density, np.gradient(density, d)
 
 
+def wall_overlap_tables(spacing, h, samples):
+    """Ghost density that two walls (an edge) and three walls (a corner) both count, as ρ/ρ0.
+
+    ``wall_density_table`` restores the lattice behind one flat wall. Near an edge the ghost lattices
+    of the two walls overlap in the quadrant behind both, which the sum counts twice; near a corner
+    the octant behind all three is counted three times by the walls and removed three times by the
+    edges. Inclusion–exclusion: density = Σ walls − Σ edges (quadrant) + corner (octant).
+    Returns the quadrant table Q[i, k] at distances (d_i, d_k) and the octant table O[i, j, k] on
+    the grid d = linspace(0, h, samples) per axis, each with its gradient tables.
+    """
+    n = int(math.ceil(h / spacing))
+    behind = 0.5 * spacing + np.arange(n + 1) * spacing  # ghost planes beyond the wall, from d
+    lateral = np.arange(-n, n + 1) * spacing
+    d = np.linspace(0.0, h, samples)
+    a = d[:, None] + behind[None, :]  # (samples, planes): distances to ghost planes along one axis
+    quadrant = np.zeros((samples, samples))
+    octant = np.zeros((samples, samples, samples))
+    for y in lateral:
+        r2 = a[:, None, :, None] ** 2 + a[None, :, None, :] ** 2 + y * y
+        quadrant += kernel_np(np.sqrt(r2), h).sum(axis=(2, 3))
+    for k in range(n + 1):
+        r2 = (a[:, None, None, :, None] ** 2 + a[None, :, None, None, :] ** 2
+              + (d[None, None, :, None, None] + behind[k]) ** 2)
+        octant += kernel_np(np.sqrt(r2), h).sum(axis=(3, 4))
+    total = lattice_density_sum(spacing, h)
+    quadrant /= total
+    octant /= total
+    return quadrant, np.stack(np.gradient(quadrant, d, d), axis=-1), octant, np.stack(np.gradient(octant, d, d, d), axis=-1)
+
+
 def jacobi_gain(kernel_ratio, relaxation, samples=24):
     """Largest gain μ of one Jacobi density projection over all wave vectors of an interior lattice.
 

@@ -26,11 +26,14 @@ def colour_surface_height(positions, volume_m3, h, xs, zs, y_range):
     return float(np.mean(heights))
 
 
-@pytest.mark.parametrize("spacing_m, substeps", [(0.025, 8), (0.0125, 16)])
-def test_column_at_rest_stays_at_rest(spacing_m, substeps):
-    # Halving the spacing with Δt ∝ spacing must give the same figures: the formulation is scale-free.
+@pytest.mark.parametrize("spacing_m, substeps, iterations", [(0.025, 8, 4), (0.0125, 16, 6)])
+def test_column_at_rest_stays_at_rest(spacing_m, substeps, iterations):
+    # Halving the spacing with Δt ∝ spacing and the same constants must give the same figures: the
+    # formulation is scale-free. Its convergence is not: Jacobi carries a correction about one
+    # smoothing radius per iteration, and the finer column is twice as many layers deep; at 4
+    # iterations its surface sat 1.0-1.1% low (measured), so it gets 6.
     height = 0.4
-    sim = Simulation(column_scene(spacing_m, substeps=substeps, height_m=height))
+    sim = Simulation(column_scene(spacing_m, substeps=substeps, iterations=iterations, height_m=height))
     volume = sim.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
     h = sim.scene.kernel_radius_m
     probes = np.linspace(0.1, 0.2, 4)
