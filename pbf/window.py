@@ -86,6 +86,7 @@ class InteractiveApp:
         edges = box_edges(sim.scene.container.min_m, sim.scene.container.max_m)
         self.edges = ti.Vector.field(3, ti.f32, shape=len(edges))
         self.edges.from_numpy(edges)
+        self.gg_camera = ti.ui.Camera()
         self.paused = False
         self.step_once = False
         self.drag = None
@@ -139,7 +140,7 @@ class InteractiveApp:
 
     def draw(self) -> None:
         view = self.camera.view()
-        camera = ti.ui.Camera()
+        camera = self.gg_camera
         camera.position(*view.eye)
         camera.lookat(*view.target)
         camera.up(0.0, 1.0, 0.0)
