@@ -1,11 +1,15 @@
-"""Benchmark: median time per substep of the dam break at 8,000 and 64,000 particles.
+"""Benchmarks: speed, the speed/error trade-off and what each term costs, printed as tables.
 
-    python -m pbf.bench [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv docs/bench.csv]
+    python -m pbf.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
+    python -m pbf.bench sweep   (see pbf.sweep: iterations × substeps × sizes, CSV and plot)
+    python -m pbf.bench terms   [--sizes 8000] [--iterations 4]
 
-Each size runs the ``dam_break`` preset with the spacing scaled to reach the particle count, warms up
-(JIT and the first impact), then times every substep with a device sync. Prints a table: median ms per
-substep, particle-substeps per second, and the mean and max density error over the timed frames,
-plus a per-stage breakdown of one substep.
+``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
+up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
+particle-substeps per second, the mean and max density error over the timed frames, and a per-stage
+breakdown of one substep. ``terms`` times one substep of the same state, stage by stage, with each
+optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
+interleaved rounds, and reports what each costs. Medians throughout: the machines are shared and noisy.
 """
 import argparse
 import csv
@@ -20,18 +24,29 @@ from pbf import config
 from pbf.simulation import Simulation
 
 
+def scaled(preset: str, particles: int, reference: int, overrides=()) -> config.Scene:
+    """``preset`` (which holds ``reference`` particles) with its spacing scaled to hold about ``particles``.
+
+    The spacing is chosen so that the first block stays a whole number of spacings wide: a block that
+    fills its container wall to wall then still does, and starts at rest.
+    """
+    base = config.load(preset)
+    block = base.fluid.blocks[0]
+    across = round((block.max_m[0] - block.min_m[0]) / base.fluid.spacing_m)
+    spacing = base.fluid.spacing_m * across / round(across * (particles / reference) ** (1 / 3))
+    return config.load(preset, [f"fluid.spacing_m={spacing!r}", *overrides])
+
+
 def dam_break(particles: int, iterations: int) -> config.Scene:
-    """The dam break with the spacing scaled to ``particles``, and Δt with it (Δt ∝ spacing keeps the
-    distance a particle moves per substep, in spacings, the same: the scene stays equally hard)."""
-    per_side = round(particles ** (1 / 3))
+    """The dam break scaled to ``particles``, Δt with the spacing (Δt ∝ spacing keeps the distance a
+    particle moves per substep, in spacings, the same: the scene stays equally hard)."""
     base = config.load("dam_break")
-    spacing = base.fluid.spacing_m * 20 / per_side
-    substeps = max(1, round(base.time.substeps * per_side / 20))
-    return config.load("dam_break", [f"fluid.spacing_m={spacing!r}", f"solver.iterations={iterations}",
-                                     f"time.substeps={substeps}"])
+    substeps = max(1, round(base.time.substeps * (particles / 8000) ** (1 / 3)))
+    return scaled("dam_break", particles, 8000, [f"solver.iterations={iterations}", f"time.substeps={substeps}"])
 
 
 def timed(function, *args):
+    """Seconds ``function(*args)`` takes, with the device synchronised before and after."""
     ti.sync()
     start = time.perf_counter()
     function(*args)
@@ -58,7 +73,7 @@ def stage_times(sim: Simulation) -> dict:
     return {name: seconds * 1e3 for name, seconds in stages.items()}
 
 
-def run(particles: int, iterations: int, frames: int, warmup_frames: int) -> dict:
+def run_size(particles: int, iterations: int, frames: int, warmup_frames: int) -> dict:
     sim = Simulation(dam_break(particles, iterations), quiet=True)
     sim.step(warmup_frames)
     substep_ms, mean_errors, max_errors = [], [], []
@@ -87,20 +102,8 @@ def run(particles: int, iterations: int, frames: int, warmup_frames: int) -> dic
     }
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[8000, 64000])
-    parser.add_argument("--iterations", type=int, default=4)
-    parser.add_argument("--frames", type=int, default=60, help="timed frames per size")
-    parser.add_argument("--warmup", type=int, default=30, help="untimed frames first")
-    parser.add_argument("--arch", default=None)
-    parser.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
-    args = parser.parse_args(argv)
-    from pbf import backend
-
-    backend.start(args.arch)
-    rows = [run(n, args.iterations, args.frames, args.warmup) for n in args.sizes]
-    print(f"\nmachine: {platform.processor() or platform.machine()}, {platform.system()}, backend {rows[0]['backend']}")
+def sizes(args) -> list[dict]:
+    rows = [run_size(n, args.iterations, args.frames, args.warmup) for n in args.sizes]
     print(f"{'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
           f"{'mean err':>9} {'max err':>8}")
     for r in rows:
@@ -116,6 +119,110 @@ def main(argv=None):
             writer.writeheader()
             writer.writerows({k: v for k, v in r.items() if k != "stages_ms"} for r in rows)
     return rows
+
+
+TERMS = {
+    "all terms (preset)": [],
+    "no vorticity confinement": ["vorticity.epsilon=0"],
+    "no XSPH viscosity": ["viscosity.xsph=0"],
+    "no s_corr": ["solver.scorr_k=0"],
+    "no wall density": ["solver.wall_density=false"],
+    "none of the four": ["vorticity.epsilon=0", "viscosity.xsph=0", "solver.scorr_k=0", "solver.wall_density=false"],
+}
+
+
+def terms(args) -> list[dict]:
+    """Per-substep cost of each optional term: every variant restored to the same mid-splash state and
+    timed stage by stage, variants interleaved round by round so that machine noise hits all alike."""
+    rows = []
+    for particles in args.sizes:
+        base = dam_break(particles, args.iterations)
+        variants = {name: Simulation(config.load("dam_break", _overrides(base) + extra), quiet=True)
+                    for name, extra in TERMS.items()}
+        reference = next(iter(variants.values()))
+        reference.step(args.warmup)
+        snapshot, dt = reference.snapshot(), reference.dt_s
+        samples = {name: [] for name in variants}
+        for _ in range(args.rounds):
+            for name, sim in variants.items():
+                sim.restore(snapshot)
+                sim.substep(dt)
+                samples[name].append(stage_times(sim))
+        medians = {name: {stage: statistics.median(s[stage] for s in runs) for stage in runs[0]}
+                   for name, runs in samples.items()}
+        full = sum(medians["all terms (preset)"].values())
+        for name, stages in medians.items():
+            total = sum(stages.values())
+            rows.append({"particles": reference.particle_count, "variant": name, "ms_per_substep": total,
+                         "solver_ms": stages["solver iterations"], "velocity_ms": stages["velocity, vorticity, XSPH"],
+                         "saving_ms": full - total, "ratio_to_all": total / full,
+                         "mean_density_error": variants[name].stats()["mean_density_error"]})
+    print(f"{'particles':>9}  {'variant':<26} {'ms/substep':>10} {'solver':>7} {'velocity':>8} {'saves ms':>9} "
+          f"{'ratio':>6} {'mean err':>9}")
+    for r in rows:
+        print(f"{r['particles']:>9,}  {r['variant']:<26} {r['ms_per_substep']:>10.2f} {r['solver_ms']:>7.2f} "
+              f"{r['velocity_ms']:>8.2f} {r['saving_ms']:>9.2f} {r['ratio_to_all']:>6.2f} {r['mean_density_error']:>9.3%}")
+    return rows
+
+
+def _overrides(scene: config.Scene) -> list[str]:
+    return [f"fluid.spacing_m={scene.fluid.spacing_m!r}", f"solver.iterations={scene.solver.iterations}",
+            f"time.substeps={scene.time.substeps}"]
+
+
+def sweep(args):
+    from pbf import sweep as speed_error
+
+    if args.from_csv:
+        points = speed_error.read_csv(args.from_csv)
+    else:
+        points = speed_error.sweep(args.sizes, args.iterations, args.substeps, args.target, args.frames,
+                                   args.rest_settle, args.rest_frames)
+        speed_error.write_csv(points, args.csv)
+    speed_error.print_table(points)
+    machine = f"{platform.processor() or platform.machine()}, {args.backend} backend"
+    speed_error.plot(points, args.plot, f"PBF dam break, {args.frames} frames from rest ({machine})")
+    print(f"wrote {args.plot}" if args.from_csv else f"wrote {args.csv} and {args.plot}")
+    return points
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms"), default="sizes")
+    parser.add_argument("--sizes", type=int, nargs="+", default=None,
+                        help="particle counts (default: 8000 64000; terms: 8000)")
+    parser.add_argument("--iterations", type=int, nargs="+", default=None,
+                        help="solver iterations (default: 4; sweep: 1 2 3 4 6 8 12)")
+    parser.add_argument("--substeps", type=int, nargs="+", default=[1, 2, 4],
+                        help="sweep: substeps per frame")
+    parser.add_argument("--target", type=float, default=0.005,
+                        help="sweep: also stop iterating under this mean density error (0: no such points)")
+    parser.add_argument("--frames", type=int, default=60, help="timed frames per size or sweep point")
+    parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms)")
+    parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
+    parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
+    parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
+    parser.add_argument("--arch", default=None)
+    parser.add_argument("--csv", type=Path, default=None, help="write the table as CSV "
+                        "(sweep default: docs/speed_vs_error.csv)")
+    parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
+    parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
+    args = parser.parse_args(argv)
+    from pbf import backend
+
+    args.backend = backend.start(args.arch)
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend}")
+    if args.mode == "sweep":
+        args.sizes = args.sizes or [8000, 64000]
+        args.iterations = args.iterations or [1, 2, 3, 4, 6, 8, 12]
+        args.csv = args.csv or Path("docs/speed_vs_error.csv")
+        return sweep(args)
+    args.iterations = (args.iterations or [4])[0]
+    if args.mode == "terms":
+        args.sizes = args.sizes or [8000]
+        return terms(args)
+    args.sizes = args.sizes or [8000, 64000]
+    return sizes(args)
 
 
 if __name__ == "__main__":

@@ -158,6 +158,10 @@ class Simulation:
         scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
         return self.state.in_creation_order(self.density.lam_total) * np.float32(scale)
 
+    def neighbour_counts(self) -> np.ndarray:
+        """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""
+        return self.state.in_creation_order(self.grid.neighbour_count).astype(np.int32)
+
     def stats(self) -> dict:
         """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
         figures = self.diagnostics.compute(self.grid.neighbours)

@@ -5,25 +5,10 @@ import numpy as np
 import pytest
 from conftest import column_scene, small_dam_break
 
-from pbf import sph
 from pbf.simulation import Simulation
+from pbf.validate import colour_surface_height
 
 G = 9.81
-
-
-def colour_surface_height(positions, volume_m3, h, xs, zs, y_range):
-    """Height where the SPH colour field Σ_j V W(x − x_j) falls to ½: the free surface, averaged over
-    vertical probes at (x, z)."""
-    ys = np.linspace(*y_range, 400)
-    heights = []
-    for x in xs:
-        for z in zs:
-            probes = np.stack([np.full_like(ys, x), ys, np.full_like(ys, z)], axis=1)
-            near = positions[(np.abs(positions[:, 0] - x) < h) & (np.abs(positions[:, 2] - z) < h)]
-            distances = np.linalg.norm(probes[:, None, :] - near[None, :, :], axis=2)
-            colour = volume_m3 * sph.kernel_np(distances, h).sum(axis=1)
-            heights.append(ys[np.argmax(colour < 0.5)])
-    return float(np.mean(heights))
 
 
 @pytest.mark.parametrize("spacing_m, substeps, iterations", [(0.025, 8, 4), (0.0125, 16, 6)])
@@ -99,13 +84,3 @@ def test_positions_keep_creation_order():
     sim.reset()
     assert np.array_equal(sim.positions(), start)
 
-
-def test_pressure_grows_with_depth_as_rho_g():
-    # Simulation.pressures() turns the multipliers into Pa; at rest they must follow the hydrostatic
-    # law p = ρ0 g (H − y): the slope against height within 10% of −ρ0 g (measured 6% steeper).
-    sim = Simulation(column_scene(0.025, substeps=8, height_m=0.4))
-    sim.step(60)
-    p, x = sim.pressures(), sim.positions()
-    inner = (np.abs(x[:, 0] - 0.15) < 0.1) & (np.abs(x[:, 2] - 0.15) < 0.1) & (x[:, 1] > 0.05) & (x[:, 1] < 0.3)
-    slope, _ = np.polyfit(x[inner, 1], p[inner], 1)
-    assert slope == pytest.approx(-1000.0 * G, rel=0.1)

@@ -1,0 +1,252 @@
+"""Validation against experiment and theory: the Martin & Moyce dam break and a hydrostatic tank.
+
+    python -m pbf.validate [martin_moyce] [hydrostatic] [--divisors 9 12 24] [--frames 600] [--out docs]
+
+``martin_moyce`` runs the ``martin_moyce`` preset at spacings a/n for each n of ``--divisors``, tracks
+the surge front (the largest x reached by water, spray ignored) against dimensionless time
+T = t·sqrt(2g/a), and compares Z = x/a with Martin & Moyce (1952), Table 2
+(``docs/data/martin_moyce_1952_surge_front.csv``). ``hydrostatic`` runs the ``hydrostatic`` preset for
+``--frames`` frames and compares pressure against depth with ρ0 g (H − y) and the free surface with the
+fill height H. Each prints its figures and writes a plot (and the curves as CSV) under ``--out``.
+"""
+import argparse
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pbf import config, sph
+from pbf.simulation import Simulation
+
+MARTIN_MOYCE_CSV = Path(__file__).resolve().parent.parent / "docs" / "data" / "martin_moyce_1952_surge_front.csv"
+SPRAY_NEIGHBOURS = 4
+"""A particle with fewer neighbours within h than this is spray, not the front (a full one has ~40)."""
+
+
+def martin_moyce_data() -> tuple[np.ndarray, np.ndarray]:
+    """The measured (T, Z) of the surge front, Martin & Moyce (1952) Table 2, n² = 2."""
+    lines = [line.strip() for line in MARTIN_MOYCE_CSV.read_text().splitlines()
+             if line.strip() and not line.startswith("#")]
+    if lines[0] != "T,Z":
+        raise ValueError(f"{MARTIN_MOYCE_CSV}: expected the columns T,Z, found {lines[0]!r}")
+    table = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    return table[:, 0], table[:, 1]
+
+
+def surge_front(positions: np.ndarray, neighbour_counts: np.ndarray, spacing_m: float) -> float:
+    """The largest x reached by water: the foremost particle with at least SPRAY_NEIGHBOURS neighbours,
+    plus half a spacing (each particle stands for a cube of water one spacing wide; the initial
+    column's edge at x = a is half a spacing beyond its last particles)."""
+    connected = neighbour_counts >= SPRAY_NEIGHBOURS
+    return float(positions[connected, 0].max()) + 0.5 * spacing_m
+
+
+@dataclass
+class SurgeRun:
+    divisor: int
+    """The spacing is a / divisor."""
+    particles: int
+    T: np.ndarray
+    Z: np.ndarray
+    max_deviation: float
+    """max |Z_sim − Z_exp| over the measured points."""
+    at_T: float
+    mean_offset: float
+    """Mean of Z_sim − Z_exp (positive: the simulation runs ahead)."""
+
+
+def martin_moyce(divisor: int, end_T: float = 3.5, overrides=()) -> SurgeRun:
+    """The ``martin_moyce`` preset at spacing a/divisor (Δt scaled with it), run until T = end_T."""
+    base = config.load("martin_moyce")
+    column = base.fluid.blocks[0]
+    a = column.max_m[0] - column.min_m[0]
+    spacing = a / divisor
+    substeps = math.ceil(base.time.substeps * base.fluid.spacing_m / spacing - 1e-9)
+    # One substep per "frame": the front is sampled every substep and the CFL limit still applies.
+    scene = config.load("martin_moyce", [f"fluid.spacing_m={spacing!r}", "time.substeps=1",
+                                         f"time.frame_dt_s={base.time.frame_dt_s / substeps!r}", *overrides])
+    sim = Simulation(scene, quiet=True)
+    g = float(np.linalg.norm(scene.gravity_m_s2))
+    to_T = math.sqrt(2 * g / a)
+    times, fronts = [0.0], [surge_front(sim.positions(), sim.neighbour_counts(), spacing)]
+    while times[-1] * to_T < end_T:
+        sim.step()
+        times.append(sim.time_s)
+        fronts.append(surge_front(sim.positions(), sim.neighbour_counts(), spacing))
+    T, Z = np.array(times) * to_T, np.array(fronts) / a
+    measured_T, measured_Z = martin_moyce_data()
+    deviation = np.interp(measured_T, T, Z) - measured_Z
+    worst = int(np.argmax(np.abs(deviation)))
+    return SurgeRun(divisor, sim.particle_count, T, Z, float(abs(deviation[worst])), float(measured_T[worst]),
+                    float(deviation.mean()))
+
+
+def plot_martin_moyce(runs: list[SurgeRun], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    measured_T, measured_Z = martin_moyce_data()
+    fig, ax = plt.subplots(figsize=(6.5, 4.5), constrained_layout=True)
+    ax.plot(measured_T, measured_Z, "ko", label="Martin & Moyce (1952), n² = 2")
+    for run in runs:
+        ax.plot(run.T, run.Z, label=f"PBF, spacing a/{run.divisor} ({run.particles:,} particles): "
+                                    f"max |ΔZ| {run.max_deviation:.2f}")
+    ax.set_xlabel("T = t·sqrt(2g/a)")
+    ax.set_ylabel("Z = surge front x / a")
+    ax.set_xlim(0, max(run.T[-1] for run in runs))
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Collapse of a water column: surge front", fontsize=10)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
+    """Height where the SPH colour field Σ_j V W(x − x_j) falls to ½: the free surface, averaged over
+    vertical probes at every (x, z) of ``xs`` × ``zs``."""
+    ys = np.linspace(*y_range, 400)
+    heights = []
+    for x in xs:
+        for z in zs:
+            probes = np.stack([np.full_like(ys, x), ys, np.full_like(ys, z)], axis=1)
+            near = positions[(np.abs(positions[:, 0] - x) < h) & (np.abs(positions[:, 2] - z) < h)]
+            distances = np.linalg.norm(probes[:, None, :] - near[None, :, :], axis=2)
+            colour = volume_m3 * sph.kernel_np(distances, h).sum(axis=1)
+            heights.append(ys[np.argmax(colour < 0.5)])
+    return float(np.mean(heights))
+
+
+@dataclass
+class HydrostaticRun:
+    particles: int
+    fill_height_m: float
+    """H: the analytic fill height, whole layers of the initial lattice."""
+    depth_m: np.ndarray
+    """Bin centres of depth H − y."""
+    pressure_pa: np.ndarray
+    """Mean pressure of the particles in each depth bin."""
+    slope_pa_m: float
+    """Least-squares dp/d(depth) over the interior particles; ρ0 g in theory."""
+    expected_slope_pa_m: float
+    pressure_rms_error: float
+    """rms of (p − ρ0 g (H − y)) over the interior particles, relative to ρ0 g H."""
+    times_s: np.ndarray
+    surface_m: np.ndarray
+    """The free surface (colour field ½) over time."""
+
+
+def hydrostatic(frames: int = 600, samples: int = 30, overrides=()) -> HydrostaticRun:
+    """Run the ``hydrostatic`` preset ``frames`` frames; sample the surface ``samples`` times, pressure at the end."""
+    scene = config.load("hydrostatic", overrides)
+    sim = Simulation(scene, quiet=True)
+    lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
+    block = scene.fluid.blocks[0]
+    spacing = scene.fluid.spacing_m
+    H = round((block.max_m[1] - block.min_m[1]) / spacing) * spacing + block.min_m[1] - lower[1]
+    h = scene.kernel_radius_m
+    volume = sim.particle_mass_kg / scene.fluid.rest_density_kg_m3
+    # Probes away from the walls by h, where the colour field is not cut by the container.
+    xs = np.linspace(lower[0] + h, upper[0] - h, 3)
+    zs = np.linspace(lower[2] + h, upper[2] - h, 3)
+    y_range = (lower[1] + 0.5 * H, lower[1] + 1.5 * H)
+    times, surfaces = [0.0], [colour_surface_height(sim.positions(), volume, h, xs, zs, y_range)]
+    for k in range(samples):
+        sim.step(frames * (k + 1) // samples - frames * k // samples)
+        times.append(sim.time_s)
+        surfaces.append(colour_surface_height(sim.positions(), volume, h, xs, zs, y_range))
+    x, p = sim.positions(), sim.pressures()
+    depth = lower[1] + H - x[:, 1]
+    rho_g = scene.fluid.rest_density_kg_m3 * float(np.linalg.norm(scene.gravity_m_s2))
+    # Interior: a smoothing radius from the side walls and floor, and below the surface layer, where
+    # the kernel sees a full neighbourhood or the wall term completes it.
+    inner = ((x[:, 0] > lower[0] + h) & (x[:, 0] < upper[0] - h) & (x[:, 2] > lower[2] + h)
+             & (x[:, 2] < upper[2] - h) & (depth > h) & (x[:, 1] > lower[1] + h))
+    slope = float(np.polyfit(depth[inner], p[inner], 1)[0])
+    rms = float(np.sqrt(np.mean((p[inner] - rho_g * depth[inner]) ** 2)) / (rho_g * H))
+    edges = np.arange(0.0, H + spacing, spacing)
+    which = np.digitize(depth, edges) - 1
+    bins = [k for k in range(len(edges) - 1) if np.any(which == k)]
+    binned = np.array([p[which == k].mean() for k in bins])
+    return HydrostaticRun(sim.particle_count, H, edges[bins] + spacing / 2, binned, slope, rho_g, rms,
+                          np.array(times), np.array(surfaces))
+
+
+def plot_hydrostatic(run: HydrostaticRun, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    left.plot(run.pressure_pa, run.depth_m, "o", ms=4, label="PBF, mean per layer")
+    left.plot(run.expected_slope_pa_m * run.depth_m, run.depth_m, "k-", label="ρ0 g (H − y)")
+    left.invert_yaxis()
+    left.set_xlabel("pressure (Pa)")
+    left.set_ylabel("depth H − y (m)")
+    left.set_title(f"slope {run.slope_pa_m:,.0f} Pa/m against ρ0 g = {run.expected_slope_pa_m:,.0f}", fontsize=10)
+    left.legend(fontsize=8)
+    left.grid(True, alpha=0.3)
+    right.plot(run.times_s, run.surface_m, "o-", ms=3, label="free surface (colour field ½)")
+    right.axhline(run.fill_height_m, color="k", label=f"fill height H = {run.fill_height_m:.3f} m")
+    right.axhspan(0.99 * run.fill_height_m, 1.01 * run.fill_height_m, color="grey", alpha=0.2, label="±1%")
+    right.set_xlabel("time (s)")
+    right.set_ylabel("surface height (m)")
+    right.legend(fontsize=8)
+    right.grid(True, alpha=0.3)
+    fig.suptitle(f"Hydrostatic tank, {run.particles:,} particles", fontsize=11)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def write_curves(path: Path, columns: dict) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(columns)
+        writer.writerows(zip(*columns.values()))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("cases", nargs="*", choices=("martin_moyce", "hydrostatic"),
+                        default=["martin_moyce", "hydrostatic"])
+    parser.add_argument("--divisors", type=int, nargs="+", default=[12, 24],
+                        help="martin_moyce: spacings a/n (n a multiple of 3: the tank is 2a/3 deep)")
+    parser.add_argument("--frames", type=int, default=600, help="hydrostatic: frames to run (60 per second)")
+    parser.add_argument("--arch", default=None)
+    parser.add_argument("--out", type=Path, default=Path("docs"))
+    args = parser.parse_args(argv)
+    bad = [n for n in args.divisors if n % 3]
+    if bad:
+        parser.error(f"--divisors: {bad} are not multiples of 3 (the tank is 2a/3 deep, a whole number of spacings)")
+    from pbf import backend
+
+    backend.start(args.arch)
+    args.out.mkdir(parents=True, exist_ok=True)
+    if "martin_moyce" in args.cases:
+        runs = [martin_moyce(n) for n in args.divisors]
+        print(f"{'spacing':>8} {'particles':>9} {'max |ΔZ|':>8} {'at T':>5} {'mean ΔZ':>8}")
+        for run in runs:
+            print(f"{'a/' + str(run.divisor):>8} {run.particles:>9,} {run.max_deviation:>8.3f} {run.at_T:>5.2f} "
+                  f"{run.mean_offset:>+8.3f}")
+            write_curves(args.out / f"martin_moyce_a{run.divisor}.csv", {"T": run.T, "Z": run.Z})
+        plot_martin_moyce(runs, args.out / "martin_moyce.png")
+    if "hydrostatic" in args.cases:
+        run = hydrostatic(args.frames)
+        late = run.surface_m[len(run.surface_m) // 2:]
+        print(f"hydrostatic, {run.particles:,} particles, {args.frames} frames: dp/d(depth) {run.slope_pa_m:,.0f} Pa/m "
+              f"against {run.expected_slope_pa_m:,.0f} ({run.slope_pa_m / run.expected_slope_pa_m - 1:+.1%}), "
+              f"rms pressure error {run.pressure_rms_error:.2%} of ρ0 g H; surface {run.surface_m[0]:.4f} m at "
+              f"the start, {late.mean():.4f} m mean over the second half (range {late.min():.4f}-{late.max():.4f}), "
+              f"H = {run.fill_height_m:.4f} m")
+        write_curves(args.out / "hydrostatic_pressure.csv", {"depth_m": run.depth_m, "pressure_pa": run.pressure_pa})
+        write_curves(args.out / "hydrostatic_surface.csv", {"time_s": run.times_s, "surface_m": run.surface_m})
+        plot_hydrostatic(run, args.out / "hydrostatic.png")
+    print(f"wrote plots and curves under {args.out}/")
+
+
+if __name__ == "__main__":
+    main()
