@@ -411,11 +411,20 @@ def particle_count(scene: Scene) -> int:
     return sum(int(np.prod(_block_counts(b, scene.fluid.spacing_m))) for b in scene.fluid.blocks)
 
 
+NEIGHBOUR_REACH = 2
+"""Grid cells per h. Cells h/2 wide put every neighbour within 2 cells, so a particle checks the 5×5×5
+cells around it, (5/2)³ = 15.6 h³ of space, against 27 h³ for cells h wide and 3×3×3: 42% fewer
+distance tests. Measured on the 8,000-particle dam break: sort + neighbour lists 2.56 against 2.93 ms
+(median of 40 interleaved runs), the same lists."""
+
+
 def grid_resolution(scene: Scene) -> tuple[int, int, int]:
-    """Cells per axis of the neighbour grid; cells are at least h wide (with a 1e-4 margin against float32
-    rounding), so the 3×3×3 cells around a particle hold all its neighbours."""
+    """Cells per axis of the neighbour grid; cells are at least h / NEIGHBOUR_REACH wide (with a 1e-4
+    margin against float32 rounding), so the cells within NEIGHBOUR_REACH of a particle's hold all its
+    neighbours."""
     extent = np.array(scene.container.max_m) - np.array(scene.container.min_m)
-    return tuple(max(1, int(math.floor(e / (scene.kernel_radius_m * (1 + 1e-4))))) for e in extent)
+    cell = scene.kernel_radius_m / NEIGHBOUR_REACH * (1 + 1e-4)
+    return tuple(max(1, int(math.floor(e / cell))) for e in extent)
 
 
 def particle_mass_kg(scene: Scene) -> float:

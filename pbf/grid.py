@@ -1,14 +1,15 @@
 """Uniform grid and exact neighbour lists, rebuilt every substep by counting sorts.
 
 Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
-1. count the particles in each cell (cell size ≥ h) and give each a rank inside its cell;
+1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell;
 2. exclusive prefix sum of the counts → first slot of every cell;
 3. slot = start[cell] + rank: the permutation that sorts particles by cell, which the caller applies
    to its arrays so that neighbours sit together in memory;
-4. visit the 3×3×3 cells around each particle once, writing its neighbours within h into a slot of
-   SLOTS entries and counting them all. If some particle has more than SLOTS neighbours, the counts
-   are prefix-summed into a compact list (grown as needed) and filled by a second visit. No capacity
-   can overflow: 8,000 particles in one cell still give exact neighbours, only a little slower.
+4. visit the cells within ``reach`` of each particle's own (3×3×3 for reach 1, 5×5×5 for reach 2)
+   once, writing its neighbours within h into a slot of SLOTS entries and counting them all. If some
+   particle has more than SLOTS neighbours, the counts are prefix-summed into a compact list (grown
+   as needed) and filled by a second visit. No capacity can overflow: 8,000 particles in one cell
+   still give exact neighbours, only a little slower.
 """
 import math
 
@@ -23,16 +24,18 @@ SLOTS = 64
 
 @ti.data_oriented
 class NeighbourGrid:
-    def __init__(self, particle_count: int, lower_m, upper_m, kernel_radius_m: float, resolution):
+    def __init__(self, particle_count: int, lower_m, upper_m, kernel_radius_m: float, resolution, reach: int = 1):
         self.particle_count = particle_count
         self.kernel_radius = float(kernel_radius_m)
         self.lower = ti.Vector([float(c) for c in lower_m])
         extent = np.asarray(upper_m, dtype=np.float64) - np.asarray(lower_m, dtype=np.float64)
         self.resolution = ti.Vector([int(r) for r in resolution])
-        # Cells are at least h wide (a 1e-4 margin keeps float32 rounding from making them narrower), so
-        # every neighbour within h lies in the 27 cells around a particle.
+        self.reach = reach
+        """Cells per h: every neighbour within h lies within ``reach`` cells of a particle's own."""
+        # Cells are at least h / reach wide (a 1e-4 margin keeps float32 rounding from making them
+        # narrower), so every neighbour within h lies within reach cells along each axis.
         self.inverse_cell_size = ti.Vector([float(r / e) for r, e in zip(resolution, extent)])
-        assert all(e / r >= kernel_radius_m * (1 + 1e-5) or r == 1 for e, r in zip(extent, resolution))
+        assert all(e / r * reach >= kernel_radius_m * (1 + 1e-5) or r == 1 for e, r in zip(extent, resolution))
         cell_count = int(np.prod(resolution))
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
         self.cell_start = ti.field(ti.i32, shape=cell_count + 1)
@@ -83,12 +86,12 @@ class NeighbourGrid:
 
     @ti.func
     def column_range(self, c, dx: ti.template(), dy: ti.template()):
-        """Slots of the cells (c.x+dx, c.y+dy, c.z-1..c.z+1): contiguous because z varies fastest."""
+        """Slots of the cells (c.x+dx, c.y+dy, c.z-reach..c.z+reach): contiguous because z varies fastest."""
         begin, end = 0, 0
         cx, cy = c[0] + dx, c[1] + dy
         if 0 <= cx < self.resolution[0] and 0 <= cy < self.resolution[1]:
-            z0 = ti.max(c[2] - 1, 0)
-            z1 = ti.min(c[2] + 1, self.resolution[2] - 1)
+            z0 = ti.max(c[2] - self.reach, 0)
+            z1 = ti.min(c[2] + self.reach, self.resolution[2] - 1)
             row = (cx * self.resolution[1] + cy) * self.resolution[2]
             begin = self.cell_start[row + z0]
             end = self.cell_start[row + z1 + 1]
@@ -109,7 +112,7 @@ class NeighbourGrid:
                 begin = self.neighbour_start[i]
                 limit = self.neighbour_start[i + 1]
             k = begin
-            for dx, dy in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+            for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
                 first, last = self.column_range(c, dx, dy)
                 for j in range(first, last):
                     if j != i and (x[j] - xi).norm_sqr() < h2:

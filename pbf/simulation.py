@@ -62,7 +62,7 @@ class Simulation:
         lower, upper = scene.container.min_m, scene.container.max_m
         self.state = ParticleState(n)
         self.box = Box(lower, upper, scene.particle_radius_m, scene.fluid.spacing_m, h, scene.solver.wall_density)
-        self.grid = NeighbourGrid(n, lower, upper, h, config.grid_resolution(scene))
+        self.grid = NeighbourGrid(n, lower, upper, h, config.grid_resolution(scene), config.NEIGHBOUR_REACH)
         self.integrator = Integrator(self.state, self.box)
         s = scene.solver
         self.density = DensityConstraint(n, h, scene.fluid.spacing_m, volume, s.relaxation, s.clamp_pressure,

@@ -13,10 +13,10 @@ def brute_force(points, h):
     return [set(np.nonzero(row < h * h)[0]) for row in d2]
 
 
-def grid_neighbours(points, lower, upper, h):
+def grid_neighbours(points, lower, upper, h, reach=1):
     n = len(points)
-    resolution = [max(1, int(np.floor((u - l) / (h * (1 + 1e-4))))) for l, u in zip(lower, upper)]
-    grid = NeighbourGrid(n, lower, upper, h, resolution)
+    resolution = [max(1, int(np.floor((u - l) * reach / (h * (1 + 1e-4))))) for l, u in zip(lower, upper)]
+    grid = NeighbourGrid(n, lower, upper, h, resolution, reach)
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
     grid.sort(x)
@@ -38,8 +38,8 @@ def float32_brute_force(points, h):
     return brute_force(points.astype(np.float32), np.float32(h))
 
 
-def check(points, lower, upper, h):
-    got, order = grid_neighbours(points, lower, upper, h)
+def check(points, lower, upper, h, reach=1):
+    got, order = grid_neighbours(points, lower, upper, h, reach)
     expected = float32_brute_force(points, h)
     by_original = [None] * len(points)
     for slot, original in enumerate(order):
@@ -49,40 +49,47 @@ def check(points, lower, upper, h):
     return expected
 
 
-def test_random_points():
+REACHES = pytest.mark.parametrize("reach", [1, 2])  # cells h wide (3×3×3 visited) or h/2 (5×5×5)
+
+
+@REACHES
+def test_random_points(reach):
     rng = np.random.default_rng(0)
     points = rng.uniform(0.0, 1.0, size=(3000, 3))
-    expected = check(points, (0, 0, 0), (1, 1, 1), 0.07)
+    expected = check(points, (0, 0, 0), (1, 1, 1), 0.07, reach)
     assert sum(map(len, expected)) > 3000  # the test is not vacuous
 
 
-def test_points_on_cell_borders():
+@REACHES
+def test_points_on_cell_borders(reach):
     # Every point has one, two or three coordinates exactly on a cell face (so it sits on a face, an
     # edge or a corner); the others are random, so no pair sits at exactly h (a float32 tie).
     h = 0.1
-    cell = 1.0 / int(np.floor(1.0 / (h * (1 + 1e-4))))
+    cell = 1.0 / int(np.floor(reach / (h * (1 + 1e-4))))
     rng = np.random.default_rng(4)
     points = rng.uniform(0.0, 1.0, size=(3000, 3))
     snap = rng.random((3000, 3)) < 0.6
     snap[np.arange(3000), rng.integers(0, 3, 3000)] = True
     points = np.where(snap, np.round(points / cell) * cell, points)
-    expected = check(points, (0, 0, 0), (1.0, 1.0, 1.0), h)
+    expected = check(points, (0, 0, 0), (1.0, 1.0, 1.0), h, reach)
     assert sum(map(len, expected)) > 3000
 
 
-def test_all_points_in_one_cell():
+@REACHES
+def test_all_points_in_one_cell(reach):
     # 8,000 particles in one cell: 63,992,000 pairs, more than any fixed capacity would hold.
     rng = np.random.default_rng(2)
     h = 0.1
     points = rng.uniform(0.45, 0.45 + h / 3, size=(8000, 3))
-    got, _ = grid_neighbours(points, (0, 0, 0), (1, 1, 1), h)
+    got, _ = grid_neighbours(points, (0, 0, 0), (1, 1, 1), h, reach)
     assert all(len(s) == 7999 for s in got)
 
 
-def test_points_outside_grid_are_clamped_not_lost():
+@REACHES
+def test_points_outside_grid_are_clamped_not_lost(reach):
     rng = np.random.default_rng(3)
     points = rng.uniform(-0.2, 1.2, size=(1500, 3))
-    check(points, (0, 0, 0), (1, 1, 1), 0.15)
+    check(points, (0, 0, 0), (1, 1, 1), 0.15, reach)
 
 
 @pytest.mark.parametrize("length", [1, 63, 64, 65, 5000, 100_003])
