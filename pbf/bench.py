@@ -193,8 +193,8 @@ def main(argv=None):
                         help="particle counts (default: 8000 64000; terms: 8000)")
     parser.add_argument("--iterations", type=int, nargs="+", default=None,
                         help="solver iterations (default: 4; sweep: 1 2 3 4 6 8 12)")
-    parser.add_argument("--substeps", type=int, nargs="+", default=[1, 2, 4],
-                        help="sweep: substeps per frame")
+    parser.add_argument("--substeps", type=int, nargs="+", default=None,
+                        help="sweep: substeps per frame (default: 1 2 4)")
     parser.add_argument("--target", type=float, default=0.005,
                         help="sweep: also stop iterating under this mean density error (0: no such points)")
     parser.add_argument("--frames", type=int, default=60, help="timed frames per size or sweep point")
@@ -213,10 +213,15 @@ def main(argv=None):
     args.backend = backend.start(args.arch)
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend}")
     if args.mode == "sweep":
+        from pbf.sweep import ITERATIONS, SUBSTEPS
+
         args.sizes = args.sizes or [8000, 64000]
-        args.iterations = args.iterations or [1, 2, 3, 4, 6, 8, 12]
+        args.iterations = args.iterations or list(ITERATIONS)
+        args.substeps = args.substeps or list(SUBSTEPS)
         args.csv = args.csv or Path("docs/speed_vs_error.csv")
         return sweep(args)
+    if len(args.iterations or [4]) > 1:
+        parser.error(f"--iterations: {args.mode} takes one count (several are for sweep)")
     args.iterations = (args.iterations or [4])[0]
     if args.mode == "terms":
         args.sizes = args.sizes or [8000]

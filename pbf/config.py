@@ -420,8 +420,8 @@ distance tests. Measured on the 8,000-particle dam break: sort + neighbour lists
 
 def grid_resolution(scene: Scene) -> tuple[int, int, int]:
     """Cells per axis of the neighbour grid; cells are at least h / NEIGHBOUR_REACH wide (with a 1e-4
-    margin against float32 rounding), so the cells within NEIGHBOUR_REACH of a particle's hold all its
-    neighbours."""
+    margin against float32 rounding), so the cells within NEIGHBOUR_REACH cells of a particle's own
+    hold all its neighbours."""
     extent = np.array(scene.container.max_m) - np.array(scene.container.min_m)
     cell = scene.kernel_radius_m / NEIGHBOUR_REACH * (1 + 1e-4)
     return tuple(max(1, int(math.floor(e / cell))) for e in extent)

@@ -172,9 +172,10 @@ def plot(points: list[Point], path, title: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
-    markers = {s: m for s, m in zip(sorted({p.substeps for p in points}), "o^sDv")}
-    for colour, particles in zip(("tab:blue", "tab:orange", "tab:green", "tab:red"),
-                                 sorted({p.particles for p in points})):
+    shapes = "o^sDvPXh"
+    markers = {s: shapes[k % len(shapes)] for k, s in enumerate(sorted({p.substeps for p in points}))}
+    for k, particles in enumerate(sorted({p.particles for p in points})):
+        colour = plt.cm.tab10(k % 10)
         mine = [p for p in points if p.particles == particles]
         for p in mine:
             if p.target_density_error:
