@@ -37,12 +37,13 @@ def scaled(preset: str, particles: int, reference: int, overrides=()) -> config.
     return config.load(preset, [f"fluid.spacing_m={spacing!r}", *overrides])
 
 
-def dam_break(particles: int, iterations: int) -> config.Scene:
+def dam_break(particles: int, iterations: int, overrides=()) -> config.Scene:
     """The dam break scaled to ``particles``, Δt with the spacing (Δt ∝ spacing keeps the distance a
     particle moves per substep, in spacings, the same: the scene stays equally hard)."""
     base = config.load("dam_break")
     substeps = max(1, round(base.time.substeps * (particles / 8000) ** (1 / 3)))
-    return scaled("dam_break", particles, 8000, [f"solver.iterations={iterations}", f"time.substeps={substeps}"])
+    return scaled("dam_break", particles, 8000,
+                  [f"solver.iterations={iterations}", f"time.substeps={substeps}", *overrides])
 
 
 def timed(function, *args):
@@ -73,8 +74,8 @@ def stage_times(sim: Simulation) -> dict:
     return {name: seconds * 1e3 for name, seconds in stages.items()}
 
 
-def run_size(particles: int, iterations: int, frames: int, warmup_frames: int) -> dict:
-    sim = Simulation(dam_break(particles, iterations), quiet=True)
+def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=()) -> dict:
+    sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
     sim.step(warmup_frames)
     substep_ms, mean_errors, max_errors = [], [], []
     dt_ms = []
@@ -103,7 +104,7 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int) -
 
 
 def sizes(args) -> list[dict]:
-    rows = [run_size(n, args.iterations, args.frames, args.warmup) for n in args.sizes]
+    rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set) for n in args.sizes]
     print(f"{'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
           f"{'mean err':>9} {'max err':>8}")
     for r in rows:
@@ -136,8 +137,8 @@ def terms(args) -> list[dict]:
     timed stage by stage, variants interleaved round by round so that machine noise hits all alike."""
     rows = []
     for particles in args.sizes:
-        base = dam_break(particles, args.iterations)
-        variants = {name: Simulation(config.load("dam_break", _overrides(base) + extra), quiet=True)
+        base = dam_break(particles, args.iterations, args.set)
+        variants = {name: Simulation(config.load("dam_break", _overrides(base) + args.set + extra), quiet=True)
                     for name, extra in TERMS.items()}
         reference = next(iter(variants.values()))
         reference.step(args.warmup)
@@ -177,7 +178,7 @@ def sweep(args):
         points = speed_error.read_csv(args.from_csv)
     else:
         points = speed_error.sweep(args.sizes, args.iterations, args.substeps, args.target, args.frames,
-                                   args.rest_settle, args.rest_frames)
+                                   args.rest_settle, args.rest_frames, args.set)
         speed_error.write_csv(points, args.csv)
     speed_error.print_table(points)
     machine = f"{platform.processor() or platform.machine()}, {args.backend} backend"
@@ -202,6 +203,8 @@ def main(argv=None):
     parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
     parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
     parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)")
     parser.add_argument("--arch", default=None)
     parser.add_argument("--csv", type=Path, default=None, help="write the table as CSV "
                         "(sweep default: docs/speed_vs_error.csv)")

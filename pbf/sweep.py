@@ -109,15 +109,15 @@ def mark_pareto(points: list[Point]) -> None:
                            for q in points)
 
 
-def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames) -> list[Point]:
+def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames, overrides=()) -> list[Point]:
     settings = [(i, s, 0.0) for s in substep_counts for i in iteration_counts]
     if target > 0:
         settings += [(max(iteration_counts), s, target) for s in substep_counts]
     points = []
     with tqdm(total=len(sizes) * len(settings), desc="sweep", unit="point") as bar:
         for particles in sizes:
-            dam = Simulation(scaled("dam_break", particles, 8000), quiet=True)
-            tank = Simulation(scaled("hydrostatic", particles, 5120), quiet=True)
+            dam = Simulation(scaled("dam_break", particles, 8000, overrides), quiet=True)
+            tank = Simulation(scaled("hydrostatic", particles, 5120, overrides), quiet=True)
             for iterations, substeps, goal in settings:
                 bar.set_postfix_str(f"{dam.particle_count:,} particles, {iterations} it, {substeps} substeps"
                                     + (f", target {goal:.2%}" if goal else ""))
