@@ -5,6 +5,8 @@
 For each Δt it prints SPlisHSPlasH's row, ours at the same iteration count, and ours at the fewest
 iterations that reach SPlisHSPlasH's mean density error or better (throughput at equal error).
 
+Install SPlisHSPlasH apart from this project:
+``python3 -m venv /tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``.
 SPlisHSPlasH (PyPI ``pysplishsplash``) needs its own environment: it is built against NumPy 1, and its
 bundled libGLdispatch clashes with the system one, so it is run as a separate process
 (``splash --no-gui``) with the system library preloaded. For each Δt both simulators run the
