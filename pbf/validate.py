@@ -213,7 +213,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="*", choices=("martin_moyce", "hydrostatic"),
                         default=["martin_moyce", "hydrostatic"])
-    parser.add_argument("--divisors", type=int, nargs="+", default=[12, 24],
+    parser.add_argument("--divisors", type=int, nargs="+", default=[9, 12, 24],
                         help="martin_moyce: spacings a/n (n a multiple of 3: the tank is 2a/3 deep)")
     parser.add_argument("--frames", type=int, default=600, help="hydrostatic: frames to run (60 per second)")
     parser.add_argument("--arch", default=None)
