@@ -29,7 +29,13 @@ def test_column_at_rest_stays_at_rest(spacing_m, substeps, iterations):
     wave_speed = math.sqrt(G * height)
     assert stats["mean_density_error"] < 0.01
     assert stats["max_density_error"] < 0.05
-    assert stats["max_speed_m_s"] < 0.1 * wave_speed
+    # The fastest single particle is the tail of a distribution and flickers from frame to frame
+    # (0.10-0.20 m/s in the fine column at frames 60-96, anywhere in it, measured), while the 99th
+    # percentile holds at 0.04-0.05 m/s (fine) and 0.06-0.07 m/s (coarse): bound both, the
+    # percentile tightly.
+    speeds = np.linalg.norm(sim.velocities(), axis=1)
+    assert np.percentile(speeds, 99) < 0.05 * wave_speed
+    assert stats["max_speed_m_s"] < 0.15 * wave_speed
     rms_speed = math.sqrt(2 * stats["kinetic_energy_j"] / (sim.particle_mass_kg * sim.particle_count))
     assert rms_speed < 0.03 * wave_speed
     surface = colour_surface_height(sim.positions(), volume, h, probes, probes, (0.3, 0.5))
