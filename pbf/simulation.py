@@ -90,14 +90,15 @@ class Simulation:
         self.time_s = snapshot["time_s"]
         self.frame = snapshot["frame"]
         self.frame_substeps = self.settings.substeps
+        self.last_dt_s = self.scene.time.frame_dt_s / self.settings.substeps
         self.iterations_used = 0
         self.integrator.x_pred.copy_from(self.state.x)
         self._find_neighbours(self.state.x)
 
     @property
     def dt_s(self) -> float:
-        """The substep of the last frame (more than frame_dt_s / substeps when the CFL limit added some)."""
-        return self.scene.time.frame_dt_s / self.frame_substeps
+        """Δt of the last substep, s (less than frame_dt_s / substeps when the CFL limit added some)."""
+        return self.last_dt_s
 
     def substeps_needed(self) -> int:
         """Substeps for the next frame: the scene's, or more so that no particle travels more than
@@ -135,6 +136,7 @@ class Simulation:
                              settings.vorticity, settings.xsph)
         self.integrator.commit()                                   # line 23: x = x*
         self.time_s += dt
+        self.last_dt_s = dt
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
