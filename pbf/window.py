@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.render import ParticleColours, View, box_edges
+from pbf.render import LIGHT_DIRECTION, ParticleColours, View, box_edges
 
 HELP = ("mouse: left drag orbits, right drag zooms", "keys: WASD/QE move, space pauses, '.' steps,",
         "r resets, esc quits")
@@ -148,7 +148,7 @@ class InteractiveApp:
         scene = self.window.get_scene()
         scene.set_camera(camera)
         scene.ambient_light((0.35, 0.35, 0.35))
-        light = view.eye + 10.0 * np.array([0.35, 0.8, 0.5])
+        light = view.eye + 10.0 * LIGHT_DIRECTION
         scene.point_light(pos=tuple(light), color=(0.9, 0.9, 0.9))
         width, height = self.window.get_window_shape()
         # GGUI scales particle radii by width/height: undo it so particles show their simulated size.
