@@ -118,8 +118,8 @@ class Solver:
     kernel_ratio: float = key(2.2, _between(1.5, 4.0), "smoothing radius over spacing, h/s")
     relaxation: float = key(0.1, _positive, "ε of Eq. (10) in the dimensionless form (ε h²/…); see pbf/density.py")
     clamp_pressure: bool = key(True, doc="use C_i = max(ρ_i/ρ0 − 1, 0): only compressed particles push")
-    scorr_k: float = key(0.01, _non_negative, "s_corr strength k (Eq. 11), dimensionless form; 0 disables")
-    scorr_n: int = key(4, _at_least(1), "s_corr exponent n (Eq. 11)")
+    scorr_k: float = key(0.03, _non_negative, "s_corr strength k (Eq. 11), dimensionless form; 0 disables")
+    scorr_n: int = key(8, _at_least(1), "s_corr exponent n (Eq. 11); 8 confines it to pairs closer than ~0.3 h")
     scorr_dq: float = key(0.2, _between(0.0, 0.9), "s_corr reference distance Δq/h (Eq. 11)")
     wall_density: bool = key(True, doc="add the density of the ghost fluid behind walls (no stacking)")
 

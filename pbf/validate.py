@@ -105,6 +105,17 @@ def plot_martin_moyce(runs: list[SurgeRun], path: Path) -> None:
     plt.close(fig)
 
 
+def fill_height_m(sim: Simulation) -> float:
+    """The analytic fill height: the water's mass at ρ0 spread over the container floor, N V / A (m).
+
+    V = m/ρ0 is 0.43% less than s³ at h = 2.2 s (the mass comes from the kernel's lattice sum, so that
+    the lattice is at ρ0), so this lies a little below the top of the initial lattice.
+    """
+    lower, upper = sim.scene.container.min_m, sim.scene.container.max_m
+    volume = sim.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
+    return sim.particle_count * volume / ((upper[0] - lower[0]) * (upper[2] - lower[2]))
+
+
 def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
     """Height where the SPH colour field Σ_j V W(x − x_j) falls to ½: the free surface, averaged over
     vertical probes at every (x, z) of ``xs`` × ``zs``."""
@@ -124,7 +135,7 @@ def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
 class HydrostaticRun:
     particles: int
     fill_height_m: float
-    """H: the analytic fill height, whole layers of the initial lattice."""
+    """H: the analytic fill height (:func:`fill_height_m`)."""
     depth_m: np.ndarray
     """Bin centres of depth H − y."""
     pressure_pa: np.ndarray
@@ -144,9 +155,8 @@ def hydrostatic(frames: int = 600, samples: int = 30, overrides=()) -> Hydrostat
     scene = config.load("hydrostatic", overrides)
     sim = Simulation(scene, quiet=True)
     lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
-    block = scene.fluid.blocks[0]
     spacing = scene.fluid.spacing_m
-    H = round((block.max_m[1] - block.min_m[1]) / spacing) * spacing + block.min_m[1] - lower[1]
+    H = fill_height_m(sim)
     h = scene.kernel_radius_m
     volume = sim.particle_mass_kg / scene.fluid.rest_density_kg_m3
     # Probes away from the walls by h, where the colour field is not cut by the container.
