@@ -61,3 +61,12 @@ def test_sweep_writes_its_table_and_plot(tmp_path):
     # 14 frames take the block through its impact: more iterations, less error.
     assert float(rows[1]["mean_density_error"]) < float(rows[0]["mean_density_error"])
     assert plot_path.stat().st_size > 10_000
+
+
+def test_validate_command_line():
+    # None named means all (Python 3.11's argparse rejected that when it checked the choices).
+    assert validate.parse_args([]).cases == ("martin_moyce", "hydrostatic")
+    assert validate.parse_args(["hydrostatic"]).cases == ["hydrostatic"]
+    for bad in (["--divisors", "10"], ["dam_break"]):
+        with pytest.raises(SystemExit):
+            validate.parse_args(bad)
