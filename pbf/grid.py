@@ -115,10 +115,11 @@ class NeighbourGrid:
             for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
                 first, last = self.column_range(c, dx, dy)
                 for j in range(first, last):
-                    if j != i and (x[j] - xi).norm_sqr() < h2:
-                        if k < limit:
-                            neighbours[k] = j
-                        k += 1
+                    # Branch-free: write every candidate to the next free slot and advance only past
+                    # neighbours. A branch on the distance test mispredicts on most candidates.
+                    if k < limit:
+                        neighbours[k] = j
+                    k += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
             self.neighbour_count[i] = k - begin
             ti.atomic_max(self.most_neighbours[None], k - begin)
             if ti.static(not compact):
