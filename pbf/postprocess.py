@@ -26,6 +26,8 @@ class VelocityPostprocess:
         self.h = float(kernel_radius_m)
         self.grid = grid
         self.omega = ti.Vector.field(3, ti.f32, shape=state.count)
+        self.omega_norm = ti.field(ti.f32, shape=state.count)
+        """|ω_i|, read once per pair by the location vector η: computed once per particle."""
         self.v_next = ti.Vector.field(3, ti.f32, shape=state.count)
 
     @ti.kernel
@@ -37,6 +39,7 @@ class VelocityPostprocess:
                 j = neighbours[k]
                 omega += self.volume * kernel_gradient(xi - x[j], self.h).cross(self.state.v[j] - vi)
             self.omega[i] = omega
+            self.omega_norm[i] = omega.norm()
 
     @ti.kernel
     def apply(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
@@ -47,19 +50,21 @@ class VelocityPostprocess:
             eta = ti.Vector([0.0, 0.0, 0.0])
             smoothing = ti.Vector([0.0, 0.0, 0.0])
             omega_i = ti.Vector([0.0, 0.0, 0.0])
+            omega_i_norm = 0.0
             if ti.static(with_vorticity):
                 omega_i = self.omega[i]
+                omega_i_norm = self.omega_norm[i]
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
                 w, grad_w = kernel_and_gradient(xi - x[j], h)
                 smoothing += self.volume * (self.state.v[j] - vi) * w
                 if ti.static(with_vorticity):
-                    eta += self.volume * (self.omega[j].norm() - omega_i.norm()) * grad_w
+                    eta += self.volume * (self.omega_norm[j] - omega_i_norm) * grad_w
             dv = xsph * smoothing
             if ti.static(with_vorticity):
                 eta_norm = eta.norm()
                 if eta_norm > 0.0:
-                    dv += dt * vorticity * h * omega_i.norm() * (eta / eta_norm).cross(omega_i)
+                    dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
             self.v_next[i] = vi + dv
         for i in range(self.count):
             self.state.v[i] = self.v_next[i]
