@@ -64,8 +64,8 @@ def stage_times(sim: Simulation) -> dict:
         "predict": timed(sim.integrator.predict, dt, s.gravity_m_s2),
         "sort by cell": timed(lambda: (sim.grid.sort(x_pred), sim.integrator.reorder(sim.grid.sorted_from))),
         "neighbour lists": timed(sim.grid.build_neighbours, x_pred),
-        "solver iterations": timed(lambda: [sim.density.project(x_pred, sim.grid.neighbours)
-                                            for _ in range(s.iterations)]),
+        "solver iterations": timed(lambda: [sim.density.project(x_pred, sim.grid.neighbours, first=k == 0)
+                                            for k in range(s.iterations)]),
         "velocity, vorticity, XSPH": timed(lambda: (sim.integrator.update_velocity(dt),
                                                     sim.postprocess.run(x_pred, sim.grid.neighbours, dt,
                                                                         s.vorticity, s.xsph))),

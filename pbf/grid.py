@@ -65,24 +65,18 @@ class NeighbourGrid:
         return (c[0] * self.resolution[1] + c[1]) * self.resolution[2] + c[2]
 
     @ti.kernel
-    def _count_cells(self, x: ti.template()):
+    def sort(self, x: ti.template()):
+        """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch); fills
+        :attr:`sorted_from`, and the caller reorders."""
         for c in self.cell_particles:
             self.cell_particles[c] = 0
         for i in range(self.particle_count):
             cell = self.linear(self.cell_of(x[i]))
             self.particle_cell[i] = cell
             self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
-
-    @ti.kernel
-    def _place(self):
+        self.cell_scan.scan(self.cell_particles, self.cell_start)
         for i in range(self.particle_count):
             self.sorted_from[self.cell_start[self.particle_cell[i]] + self.rank_in_cell[i]] = i
-
-    def sort(self, x):
-        """Counting sort by cell of positions ``x``; fills :attr:`sorted_from` (the caller reorders)."""
-        self._count_cells(x)
-        self.cell_scan.run(self.cell_particles, self.cell_start)
-        self._place()
 
     @ti.func
     def column_range(self, c, dx: ti.template(), dy: ti.template()):

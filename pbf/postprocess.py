@@ -31,20 +31,19 @@ class VelocityPostprocess:
         self.v_next = ti.Vector.field(3, ti.f32, shape=state.count)
 
     @ti.kernel
-    def compute_vorticity(self, x: ti.template(), neighbours: NeighbourList):
-        for i in range(self.count):
-            xi, vi = x[i], self.state.v[i]
-            omega = ti.Vector([0.0, 0.0, 0.0])
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                j = neighbours[k]
-                omega += self.volume * kernel_gradient(xi - x[j], self.h).cross(self.state.v[j] - vi)
-            self.omega[i] = omega
-            self.omega_norm[i] = omega.norm()
-
-    @ti.kernel
     def apply(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
               xsph: ti.f32, with_vorticity: ti.template()):
+        """ω (if confining), then the new velocities, then the copy back: three loops, one launch."""
         h = self.h
+        if ti.static(with_vorticity):
+            for i in range(self.count):
+                xi, vi = x[i], self.state.v[i]
+                omega = ti.Vector([0.0, 0.0, 0.0])
+                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                    j = neighbours[k]
+                    omega += self.volume * kernel_gradient(xi - x[j], h).cross(self.state.v[j] - vi)
+                self.omega[i] = omega
+                self.omega_norm[i] = omega.norm()
         for i in range(self.count):
             xi, vi = x[i], self.state.v[i]
             eta = ti.Vector([0.0, 0.0, 0.0])
@@ -71,7 +70,5 @@ class VelocityPostprocess:
 
     def run(self, x, neighbours, dt, vorticity, xsph):
         """Apply confinement (if ε > 0) and XSPH (if c > 0) to the state's velocities."""
-        if vorticity > 0.0:
-            self.compute_vorticity(x, neighbours)
         if vorticity > 0.0 or xsph > 0.0:
             self.apply(x, neighbours, dt, vorticity, xsph, vorticity > 0.0)

@@ -18,8 +18,10 @@ class ExclusiveScan:
         self.blocks = math.ceil(length / self.block)
         self.block_offset = ti.field(ti.i32, shape=self.blocks + 1)
 
-    @ti.kernel
-    def _scan(self, values: ti.template(), starts: ti.template()) -> ti.i32:
+    @ti.func
+    def scan(self, values: ti.template(), starts: ti.template()):
+        """starts[k] = Σ_{l<k} values[l] for k ≤ length; returns the total. Called at a kernel's top
+        level, so that its loops run in parallel and the scan adds no launch of its own."""
         for b in range(self.blocks):
             total = 0
             for k in range(b * self.block, ti.min((b + 1) * self.block, self.length)):
@@ -36,6 +38,7 @@ class ExclusiveScan:
         starts[self.length] = self.block_offset[self.blocks]
         return self.block_offset[self.blocks]
 
-    def run(self, values, starts) -> int:
-        """starts[k] = Σ_{l<k} values[l] for k ≤ length; returns the total."""
-        return self._scan(values, starts)
+    @ti.kernel
+    def run(self, values: ti.template(), starts: ti.template()) -> ti.i32:
+        """:meth:`scan` as a kernel of its own."""
+        return self.scan(values, starts)

@@ -125,9 +125,8 @@ class Simulation:
         x_pred = self.integrator.x_pred
         self.integrator.predict(dt, settings.gravity_m_s2)         # lines 1-4: v += Δt g, x* = x + Δt v
         self._find_neighbours(x_pred)                              # lines 5-7: sorted grid, neighbour lists
-        self.density.lam_total.fill(0.0)
         for k in range(settings.iterations):                       # lines 8-19: λ, Δx, collision, x* += Δx
-            error = self.density.project(x_pred, self.grid.neighbours, measure=target > 0.0)
+            error = self.density.project(x_pred, self.grid.neighbours, measure=target > 0.0, first=k == 0)
             self.iterations_used = k + 1
             if target > 0.0 and error < target:                    # the error this iteration started from
                 break
