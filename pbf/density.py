@@ -9,11 +9,13 @@ with volume V = m/ρ0 and the dimensionless gradient ĝ_ij = V h ∇W(x_i − x_
     Δx_i = h [Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij + λ̂_i ĝ_wall],  s_corr = −k (W_ij / W(Δq))ⁿ
 
 Every constant (ε̂, k, n, Δq/h) is dimensionless, so one set behaves the same at any particle spacing.
+
 s_corr is a repulsion added in every iteration, not a constraint that converges. The paper's n = 4
 still pushes at the lattice spacing (0.45 h), so water at rest kept jostling: single particles of a
 resting 0.4 m column flickered at up to 0.32 m/s. With n = 8 and k = 0.03 it is negligible beyond
 about 0.3 h, it still parts pairs that come closer (its job in spray), and the fastest particle of
 the same column stays under 0.11 m/s.
+
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once.
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
 (``pbf.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
