@@ -1,4 +1,5 @@
-"""Time integration: prediction, reordering by cell, velocity update and commit (Algorithm 1, lines 1-4, 20-23)."""
+"""Time integration: prediction and reordering by cell (Algorithm 1, lines 1-4); lines 20-23 are
+``pbf.postprocess``."""
 import taichi as ti
 
 
@@ -35,15 +36,3 @@ class Integrator:
             self.state.v[slot] = self._vec[1, slot]
             self.x_pred[slot] = self._vec[2, slot]
             self.state.index[slot] = self._int[slot]
-
-    @ti.kernel
-    def update_velocity(self, dt: ti.f32):
-        """v ← (x* − x) / Δt (Algorithm 1, line 21)."""
-        for i in range(self.count):
-            self.state.v[i] = (self.x_pred[i] - self.state.x[i]) / dt
-
-    @ti.kernel
-    def commit(self):
-        """x ← x* (Algorithm 1, line 23)."""
-        for i in range(self.count):
-            self.state.x[i] = self.x_pred[i]

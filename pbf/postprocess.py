@@ -1,14 +1,18 @@
-"""Velocity post-processing: vorticity confinement (Eqs. 13-14) and XSPH viscosity (Eq. 15).
+"""The end of a substep (Algorithm 1, lines 20-23): new velocities, vorticity confinement (Eqs. 13-14),
+XSPH viscosity (Eq. 15) and the position update, as one kernel.
 
-Both are made dimensionless like the density constraint (V = m/ρ0 is the particle volume):
+Both terms are made dimensionless like the density constraint (V = m/ρ0 is the particle volume):
 
+    v_i   = (x*_i − x_i) / Δt                            line 21
     ω_i   = Σ_j V ∇_i W_ij × (v_j − v_i)                  SPH curl of v (1/s), Eq. 13
     η_i   = Σ_j V (|ω_j| − |ω_i|) ∇_i W_ij,  N = η/|η|    location vector
     Δv_i  = Δt ε h |ω_i| (N × ω_i)                        Eq. 14; ε h |ω|² is an acceleration
     Δv_i += c Σ_j V (v_j − v_i) W_ij                      Eq. 15
 
 The h in Eq. 14 makes confinement fade as resolution rises, as the vorticity it restores is the part
-lost to coarse particles. Both read velocities and write new ones (Jacobi), then copy back.
+lost to coarse particles. Every pass reads v_j as (x*_j − x_j)/Δt instead of a stored velocity, so
+the velocity update needs no pass of its own and the smoothed velocity can be written straight into
+v (nothing in that pass reads v): two particle loops fewer than update, smooth into a copy, copy back.
 """
 import taichi as ti
 
@@ -28,47 +32,56 @@ class VelocityPostprocess:
         self.omega = ti.Vector.field(3, ti.f32, shape=state.count)
         self.omega_norm = ti.field(ti.f32, shape=state.count)
         """|ω_i|, read once per pair by the location vector η: computed once per particle."""
-        self.v_next = ti.Vector.field(3, ti.f32, shape=state.count)
+
+    @ti.func
+    def velocity(self, x_pred: ti.template(), i, inverse_dt):
+        """v_i = (x*_i − x_i) / Δt (Algorithm 1, line 21)."""
+        return (x_pred[i] - self.state.x[i]) * inverse_dt
 
     @ti.kernel
-    def apply(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
-              xsph: ti.f32, with_vorticity: ti.template()):
-        """ω (if confining), then the new velocities, then the copy back: three loops, one launch."""
+    def finish(self, x_pred: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
+               xsph: ti.f32, with_vorticity: ti.template(), with_xsph: ti.template()):
+        """v from x* and x, ω (if confining), confinement and XSPH into v, then x ← x*: one launch."""
         h = self.h
+        inverse_dt = 1.0 / dt
         if ti.static(with_vorticity):
             for i in range(self.count):
-                xi, vi = x[i], self.state.v[i]
+                xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                 omega = ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
-                    omega += self.volume * kernel_gradient(xi - x[j], h).cross(self.state.v[j] - vi)
+                    omega += self.volume * kernel_gradient(xi - x_pred[j], h).cross(
+                        self.velocity(x_pred, j, inverse_dt) - vi)
                 self.omega[i] = omega
                 self.omega_norm[i] = omega.norm()
         for i in range(self.count):
-            xi, vi = x[i], self.state.v[i]
-            eta = ti.Vector([0.0, 0.0, 0.0])
-            smoothing = ti.Vector([0.0, 0.0, 0.0])
-            omega_i = ti.Vector([0.0, 0.0, 0.0])
-            omega_i_norm = 0.0
-            if ti.static(with_vorticity):
-                omega_i = self.omega[i]
-                omega_i_norm = self.omega_norm[i]
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                j = neighbours[k]
-                w, grad_w = kernel_and_gradient(xi - x[j], h)
-                smoothing += self.volume * (self.state.v[j] - vi) * w
+            xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
+            dv = ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(with_vorticity or with_xsph):
+                eta = ti.Vector([0.0, 0.0, 0.0])
+                smoothing = ti.Vector([0.0, 0.0, 0.0])
+                omega_i = ti.Vector([0.0, 0.0, 0.0])
+                omega_i_norm = 0.0
                 if ti.static(with_vorticity):
-                    eta += self.volume * (self.omega_norm[j] - omega_i_norm) * grad_w
-            dv = xsph * smoothing
-            if ti.static(with_vorticity):
-                eta_norm = eta.norm()
-                if eta_norm > 0.0:
-                    dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
-            self.v_next[i] = vi + dv
+                    omega_i = self.omega[i]
+                    omega_i_norm = self.omega_norm[i]
+                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                    j = neighbours[k]
+                    w, grad_w = kernel_and_gradient(xi - x_pred[j], h)
+                    if ti.static(with_xsph):
+                        smoothing += self.volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
+                    if ti.static(with_vorticity):
+                        eta += self.volume * (self.omega_norm[j] - omega_i_norm) * grad_w
+                dv = xsph * smoothing
+                if ti.static(with_vorticity):
+                    eta_norm = eta.norm()
+                    if eta_norm > 0.0:
+                        dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
+            self.state.v[i] = vi + dv
         for i in range(self.count):
-            self.state.v[i] = self.v_next[i]
+            self.state.x[i] = x_pred[i]
 
-    def run(self, x, neighbours, dt, vorticity, xsph):
-        """Apply confinement (if ε > 0) and XSPH (if c > 0) to the state's velocities."""
-        if vorticity > 0.0 or xsph > 0.0:
-            self.apply(x, neighbours, dt, vorticity, xsph, vorticity > 0.0)
+    def run(self, x_pred, neighbours, dt, vorticity, xsph):
+        """Lines 20-23 of Algorithm 1: v = (x* − x)/Δt, confinement (if ε > 0) and XSPH (if c > 0) on v,
+        then x = x*."""
+        self.finish(x_pred, neighbours, dt, vorticity, xsph, vorticity > 0.0, xsph > 0.0)

@@ -130,10 +130,8 @@ class Simulation:
             self.iterations_used = k + 1
             if target > 0.0 and error < target:                    # the error this iteration started from
                 break
-        self.integrator.update_velocity(dt)                        # lines 20-21: v = (x* − x) / Δt
-        self.postprocess.run(x_pred, self.grid.neighbours, dt,     # line 22: vorticity confinement, XSPH
-                             settings.vorticity, settings.xsph)
-        self.integrator.commit()                                   # line 23: x = x*
+        self.postprocess.run(x_pred, self.grid.neighbours, dt,     # lines 20-23: v = (x* − x) / Δt, vorticity
+                             settings.vorticity, settings.xsph)    # confinement, XSPH, x = x*
         self.time_s += dt
         self.last_dt_s = dt
 
