@@ -1,10 +1,14 @@
 """Our PBF against SPlisHSPlasH's PBF on the seed dam break: time per step and density error.
 
     python benchmarks/splishsplash.py --splash /path/to/venv/bin/splash [--dt-ms 4.1667 8.3333] [--iterations 4]
-                                      [--repeats 3]
+                                      [--repeats 3] [--kernel-ratios 2.2 2.0] [--threads N]
 
-For each Δt it prints SPlisHSPlasH's row, ours at the same iteration count, and ours at the fewest
-iterations that reach SPlisHSPlasH's mean density error or better (throughput at equal error).
+For each Δt it prints SPlisHSPlasH's row, then for each of our kernel supports h/s (our default 2.2,
+and 2.0, SPlisHSPlasH's own: its support radius is 4 particle radii) ours at the same iteration count
+and ours at the fewest iterations that reach SPlisHSPlasH's mean density error or better (throughput
+at equal error). Both use the cubic spline. ``--threads 1`` runs both on one thread (OpenMP's
+``OMP_NUM_THREADS`` for SPlisHSPlasH, Taichi's ``cpu_max_num_threads`` for ours): slower, but free of
+the second core's availability, which on a shared 2-core VM swings times by up to 50%.
 
 Install SPlisHSPlasH apart from this project:
 ``python3 -m venv /tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``.
@@ -40,6 +44,8 @@ from pbf.bench import timed
 from pbf.simulation import Simulation
 
 SYSTEM_GLDISPATCH = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"
+SPLISHSPLASH_KERNEL_RATIO = 2.0
+"""SPlisHSPlasH's support radius over the spacing: 4 particle radii (Simulation::getSupportRadius)."""
 
 
 def scene_json(dt_s: float, iterations: int, box_obj: Path, seconds: float) -> dict:
@@ -75,12 +81,14 @@ def read_vtk_density(path: Path) -> np.ndarray:
     return np.frombuffer(data, ">f4", int(match.group(1)), match.end()).astype(np.float64)
 
 
-def run_splishsplash(splash: Path, dt_s: float, iterations: int, seconds: float) -> dict:
+def run_splishsplash(splash: Path, dt_s: float, iterations: int, seconds: float, threads: int | None) -> dict:
     box_obj = splash.parent / "data" / "models" / "UnitBox.obj"
     with tempfile.TemporaryDirectory() as tmp:
         scene_path = Path(tmp) / "dam_break.json"
         scene_path.write_text(json.dumps(scene_json(dt_s, iterations, box_obj, seconds)))
         env = dict(os.environ, LD_PRELOAD=SYSTEM_GLDISPATCH)
+        if threads:
+            env["OMP_NUM_THREADS"] = str(threads)
         # The iteration bounds in the scene file are not applied (23 iterations on average were taken
         # with both set to 4); given on the command line they are.
         bounds = ["--param", f"minIterations:{iterations}", "--param", f"maxIterations:{iterations}"]
@@ -96,11 +104,12 @@ def run_splishsplash(splash: Path, dt_s: float, iterations: int, seconds: float)
             "max_density_error": float(max(e.max() for e in errors)), "frames": len(errors)}
 
 
-def run_ours(dt_s: float, iterations: int, seconds: float) -> dict:
+def run_ours(dt_s: float, iterations: int, seconds: float, kernel_ratio: float) -> dict:
     scene = config.load("dam_break")
     substeps = round(scene.time.frame_dt_s / dt_s)
     sim = Simulation(config.load("dam_break", [f"time.substeps={substeps}", f"solver.iterations={iterations}",
-                                               "time.max_cfl=1000", "vorticity.epsilon=0"]), quiet=True)
+                                               f"solver.kernel_ratio={kernel_ratio}", "time.max_cfl=1000",
+                                               "vorticity.epsilon=0"]), quiet=True)
     sim.step()  # compiles the kernels; the run below starts again from rest
     sim.reset()
     frame_ms, means, maxima = [], [], []
@@ -128,37 +137,48 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=4)
     parser.add_argument("--seconds", type=float, default=1.0)
     parser.add_argument("--repeats", type=int, default=3, help="runs of each row, alternating; medians are reported")
+    parser.add_argument("--kernel-ratios", type=float, nargs="+",
+                        default=[config.load("dam_break").solver.kernel_ratio, SPLISHSPLASH_KERNEL_RATIO],
+                        help="our kernel supports h/s to run (default: the preset's, and SPlisHSPlasH's 2.0)")
+    parser.add_argument("--threads", type=int, help="CPU threads for both simulators (default: all cores)")
     args = parser.parse_args(argv)
     if not args.splash.exists():
         parser.error(f"--splash: {args.splash} does not exist")
-    backend.start("cpu")
+    if args.threads is not None and args.threads < 1:
+        parser.error(f"--threads: {args.threads}; allowed: a positive integer")
+    backend.start("cpu", cpu_threads=args.threads)
     rows, ratios = [], []
     for dt_ms in args.dt_ms:
         dt = dt_ms / 1e3
-        theirs_runs, same_runs = [], []
-        for _ in range(args.repeats):  # alternating, so that a slow phase of the machine hits both
-            theirs_runs.append(run_splishsplash(args.splash, dt, args.iterations, args.seconds))
-            same_runs.append(run_ours(dt, args.iterations, args.seconds))
-        theirs = {"simulator": "SPlisHSPlasH PBF", "dt_ms": dt_ms, **medians(theirs_runs)}
-        same = {"simulator": "pbf, same iterations", "dt_ms": dt_ms, **medians(same_runs)}
-        rows += [theirs, same]
-        ratios.append((dt_ms, "same iterations", theirs, same))
-        # The fewest iterations that reach SPlisHSPlasH's error or better: throughput at equal error.
-        for iterations in range(1, args.iterations):
-            first = run_ours(dt, iterations, args.seconds)
-            if first["mean_density_error"] <= theirs["mean_density_error"]:
-                runs = [first] + [run_ours(dt, iterations, args.seconds) for _ in range(args.repeats - 1)]
-                fewer = {"simulator": f"pbf, {iterations} iteration{'s' * (iterations > 1)}", "dt_ms": dt_ms,
-                         **medians(runs)}
-                rows.append(fewer)
-                ratios.append((dt_ms, "equal or lower error", theirs, fewer))
-                break
-    print(f"{'simulator':<22} {'dt ms':>6} {'iters':>5} {'ms/step':>8} {'particle-steps/s':>16} {'mean err':>9} {'max err':>8}")
+        theirs_runs, same_runs = [], {ratio: [] for ratio in args.kernel_ratios}
+        for _ in range(args.repeats):  # alternating, so that a slow phase of the machine hits all alike
+            theirs_runs.append(run_splishsplash(args.splash, dt, args.iterations, args.seconds, args.threads))
+            for ratio in args.kernel_ratios:
+                same_runs[ratio].append(run_ours(dt, args.iterations, args.seconds, ratio))
+        theirs = {"simulator": "SPlisHSPlasH PBF", "dt_ms": dt_ms, "h_over_s": SPLISHSPLASH_KERNEL_RATIO,
+                  **medians(theirs_runs)}
+        rows.append(theirs)
+        for ratio in args.kernel_ratios:
+            same = {"simulator": "pbf, same iterations", "dt_ms": dt_ms, "h_over_s": ratio, **medians(same_runs[ratio])}
+            rows.append(same)
+            ratios.append((dt_ms, ratio, "same iterations", theirs, same))
+            # The fewest iterations that reach SPlisHSPlasH's error or better: throughput at equal error.
+            for iterations in range(1, args.iterations):
+                first = run_ours(dt, iterations, args.seconds, ratio)
+                if first["mean_density_error"] <= theirs["mean_density_error"]:
+                    runs = [first] + [run_ours(dt, iterations, args.seconds, ratio) for _ in range(args.repeats - 1)]
+                    fewer = {"simulator": f"pbf, {iterations} iteration{'s' * (iterations > 1)}", "dt_ms": dt_ms,
+                             "h_over_s": ratio, **medians(runs)}
+                    rows.append(fewer)
+                    ratios.append((dt_ms, ratio, "equal or lower error", theirs, fewer))
+                    break
+    print(f"{'simulator':<22} {'dt ms':>6} {'h/s':>4} {'iters':>5} {'ms/step':>8} {'particle-steps/s':>16} "
+          f"{'mean err':>9} {'max err':>8}")
     for r in rows:
-        print(f"{r['simulator']:<22} {r['dt_ms']:>6.2f} {r['iterations']:>5.2f} {r['ms_per_step']:>8.2f} "
+        print(f"{r['simulator']:<22} {r['dt_ms']:>6.2f} {r['h_over_s']:>4.1f} {r['iterations']:>5.2f} {r['ms_per_step']:>8.2f} "
               f"{8000 / r['ms_per_step'] * 1e3:>16,.0f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%}")
-    for dt_ms, what, theirs, ours in ratios:
-        print(f"Δt {dt_ms:.2f} ms, {what}: throughput ours / SPlisHSPlasH {theirs['ms_per_step'] / ours['ms_per_step']:.2f}, "
+    for dt_ms, ratio, what, theirs, ours in ratios:
+        print(f"Δt {dt_ms:.2f} ms, h = {ratio:.1f} s, {what}: throughput ours / SPlisHSPlasH {theirs['ms_per_step'] / ours['ms_per_step']:.2f}, "
               f"mean error ours / SPlisHSPlasH {ours['mean_density_error'] / theirs['mean_density_error']:.2f}")
     return rows
 

@@ -30,8 +30,9 @@ def _cuda_present() -> bool:
     return found
 
 
-def start(arch: str | None = None, quiet: bool = False) -> str:
+def start(arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None) -> str:
     """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto") and return "cpu" or "cuda".
+    ``cpu_threads`` caps the CPU backend's threads (default: one per core).
 
     Taichi can only run one backend per process: a second call with a different explicit request
     raises BackendError; a matching or "auto" request returns the backend already running.
@@ -53,7 +54,8 @@ def start(arch: str | None = None, quiet: bool = False) -> str:
         raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
     else:
         chosen = "cpu"
-    ti.init(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN)
+    threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
+    ti.init(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN, **threads)
     _started = chosen
     if not quiet:
         reason = "CUDA GPU found" if chosen == "cuda" else ("requested" if requested == "cpu" else "no CUDA GPU found")

@@ -59,15 +59,20 @@ def stage_times(sim: Simulation) -> dict:
     """Milliseconds of each stage of one substep (run stage by stage, with syncs in between)."""
     dt = sim.dt_s
     s = sim.settings
-    x_pred = sim.integrator.x_pred
+    buffers = [sim.integrator.x_pred, sim.density.x_spare]
+
+    def iterations():
+        for k in range(s.iterations):
+            sim.density.project(buffers[0], buffers[1], sim.grid.neighbours, first=k == 0)
+            buffers.reverse()
+
     stages = {
         "predict": timed(sim.integrator.predict, dt, s.gravity_m_s2),
-        "sort by cell": timed(lambda: (sim.grid.sort(x_pred), sim.integrator.reorder(sim.grid.sorted_from))),
-        "neighbour lists": timed(sim.grid.build_neighbours, x_pred),
-        "solver iterations": timed(lambda: [sim.density.project(x_pred, sim.grid.neighbours, first=k == 0)
-                                            for k in range(s.iterations)]),
-        "velocity, vorticity, XSPH, x = x*": timed(sim.postprocess.run, x_pred, sim.grid.neighbours, dt,
-                                                   s.vorticity, s.xsph),
+        "sort by cell": timed(lambda: (sim.grid.sort(buffers[0]), sim.integrator.reorder(sim.grid.sorted_from))),
+        "neighbour lists": timed(sim.grid.build_neighbours, buffers[0]),
+        "solver iterations": timed(iterations),
+        "velocity, vorticity, XSPH, x = x*": timed(lambda: sim.postprocess.run(buffers[0], sim.grid.neighbours, dt,
+                                                                               s.vorticity, s.xsph)),
     }
     return {name: seconds * 1e3 for name, seconds in stages.items()}
 

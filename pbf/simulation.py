@@ -122,11 +122,12 @@ class Simulation:
         settings = self.settings
         dt = dt or self.scene.time.frame_dt_s / settings.substeps
         target = settings.target_density_error
-        x_pred = self.integrator.x_pred
+        x_pred, spare = self.integrator.x_pred, self.density.x_spare
         self.integrator.predict(dt, settings.gravity_m_s2)         # lines 1-4: v += Δt g, x* = x + Δt v
         self._find_neighbours(x_pred)                              # lines 5-7: sorted grid, neighbour lists
         for k in range(settings.iterations):                       # lines 8-19: λ, Δx, collision, x* += Δx
-            error = self.density.project(x_pred, self.grid.neighbours, measure=target > 0.0, first=k == 0)
+            error = self.density.project(x_pred, spare, self.grid.neighbours, measure=target > 0.0, first=k == 0)
+            x_pred, spare = spare, x_pred                          # Jacobi: x* + Δx went into the other buffer
             self.iterations_used = k + 1
             if target > 0.0 and error < target:                    # the error this iteration started from
                 break
