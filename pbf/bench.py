@@ -158,7 +158,8 @@ def terms(args) -> list[dict]:
         for name, stages in medians.items():
             total = sum(stages.values())
             rows.append({"particles": reference.particle_count, "variant": name, "ms_per_substep": total,
-                         "solver_ms": stages["solver iterations"], "velocity_ms": stages["velocity, vorticity, XSPH, x = x*"],
+                         "solver_ms": stages["solver iterations"],
+                         "velocity_ms": stages["velocity, vorticity, XSPH, x = x*"],
                          "saving_ms": full - total, "ratio_to_all": total / full,
                          "mean_density_error": variants[name].stats()["mean_density_error"]})
     print(f"{'particles':>9}  {'variant':<26} {'ms/substep':>10} {'solver':>7} {'velocity':>8} {'saves ms':>9} "
