@@ -10,7 +10,8 @@ class Integrator:
         self.box = box
         self.count = state.count
         self.x_pred = ti.Vector.field(3, ti.f32, shape=state.count)
-        """Predicted positions x* (m), refined by the solver iterations."""
+        """Predicted positions x* (m). The solver iterations alternate between this and
+        ``DensityConstraint.x_spare``, so after an odd number of them x* is in the other buffer."""
         self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.count))
         self._int = ti.field(ti.i32, shape=state.count)
 
