@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pbf import backend, config
-from pbf.bench import timed
-from pbf.simulation import Simulation
+from pbf.scene import load_scene
+from pbf.solver import Simulation, start_backend
+from pbf.study.common import timed
 
 SYSTEM_GLDISPATCH = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"
 SPLISHSPLASH_KERNEL_RATIO = 2.0
@@ -49,7 +49,7 @@ SPLISHSPLASH_KERNEL_RATIO = 2.0
 
 
 def scene_json(dt_s: float, iterations: int, box_obj: Path, seconds: float) -> dict:
-    scene = config.load("dam_break")
+    scene = load_scene("dam_break")
     block = scene.fluid.blocks[0]
     spacing = scene.fluid.spacing_m
     lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
@@ -105,9 +105,9 @@ def run_splishsplash(splash: Path, dt_s: float, iterations: int, seconds: float,
 
 
 def run_ours(dt_s: float, iterations: int, seconds: float, kernel_ratio: float) -> dict:
-    scene = config.load("dam_break")
+    scene = load_scene("dam_break")
     substeps = round(scene.time.frame_dt_s / dt_s)
-    sim = Simulation(config.load("dam_break", [f"time.substeps={substeps}", f"solver.iterations={iterations}",
+    sim = Simulation(load_scene("dam_break", [f"time.substeps={substeps}", f"solver.iterations={iterations}",
                                                f"solver.kernel_ratio={kernel_ratio}", "time.max_cfl=1000",
                                                "vorticity.epsilon=0"]), quiet=True)
     sim.step()  # compiles the kernels; the run below starts again from rest
@@ -138,7 +138,7 @@ def main(argv=None):
     parser.add_argument("--seconds", type=float, default=1.0)
     parser.add_argument("--repeats", type=int, default=3, help="runs of each row, alternating; medians are reported")
     parser.add_argument("--kernel-ratios", type=float, nargs="+",
-                        default=[config.load("dam_break").solver.kernel_ratio, SPLISHSPLASH_KERNEL_RATIO],
+                        default=[load_scene("dam_break").solver.kernel_ratio, SPLISHSPLASH_KERNEL_RATIO],
                         help="our kernel supports h/s to run (default: the preset's, and SPlisHSPlasH's 2.0)")
     parser.add_argument("--threads", type=int, help="CPU threads for both simulators (default: all cores)")
     args = parser.parse_args(argv)
@@ -146,7 +146,7 @@ def main(argv=None):
         parser.error(f"--splash: {args.splash} does not exist")
     if args.threads is not None and args.threads < 1:
         parser.error(f"--threads: {args.threads}; allowed: a positive integer")
-    backend.start("cpu", cpu_threads=args.threads)
+    start_backend("cpu", cpu_threads=args.threads)
     rows, ratios = [], []
     for dt_ms in args.dt_ms:
         dt = dt_ms / 1e3

@@ -5,13 +5,13 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import taichi as ti
-from conftest import small_dam_break
 from plyfile import PlyData
+from scenes import small_dam_break
 
-from pbf import cli, config
-from pbf.render import SceneRenderer, SphereRenderer, View
-from pbf.simulation import Simulation
-from pbf.window import OrbitCamera
+from pbf import Simulation, load_scene
+from pbf.app import cli
+from pbf.app.render import SceneRenderer, SphereRenderer, View
+from pbf.app.window import OrbitCamera
 
 WHITE = (1.0, 1.0, 1.0)
 W, H = 320, 240
@@ -101,7 +101,7 @@ def test_headless_run_writes_frames_video_and_particles(tmp_path):
     assert iio.imread(frames[0]).shape == (90, 160, 3)
     assert len(list(iio.imiter(tmp_path / "v.mp4"))) == 4
     ply = PlyData.read(str(out / "particles_00003.ply"))
-    assert ply["vertex"].count == config.particle_count(config.load("dam_break", ["fluid.spacing_m=0.05"]))
+    assert ply["vertex"].count == load_scene("dam_break", ["fluid.spacing_m=0.05"]).particle_count
     assert np.isfinite(ply["vertex"]["vy"]).all() and ply["vertex"]["vy"].min() < -0.1  # falling
 
 

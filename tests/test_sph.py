@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from pbf import sph
+from pbf.solver import sph
 
 
 @pytest.mark.parametrize("ratio", [2.0, 2.2, 3.0])

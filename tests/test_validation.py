@@ -1,10 +1,10 @@
-"""Cheap versions of the validation runs (pbf.validate) and of the speed/error sweep (pbf.sweep)."""
+"""Cheap versions of the validation runs (pbf.study.validate) and of the speed/error sweep (pbf.study.sweep)."""
 import csv
 
 import numpy as np
 import pytest
 
-from pbf import bench, sweep, validate
+from pbf.study import bench, sweep, validate
 
 
 def test_martin_moyce_surge_front_follows_the_experiment():
@@ -50,6 +50,7 @@ def test_pareto_front_keeps_the_points_nothing_beats():
     assert [p.pareto for p in points] == [True, True, False, True, True]
 
 
+@pytest.mark.slow
 def test_sweep_writes_its_table_and_plot(tmp_path):
     csv_path, plot_path = tmp_path / "sweep.csv", tmp_path / "sweep.png"
     points = bench.main(["sweep", "--sizes", "1000", "--iterations", "1", "4", "--substeps", "2", "--frames", "14",

@@ -1,80 +1,27 @@
 """Benchmarks: speed, the speed/error trade-off and what each term costs, printed as tables.
 
-    python -m pbf.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
-    python -m pbf.bench sweep   (see pbf.sweep: iterations × substeps × sizes, CSV and plot)
-    python -m pbf.bench terms   [--sizes 8000] [--iterations 4]
+    python -m pbf.study.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
+    python -m pbf.study.bench sweep   (see pbf.study.sweep: iterations × substeps × sizes, CSV and plot)
+    python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
 particle-substeps per second, the mean and max density error over the timed frames, and a per-stage
-breakdown of one substep. ``terms`` times one substep of the same state, stage by stage, with each
-optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
-interleaved rounds, and reports what each costs. Medians throughout: the machines are shared and noisy.
+breakdown of the substeps that follow. ``terms`` times one substep of the same state, stage by stage,
+with each optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
+interleaved rounds, and reports what each costs. Stages are timed by a hook inside the step
+(``pbf.study.common.StageTimer``). Medians throughout: the machines are shared and noisy.
 """
 import argparse
 import csv
 import platform
 import statistics
-import time
 from pathlib import Path
 
-import taichi as ti
-
-from pbf import config
-from pbf.simulation import Simulation
-
-
-def scaled(preset: str, particles: int, reference: int, overrides=()) -> config.Scene:
-    """``preset`` (which holds ``reference`` particles) with its spacing scaled to hold about ``particles``.
-
-    The spacing is chosen so that the first block stays a whole number of spacings wide: a block that
-    fills its container wall to wall then still does, and starts at rest.
-    """
-    base = config.load(preset)
-    block = base.fluid.blocks[0]
-    across = round((block.max_m[0] - block.min_m[0]) / base.fluid.spacing_m)
-    spacing = base.fluid.spacing_m * across / round(across * (particles / reference) ** (1 / 3))
-    return config.load(preset, [f"fluid.spacing_m={spacing!r}", *overrides])
-
-
-def dam_break(particles: int, iterations: int, overrides=()) -> config.Scene:
-    """The dam break scaled to ``particles``, Δt with the spacing (Δt ∝ spacing keeps the distance a
-    particle moves per substep, in spacings, the same: the scene stays equally hard)."""
-    base = config.load("dam_break")
-    substeps = max(1, round(base.time.substeps * (particles / 8000) ** (1 / 3)))
-    return scaled("dam_break", particles, 8000,
-                  [f"solver.iterations={iterations}", f"time.substeps={substeps}", *overrides])
-
-
-def timed(function, *args):
-    """Seconds ``function(*args)`` takes, with the device synchronised before and after."""
-    ti.sync()
-    start = time.perf_counter()
-    function(*args)
-    ti.sync()
-    return time.perf_counter() - start
-
-
-def stage_times(sim: Simulation) -> dict:
-    """Milliseconds of each stage of one substep (run stage by stage, with syncs in between)."""
-    dt = sim.dt_s
-    s = sim.settings
-    buffers = [sim.integrator.x_pred, sim.density.x_spare]
-
-    def iterations():
-        for k in range(s.iterations):
-            sim.density.project(buffers[0], buffers[1], sim.grid.neighbours, first=k == 0)
-            buffers.reverse()
-
-    stages = {
-        "predict": timed(sim.integrator.predict, dt, s.gravity_m_s2),
-        "sort by cell": timed(lambda: (sim.grid.sort(buffers[0]), sim.integrator.reorder(sim.grid.sorted_from))),
-        "neighbour lists": timed(sim.grid.build_neighbours, buffers[0]),
-        "solver iterations": timed(iterations),
-        "velocity, vorticity, XSPH, x = x*": timed(lambda: sim.postprocess.run(buffers[0], sim.grid.neighbours, dt,
-                                                                               s.vorticity, s.xsph)),
-    }
-    return {name: seconds * 1e3 for name, seconds in stages.items()}
+from pbf.scene import load_scene
+from pbf.solver import Simulation, start_backend
+from pbf.study import sweep as speed_error
+from pbf.study.common import StageTimer, dam_break, stage_breakdown, timed
 
 
 def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=()) -> dict:
@@ -90,8 +37,7 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
         stats = sim.stats()
         mean_errors.append(stats["mean_density_error"])
         max_errors.append(stats["max_density_error"])
-    breakdown = [stage_times(sim) for _ in range(9)]
-    stages = {name: statistics.median(b[name] for b in breakdown) for name in breakdown[0]}
+    stages = stage_breakdown(sim, 9)
     median_ms = statistics.median(substep_ms)
     return {
         "particles": sim.particle_count,
@@ -141,19 +87,18 @@ def terms(args) -> list[dict]:
     rows = []
     for particles in args.sizes:
         base = dam_break(particles, args.iterations, args.set)
-        variants = {name: Simulation(config.load("dam_break", _overrides(base) + args.set + extra), quiet=True)
+        variants = {name: Simulation(load_scene("dam_break", _overrides(base) + args.set + extra), quiet=True)
                     for name, extra in TERMS.items()}
         reference = next(iter(variants.values()))
         reference.step(args.warmup)
         snapshot, dt = reference.snapshot(), reference.dt_s
-        samples = {name: [] for name in variants}
+        for sim in variants.values():
+            sim.hook = StageTimer()
         for _ in range(args.rounds):
-            for name, sim in variants.items():
+            for sim in variants.values():
                 sim.restore(snapshot)
                 sim.substep(dt)
-                samples[name].append(stage_times(sim))
-        medians = {name: {stage: statistics.median(s[stage] for s in runs) for stage in runs[0]}
-                   for name, runs in samples.items()}
+        medians = {name: sim.hook.medians() for name, sim in variants.items()}
         full = sum(medians["all terms (preset)"].values())
         for name, stages in medians.items():
             total = sum(stages.values())
@@ -170,14 +115,12 @@ def terms(args) -> list[dict]:
     return rows
 
 
-def _overrides(scene: config.Scene) -> list[str]:
+def _overrides(scene) -> list[str]:
     return [f"fluid.spacing_m={scene.fluid.spacing_m!r}", f"solver.iterations={scene.solver.iterations}",
             f"time.substeps={scene.time.substeps}"]
 
 
 def sweep(args):
-    from pbf import sweep as speed_error
-
     if args.from_csv:
         points = speed_error.read_csv(args.from_csv)
     else:
@@ -215,16 +158,12 @@ def main(argv=None):
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
-    from pbf import backend
-
-    args.backend = backend.start(args.arch)
+    args.backend = start_backend(args.arch)
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend}")
     if args.mode == "sweep":
-        from pbf.sweep import ITERATIONS, SUBSTEPS
-
         args.sizes = args.sizes or [8000, 64000]
-        args.iterations = args.iterations or list(ITERATIONS)
-        args.substeps = args.substeps or list(SUBSTEPS)
+        args.iterations = args.iterations or list(speed_error.ITERATIONS)
+        args.substeps = args.substeps or list(speed_error.SUBSTEPS)
         args.csv = args.csv or Path("docs/speed_vs_error.csv")
         return sweep(args)
     if len(args.iterations or [4]) > 1:

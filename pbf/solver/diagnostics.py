@@ -1,21 +1,25 @@
 """Statistics of the current state, reduced inside a kernel (no Python loop over particles)."""
 import taichi as ti
 
-NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+from pbf.solver.grid import NeighbourList
 
 
 @ti.data_oriented
 class Diagnostics:
-    def __init__(self, state, density, grid, particle_mass_kg):
+    """Reductions over the state, and the per-particle density ratio renderers colour by."""
+
+    def __init__(self, state, density, grid, particle_mass_kg: float):
         self.state = state
         self.density = density
         self.grid = grid
         self.count = state.count
-        self.mass = float(particle_mass_kg)
+        self.mass = particle_mass_kg
         self.sums = ti.field(ti.f64, shape=3)
         """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours."""
         self.maxima = ti.field(ti.f32, shape=3)
         """max max(ρ/ρ0 − 1, 0), max |v|, max neighbours."""
+        self.density_ratio = ti.field(ti.f32, shape=state.count)
+        """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
@@ -33,6 +37,18 @@ class Diagnostics:
             ti.atomic_max(self.maxima[0], error)
             ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
             ti.atomic_max(self.maxima[2], ti.cast(count, ti.f32))
+
+    @ti.kernel
+    def _density_ratios(self, neighbours: NeighbourList):
+        for i in range(self.count):
+            ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
+            self.density_ratio[i] = ratio
+
+    def density_ratios(self, neighbours):
+        """ρ/ρ0 of every particle at the current positions, with the last substep's neighbour lists;
+        returns the field."""
+        self._density_ratios(neighbours)
+        return self.density_ratio
 
     @ti.kernel
     def _max_speed(self) -> ti.f32:

@@ -16,27 +16,32 @@ import math
 import numpy as np
 import taichi as ti
 
-from pbf.scan import ExclusiveScan
+from pbf.solver.model import GridParams
+from pbf.solver.scan import ExclusiveScan
 
 SLOTS = 64
 """Neighbours stored per particle on the one-visit path; about twice the typical 30-40 at h = 2.2 s."""
+NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+"""The kernel argument type of :attr:`NeighbourGrid.neighbours` (an ndarray, so that growing it after
+an overflow recompiles nothing)."""
 
 
 @ti.data_oriented
 class NeighbourGrid:
-    def __init__(self, particle_count: int, lower_m, upper_m, kernel_radius_m: float, resolution, reach: int = 1):
+    def __init__(self, params: GridParams):
+        particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         self.particle_count = particle_count
-        self.kernel_radius = float(kernel_radius_m)
-        self.lower = ti.Vector([float(c) for c in lower_m])
-        extent = np.asarray(upper_m, dtype=np.float64) - np.asarray(lower_m, dtype=np.float64)
-        self.resolution = ti.Vector([int(r) for r in resolution])
+        self.kernel_radius = params.kernel_radius_m
+        self.lower = ti.Vector(list(params.lower_m))
+        extent = np.asarray(params.upper_m, dtype=np.float64) - np.asarray(params.lower_m, dtype=np.float64)
+        self.resolution = ti.Vector(list(resolution))
         self.reach = reach
         """Cells per h: every neighbour within h lies within ``reach`` cells of a particle's own."""
         # Cells are at least h / reach wide (a 1e-4 margin keeps float32 rounding from making them
         # narrower), so every neighbour within h lies within reach cells along each axis.
         self.inverse_cell_size = ti.Vector([float(r / e) for r, e in zip(resolution, extent)])
-        assert all(e / r * reach >= kernel_radius_m * (1 + 1e-5) or r == 1 for e, r in zip(extent, resolution))
-        cell_count = int(np.prod(resolution))
+        assert all(e / r * reach >= params.kernel_radius_m * (1 + 1e-5) or r == 1 for e, r in zip(extent, resolution))
+        cell_count = params.cell_count
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
         self.cell_start = ti.field(ti.i32, shape=cell_count + 1)
         self.cell_scan = ExclusiveScan(cell_count)
@@ -94,7 +99,7 @@ class NeighbourGrid:
         return begin, end
 
     @ti.kernel
-    def _visit(self, x: ti.template(), neighbours: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    def _visit(self, x: ti.template(), neighbours: NeighbourList,
                compact: ti.template()) -> ti.i32:
         """Find the neighbours of every particle: into slot i·SLOTS (first visit) or, when ``compact``,
         into the prefix-summed range neighbour_start[i] (second visit, only after an overflow).

@@ -2,15 +2,16 @@
 
 A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
 the solver pulls it into the wall, where clamping stacks it. We add the density of ghost fluid behind
-each wall (``pbf.sph.wall_density_table``), and its gradient, to the density constraint; the table is
+each wall (``pbf.solver.sph.wall_density_table``), and its gradient, to the density constraint; the table is
 computed once per scene and looked up by wall distance. Near an edge or a corner the ghost lattices
-of two or three walls overlap; inclusion–exclusion tables (``pbf.sph.wall_overlap_tables``) remove
+of two or three walls overlap; inclusion–exclusion tables (``pbf.solver.sph.wall_overlap_tables``) remove
 what would be counted twice, so a block in a corner also starts exactly at ρ0.
 """
 import numpy as np
 import taichi as ti
 
-from pbf import sph
+from pbf.solver import sph
+from pbf.solver.model import BoxParams
 
 TABLE_SAMPLES = 512
 OVERLAP_SAMPLES = 32
@@ -18,20 +19,20 @@ OVERLAP_SAMPLES = 32
 
 @ti.data_oriented
 class Box:
-    def __init__(self, lower_m, upper_m, particle_radius_m: float, spacing_m: float, kernel_radius_m: float,
-                 wall_density: bool):
-        self.radius = float(particle_radius_m)
-        self.lower = ti.Vector([float(c) for c in lower_m])
-        self.upper = ti.Vector([float(c) for c in upper_m])
-        self.kernel_radius = float(kernel_radius_m)
-        self.with_wall_density = wall_density
+    def __init__(self, params: BoxParams):
+        self.radius = params.particle_radius_m
+        self.lower = ti.Vector(list(params.lower_m))
+        self.upper = ti.Vector(list(params.upper_m))
+        self.kernel_radius = params.kernel_radius_m
+        self.with_wall_density = params.wall_density
+        spacing_m, kernel_radius_m = params.spacing_m, params.kernel_radius_m
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.density_table.from_numpy(density.astype(np.float32))
         self.slope_table.from_numpy(slope.astype(np.float32))
         n = OVERLAP_SAMPLES
-        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if wall_density else (
+        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if params.wall_density else (
             np.zeros((n, n)), np.zeros((n, n, 2)), np.zeros((n, n, n)), np.zeros((n, n, n, 3)))
         self.edge = ti.field(ti.f32, shape=(n, n))
         self.edge_gradient = ti.Vector.field(2, ti.f32, shape=(n, n))

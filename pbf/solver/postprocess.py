@@ -16,18 +16,20 @@ v (nothing in that pass reads v): two particle loops fewer than update, smooth i
 """
 import taichi as ti
 
-from pbf.sph import kernel_and_gradient, kernel_gradient
-
-NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
+from pbf.solver.grid import NeighbourList
+from pbf.solver.model import VelocityParams
+from pbf.solver.sph import kernel_and_gradient, kernel_gradient
 
 
 @ti.data_oriented
 class VelocityPostprocess:
-    def __init__(self, state, particle_volume_m3, kernel_radius_m, grid):
+    """Lines 20-23 of Algorithm 1 and their scratch: ω and |ω| per particle."""
+
+    def __init__(self, params: VelocityParams, state, grid):
         self.state = state
-        self.count = state.count
-        self.volume = float(particle_volume_m3)
-        self.h = float(kernel_radius_m)
+        self.count = params.particle_count
+        self.volume = params.particle_volume_m3
+        self.h = params.kernel_radius_m
         self.grid = grid
         self.omega = ti.Vector.field(3, ti.f32, shape=state.count)
         self.omega_norm = ti.field(ti.f32, shape=state.count)

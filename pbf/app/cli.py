@@ -3,13 +3,18 @@
     python run.py [SCENE] [--set KEY=VALUE]...               # the window (headless when none can open)
     python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz]
     python run.py --list
+
+It builds a Simulation and a viewer (window, headless frames or statistics) and hands both to the
+one loop of ``pbf.app.loop``.
 """
 import argparse
 import sys
-import time
 from pathlib import Path
 
-from pbf import backend, config, export
+from pbf import scene as schema
+from pbf.app import export, loop
+from pbf.app.headless import FrameWriter
+from pbf.solver import ARCHES, ENV_VAR, BackendError, Simulation
 
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
 
@@ -19,8 +24,8 @@ def parse_args(argv=None):
     parser.add_argument("scene", nargs="?", default="dam_break", help="preset name or path to a TOML file")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")
-    parser.add_argument("--arch", choices=backend.ARCHES, default=None,
-                        help=f"Taichi backend (default: ${backend.ENV_VAR} or auto)")
+    parser.add_argument("--arch", choices=ARCHES, default=None,
+                        help=f"Taichi backend (default: ${ENV_VAR} or auto)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
     output = parser.add_argument_group("headless output")
     output.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
@@ -68,40 +73,34 @@ def view_overrides(parser, args) -> list[str]:
 
 
 def list_presets() -> None:
-    for path in sorted(config.SCENES_DIR.glob("*.toml")):
-        scene = config.load(path)
-        print(f"{path.stem:18s} {config.particle_count(scene):>10,} particles  {scene.description}")
+    for path in sorted(schema.SCENES_DIR.glob("*.toml")):
+        scene = schema.load_scene(path)
+        print(f"{path.stem:18s} {scene.particle_count:>10,} particles  {scene.description}")
 
 
-def print_stats(sim) -> None:
-    s = sim.stats()
-    print(f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
-          f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
-          f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})")
-
-
-def run_stats(sim, frames: int) -> None:
-    frames_per_report = max(1, round(1.0 / sim.scene.time.frame_dt_s))
-    started = time.perf_counter()
-    for frame in range(1, frames + 1):
-        sim.step()
-        if frame % frames_per_report == 0 or frame == frames:
-            print_stats(sim)
-    elapsed = time.perf_counter() - started
-    print(f"[pbf] {frames} frames in {elapsed:.1f} s ({frames / elapsed:.1f} frames/s, JIT included)")
-
-
-def run_headless(sim, args) -> None:
-    from pbf import headless
-
+def choose_viewer(sim, args):
+    """The viewer the options ask for, and the frames to run (None: until the window closes)."""
     out = args.out or Path("out") / sim.scene.name
-    paths = headless.render(sim, args.frames, out, video=args.video, export=args.export)
-    print_stats(sim)
-    written = f"{len(paths)} frames in {out}/"
+    if args.stats_only:
+        return loop.StatsViewer(sim, args.frames), args.frames
+    if not args.headless:
+        from pbf.app import window
+
+        try:
+            return window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
+                                                               sim.scene.render.height_px)), None
+        except window.WindowUnavailable as reason:
+            print(f"[pbf] no window ({reason}); rendering {args.frames} frames headless instead")
+    return FrameWriter(sim, args.frames, out, video=args.video, export=args.export), args.frames
+
+
+def report_written(sim, args, viewer) -> None:
+    print(loop.stats_line(sim))
+    written = f"{len(viewer.paths)} frames in {viewer.out_dir}/"
     if args.video:
         written += f", video {args.video}"
     if args.export:
-        written += f", particles as {args.export} in {out}/"
+        written += f", particles as {args.export} in {viewer.out_dir}/"
     print(f"[pbf] wrote {written}")
 
 
@@ -110,29 +109,16 @@ def main(argv=None) -> int:
     if args.list:
         list_presets()
         return 0
-    from pbf.simulation import Simulation
-
     try:
-        scene = config.load(args.scene, args.set)
+        scene = schema.load_scene(args.scene, args.set)
         sim = Simulation(scene, arch=args.arch)
-    except (config.SceneError, backend.BackendError) as error:
+    except (schema.SceneError, BackendError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
-          f"{sim.settings.iterations} iterations")
-    if args.stats_only:
-        run_stats(sim, args.frames)
-    elif args.headless:
-        run_headless(sim, args)
-    else:
-        from pbf import window
-
-        try:
-            app = window.InteractiveApp(sim, window.open_window(f"pbf: {scene.name}", scene.render.width_px,
-                                                               scene.render.height_px))
-        except window.WindowUnavailable as reason:
-            print(f"[pbf] no window ({reason}); rendering {args.frames} frames headless instead")
-            run_headless(sim, args)
-        else:
-            app.run()
+          f"{sim.control.iterations} iterations")
+    viewer, frames = choose_viewer(sim, args)
+    loop.run(sim, viewer, frames)
+    if isinstance(viewer, FrameWriter):
+        report_written(sim, args, viewer)
     return 0

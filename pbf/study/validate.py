@@ -1,6 +1,6 @@
 """Validation against experiment and theory: the Martin & Moyce dam break and a hydrostatic tank.
 
-    python -m pbf.validate [martin_moyce] [hydrostatic] [--divisors 9 12 24] [--frames 600] [--out docs]
+    python -m pbf.study.validate [martin_moyce] [hydrostatic] [--divisors 9 12 24] [--frames 600] [--out docs]
 
 ``martin_moyce`` runs the ``martin_moyce`` preset at spacings a/n for each n of ``--divisors``, tracks
 the surge front (the largest x reached by water, spray ignored) against dimensionless time
@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pbf import config, sph
-from pbf.simulation import Simulation
+from pbf.scene import load_scene
+from pbf.solver import Simulation, start_backend
+from pbf.study.common import colour_surface_height, fill_height_m
 
-MARTIN_MOYCE_CSV = Path(__file__).resolve().parent.parent / "docs" / "data" / "martin_moyce_1952_surge_front.csv"
+MARTIN_MOYCE_CSV = Path(__file__).resolve().parents[2] / "docs" / "data" / "martin_moyce_1952_surge_front.csv"
 SPRAY_NEIGHBOURS = 4
 """A particle with fewer neighbours within h than this is spray, not the front (a full one has ~40)."""
 
@@ -59,13 +60,13 @@ class SurgeRun:
 
 def martin_moyce(divisor: int, end_T: float = 3.5, overrides=()) -> SurgeRun:
     """The ``martin_moyce`` preset at spacing a/divisor (Δt scaled with it), run until T = end_T."""
-    base = config.load("martin_moyce")
+    base = load_scene("martin_moyce")
     column = base.fluid.blocks[0]
     a = column.max_m[0] - column.min_m[0]
     spacing = a / divisor
     substeps = math.ceil(base.time.substeps * base.fluid.spacing_m / spacing - 1e-9)
     # One substep per "frame": the front is sampled every substep and the CFL limit still applies.
-    scene = config.load("martin_moyce", [f"fluid.spacing_m={spacing!r}", "time.substeps=1",
+    scene = load_scene("martin_moyce", [f"fluid.spacing_m={spacing!r}", "time.substeps=1",
                                          f"time.frame_dt_s={base.time.frame_dt_s / substeps!r}", *overrides])
     sim = Simulation(scene, quiet=True)
     g = float(np.linalg.norm(scene.gravity_m_s2))
@@ -105,32 +106,6 @@ def plot_martin_moyce(runs: list[SurgeRun], path: Path) -> None:
     plt.close(fig)
 
 
-def fill_height_m(sim: Simulation) -> float:
-    """The analytic fill height: the water's mass at ρ0 spread over the container floor, N V / A (m).
-
-    V = m/ρ0 is 0.43% less than s³ at h = 2.2 s (the mass comes from the kernel's lattice sum, so that
-    the lattice is at ρ0), so this lies a little below the top of the initial lattice.
-    """
-    lower, upper = sim.scene.container.min_m, sim.scene.container.max_m
-    volume = sim.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
-    return sim.particle_count * volume / ((upper[0] - lower[0]) * (upper[2] - lower[2]))
-
-
-def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
-    """Height where the SPH colour field Σ_j V W(x − x_j) falls to ½: the free surface, averaged over
-    vertical probes at every (x, z) of ``xs`` × ``zs``."""
-    ys = np.linspace(*y_range, 400)
-    heights = []
-    for x in xs:
-        for z in zs:
-            probes = np.stack([np.full_like(ys, x), ys, np.full_like(ys, z)], axis=1)
-            near = positions[(np.abs(positions[:, 0] - x) < h) & (np.abs(positions[:, 2] - z) < h)]
-            distances = np.linalg.norm(probes[:, None, :] - near[None, :, :], axis=2)
-            colour = volume_m3 * sph.kernel_np(distances, h).sum(axis=1)
-            heights.append(ys[np.argmax(colour < 0.5)])
-    return float(np.mean(heights))
-
-
 @dataclass
 class HydrostaticRun:
     particles: int
@@ -152,13 +127,13 @@ class HydrostaticRun:
 
 def hydrostatic(frames: int = 600, samples: int = 30, overrides=()) -> HydrostaticRun:
     """Run the ``hydrostatic`` preset ``frames`` frames; sample the surface ``samples`` times, pressure at the end."""
-    scene = config.load("hydrostatic", overrides)
+    scene = load_scene("hydrostatic", overrides)
     sim = Simulation(scene, quiet=True)
     lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
     spacing = scene.fluid.spacing_m
     H = fill_height_m(sim)
     h = scene.kernel_radius_m
-    volume = sim.particle_mass_kg / scene.fluid.rest_density_kg_m3
+    volume = sim.model.particle_volume_m3
     # Probes away from the walls by h, where the colour field is not cut by the container.
     xs = np.linspace(lower[0] + h, upper[0] - h, 3)
     zs = np.linspace(lower[2] + h, upper[2] - h, 3)
@@ -243,9 +218,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None):
     args = parse_args(argv)
-    from pbf import backend
-
-    backend.start(args.arch)
+    start_backend(args.arch)
     args.out.mkdir(parents=True, exist_ok=True)
     if "martin_moyce" in args.cases:
         runs = [martin_moyce(n) for n in args.divisors]

@@ -1,14 +1,31 @@
-"""Particle state: what persists between substeps, kept apart from the solver's scratch arrays."""
+"""Particle state: what persists from one substep to the next, kept apart from the stages' scratch."""
+
+from dataclasses import dataclass
+
 import numpy as np
 import taichi as ti
 
 
-@ti.data_oriented
-class ParticleState:
-    """Positions x (m), velocities v (m/s) and each particle's original index, all of length n.
+@dataclass(frozen=True)
+class Snapshot:
+    """A state to return to with ``Simulation.restore``: NumPy copies in creation order."""
 
-    The arrays are re-sorted by grid cell every substep, so slot i holds particle ``index[i]``;
-    :meth:`positions` and :meth:`velocities` return them in the original order.
+    positions_m: np.ndarray
+    """(n, 3) float32, m."""
+    velocities_m_s: np.ndarray
+    """(n, 3) float32, m/s."""
+    time_s: float
+    frame: int
+
+
+@ti.data_oriented
+class State:
+    """The particles of a simulation. Every array has one entry per particle, in the current sorted
+    order: the grid re-sorts them by cell every substep, so slot i holds particle ``index[i]``.
+
+    * ``x``: (n,) vector(3, f32), positions, m
+    * ``v``: (n,) vector(3, f32), velocities, m/s
+    * ``index``: (n,) i32, the particle's creation index (its row in :meth:`positions`)
     """
 
     def __init__(self, particle_count: int):
@@ -20,6 +37,7 @@ class ParticleState:
         self._unsorted_scalar = ti.field(ti.f32, shape=particle_count)
 
     def load(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """Set every particle from (n, 3) arrays in creation order (m, m/s)."""
         self.x.from_numpy(positions.astype(np.float32))
         self.v.from_numpy(velocities.astype(np.float32))
         self.index.from_numpy(np.arange(self.count, dtype=np.int32))

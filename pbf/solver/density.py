@@ -19,42 +19,38 @@ the same column stays under 0.11 m/s.
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
 (into a second buffer: the iterations alternate between two).
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
-(``pbf.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
-under-relax by ω = STABLE_GAIN / gain, so that no mode is amplified; long waves, which carry most of
-the density error, still converge.
+(``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
+under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
+waves, which carry most of the density error, still converge.
 """
 import taichi as ti
 
-from pbf.sph import jacobi_gain, kernel, kernel_and_gradient, kernel_np
-
-NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
-
-MAX_CORRECTION = 0.1
-"""Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
-STABLE_GAIN = 1.8
-"""Largest per-iteration gain ω·μ allowed for any error mode: below 2, so every mode decays."""
+from pbf.solver.grid import NeighbourList
+from pbf.solver.model import DensityParams
+from pbf.solver.sph import kernel, kernel_and_gradient
 
 
 @ti.data_oriented
 class DensityConstraint:
-    def __init__(self, particle_count, kernel_radius_m, spacing_m, particle_volume_m3, relaxation, clamp_pressure,
-                 scorr_k, scorr_n, scorr_dq, box, grid):
+    """The constraint's kernels and scratch: λ̂ per particle, its sum over a substep, the error sum."""
+
+    def __init__(self, params: DensityParams, box, grid):
+        particle_count = params.particle_count
         self.count = particle_count
-        self.h = float(kernel_radius_m)
-        self.volume = float(particle_volume_m3)
-        self.relaxation = float(relaxation)
-        self.omega = min(1.0, STABLE_GAIN / jacobi_gain(kernel_radius_m / spacing_m, relaxation))
-        """ω, the Jacobi under-relaxation of λ (see the module docstring)."""
-        self.clamp_pressure = bool(clamp_pressure)
-        self.scorr_k = float(scorr_k)
-        self.scorr_n = int(scorr_n)
-        self.inverse_w_dq = 1.0 / float(kernel_np(scorr_dq * kernel_radius_m, kernel_radius_m))
+        # Compile-time constants of the kernels below (see pbf.solver.model).
+        self.h = params.kernel_radius_m
+        self.volume = params.particle_volume_m3
+        self.relaxation = params.relaxation
+        self.omega = params.omega
+        self.clamp_pressure = params.clamp_pressure
+        self.scorr_k = params.scorr_k
+        self.scorr_n = params.scorr_n
+        self.inverse_w_dq = params.inverse_w_dq
+        self.max_correction = params.max_correction
         self.box = box
         self.grid = grid
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
-        self.x_spare = ti.Vector.field(3, ti.f32, shape=particle_count)
-        """The second buffer of predicted positions: iterations alternate between it and x*."""
         self.error_sum = ti.field(ti.f64, shape=())
         """Σ_i max(C_i, 0) of the last λ pass that measured it."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
@@ -109,7 +105,7 @@ class DensityConstraint:
         dx += lam_i * h * wall_gradient
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
-        dx *= ti.min(1.0, MAX_CORRECTION / (dx.norm() + 1e-12))
+        dx *= ti.min(1.0, self.max_correction / (dx.norm() + 1e-12))
         return self.box.clamp(xi + h * dx)
 
     @ti.kernel
@@ -130,8 +126,7 @@ class DensityConstraint:
 
     def project(self, x, x_next, neighbours, measure: bool = False, first: bool = False):
         """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19): reads positions x,
-        writes the corrected ones into x_next. The caller swaps the two for the next iteration, which
-        saves a copy (a parallel loop, 20-40 µs here) per iteration.
+        writes the corrected ones into x_next (the two buffers of ``PredictedPositions``).
 
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
         density error max(ρ/ρ0 − 1, 0) the iteration started from.

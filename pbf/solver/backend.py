@@ -30,7 +30,7 @@ def _cuda_present() -> bool:
     return found
 
 
-def start(arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None) -> str:
+def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None) -> str:
     """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto") and return "cpu" or "cuda".
     ``cpu_threads`` caps the CPU backend's threads (default: one per core).
 

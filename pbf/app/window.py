@@ -3,7 +3,8 @@
 Mouse: left drag orbits around the target, right drag zooms. Keys: W/A/S/D move the target forward,
 left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
 r resets, esc quits. Particles are drawn at their simulated radius with the colours of the headless
-renderer (pbf.render), the container as lines.
+renderer (``pbf.app.render``), the container as lines. ``WindowViewer`` runs it in the loop of
+``pbf.app.loop``.
 """
 import math
 import os
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.render import LIGHT_DIRECTION, ParticleColours, View, box_edges
+from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, box_edges
 
 HELP = ("mouse: left drag orbits, right drag zooms", "keys: WASD/QE move, space pauses, '.' steps,",
         "r resets, esc quits")
@@ -74,8 +75,9 @@ def open_window(title: str, width: int, height: int):
         raise WindowUnavailable(str(error).strip().splitlines()[-1]) from None
 
 
-class InteractiveApp:
-    """Runs a Simulation in a window until the user quits."""
+class WindowViewer:
+    """The interactive viewer of ``pbf.app.loop.run``: draws each frame in a GGUI window and turns keys
+    and mouse into camera moves, pause, single steps and resets, until the user quits."""
 
     def __init__(self, sim, window):
         self.sim = sim
@@ -89,8 +91,31 @@ class InteractiveApp:
         self.gg_camera = ti.ui.Camera()
         self.paused = False
         self.step_once = False
+        self.quit = False
         self.drag = None
         self.fps = 0.0
+        self.last_frame = time.perf_counter()
+
+    def running(self) -> bool:
+        return self.window.running and not self.quit
+
+    def advance(self) -> bool:
+        """Handle the input since the last frame; whether the simulation steps a frame now."""
+        now = time.perf_counter()
+        seconds, self.last_frame = now - self.last_frame, now
+        self.fps = 0.9 * self.fps + 0.1 / max(seconds, 1e-6)
+        self.quit = not self.handle_input(seconds)
+        stepping = not self.quit and (not self.paused or self.step_once)
+        self.step_once = False
+        return stepping
+
+    def show(self) -> None:
+        self.draw()
+        self.panel(self.sim.stats())
+        self.window.show()
+
+    def close(self) -> None:
+        """Nothing to release: GGUI closes the window when the process ends."""
 
     def handle_input(self, seconds: float) -> bool:
         """Keys and mouse since the last frame; False when the user quits."""
@@ -122,19 +147,19 @@ class InteractiveApp:
         return True
 
     def panel(self, stats: dict) -> None:
-        settings = self.sim.settings
+        control = self.sim.control
         with self.window.get_gui().sub_window("pbf", *PANEL) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
             gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
             gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
-            settings.iterations = gui.slider_int("iterations", settings.iterations, 1, 20)
-            settings.substeps = gui.slider_int("substeps", settings.substeps, 1, 16)
-            settings.xsph = gui.slider_float("XSPH c", settings.xsph, 0.0, 0.1)
-            settings.vorticity = gui.slider_float("vorticity", settings.vorticity, 0.0, 0.5)
-            gx, gy, gz = settings.gravity_m_s2
-            settings.gravity_m_s2 = (gx, gui.slider_float("gravity y m/s²", gy, -20.0, 0.0), gz)
+            control.iterations = gui.slider_int("iterations", control.iterations, 1, 20)
+            control.substeps = gui.slider_int("substeps", control.substeps, 1, 16)
+            control.xsph = gui.slider_float("XSPH c", control.xsph, 0.0, 0.1)
+            control.vorticity = gui.slider_float("vorticity", control.vorticity, 0.0, 0.5)
+            gx, gy, gz = control.gravity_m_s2
+            control.gravity_m_s2 = (gx, gui.slider_float("gravity y m/s²", gy, -20.0, 0.0), gz)
             for line in HELP:
                 gui.text(line)
 
@@ -152,24 +177,10 @@ class InteractiveApp:
         scene.point_light(pos=tuple(light), color=(0.9, 0.9, 0.9))
         width, height = self.window.get_window_shape()
         # GGUI scales particle radii by width/height: undo it so particles show their simulated size.
-        scene.particles(self.sim.state.x, radius=self.sim.scene.particle_radius_m * height / width,
+        particles = self.sim.readout()
+        scene.particles(particles.positions, radius=particles.radius_m * height / width,
                         per_vertex_color=self.colours.update())
         scene.lines(self.edges, width=1.5, color=tuple(self.render.container_rgb))
         canvas = self.window.get_canvas()
         canvas.set_background_color(tuple(self.render.background_rgb))
         canvas.scene(scene)
-
-    def run(self) -> None:
-        last = time.perf_counter()
-        while self.window.running:
-            now = time.perf_counter()
-            seconds, last = now - last, now
-            self.fps = 0.9 * self.fps + 0.1 / max(seconds, 1e-6)
-            if not self.handle_input(seconds):
-                break
-            if not self.paused or self.step_once:
-                self.sim.step()
-                self.step_once = False
-            self.draw()
-            self.panel(self.sim.stats())
-            self.window.show()

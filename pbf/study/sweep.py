@@ -1,6 +1,6 @@
 """Speed against error: the solver settings that trade one for the other, swept and plotted.
 
-    python -m pbf.bench sweep [--sizes 8000 64000] [--iterations 1 2 3 4 6 8 12] [--substeps 1 2 4]
+    python -m pbf.study.bench sweep [--sizes 8000 64000] [--iterations 1 2 3 4 6 8 12] [--substeps 1 2 4]
                               [--target 0.005] [--frames 60] [--csv docs/speed_vs_error.csv]
                               [--plot docs/speed_vs_error.png]
 
@@ -19,8 +19,8 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 from tqdm import tqdm
 
-from pbf.bench import scaled, timed
-from pbf.simulation import Simulation
+from pbf.solver import Simulation
+from pbf.study.common import scaled, timed
 
 ITERATIONS = (1, 2, 3, 4, 6, 8, 12)
 SUBSTEPS = (1, 2, 4)
@@ -51,9 +51,9 @@ class Point:
 
 def configure(sim: Simulation, iterations: int, substeps: int, target: float) -> None:
     sim.reset()
-    sim.settings.iterations = iterations
-    sim.settings.substeps = substeps
-    sim.settings.target_density_error = target
+    sim.control.iterations = iterations
+    sim.control.substeps = substeps
+    sim.control.target_density_error = target
 
 
 def run_dam_break(sim: Simulation, frames: int) -> dict:
@@ -85,9 +85,9 @@ def run_dam_break(sim: Simulation, frames: int) -> dict:
 
 def energy(sim: Simulation) -> float:
     """Kinetic plus potential energy in J (potential measured from the container floor, along −g)."""
-    g = np.asarray(sim.settings.gravity_m_s2, dtype=np.float64)
+    g = np.asarray(sim.control.gravity_m_s2, dtype=np.float64)
     height = -(sim.positions().astype(np.float64) - sim.scene.container.min_m) @ g
-    return sim.stats()["kinetic_energy_j"] + sim.particle_mass_kg * float(height.sum())
+    return sim.stats()["kinetic_energy_j"] + sim.model.particle_mass_kg * float(height.sum())
 
 
 def run_rest(sim: Simulation, settle_frames: int, frames: int) -> dict:
@@ -96,7 +96,7 @@ def run_rest(sim: Simulation, settle_frames: int, frames: int) -> dict:
     start = energy(sim)
     sim.step(frames)
     depth = max(b.max_m[1] for b in sim.scene.fluid.blocks) - sim.scene.container.min_m[1]
-    scale = sim.particle_count * sim.particle_mass_kg * float(np.linalg.norm(sim.settings.gravity_m_s2)) * depth
+    scale = sim.particle_count * sim.model.particle_mass_kg * float(np.linalg.norm(sim.control.gravity_m_s2)) * depth
     return {"rest_energy_drift": (energy(sim) - start) / scale, "rest_max_speed_m_s": sim.stats()["max_speed_m_s"]}
 
 

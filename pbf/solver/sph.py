@@ -141,7 +141,7 @@ def jacobi_gain(kernel_ratio, relaxation, samples=24):
 
     Linearised about a lattice of spacing s, one projection maps the constraint error C to
     (1 − μ(k)) C for each Fourier mode k, with μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂)
-    (ĝ_j the dimensionless gradient of pbf.density). A mode with μ > 2 grows every iteration: for
+    (ĝ_j the dimensionless gradient of pbf.solver.density). A mode with μ > 2 grows every iteration: for
     the cubic spline at h = 2.2 s, μ reaches 3.1 at wavelengths near 4 s, and a 64,000-particle dam
     break exploded at the first impact. Depends only on h/s and ε̂, so it is computed in units of s.
     """

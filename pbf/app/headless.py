@@ -1,0 +1,56 @@
+"""The headless viewer: numbered PNG frames, an optional video and per-frame particle files, with a
+progress bar."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import imageio.v2 as imageio
+import imageio.v3 as iio
+from tqdm import tqdm
+
+from pbf.app.export import write_particles
+from pbf.app.render import SceneRenderer
+
+
+class FrameWriter:
+    """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame,
+    and, when asked, appends each to a video and writes the particles beside it."""
+
+    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export: str | None = None,
+                 progress: bool = True):
+        self.sim = sim
+        self.out_dir = out_dir
+        self.export = export
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.renderer = SceneRenderer(sim)
+        self.writer = None
+        if video is not None:
+            video.parent.mkdir(parents=True, exist_ok=True)
+            fps = 1.0 / sim.scene.time.frame_dt_s
+            self.writer = imageio.get_writer(video, fps=fps, codec="libx264", quality=8, macro_block_size=2)
+        self.paths: list[Path] = []
+        self.progress = tqdm(total=frames + 1, desc=f"{sim.scene.name}: frames", unit="frame", disable=not progress)
+
+    def running(self) -> bool:
+        return True
+
+    def advance(self) -> bool:
+        return True
+
+    def show(self) -> None:
+        number = len(self.paths)
+        image = self.renderer.frame()
+        path = self.out_dir / f"frame_{number:05d}.png"
+        iio.imwrite(path, image)
+        self.paths.append(path)
+        if self.writer is not None:
+            self.writer.append_data(image)
+        if self.export is not None:
+            write_particles(self.out_dir / f"particles_{number:05d}.{self.export}", self.sim.positions(),
+                            self.sim.velocities(), self.sim.time_s)
+        self.progress.update()
+
+    def close(self) -> None:
+        self.progress.close()
+        if self.writer is not None:
+            self.writer.close()

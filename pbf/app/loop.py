@@ -1,0 +1,72 @@
+"""One loop for every way of running a scene: the window, headless frames and statistics only.
+
+The loop steps the simulation and hands each frame to a viewer (as Newton's examples take a viewer,
+with a null one for headless runs). A viewer decides when to step (the window pauses), shows each
+frame (draws it, writes it to files, or prints statistics) and says when to stop.
+"""
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+
+class Viewer(Protocol):
+    def running(self) -> bool:
+        """False once the viewer is done (the window was closed)."""
+
+    def advance(self) -> bool:
+        """Handle input since the last frame; whether the simulation steps one frame now."""
+
+    def show(self) -> None:
+        """Present the simulation's current frame."""
+
+    def close(self) -> None:
+        """Release what the viewer holds (files, progress bars); called however the loop ends."""
+
+
+def run(sim, viewer: Viewer, frames: int | None = None) -> None:
+    """Show the current state, then step and show until the viewer stops or ``frames`` frames were
+    stepped (None: until the viewer stops)."""
+    stepped = 0
+    try:
+        viewer.show()
+        while viewer.running() and (frames is None or stepped < frames):
+            if viewer.advance():
+                sim.step()
+                stepped += 1
+            viewer.show()
+    finally:
+        viewer.close()
+
+
+def stats_line(sim) -> str:
+    s = sim.stats()
+    return (f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
+            f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
+            f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})")
+
+
+class StatsViewer:
+    """The null viewer (``--stats-only``): renders nothing, prints statistics once a simulated second
+    and after the last frame, and the frame rate at the end."""
+
+    def __init__(self, sim, frames: int):
+        self.sim = sim
+        self.frames = frames
+        self.frames_per_report = max(1, round(1.0 / sim.scene.time.frame_dt_s))
+        self.started = time.perf_counter()
+
+    def running(self) -> bool:
+        return True
+
+    def advance(self) -> bool:
+        return True
+
+    def show(self) -> None:
+        frame = self.sim.frame
+        if frame and (frame % self.frames_per_report == 0 or frame == self.frames):
+            print(stats_line(self.sim))
+
+    def close(self) -> None:
+        elapsed = time.perf_counter() - self.started
+        print(f"[pbf] {self.sim.frame} frames in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s, JIT included)")

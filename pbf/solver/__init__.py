@@ -1,0 +1,12 @@
+"""The solver wing: the physics of Position Based Fluids, a module per stage of Algorithm 1.
+
+Its public face (what the application and the studies use) is imported here. The modules inside
+import only the scene schema (``pbf.scene``), Taichi and NumPy: no plotting, command line or images.
+"""
+from pbf.solver.backend import ARCHES, ENV_VAR, BackendError, start_backend
+from pbf.solver.model import Control, Model
+from pbf.solver.simulation import STAGES, Readout, Simulation, StageHook
+from pbf.solver.state import Snapshot
+
+__all__ = ["ARCHES", "ENV_VAR", "BackendError", "Control", "Model", "Readout", "STAGES", "Simulation",
+           "Snapshot", "StageHook", "start_backend"]

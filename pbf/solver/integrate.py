@@ -1,0 +1,66 @@
+"""Time integration: prediction and reordering by cell (Algorithm 1, lines 1-4); lines 20-23 are
+``pbf.solver.postprocess``."""
+import taichi as ti
+
+
+@ti.data_oriented
+class PredictedPositions:
+    """x*, the predicted positions (m): two (n,) vector(3, f32) buffers. Prediction writes
+    :attr:`current`; each Jacobi iteration reads it, writes :attr:`other`, and :meth:`swap` makes
+    that the current one, which saves a copy (a parallel loop, 20-40 µs on a 2-core CPU) per iteration."""
+
+    def __init__(self, particle_count: int):
+        self._buffers = [ti.Vector.field(3, ti.f32, shape=particle_count) for _ in range(2)]
+
+    @property
+    def current(self):
+        return self._buffers[0]
+
+    @property
+    def other(self):
+        return self._buffers[1]
+
+    def swap(self) -> None:
+        self._buffers.reverse()
+
+
+@ti.data_oriented
+class Integrator:
+    """Owns x* (:class:`PredictedPositions`) and the reorder scratch."""
+
+    def __init__(self, state, box):
+        self.state = state
+        self.box = box
+        self.count = state.count
+        self.predicted = PredictedPositions(state.count)
+        self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.count))
+        self._int = ti.field(ti.i32, shape=state.count)
+
+    @ti.kernel
+    def _predict(self, x_pred: ti.template(), dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
+        for i in range(self.count):
+            v = self.state.v[i] + dt * gravity
+            self.state.v[i] = v
+            x_pred[i] = self.box.clamp(self.state.x[i] + dt * v)
+
+    def predict(self, dt: float, gravity_m_s2) -> None:
+        """v ← v + Δt g;  x* ← x + Δt v, kept inside the box so the grid never sees a lost particle."""
+        self._predict(self.predicted.current, dt, gravity_m_s2)
+
+    @ti.kernel
+    def _reorder(self, sorted_from: ti.template(), x_pred: ti.template()):
+        for slot in range(self.count):
+            i = sorted_from[slot]
+            self._vec[0, slot] = self.state.x[i]
+            self._vec[1, slot] = self.state.v[i]
+            self._vec[2, slot] = x_pred[i]
+            self._int[slot] = self.state.index[i]
+        for slot in range(self.count):
+            self.state.x[slot] = self._vec[0, slot]
+            self.state.v[slot] = self._vec[1, slot]
+            x_pred[slot] = self._vec[2, slot]
+            self.state.index[slot] = self._int[slot]
+
+    def reorder(self, sorted_from) -> None:
+        """Apply the grid's counting-sort permutation to the state and to x*."""
+        self._reorder(sorted_from, self.predicted.current)

@@ -1,0 +1,203 @@
+"""The Simulation: a scene's particles, the PBF step (Macklin & Müller 2013, Algorithm 1) and its read-outs."""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import warnings
+from dataclasses import dataclass
+from typing import ContextManager, Protocol
+
+import numpy as np
+
+from pbf import scene as schema
+from pbf.solver.backend import start_backend
+from pbf.solver.boundary import Box
+from pbf.solver.density import DensityConstraint
+from pbf.solver.diagnostics import Diagnostics
+from pbf.solver.grid import NeighbourGrid
+from pbf.solver.integrate import Integrator
+from pbf.solver.model import Control, Model
+from pbf.solver.postprocess import VelocityPostprocess
+from pbf.solver.state import Snapshot, State
+
+STAGES = ("predict", "sort by cell", "neighbour lists", "solver iterations", "velocity, vorticity, XSPH, x = x*")
+"""The stages :meth:`Simulation.substep` reports to its :class:`StageHook`, in order."""
+
+
+class StageHook(Protocol):
+    """Told about each stage of a substep as it runs (a profiler, say; ``pbf.study.common.StageTimer``)."""
+
+    def stage(self, name: str) -> ContextManager:
+        """A context that encloses the stage ``name`` (one of STAGES)."""
+
+
+class NoHook:
+    """The default hook: does nothing, at the cost of entering a null context per stage."""
+
+    _null = contextlib.nullcontext()
+
+    def stage(self, name: str) -> ContextManager:
+        return self._null
+
+
+@dataclass(frozen=True)
+class Readout:
+    """Per-particle Taichi fields for code on the same device (renderers), in the solver's current
+    sorted order, valid until the next step. Read them; never write them."""
+
+    count: int
+    radius_m: float
+    positions: object
+    """(n,) vector(3, f32) field, m."""
+    velocities: object
+    """(n,) vector(3, f32) field, m/s."""
+
+
+class Simulation:
+    """Position Based Fluids in a box.
+
+    >>> sim = Simulation("dam_break")          # a preset name, a TOML path, a dict or a Scene
+    >>> sim.step()                             # one frame: control.substeps PBF substeps (or more, CFL)
+    >>> sim.positions(), sim.velocities()      # (n, 3) float32 NumPy arrays, m and m/s
+    >>> sim.stats()["mean_density_error"]      # dict of diagnostics
+    >>> sim.reset()                            # back to the initial state
+    """
+
+    def __init__(self, scene: schema.Scene | dict | str | os.PathLike, arch: str | None = None,
+                 overrides=(), quiet: bool = False, hook: StageHook | None = None):
+        if isinstance(scene, dict):
+            scene = schema.from_dict(scene)
+        elif not isinstance(scene, schema.Scene):
+            scene = schema.load_scene(scene, overrides)
+        self.model = Model.from_scene(scene)  # validates memory before Taichi allocates anything
+        self.backend = start_backend(arch, quiet=quiet)
+        self.hook = hook or NoHook()
+        """Told about every stage of every substep (see StageHook); assign one to profile."""
+        model = self.model
+        self.state = State(model.particle_count)
+        self.box = Box(model.box)
+        self.grid = NeighbourGrid(model.grid)
+        self.integrator = Integrator(self.state, self.box)
+        self.density = DensityConstraint(model.density, self.box, self.grid)
+        self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
+        self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
+        self.reset()
+
+    @property
+    def scene(self) -> schema.Scene:
+        return self.model.scene
+
+    @property
+    def particle_count(self) -> int:
+        return self.model.particle_count
+
+    def reset(self) -> None:
+        """Restore the scene's initial particles, time and control."""
+        self.control = Control.from_scene(self.scene)
+        positions, velocities = self.model.initial_particles()
+        self.restore(Snapshot(positions, velocities, 0.0, 0))
+
+    def snapshot(self) -> Snapshot:
+        """Positions, velocities (creation order), time and frame: what :meth:`restore` takes."""
+        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame)
+
+    def restore(self, snapshot: Snapshot) -> None:
+        """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
+        self.state.load(snapshot.positions_m, snapshot.velocities_m_s)
+        self.time_s = snapshot.time_s
+        self.frame = snapshot.frame
+        self.frame_substeps = self.control.substeps
+        self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
+        self.iterations_used = 0
+        self._sort_by_cell(self.state.x)  # neighbour lists for stats() before the first step
+        self.grid.build_neighbours(self.state.x)
+
+    @property
+    def dt_s(self) -> float:
+        """Δt of the last substep, s (less than frame_dt_s / substeps when the CFL limit added some)."""
+        return self.last_dt_s
+
+    def substeps_needed(self) -> int:
+        """Substeps for the next frame: the control's, or more so that no particle travels more than
+        time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
+        t = self.scene.time
+        speed = self.diagnostics.max_speed() + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
+        needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
+        if needed > t.max_substeps:
+            warnings.warn(f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
+                          f"time.max_cfl = {t.max_cfl}; capped at time.max_substeps = {t.max_substeps}",
+                          RuntimeWarning, stacklevel=3)
+        return min(needed, t.max_substeps)
+
+    def _sort_by_cell(self, x) -> None:
+        """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
+        self.grid.sort(x)
+        self.integrator.reorder(self.grid.sorted_from)
+
+    def substep(self, dt: float | None = None) -> None:
+        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""
+        control, hook = self.control, self.hook
+        dt = dt or self.scene.time.frame_dt_s / control.substeps
+        target = control.target_density_error
+        x_star = self.integrator.predicted
+        with hook.stage("predict"):
+            self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
+        with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
+            self._sort_by_cell(x_star.current)
+        with hook.stage("neighbour lists"):
+            self.grid.build_neighbours(x_star.current)
+        with hook.stage("solver iterations"):
+            for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
+                error = self.density.project(x_star.current, x_star.other, self.grid.neighbours,
+                                             measure=target > 0.0, first=k == 0)
+                x_star.swap()                                    # Jacobi: x* + Δx went into the other buffer
+                self.iterations_used = k + 1
+                if target > 0.0 and error < target:              # the error this iteration started from
+                    break
+        with hook.stage("velocity, vorticity, XSPH, x = x*"):
+            self.postprocess.run(x_star.current, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
+                                 control.vorticity, control.xsph)           # confinement, XSPH, x = x*
+        self.time_s += dt
+        self.last_dt_s = dt
+
+    def step(self, frames: int = 1) -> None:
+        """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
+        for _ in range(frames):
+            self.frame_substeps = self.substeps_needed()
+            dt = self.scene.time.frame_dt_s / self.frame_substeps
+            for _ in range(self.frame_substeps):
+                self.substep(dt)
+            self.frame += 1
+
+    def positions(self) -> np.ndarray:
+        """(n, 3) float32 particle positions in metres, in creation order."""
+        return self.state.positions()
+
+    def velocities(self) -> np.ndarray:
+        """(n, 3) float32 particle velocities in m/s, in creation order."""
+        return self.state.velocities()
+
+    def pressures(self) -> np.ndarray:
+        """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers, in creation order."""
+        scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
+        return self.state.in_creation_order(self.density.lam_total) * np.float32(scale)
+
+    def neighbour_counts(self) -> np.ndarray:
+        """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""
+        return self.state.in_creation_order(self.grid.neighbour_count).astype(np.int32)
+
+    def readout(self) -> Readout:
+        """The particles' device fields, for renderers (no copy to the host)."""
+        return Readout(self.particle_count, self.scene.particle_radius_m, self.state.x, self.state.v)
+
+    def density_ratios(self):
+        """ρ/ρ0 of every particle as a device field in the order of :meth:`readout`."""
+        return self.diagnostics.density_ratios(self.grid.neighbours)
+
+    def stats(self) -> dict:
+        """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
+        figures = self.diagnostics.compute(self.grid.neighbours)
+        figures.update(time_s=self.time_s, frame=self.frame, particles=self.particle_count,
+                       backend=self.backend, iterations=self.iterations_used, substeps=self.frame_substeps)
+        return figures
