@@ -19,7 +19,10 @@ def grid_neighbours(points, lower, upper, h, reach=1):
     grid = NeighbourGrid(GridParams.covering(n, lower, upper, h, reach))
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
-    grid.sort(x)
+    keys = np.random.default_rng(n).permutation(n).astype(np.int32)
+    key = ti.field(ti.i32, shape=n)
+    key.from_numpy(keys)
+    grid.sort(x, key)
     order = grid.sorted_from.to_numpy()
     assert sorted(order) == list(range(n)), "the sort must be a permutation"
     sorted_points = points[order]
@@ -30,6 +33,8 @@ def grid_neighbours(points, lower, upper, h, reach=1):
     # Back to original indices; also check the sort put cells in ascending order.
     cells = grid.particle_cell.to_numpy()[order]
     assert np.all(np.diff(cells) >= 0)
+    same_cell = np.diff(cells) == 0
+    assert np.all(np.diff(keys[order])[same_cell] > 0), "within a cell, particles follow their keys"
     return [set(order[l].tolist()) for l in lists], order
 
 
@@ -85,7 +90,8 @@ def test_all_points_in_one_cell(reach):
     grid = NeighbourGrid(GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, reach))
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
-    grid.sort(x)
+    key = ti.field(ti.i32, shape=n)
+    grid.sort(x, key)
     grid.build_neighbours(x)  # every particle is in the one cell, so the sort's order does not matter
     start, end = grid.neighbour_start.to_numpy()[:n], grid.neighbour_end.to_numpy()
     assert np.array_equal(end - start, np.full(n, n - 1))

@@ -27,6 +27,7 @@ import taichi as ti
 
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import DensityParams
+from pbf.solver.scan import BlockSum
 from pbf.solver.sph import kernel, kernel_and_gradient
 
 
@@ -51,8 +52,10 @@ class DensityConstraint:
         self.grid = grid
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
-        self.error_sum = ti.field(ti.f64, shape=())
-        """Σ_i max(C_i, 0) of the last λ pass that measured it."""
+        self.error = ti.field(ti.f32, shape=particle_count)
+        """max(C_i, 0) of the last λ pass that measured it."""
+        self.error_sum = BlockSum(particle_count)
+        """Σ_i max(C_i, 0), summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """Σ of λ̂_i over this substep's iterations: the pressure impulse (see pressure_scale)."""
 
@@ -74,13 +77,13 @@ class DensityConstraint:
         return ratio + wall, gradient_i + h * wall_gradient, sum_sq
 
     @ti.func
-    def lagrange_multiplier(self, x: ti.template(), i, neighbours: ti.template(), measure, first):
+    def lagrange_multiplier(self, x: ti.template(), i, neighbours: ti.template(), measure: ti.template(), first):
         """λ̂_i (Eq. 10, dimensionless), added to the substep's total; with ``measure``, max(C_i, 0) is
-        added to error_sum."""
+        kept for error_sum."""
         ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
         c = ratio - 1.0
-        if measure:
-            self.error_sum[None] += ti.cast(ti.max(c, 0.0), ti.f64)
+        if ti.static(measure):
+            self.error[i] = ti.max(c, 0.0)
         if ti.static(self.clamp_pressure):
             c = ti.max(c, 0.0)
         lam = -self.omega * c / (gradient_i.norm_sqr() + sum_sq + self.relaxation)
@@ -109,15 +112,16 @@ class DensityConstraint:
         return self.box.clamp(xi + h * dx)
 
     @ti.kernel
-    def iterate(self, x: ti.template(), x_next: ti.template(), neighbours: NeighbourList, measure: ti.i32,
+    def iterate(self, x: ti.template(), x_next: ti.template(), neighbours: NeighbourList, measure: ti.template(),
                 first: ti.i32):
-        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions into x_next.
-        One launch instead of two, as a launch costs 30-100 µs on a 2-core CPU."""
-        self.error_sum[None] = 0.0
+        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions into x_next,
+        and with ``measure`` the error sum. One launch, as a launch costs 30-100 µs on a 2-core CPU."""
         for i in range(self.count):
             self.lagrange_multiplier(x, i, neighbours, measure, first)
         for i in range(self.count):
             x_next[i] = self.corrected_position(x, i, neighbours)
+        if ti.static(measure):
+            self.error_sum.sum(self.error, 0)
 
     def pressure_scale(self, dt: float) -> float:
         """p_i = −ρ0 h² Σλ̂_i / Δt² (Pa per unit ρ0): matching Δx_i = h Σ_j (λ̂_i + λ̂_j) ĝ_ij with the SPH
@@ -131,5 +135,5 @@ class DensityConstraint:
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
-        self.iterate(x, x_next, neighbours, measure, first)
-        return self.error_sum[None] / self.count if measure else None
+        self.iterate(x, x_next, neighbours, bool(measure), first)
+        return self.error_sum.total[0] / self.count if measure else None

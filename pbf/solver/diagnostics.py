@@ -2,6 +2,7 @@
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
+from pbf.solver.scan import BlockSum
 
 
 @ti.data_oriented
@@ -14,8 +15,10 @@ class Diagnostics:
         self.grid = grid
         self.count = state.count
         self.mass = particle_mass_kg
-        self.sums = ti.field(ti.f64, shape=3)
-        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours."""
+        self.terms = [ti.field(ti.f32, shape=state.count) for _ in range(3)]
+        """max(ρ/ρ0 − 1, 0), |v|² and the neighbour count of each particle."""
+        self.sums = BlockSum(state.count, 3)
+        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours, the same bits on any thread count."""
         self.maxima = ti.field(ti.f32, shape=3)
         """max max(ρ/ρ0 − 1, 0), max |v|, max neighbours."""
         self.density_ratio = ti.field(ti.f32, shape=state.count)
@@ -24,19 +27,18 @@ class Diagnostics:
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
         for k in ti.static(range(3)):
-            self.sums[k] = 0.0
             self.maxima[k] = 0.0
         for i in range(self.count):
             ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
             error = ti.max(ratio - 1.0, 0.0)
             speed2 = self.state.v[i].norm_sqr()
-            count = self.grid.neighbour_end[i] - self.grid.neighbour_start[i]
-            self.sums[0] += ti.cast(error, ti.f64)
-            self.sums[1] += ti.cast(speed2, ti.f64)
-            self.sums[2] += ti.cast(count, ti.f64)
-            ti.atomic_max(self.maxima[0], error)
+            count = ti.cast(self.grid.neighbour_end[i] - self.grid.neighbour_start[i], ti.f32)
+            self.terms[0][i], self.terms[1][i], self.terms[2][i] = error, speed2, count
+            ti.atomic_max(self.maxima[0], error)  # a maximum is the same in any order
             ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
-            ti.atomic_max(self.maxima[2], ti.cast(count, ti.f32))
+            ti.atomic_max(self.maxima[2], count)
+        for k in ti.static(range(3)):
+            self.sums.sum(self.terms[k], k)
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
@@ -68,7 +70,7 @@ class Diagnostics:
         solver's final iteration did.
         """
         self._reduce(neighbours)
-        sums, maxima = self.sums.to_numpy(), self.maxima.to_numpy()
+        sums, maxima = self.sums.total.to_numpy(), self.maxima.to_numpy()
         n = self.count
         return {
             "mean_density_error": float(sums[0] / n),

@@ -3,8 +3,9 @@
 Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
 1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell;
 2. exclusive prefix sum of the counts → first slot of every cell;
-3. slot = start[cell] + rank: the permutation that sorts particles by cell, which the caller applies
-   to its arrays so that neighbours sit together in memory;
+3. slot = start[cell] + rank, then each cell put in the order of a key (the creation index): the
+   permutation that sorts particles by cell, which the caller applies to its arrays so that
+   neighbours sit together in memory;
 4. visit the cells within ``reach`` of each particle's own (3×3×3 for reach 1, 5×5×5 for reach 2)
    once, writing its neighbours within h into a slot of SLOTS entries and counting them all. If some
    particle has more than SLOTS neighbours, the counts are prefix-summed into a compact list (grown
@@ -70,9 +71,17 @@ class NeighbourGrid:
         return (c[0] * self.resolution[1] + c[1]) * self.resolution[2] + c[2]
 
     @ti.kernel
-    def sort(self, x: ti.template()):
-        """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch); fills
-        :attr:`sorted_from`, and the caller reorders."""
+    def sort(self, x: ti.template(), key: ti.template()):
+        """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch), particles of one
+        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders.
+
+        The ranks the atomic counter hands out depend on which thread gets there first, so within a
+        cell the order would change from run to run, and with it the order of every neighbour sum:
+        two runs of the seed scene ended 0.46 m apart after a second. Ordering each cell by a key
+        that belongs to the particle (its creation index) makes the permutation depend only on where
+        the particles are, so runs, and a restored snapshot, replay bit for bit. A cell holds one or
+        two particles at h/2 wide cells, so an insertion sort costs next to nothing.
+        """
         for i in range(self.particle_count):
             cell = self.linear(self.cell_of(x[i]))
             self.particle_cell[i] = cell
@@ -84,6 +93,19 @@ class NeighbourGrid:
             # Clear the counts for the next sort here rather than in a loop over all cells of its own:
             # the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
             self.cell_particles[cell] = 0
+        for slot in range(self.particle_count):
+            # The thread at a cell's first slot sorts the cell; any other slot of the cell reads some
+            # particle of the same cell here, so it never mistakes itself for the first.
+            begin = self.cell_start[self.particle_cell[self.sorted_from[slot]]]
+            if begin == slot:
+                end = self.cell_start[self.particle_cell[self.sorted_from[slot]] + 1]
+                for a in range(begin + 1, end):
+                    moving = self.sorted_from[a]
+                    b = a
+                    while b > begin and key[self.sorted_from[b - 1]] > key[moving]:
+                        self.sorted_from[b] = self.sorted_from[b - 1]
+                        b -= 1
+                    self.sorted_from[b] = moving
 
     @ti.func
     def column_range(self, c, dx: ti.template(), dy: ti.template()):

@@ -42,3 +42,35 @@ class ExclusiveScan:
     def run(self, values: ti.template(), starts: ti.template()) -> ti.i32:
         """:meth:`scan` as a kernel of its own."""
         return self.scan(values, starts)
+
+
+@ti.data_oriented
+class BlockSum:
+    """Sums of per-particle values in float64 that come out the same, bit for bit, on any thread count.
+
+    A float atomic add into one address sums in whatever order the threads arrive, so the last bits
+    change from run to run (and when such a sum decides when the solver stops iterating, the whole
+    run changes); on a GPU, a million atomics into one address also serialise. Here fixed blocks are
+    summed in parallel, each in index order, then the block sums in order.
+    """
+
+    def __init__(self, length: int, sums: int = 1):
+        self.length = length
+        self.block = max(64, math.ceil(length / 1024))
+        self.blocks = math.ceil(length / self.block)
+        self.partial = ti.field(ti.f64, shape=self.blocks)
+        self.total = ti.field(ti.f64, shape=sums)
+        """The results: ``total[slot]`` of each :meth:`sum`."""
+
+    @ti.func
+    def sum(self, values: ti.template(), slot: ti.template()):
+        """total[slot] = Σ_k values[k]. Called at a kernel's top level, like ExclusiveScan.scan."""
+        for b in range(self.blocks):
+            partial = ti.cast(0.0, ti.f64)
+            for k in range(b * self.block, ti.min((b + 1) * self.block, self.length)):
+                partial += ti.cast(values[k], ti.f64)
+            self.partial[b] = partial
+        self.total[slot] = 0.0
+        ti.loop_config(serialize=True)
+        for b in range(self.blocks):
+            self.total[slot] += self.partial[b]

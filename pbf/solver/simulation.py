@@ -132,7 +132,7 @@ class Simulation:
 
     def _sort_by_cell(self, x) -> None:
         """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
-        self.grid.sort(x)
+        self.grid.sort(x, self.state.index)
         self.integrator.reorder(self.grid.sorted_from)
 
     def substep(self, dt: float | None = None) -> None:
