@@ -93,6 +93,15 @@ class Block:
 
 
 @dataclass(frozen=True)
+class Obstacle:
+    """A static box inside the container that the water flows around (collision and wall density,
+    like the container's walls)."""
+
+    min_m: Vec3 = key(doc="lower corner, m")
+    max_m: Vec3 = key(doc="upper corner, m")
+
+
+@dataclass(frozen=True)
 class Fluid:
     spacing_m: float = key(0.025, _positive, "particle spacing s (the lattice pitch), m")
     rest_density_kg_m3: float = key(1000.0, _positive, "rest density ρ0, kg/m³")
@@ -155,6 +164,26 @@ class Render:
 
 
 @dataclass(frozen=True)
+class Surface:
+    """The free surface reconstructed from the particles (``--export mesh``, ``--style surface``).
+
+    Lengths are in particle spacings, so one table serves every resolution. The mesh is the iso
+    surface of splashsurf's colour field Σ_j (m_j/ρ_j) W(x − x_j) (about 1 inside, 0 outside),
+    smoothed by the weighted Laplacian of Löschner et al. 2023.
+    """
+
+    smoothing_length_spacings: float = key(1.2, _between(0.5, 4.0), "SPH smoothing length of the colour "
+                                           "field (kernel support twice this), spacings")
+    cube_size_spacings: float = key(0.5, _between(0.1, 2.0), "marching-cubes cell edge, spacings")
+    iso_level: float = key(0.6, _between(0.05, 0.95), "colour-field value of the surface (1 in the bulk)")
+    smoothing_iterations: int = key(10, _between(0, 1000), "Laplacian smoothing passes over the mesh "
+                                    "(each shrinks a droplet a little)")
+    mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
+    deterministic: bool = key(True, doc="one thread, no subdomains: the same mesh on every run "
+                              "(splashsurf's parallel subdomains vary from run to run); false is faster")
+
+
+@dataclass(frozen=True)
 class Scene:
     source: str = field(default="<dict>", compare=False, metadata={"internal": True})
     """Where the scene came from (a file path or "<dict>"): error messages name it. Not a TOML key."""
@@ -163,12 +192,14 @@ class Scene:
     gravity_m_s2: Vec3 = key((0.0, -9.81, 0.0), doc="gravitational acceleration, m/s² (y is up)")
     container: Container = key(Container())
     fluid: Fluid = key(Fluid())
+    obstacles: tuple[Obstacle, ...] = key((), doc="static boxes in the container ([[obstacles]] tables)")
     time: Time = key(Time())
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
     vorticity: Vorticity = key(Vorticity())
     camera: Camera = key(Camera())
     render: Render = key(Render())
+    surface: Surface = key(Surface())
 
     @property
     def dt_s(self) -> float:
@@ -313,10 +344,52 @@ def _check_geometry(scene: Scene, source: str) -> None:
         boxes.append((b_lo, b_hi))
 
 
+MIN_OBSTACLE_SPACINGS = 2
+"""An obstacle's least thickness, in spacings. Grown by the particle radius, its half-thickness is
+then at least 1.5 spacings, and a particle moves at most time.max_cfl spacings per substep (1.2 by
+default, at most OBSTACLE_MAX_CFL with obstacles), so it cannot cross an obstacle's middle in one
+substep and be pushed out on the far side."""
+OBSTACLE_MAX_CFL = 1.5
+
+
+def _check_obstacles(scene: Scene, source: str) -> None:
+    """Obstacles: inside the container, thick enough, sharing no volume with fluid or each other."""
+    def box(lo, hi):
+        return "[" + ", ".join(f"{c:g}" for c in lo) + "]–[" + ", ".join(f"{c:g}" for c in hi) + "] m"
+
+    c_lo, c_hi = scene.container.min_m, scene.container.max_m
+    thinnest = MIN_OBSTACLE_SPACINGS * scene.fluid.spacing_m
+    tolerance = 1e-9 * (max(abs(c) for c in c_lo + c_hi) + 1.0)
+
+    def overlap(a_lo, a_hi, b_lo, b_hi):
+        return all(min(ah, bh) - max(al, bl) > tolerance for al, ah, bl, bh in zip(a_lo, a_hi, b_lo, b_hi))
+
+    if scene.obstacles and scene.time.max_cfl > OBSTACLE_MAX_CFL:
+        raise SceneError(f"{source}: key 'time.max_cfl' = {scene.time.max_cfl:g} lets particles cross an obstacle in "
+                         f"one substep; with [[obstacles]] it must be ≤ {OBSTACLE_MAX_CFL:g}")
+    for i, obstacle in enumerate(scene.obstacles):
+        lo, hi = obstacle.min_m, obstacle.max_m
+        where = f"{source}: key 'obstacles[{i}]"
+        if any(h - l < thinnest for l, h in zip(lo, hi)):
+            raise SceneError(f"{where}.max_m': obstacle {box(lo, hi)} must be at least {MIN_OBSTACLE_SPACINGS} "
+                             f"spacings ({thinnest:g} m) thick on every axis, or particles could cross it")
+        if any(l < cl - tolerance or h > ch + tolerance for l, h, cl, ch in zip(lo, hi, c_lo, c_hi)):
+            raise SceneError(f"{where}': obstacle {box(lo, hi)} lies outside the container {box(c_lo, c_hi)}; "
+                             f"allowed: min_m ≥ container.min_m and max_m ≤ container.max_m")
+        for j, block in enumerate(scene.fluid.blocks):
+            if overlap(lo, hi, block.min_m, block.max_m):
+                raise SceneError(f"{where}' overlaps fluid.blocks[{j}] ({box(block.min_m, block.max_m)}); "
+                                 f"move the block or the obstacle so that they share no volume")
+        for j, other in enumerate(scene.obstacles[:i]):
+            if overlap(lo, hi, other.min_m, other.max_m):
+                raise SceneError(f"{where}' overlaps obstacles[{j}]; obstacles must not share volume")
+
+
 def from_dict(table: dict, source: str = "<dict>") -> Scene:
     """Validate a scene given as a dict shaped like the TOML file."""
     scene = dataclasses.replace(_build(Scene, table, source), source=source)
     _check_geometry(scene, source)
+    _check_obstacles(scene, source)
     return scene
 
 

@@ -70,6 +70,12 @@ def box_edges(lower, upper) -> np.ndarray:
     return np.array([corners[p] for pair in pairs for p in pair], dtype=np.float32)
 
 
+def scene_edges(scene: Scene) -> np.ndarray:
+    """The edges of the container and of every obstacle, as one (24 k, 3) array of segment end points."""
+    boxes = [(scene.container.min_m, scene.container.max_m)] + [(o.min_m, o.max_m) for o in scene.obstacles]
+    return np.concatenate([box_edges(lower, upper) for lower, upper in boxes])
+
+
 @ti.data_oriented
 class ParticleColours:
     """Per-particle RGB from speed or density through a Matplotlib colour map (a 256-entry table)."""
@@ -228,7 +234,7 @@ class SceneRenderer:
         self.colours = ParticleColours(sim, render)
         self.spheres = SphereRenderer(width_px or render.width_px, height_px or render.height_px,
                                       render.background_rgb, render.container_rgb,
-                                      box_edges(sim.scene.container.min_m, sim.scene.container.max_m))
+                                      scene_edges(sim.scene))
 
     def frame(self) -> np.ndarray:
         """The current state as an (H, W, 3) uint8 image."""

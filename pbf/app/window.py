@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, box_edges
+from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, scene_edges
 
 HELP = ("mouse: left drag orbits, right drag zooms", "keys: WASD/QE move, space pauses, '.' steps,",
         "r resets, esc quits")
@@ -85,7 +85,7 @@ class WindowViewer:
         self.render = sim.scene.render
         self.camera = OrbitCamera.from_view(View.of_scene(sim.scene))
         self.colours = ParticleColours(sim, self.render)
-        edges = box_edges(sim.scene.container.min_m, sim.scene.container.max_m)
+        edges = scene_edges(sim.scene)
         self.edges = ti.Vector.field(3, ti.f32, shape=len(edges))
         self.edges.from_numpy(edges)
         self.gg_camera = ti.ui.Camera()

@@ -1,4 +1,5 @@
-"""The container: an axis-aligned box, with collision and the density of the missing wall neighbours.
+"""The boundary: the container (an axis-aligned box) and static box obstacles inside it, with
+collision and the density of the missing wall neighbours.
 
 A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
 the solver pulls it into the wall, where clamping stacks it. We add the density of ghost fluid behind
@@ -6,6 +7,14 @@ each wall (``pbf.solver.sph.wall_density_table``), and its gradient, to the dens
 computed once per scene and looked up by wall distance. Near an edge or a corner the ghost lattices
 of two or three walls overlap; inclusion–exclusion tables (``pbf.solver.sph.wall_overlap_tables``) remove
 what would be counted twice, so a block in a corner also starts exactly at ρ0.
+
+An obstacle is the intersection of three slabs, so its ghost lattice is too. Per axis, a particle
+is either outside the slab (one half-space at distance a stands for the slab) or inside it (the
+slab is everything minus the two half-spaces beyond its faces, at distances d_lo and d_hi). The
+product over the three axes expands into at most 27 signed terms, each the ghost density of one,
+two or three orthogonal half-spaces: the wall, edge and corner tables of the container. So the
+ghost of an obstacle is exact (to the tables) at its faces, its convex edges and its corners, and a
+block resting on an obstacle starts at ρ0 as it does on the floor.
 """
 import numpy as np
 import taichi as ti
@@ -40,11 +49,47 @@ class Box:
         self.corner_gradient = ti.Vector.field(3, ti.f32, shape=(n, n, n))
         for field, table in zip((self.edge, self.edge_gradient, self.corner, self.corner_gradient), tables):
             field.from_numpy(table.astype(np.float32))
+        self.obstacle_count = len(params.obstacles)
+        slots = max(1, self.obstacle_count)
+        self.obstacle_lower = ti.Vector.field(3, ti.f32, shape=slots)
+        self.obstacle_upper = ti.Vector.field(3, ti.f32, shape=slots)
+        # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
+        self.obstacle_exit_lower = ti.Vector.field(3, ti.i32, shape=slots)
+        self.obstacle_exit_upper = ti.Vector.field(3, ti.i32, shape=slots)
+        for k, (lower, upper) in enumerate(params.obstacles):
+            self.obstacle_lower[k] = lower
+            self.obstacle_upper[k] = upper
+            self.obstacle_exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
+            self.obstacle_exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
 
     @ti.func
     def clamp(self, p):
-        """Project p into the box shrunk by the particle radius (the collision of Algorithm 1, line 15)."""
-        return ti.max(self.lower + self.radius, ti.min(p, self.upper - self.radius))
+        """Project p into the container shrunk by the particle radius and out of every obstacle grown
+        by it (the collision of Algorithm 1, line 15)."""
+        q = ti.max(self.lower + self.radius, ti.min(p, self.upper - self.radius))
+        if ti.static(self.obstacle_count > 0):
+            for o in range(self.obstacle_count):
+                q = self._push_out(q, o)
+        return q
+
+    @ti.func
+    def _push_out(self, p, o):
+        """p moved out of obstacle o (grown by the particle radius) through the nearest open face.
+        Obstacles are at least two spacings thick and a particle moves at most time.max_cfl spacings
+        in a substep, so the nearest face is the one it came through."""
+        lower = self.obstacle_lower[o] - self.radius
+        upper = self.obstacle_upper[o] + self.radius
+        q = p
+        if (p > lower).all() and (p < upper).all():
+            best, axis, target = 1e30, 0, 0.0
+            for a in ti.static(range(3)):
+                if self.obstacle_exit_lower[o][a] and p[a] - lower[a] < best:
+                    best, axis, target = p[a] - lower[a], a, lower[a]
+                if self.obstacle_exit_upper[o][a] and upper[a] - p[a] < best:
+                    best, axis, target = upper[a] - p[a], a, upper[a]
+            if best < 1e30:
+                q[axis] = target
+        return q
 
     @ti.func
     def _lookup(self, distance):
@@ -118,4 +163,78 @@ class Box:
                 o, g = self._corner(distance)
                 density += o
                 gradient += side * g
+            if ti.static(self.obstacle_count > 0):
+                for o in range(self.obstacle_count):
+                    d, g = self._obstacle_ghost(p, o)
+                    density += d
+                    gradient += g
         return density, gradient
+
+    @ti.func
+    def _obstacle_ghost(self, p, o):
+        """Ghost density of obstacle o and its gradient: the 27-term expansion of the module docstring."""
+        lower, upper = self.obstacle_lower[o], self.obstacle_upper[o]
+        h = self.kernel_radius
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
+        if nearest.norm() < h:
+            outside = ti.Vector([0, 0, 0])
+            far = ti.Vector([0.0, 0.0, 0.0])  # outside: distance to the slab; its derivative's sign
+            far_sign = ti.Vector([0.0, 0.0, 0.0])
+            for a in ti.static(range(3)):
+                if p[a] < lower[a]:
+                    outside[a], far[a], far_sign[a] = 1, lower[a] - p[a], -1.0
+                elif p[a] > upper[a]:
+                    outside[a], far[a], far_sign[a] = 1, p[a] - upper[a], 1.0
+            for term in range(27):
+                # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
+                # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
+                sign = 1.0
+                valid = True
+                active = ti.Vector([0, 0, 0])
+                d = ti.Vector([0.0, 0.0, 0.0])
+                d_sign = ti.Vector([0.0, 0.0, 0.0])
+                for a in ti.static(range(3)):
+                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
+                    if choice == 0:
+                        if outside[a]:
+                            active[a], d[a], d_sign[a] = 1, far[a], far_sign[a]
+                    elif outside[a]:
+                        valid = False
+                    else:
+                        sign = -sign
+                        active[a] = 1
+                        if choice == 1:
+                            d[a], d_sign[a] = p[a] - lower[a], 1.0
+                        else:
+                            d[a], d_sign[a] = upper[a] - p[a], -1.0
+                    if active[a] and d[a] >= h:
+                        valid = False
+                if valid:
+                    value, slope = self._ghost(active, d)
+                    density += sign * value
+                    gradient += sign * d_sign * slope
+        return density, gradient
+
+    @ti.func
+    def _ghost(self, active, d):
+        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
+        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1."""
+        value = 0.0
+        slope = ti.Vector([0.0, 0.0, 0.0])
+        count = active.sum()
+        if count == 0:
+            value = 1.0
+        elif count == 1:
+            for a in ti.static(range(3)):
+                if active[a]:
+                    value, slope[a] = self._lookup(d[a])
+        elif count == 2:
+            for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
+                if active[a] and active[b]:
+                    q, g = self._edge(d[a], d[b])
+                    value, slope[a], slope[b] = q, g[0], g[1]
+        else:
+            value, slope = self._corner(d)
+        return value, slope

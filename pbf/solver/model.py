@@ -84,7 +84,9 @@ class BoxParams:
     """The fluid lattice's pitch: the ghost lattice behind the walls mirrors it."""
     kernel_radius_m: float
     wall_density: bool
-    """Whether the ghost density behind walls is added to the constraint."""
+    """Whether the ghost density behind walls (and inside obstacles) is added to the constraint."""
+    obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
+    """(lower, upper) corners of each static box obstacle, m."""
 
 
 @dataclass(frozen=True)
@@ -182,7 +184,8 @@ class Model:
             clamp_pressure=s.clamp_pressure, scorr_k=s.scorr_k, scorr_n=s.scorr_n,
             inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION)
         return cls(scene, n, mass, volume, grid,
-                   BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density),
+                   BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
+                             tuple((o.min_m, o.max_m) for o in scene.obstacles)),
                    density, VelocityParams(n, h, volume))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
