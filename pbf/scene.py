@@ -138,6 +138,15 @@ class Viscosity:
 
 
 @dataclass(frozen=True)
+class WaveMaker:
+    """A piston wave maker: the container's lower-x wall swings along x between min_m and
+    min_m + stroke_m, x = min + S/2 (1 − cos 2πt/T), starting at rest."""
+
+    stroke_m: float = key(0.0, _non_negative, "piston stroke S, m; 0: no wave maker")
+    period_s: float = key(1.0, _positive, "wave period T, s")
+
+
+@dataclass(frozen=True)
 class Vorticity:
     epsilon: float = key(0.0, _non_negative, "vorticity confinement ε (Eqs. 13-14), dimensionless; 0 disables")
 
@@ -175,9 +184,10 @@ class Surface:
     smoothing_length_spacings: float = key(1.2, _between(0.5, 4.0), "SPH smoothing length of the colour "
                                            "field (kernel support twice this), spacings")
     cube_size_spacings: float = key(0.5, _between(0.1, 2.0), "marching-cubes cell edge, spacings")
-    iso_level: float = key(0.6, _between(0.05, 0.95), "colour-field value of the surface (1 in the bulk)")
-    smoothing_iterations: int = key(10, _between(0, 1000), "Laplacian smoothing passes over the mesh "
-                                    "(each shrinks a droplet a little)")
+    iso_level: float = key(0.5, _between(0.05, 0.95), "colour-field value of the surface (1 in the bulk, 0.5 "
+                           "where a flat body of the particles' volume ends)")
+    smoothing_iterations: int = key(5, _between(0, 1000), "Laplacian smoothing passes over the mesh (each "
+                                    "shrinks the water by about 0.3%)")
     mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
     deterministic: bool = key(True, doc="one thread, no subdomains: the same mesh on every run "
                               "(splashsurf's parallel subdomains vary from run to run); false is faster")
@@ -197,6 +207,7 @@ class Scene:
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
     vorticity: Vorticity = key(Vorticity())
+    wave_maker: WaveMaker = key(WaveMaker())
     camera: Camera = key(Camera())
     render: Render = key(Render())
     surface: Surface = key(Surface())
@@ -385,11 +396,29 @@ def _check_obstacles(scene: Scene, source: str) -> None:
                 raise SceneError(f"{where}' overlaps obstacles[{j}]; obstacles must not share volume")
 
 
+def _check_wave_maker(scene: Scene, source: str) -> None:
+    """The piston must leave room behind it for the water and in front of it for the obstacles."""
+    stroke = scene.wave_maker.stroke_m
+    if stroke == 0.0:
+        return
+    length = scene.container.max_m[0] - scene.container.min_m[0]
+    if stroke > 0.25 * length:
+        raise SceneError(f"{source}: key 'wave_maker.stroke_m' = {stroke:g} m is more than a quarter of the "
+                         f"container's length along x ({length:g} m); allowed: ≤ {0.25 * length:g} m")
+    reach = scene.container.min_m[0] + stroke + 2 * scene.kernel_radius_m
+    for i, obstacle in enumerate(scene.obstacles):
+        if obstacle.min_m[0] < reach:
+            raise SceneError(f"{source}: key 'obstacles[{i}].min_m': the piston sweeps x up to "
+                             f"{scene.container.min_m[0] + stroke:g} m; an obstacle must start at least 2 h "
+                             f"further, at x ≥ {reach:g} m")
+
+
 def from_dict(table: dict, source: str = "<dict>") -> Scene:
     """Validate a scene given as a dict shaped like the TOML file."""
     scene = dataclasses.replace(_build(Scene, table, source), source=source)
     _check_geometry(scene, source)
     _check_obstacles(scene, source)
+    _check_wave_maker(scene, source)
     return scene
 
 

@@ -1,7 +1,7 @@
 """Command line: open a scene in a window, render it headless to PNG/video/particle files, or list presets.
 
     python run.py [SCENE] [--set KEY=VALUE]...               # the window (headless when none can open)
-    python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz]
+    python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz|mesh]...
     python run.py --list
 
 It builds a Simulation and a viewer (window, headless frames or statistics) and hands both to the
@@ -33,8 +33,9 @@ def parse_args(argv=None):
     output.add_argument("--frames", type=int, default=180, help="frames to simulate (default 180: 3 s at 60 fps)")
     output.add_argument("--out", type=Path, default=None, help="folder for PNG frames (default out/SCENE)")
     output.add_argument("--video", type=Path, default=None, help="also encode the frames as a video (.mp4)")
-    output.add_argument("--export", choices=export.FORMATS, default=None,
-                        help="also write particle positions and velocities per frame")
+    output.add_argument("--export", choices=export.EXPORTS, action="append", default=None,
+                        help="also write per frame the particles (ply, npz: positions and velocities) or the "
+                             "fluid's surface (mesh: PLY or OBJ, see surface.mesh_format); repeatable")
     view = parser.add_argument_group("view (shortcuts for --set camera.* and render.*)")
     view.add_argument("--size", metavar="WxH", help="image size in pixels, e.g. 1920x1080")
     view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
@@ -100,7 +101,7 @@ def report_written(sim, args, viewer) -> None:
     if args.video:
         written += f", video {args.video}"
     if args.export:
-        written += f", particles as {args.export} in {viewer.out_dir}/"
+        written += f", {' and '.join(args.export)} files in {viewer.out_dir}/"
     print(f"[pbf] wrote {written}")
 
 

@@ -5,6 +5,10 @@ import numpy as np
 from plyfile import PlyData, PlyElement
 
 FORMATS = ("ply", "npz")
+"""Particle file formats."""
+EXPORTS = FORMATS + ("mesh",)
+"""What ``--export`` takes: a particle format, or ``mesh``, the fluid's surface (``pbf.app.surface``,
+in the format of the scene's ``surface.mesh_format``)."""
 
 
 def write_particles(path: Path, positions: np.ndarray, velocities: np.ndarray, time_s: float) -> Path:

@@ -1,5 +1,5 @@
-"""The headless viewer: numbered PNG frames, an optional video and per-frame particle files, with a
-progress bar."""
+"""The headless viewer: numbered PNG frames, an optional video and per-frame particle and surface
+mesh files, with a progress bar."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,18 +9,21 @@ import imageio.v3 as iio
 from tqdm import tqdm
 
 from pbf.app.export import write_particles
+from pbf.app.surface import reconstruct, write_mesh
 from pbf.app.render import SceneRenderer
 
 
 class FrameWriter:
     """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame,
-    and, when asked, appends each to a video and writes the particles beside it."""
+    and, when asked, appends each to a video and writes the particles (``particles_00000.ply`` or
+    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``) beside it."""
 
-    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export: str | None = None,
+    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export=(),
                  progress: bool = True):
         self.sim = sim
         self.out_dir = out_dir
-        self.export = export
+        self.exports = tuple(dict.fromkeys(export or ()))
+        """Names from ``pbf.app.export.EXPORTS``, each once."""
         out_dir.mkdir(parents=True, exist_ok=True)
         self.renderer = SceneRenderer(sim)
         self.writer = None
@@ -45,9 +48,13 @@ class FrameWriter:
         self.paths.append(path)
         if self.writer is not None:
             self.writer.append_data(image)
-        if self.export is not None:
-            write_particles(self.out_dir / f"particles_{number:05d}.{self.export}", self.sim.positions(),
-                            self.sim.velocities(), self.sim.time_s)
+        for name in self.exports:
+            if name == "mesh":
+                write_mesh(self.out_dir / f"surface_{number:05d}.{self.sim.scene.surface.mesh_format}",
+                           reconstruct(self.sim.positions(), self.sim.scene), self.sim.time_s)
+            else:
+                write_particles(self.out_dir / f"particles_{number:05d}.{name}", self.sim.positions(),
+                                self.sim.velocities(), self.sim.time_s)
         self.progress.update()
 
     def close(self) -> None:

@@ -1,0 +1,134 @@
+"""Surface meshes (``pbf.app.surface``, ``--export mesh``): closed, of the water's volume and shape,
+the same on every run, and written in formats other tools read."""
+import math
+
+import numpy as np
+import pytest
+from plyfile import PlyData
+from scenes import column_scene
+
+from pbf import Simulation, load_scene
+from pbf.app import cli
+from pbf.app.surface import Mesh, reconstruct, write_mesh
+from pbf.scene import from_dict
+
+SPACING = 0.025
+
+
+def open_scene(**surface):
+    """A 1 m box with no fluid of interest: the scene only carries the spacing and [surface]."""
+    return from_dict({"container": {"min_m": [0, 0, 0], "max_m": [1, 1, 1]},
+                      "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.1, 0.1, 0.1]}]},
+                      "surface": surface})
+
+
+def assert_closed(mesh: Mesh):
+    """Closed and consistently oriented: every directed edge appears once, and its reverse once."""
+    t = mesh.triangles.astype(np.int64)
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    keys = edges[:, 0] * len(mesh.vertices) + edges[:, 1]
+    reverse = edges[:, 1] * len(mesh.vertices) + edges[:, 0]
+    assert len(np.unique(keys)) == len(keys), "an edge is used twice in the same direction (not manifold)"
+    assert np.isin(reverse, keys).all(), "an edge has one triangle only (a hole)"
+
+
+def ball(radius_spacings: float, centre) -> np.ndarray:
+    """Lattice sites within a sphere, at the simulation's spacing."""
+    k = np.arange(-math.ceil(radius_spacings), math.ceil(radius_spacings) + 1)
+    lattice = np.stack(np.meshgrid(k, k, k, indexing="ij"), axis=-1).reshape(-1, 3).astype(float)
+    inside = lattice[np.linalg.norm(lattice, axis=1) <= radius_spacings]
+    return (np.array(centre) + SPACING * inside).astype(np.float32)
+
+
+def test_resting_water_gives_a_closed_mesh_of_its_volume():
+    sim = Simulation(column_scene(height_m=0.3))  # 12 × 12 × 12 spacings against five walls
+    sim.step(20)
+    mesh = reconstruct(sim.positions(), sim.scene)
+    assert_closed(mesh)
+    water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
+    assert mesh.enclosed_volume_m3() == pytest.approx(water_m3, rel=0.05)
+    lower, upper = (np.array(corner, np.float32) for corner in (sim.scene.container.min_m, sim.scene.container.max_m))
+    assert (mesh.vertices >= lower).all() and (mesh.vertices <= upper).all()
+    # The free surface lies within a spacing of the top particles.
+    top = sim.positions()[:, 1].max()
+    assert abs(mesh.vertices[:, 1].max() - top) < SPACING
+
+
+def test_a_ball_of_particles_gives_a_sphere_of_its_radius():
+    centre = np.array([0.5, 0.5, 0.5])
+    particles = ball(6.0, centre)
+    mesh = reconstruct(particles, open_scene())
+    assert_closed(mesh)
+    water_radius = (3 * len(particles) / (4 * math.pi)) ** (1 / 3) * SPACING  # the sphere of the same volume
+    distances = np.linalg.norm(mesh.vertices - centre, axis=1)
+    assert distances.mean() == pytest.approx(water_radius, abs=0.25 * SPACING)
+    assert distances.std() < 0.1 * SPACING  # round, not a lattice of bumps
+
+
+def test_no_particle_gives_an_empty_mesh_and_one_gives_a_droplet(tmp_path):
+    scene = open_scene()
+    empty = reconstruct(np.zeros((0, 3), np.float32), scene)
+    assert empty.vertices.shape == (0, 3) and empty.triangles.shape == (0, 3)
+    assert PlyData.read(str(write_mesh(tmp_path / "empty.ply", empty, 0.0)))["face"].count == 0
+    assert "\nv " not in write_mesh(tmp_path / "empty.obj", empty, 0.0).read_text()
+    particle = np.array([[0.5, 0.5, 0.5]], np.float32)
+    droplet = reconstruct(particle, scene)
+    assert_closed(droplet)
+    support = 2 * scene.surface.smoothing_length_spacings * SPACING
+    assert 0 < droplet.enclosed_volume_m3() < 4 / 3 * math.pi * support**3
+    assert np.linalg.norm(droplet.vertices - particle, axis=1).max() < support
+
+
+def test_non_finite_positions_are_refused():
+    with pytest.raises(ValueError, match="not finite"):
+        reconstruct(np.full((4, 3), np.nan, np.float32), open_scene())
+
+
+def test_the_same_particles_give_the_same_mesh():
+    rng = np.random.default_rng(7)
+    particles = ball(7.0, [0.5, 0.5, 0.5]) + rng.normal(0.0, 0.2 * SPACING, (1, 3)).astype(np.float32)
+    particles += rng.normal(0.0, 0.15 * SPACING, particles.shape).astype(np.float32)
+    first = reconstruct(particles, open_scene())
+    for _ in range(3):
+        again = reconstruct(particles, open_scene())
+        assert np.array_equal(again.vertices, first.vertices) and np.array_equal(again.triangles, first.triangles)
+
+
+@pytest.mark.parametrize("suffix", ["ply", "obj"])
+def test_written_mesh_reads_back(tmp_path, suffix):
+    mesh = reconstruct(ball(3.0, [0.5, 0.5, 0.5]), open_scene())
+    path = write_mesh(tmp_path / f"surface.{suffix}", mesh, 0.25)
+    if suffix == "ply":
+        ply = PlyData.read(str(path))
+        assert ply.text is False  # binary
+        vertices = np.stack([ply["vertex"][a] for a in "xyz"], axis=1)
+        triangles = np.stack(ply["face"]["vertex_indices"])
+    else:
+        lines = path.read_text().splitlines()
+        vertices = np.array([line.split()[1:] for line in lines if line.startswith("v ")], float)
+        triangles = np.array([line.split()[1:] for line in lines if line.startswith("f ")], int) - 1
+    assert np.allclose(vertices, mesh.vertices, atol=1e-6) and np.array_equal(triangles, mesh.triangles)
+
+
+def test_headless_run_writes_meshes_beside_particles(tmp_path):
+    argv = ["dam_break", "--headless", "--frames", "2", "--out", str(tmp_path), "--size", "64x48",
+            "--set", "fluid.spacing_m=0.05", "--export", "mesh", "--export", "npz", "--set", "surface.mesh_format=obj"]
+    assert cli.main(argv) == 0
+    assert sorted(p.name for p in tmp_path.glob("surface_*")) == [f"surface_{k:05d}.obj" for k in range(3)]
+    assert len(list(tmp_path.glob("particles_*.npz"))) == 3
+    text = (tmp_path / "surface_00002.obj").read_text()
+    assert text.count("\nf ") > 100
+    assert load_scene("dam_break", ["surface.mesh_format=obj"]).surface.mesh_format == "obj"
+
+
+@pytest.mark.parametrize("assignment, key", [
+    ("surface.iso_level=1.5", "surface.iso_level"),
+    ("surface.cube_size_spacings=0", "surface.cube_size_spacings"),
+    ("surface.mesh_format=stl", "surface.mesh_format"),
+    ("surface.smoothing_iterations=-1", "surface.smoothing_iterations"),
+])
+def test_bad_surface_keys_write_nothing(tmp_path, capsys, assignment, key):
+    out = tmp_path / "out"
+    assert cli.main(["dam_break", "--headless", "--export", "mesh", "--out", str(out), "--set", assignment]) == 2
+    assert key in capsys.readouterr().err
+    assert not out.exists()
