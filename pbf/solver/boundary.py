@@ -16,6 +16,8 @@ two or three orthogonal half-spaces: the wall, edge and corner tables of the con
 ghost of an obstacle is exact (to the tables) at its faces, its convex edges and its corners, and a
 block resting on an obstacle starts at ρ0 as it does on the floor.
 """
+import math
+
 import numpy as np
 import taichi as ti
 
@@ -49,6 +51,14 @@ class Box:
         self.corner_gradient = ti.Vector.field(3, ti.f32, shape=(n, n, n))
         for field, table in zip((self.edge, self.edge_gradient, self.corner, self.corner_gradient), tables):
             field.from_numpy(table.astype(np.float32))
+        self.wave_maker = params.piston_stroke_m > 0.0
+        """Whether the container's lower-x wall is a piston wave maker (compiled out when not)."""
+        self.piston_stroke_m = params.piston_stroke_m
+        self.piston_period_s = params.piston_period_s
+        self.piston_x = ti.field(ti.f32, shape=())
+        """Where the piston wall stands now (m); set by :meth:`move_walls` before each substep."""
+        self.piston_rest_x = params.lower_m[0]
+        self.piston_x[None] = params.lower_m[0]
         self.obstacle_count = len(params.obstacles)
         slots = max(1, self.obstacle_count)
         self.obstacle_lower = ti.Vector.field(3, ti.f32, shape=slots)
@@ -62,11 +72,34 @@ class Box:
             self.obstacle_exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
             self.obstacle_exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
 
+    def piston_position_m(self, time_s: float) -> float:
+        """The piston wall at time t: x = x_min + S/2 (1 − cos 2πt/T), at rest at t = 0 and swinging
+        between x_min and x_min + S."""
+        return self.piston_rest_x + 0.5 * self.piston_stroke_m * (1.0 - math.cos(2.0 * math.pi * time_s / self.piston_period_s))
+
+    def piston_speed_limit_m_s(self) -> float:
+        """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
+        return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
+
+    def move_walls(self, time_s: float) -> None:
+        """Place moving walls where they stand at ``time_s``: the end of the coming substep, where x* is
+        projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt)."""
+        if self.wave_maker:
+            self.piston_x[None] = self.piston_position_m(time_s)
+
+    @ti.func
+    def _lower(self):
+        """The container's lower corner now (the piston moves its x)."""
+        lower = self.lower
+        if ti.static(self.wave_maker):
+            lower[0] = self.piston_x[None]
+        return lower
+
     @ti.func
     def clamp(self, p):
         """Project p into the container shrunk by the particle radius and out of every obstacle grown
         by it (the collision of Algorithm 1, line 15)."""
-        q = ti.max(self.lower + self.radius, ti.min(p, self.upper - self.radius))
+        q = ti.max(self._lower() + self.radius, ti.min(p, self.upper - self.radius))
         if ti.static(self.obstacle_count > 0):
             for o in range(self.obstacle_count):
                 q = self._push_out(q, o)
@@ -142,10 +175,11 @@ class Box:
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.with_wall_density):
+            lower = self._lower()
             distance = ti.Vector([0.0, 0.0, 0.0])
             side = ti.Vector([0.0, 0.0, 0.0])  # +1: near the lower wall, −1: the upper, 0: neither
             for axis in ti.static(range(3)):
-                below = p[axis] - self.lower[axis]
+                below = p[axis] - lower[axis]
                 above = self.upper[axis] - p[axis]
                 distance[axis] = ti.min(below, above)
                 if distance[axis] < self.kernel_radius:

@@ -87,6 +87,9 @@ class BoxParams:
     """Whether the ghost density behind walls (and inside obstacles) is added to the constraint."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
+    piston_stroke_m: float = 0.0
+    """Stroke S of the piston wave maker that moves the lower-x wall (0: the wall stands still)."""
+    piston_period_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -185,7 +188,8 @@ class Model:
             inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION)
         return cls(scene, n, mass, volume, grid,
                    BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
-                             tuple((o.min_m, o.max_m) for o in scene.obstacles)),
+                             tuple((o.min_m, o.max_m) for o in scene.obstacles),
+                             scene.wave_maker.stroke_m, scene.wave_maker.period_s),
                    density, VelocityParams(n, h, volume))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:

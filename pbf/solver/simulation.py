@@ -107,6 +107,7 @@ class Simulation:
         self.state.load(snapshot.positions_m, snapshot.velocities_m_s)
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
+        self.box.move_walls(self.time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
@@ -122,7 +123,8 @@ class Simulation:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
         time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
         t = self.scene.time
-        speed = self.diagnostics.max_speed() + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
+        speed = (max(self.diagnostics.max_speed(), self.box.piston_speed_limit_m_s())
+                 + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s)
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
         if needed > t.max_substeps:
             warnings.warn(f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
@@ -141,6 +143,7 @@ class Simulation:
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         target = control.target_density_error
         x_star = self.integrator.predicted
+        self.box.move_walls(self.time_s + dt)                    # moving walls stand where x* will
         with hook.stage("predict"):
             self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles

@@ -1,13 +1,17 @@
-"""Validation against experiment and theory: the Martin & Moyce dam break and a hydrostatic tank.
+"""Validation against experiment and theory: the Martin & Moyce dam break, a hydrostatic tank and a
+wave maker.
 
-    python -m pbf.study.validate [martin_moyce] [hydrostatic] [--divisors 9 12 24] [--frames 600] [--out docs]
+    python -m pbf.study.validate [martin_moyce] [hydrostatic] [wave_tank] [--divisors 9 12 24] [--frames 600]
+                                 [--out docs]
 
 ``martin_moyce`` runs the ``martin_moyce`` preset at spacings a/n for each n of ``--divisors``, tracks
 the surge front (the largest x reached by water, spray ignored) against dimensionless time
 T = t·sqrt(2g/a), and compares Z = x/a with Martin & Moyce (1952), Table 2
 (``docs/data/martin_moyce_1952_surge_front.csv``). ``hydrostatic`` runs the ``hydrostatic`` preset for
 ``--frames`` frames and compares pressure against depth with ρ0 g (H − y) and the free surface with the
-fill height H. Each prints its figures and writes a plot (and the curves as CSV) under ``--out``.
+fill height H. ``wave_tank`` runs the ``wave_tank`` preset and compares the height of the waves its
+piston makes with linear wave-maker theory (Biésel's transfer function). Each prints its figures and
+writes a plot (and the curves as CSV) under ``--out``.
 """
 import argparse
 import csv
@@ -187,6 +191,100 @@ def plot_hydrostatic(run: HydrostaticRun, path: Path) -> None:
     plt.close(fig)
 
 
+def linear_wave_number(period_s: float, depth_m: float, g: float) -> float:
+    """k of the linear dispersion relation ω² = g k tanh(k d), by Newton's method from the deep-water k."""
+    omega = 2 * math.pi / period_s
+    k = omega**2 / g
+    for _ in range(50):
+        f = g * k * math.tanh(k * depth_m) - omega**2
+        slope = g * math.tanh(k * depth_m) + g * k * depth_m / math.cosh(k * depth_m) ** 2
+        k -= f / slope
+    return k
+
+
+def biesel_height_ratio(kd: float) -> float:
+    """Wave height over piston stroke, H/S = 2 (cosh 2kd − 1) / (sinh 2kd + 2kd): linear theory of a
+    piston wave maker far from the paddle (Biésel & Suquet 1951; Dean & Dalrymple, Sec. 6.3)."""
+    return 2 * (math.cosh(2 * kd) - 1) / (math.sinh(2 * kd) + 2 * kd)
+
+
+@dataclass
+class WaveRun:
+    particles: int
+    depth_m: float
+    kd: float
+    expected_height_m: float
+    """Biésel's H for the preset's stroke."""
+    gauges_m: tuple
+    """Distances of the wave gauges from the piston's rest position."""
+    times_s: np.ndarray
+    elevation_m: np.ndarray
+    """(gauges, times): the free surface (colour field ½) at each gauge."""
+    windows_s: list
+    """Per gauge, the time after the first full wave arrived and before the far wall's reflection returned."""
+    heights_m: list
+    """Per gauge, crest to trough over its window."""
+
+
+def wave_tank(end_s: float = 4.0, gauges_in_depths=(2.0, 3.0), overrides=()) -> WaveRun:
+    """Run the ``wave_tank`` preset until ``end_s`` and measure the waves at gauges placed a given number
+    of depths from the piston (two depths and more, where the evanescent modes have decayed)."""
+    scene = load_scene("wave_tank", overrides)
+    sim = Simulation(scene, quiet=True)
+    g = float(np.linalg.norm(scene.gravity_m_s2))
+    lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
+    depth = fill_height_m(sim)  # the lattice's top layer, not the block's top: a whole number of spacings
+    period, stroke = scene.wave_maker.period_s, scene.wave_maker.stroke_m
+    k = linear_wave_number(period, depth, g)
+    kd = k * depth
+    group_speed = 0.5 * (2 * math.pi / period) / k * (1 + 2 * kd / math.sinh(2 * kd))
+    gauges = tuple(lower[0] + n * depth for n in gauges_in_depths)
+    h = scene.kernel_radius_m
+    middle = [0.5 * (lower[2] + upper[2])]
+    times, elevations = [], []
+    while sim.time_s < end_s:
+        sim.step()
+        x = sim.positions()
+        times.append(sim.time_s)
+        elevations.append([colour_surface_height(x, sim.model.particle_volume_m3, h, [gauge], middle,
+                                                 (lower[1] + 0.25 * depth, lower[1] + 2.0 * depth)) - lower[1] - depth
+                           for gauge in gauges])
+    times, elevation = np.array(times), np.array(elevations).T
+    windows, heights = [], []
+    for gauge, eta in zip(gauges, elevation):
+        start = (gauge - lower[0]) / group_speed + period
+        stop = min((2 * (upper[0] - lower[0]) - (gauge - lower[0])) / group_speed, times[-1])
+        inside = (times >= start) & (times <= stop)
+        windows.append((start, stop))
+        heights.append(float(eta[inside].max() - eta[inside].min()) if inside.any() else math.nan)
+    return WaveRun(sim.particle_count, depth, kd, biesel_height_ratio(kd) * stroke, gauges, times, elevation,
+                   windows, heights)
+
+
+def plot_wave_tank(run: WaveRun, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    for gauge, eta, (start, stop), height in zip(run.gauges_m, run.elevation_m, run.windows_s, run.heights_m):
+        line, = ax.plot(run.times_s, eta * 1e3, label=f"x = {gauge:.2f} m ({gauge / run.depth_m:.0f} depths): "
+                                                     f"H = {height * 1e3:.1f} mm")
+        ax.axvspan(start, stop, color=line.get_color(), alpha=0.08)
+    for sign in (-1, 1):
+        ax.axhline(sign * 0.5e3 * run.expected_height_m, color="k", ls="--", lw=1)
+    ax.plot([], [], "k--", lw=1, label=f"± H/2 of linear theory (Biésel), H = {run.expected_height_m * 1e3:.1f} mm")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("surface elevation (mm)")
+    ax.set_title(f"Piston wave maker, {run.particles:,} particles, kd = {run.kd:.2f} "
+                 f"(shaded: the measured windows)", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
 def write_curves(path: Path, columns: dict) -> None:
     with path.open("w", newline="") as f:
         writer = csv.writer(f)
@@ -197,7 +295,7 @@ def write_curves(path: Path, columns: dict) -> None:
 def parse_args(argv=None) -> argparse.Namespace:
     """The command line; no cases named means all of them."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    cases = ("martin_moyce", "hydrostatic")
+    cases = ("martin_moyce", "hydrostatic", "wave_tank")
     # Checked by hand: Python 3.11's argparse rejects an empty list of a positional that has choices.
     parser.add_argument("cases", nargs="*", help=f"any of {', '.join(cases)} (default: all)")
     parser.add_argument("--divisors", type=int, nargs="+", default=[9, 12, 24],
@@ -239,6 +337,16 @@ def main(argv=None):
         write_curves(args.out / "hydrostatic_pressure.csv", {"depth_m": run.depth_m, "pressure_pa": run.pressure_pa})
         write_curves(args.out / "hydrostatic_surface.csv", {"time_s": run.times_s, "surface_m": run.surface_m})
         plot_hydrostatic(run, args.out / "hydrostatic.png")
+    if "wave_tank" in args.cases:
+        run = wave_tank()
+        for gauge, height in zip(run.gauges_m, run.heights_m):
+            print(f"wave_tank, {run.particles:,} particles: at {gauge:.2f} m from the piston H = {height * 1e3:.1f} mm "
+                  f"against Biésel's {run.expected_height_m * 1e3:.1f} mm ({height / run.expected_height_m:.2f}), "
+                  f"kd = {run.kd:.2f}")
+        write_curves(args.out / "wave_tank.csv", {"time_s": run.times_s,
+                                                  **{f"eta_m_at_{g:.2f}_m": e for g, e in zip(run.gauges_m,
+                                                                                             run.elevation_m)}})
+        plot_wave_tank(run, args.out / "wave_tank.png")
     print(f"wrote plots and curves under {args.out}/")
 
 
