@@ -52,6 +52,10 @@ def _vec_positive(value):
     return None if all(c > 0 for c in value) else "three values > 0"
 
 
+def _vec_non_negative(value):
+    return None if all(c >= 0 for c in value) else "three values ≥ 0"
+
+
 def _rgb(value):
     return None if all(0 <= c <= 1 for c in value) else "three values in [0, 1] (red, green, blue)"
 
@@ -106,6 +110,35 @@ class Fluid:
     spacing_m: float = key(0.025, _positive, "particle spacing s (the lattice pitch), m")
     rest_density_kg_m3: float = key(1000.0, _positive, "rest density ρ0, kg/m³")
     blocks: tuple[Block, ...] = key((), doc="fluid blocks ([[fluid.blocks]] tables)")
+    max_particles: int = key(0, _non_negative, "particle budget, allocated at the start: at least the blocks' "
+                             "particles and all that the emitters add; 0: exactly that many")
+
+
+@dataclass(frozen=True)
+class Emitter:
+    """A nozzle that shoots water in: a disc of lattice sites at the spacing, perpendicular to the
+    direction, emitting a new layer each time the stream has moved one spacing, from start_s to end_s."""
+
+    position_m: Vec3 = key(doc="centre of the nozzle, m")
+    direction: Vec3 = key(doc="direction of the stream (any length; normalised)")
+    radius_m: float = key(doc="radius of the nozzle, m (at least half a spacing)")
+    end_s: float = key(doc="when the stream stops, s")
+    speed_m_s: float = key(1.0, _positive, "speed of the stream, m/s")
+    start_s: float = key(0.0, _non_negative, "when the stream starts, s")
+
+    def unit_direction(self) -> Vec3:
+        length = math.sqrt(sum(c * c for c in self.direction))
+        return tuple(c / length for c in self.direction)
+
+    def sites_per_layer(self, spacing: float) -> int:
+        """Lattice sites (i s, j s) of the nozzle's plane within its radius."""
+        reach = int(math.floor(self.radius_m / spacing + 1e-9))
+        limit = (self.radius_m / spacing) ** 2 + 1e-9
+        return sum(1 for i in range(-reach, reach + 1) for j in range(-reach, reach + 1) if i * i + j * j <= limit)
+
+    def layers(self, spacing: float) -> int:
+        """Layers emitted over the whole interval: one at start_s, one per spacing the stream moves."""
+        return int(math.floor((self.end_s - self.start_s) * self.speed_m_s / spacing + 1e-9)) + 1
 
 
 @dataclass(frozen=True)
@@ -170,6 +203,8 @@ class Render:
     container_rgb: Vec3 = key((0.25, 0.25, 0.3), _rgb, "colour of the container's edges")
     width_px: int = key(1280, _even_pixels, "image width, pixels")
     height_px: int = key(720, _even_pixels, "image height, pixels")
+    style: str = key("particles", _one_of("particles", "surface"), "headless frames show particles (shaded "
+                     "spheres in the colour map) or the water's surface (see [surface])")
 
 
 @dataclass(frozen=True)
@@ -191,6 +226,9 @@ class Surface:
     mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
     deterministic: bool = key(True, doc="one thread, no subdomains: the same mesh on every run "
                               "(splashsurf's parallel subdomains vary from run to run); false is faster")
+    absorption_per_m: Vec3 = key((2.0, 0.7, 0.35), _vec_non_negative, "Beer–Lambert absorption of red, "
+                                 "green and blue light in render.style = surface, 1/m")
+    water_rgb: Vec3 = key((0.05, 0.3, 0.45), _rgb, "colour of deep water (the light it absorbs is replaced by this)")
 
 
 @dataclass(frozen=True)
@@ -203,6 +241,7 @@ class Scene:
     container: Container = key(Container())
     fluid: Fluid = key(Fluid())
     obstacles: tuple[Obstacle, ...] = key((), doc="static boxes in the container ([[obstacles]] tables)")
+    emitters: tuple[Emitter, ...] = key((), doc="nozzles that add water while the scene runs ([[emitters]] tables)")
     time: Time = key(Time())
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
@@ -226,8 +265,19 @@ class Scene:
 
     @property
     def particle_count(self) -> int:
-        """Lattice sites of all fluid blocks (see :func:`block_counts`)."""
+        """Lattice sites of all fluid blocks (see :func:`block_counts`): the particles at the start."""
         return sum(math.prod(block_counts(b, self.fluid.spacing_m)) for b in self.fluid.blocks)
+
+    @property
+    def emitted_count(self) -> int:
+        """Particles the emitters add over the whole run."""
+        spacing = self.fluid.spacing_m
+        return sum(e.layers(spacing) * e.sites_per_layer(spacing) for e in self.emitters)
+
+    @property
+    def particle_capacity(self) -> int:
+        """Particles allocated at the start: fluid.max_particles, or the blocks' and emitters' total."""
+        return self.fluid.max_particles or self.particle_count + self.emitted_count
 
 
 # ----------------------------------------------------------------------------- loading and validation
@@ -329,8 +379,9 @@ def _check_geometry(scene: Scene, source: str) -> None:
             f"{source}: key 'container.max_m': the box must be at least two smoothing radii "
             f"(2 h = {2 * scene.kernel_radius_m:g} m) wide on every axis for fluid.spacing_m = {spacing:g}"
         )
-    if not scene.fluid.blocks:
-        raise SceneError(f"{source}: key 'fluid.blocks': at least one [[fluid.blocks]] table is required")
+    if not scene.fluid.blocks and not scene.emitters:
+        raise SceneError(f"{source}: key 'fluid.blocks': at least one [[fluid.blocks]] table (or an [[emitters]] "
+                         f"table) is required")
     tolerance = 1e-9 * float(np.max(np.abs(np.concatenate([lo, hi]))) + 1.0)
     boxes = []
     for i, block in enumerate(scene.fluid.blocks):
@@ -413,12 +464,42 @@ def _check_wave_maker(scene: Scene, source: str) -> None:
                              f"further, at x ≥ {reach:g} m")
 
 
+def _check_emitters(scene: Scene, source: str) -> None:
+    """Emitters: a real interval and nozzle, inside the container and out of obstacles, within budget."""
+    spacing = scene.fluid.spacing_m
+    c_lo, c_hi = scene.container.min_m, scene.container.max_m
+    for i, emitter in enumerate(scene.emitters):
+        where = f"{source}: key 'emitters[{i}]"
+        if emitter.end_s <= emitter.start_s:
+            raise SceneError(f"{where}.end_s' = {emitter.end_s:g} s must be after start_s = {emitter.start_s:g} s")
+        if math.sqrt(sum(c * c for c in emitter.direction)) < 1e-9:
+            raise SceneError(f"{where}.direction': expected a non-zero vector, e.g. [0, -1, 0]")
+        if emitter.radius_m < 0.5 * spacing:
+            raise SceneError(f"{where}.radius_m' = {emitter.radius_m:g} m is less than half a spacing "
+                             f"({0.5 * spacing:g} m): the nozzle would hold no particle")
+        margin = emitter.radius_m + 0.5 * spacing  # the whole disc, at any orientation, a radius from the walls
+        if any(p - margin < lo or p + margin > hi for p, lo, hi in zip(emitter.position_m, c_lo, c_hi)):
+            raise SceneError(f"{where}.position_m': the nozzle (radius {emitter.radius_m:g} m) must lie inside the "
+                             f"container, at least radius_m + spacing/2 = {margin:g} m from every wall")
+        for j, obstacle in enumerate(scene.obstacles):
+            if all(lo - margin < p < hi + margin for p, lo, hi in zip(emitter.position_m, obstacle.min_m,
+                                                                       obstacle.max_m)):
+                raise SceneError(f"{where}.position_m': the nozzle touches obstacles[{j}]; move it at least "
+                                 f"{margin:g} m away")
+    need = scene.particle_count + scene.emitted_count
+    if scene.fluid.max_particles and scene.fluid.max_particles < need:
+        raise SceneError(f"{source}: key 'fluid.max_particles' = {scene.fluid.max_particles:,} is less than the "
+                         f"{scene.particle_count:,} particles of the blocks and the {scene.emitted_count:,} the "
+                         f"emitters add (rate × duration); allowed: ≥ {need:,}, or 0 for exactly that")
+
+
 def from_dict(table: dict, source: str = "<dict>") -> Scene:
     """Validate a scene given as a dict shaped like the TOML file."""
     scene = dataclasses.replace(_build(Scene, table, source), source=source)
     _check_geometry(scene, source)
     _check_obstacles(scene, source)
     _check_wave_maker(scene, source)
+    _check_emitters(scene, source)
     return scene
 
 

@@ -14,9 +14,16 @@ def brute_force(points, h):
     return [set(np.nonzero(row < h * h)[0]) for row in d2]
 
 
+def make_grid(n, lower, upper, h, reach):
+    """A grid for n live particles (the solver's State owns the count; here a field of its own)."""
+    active = ti.field(ti.i32, shape=())
+    active[None] = n
+    return NeighbourGrid(GridParams.covering(n, lower, upper, h, reach), active)
+
+
 def grid_neighbours(points, lower, upper, h, reach=1):
     n = len(points)
-    grid = NeighbourGrid(GridParams.covering(n, lower, upper, h, reach))
+    grid = make_grid(n, lower, upper, h, reach)
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
     keys = np.random.default_rng(n).permutation(n).astype(np.int32)
@@ -87,7 +94,7 @@ def test_all_points_in_one_cell(reach):
     rng = np.random.default_rng(2)
     h, n = 0.1, 8000
     points = rng.uniform(0.45, 0.45 + h / 3, size=(n, 3))
-    grid = NeighbourGrid(GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, reach))
+    grid = make_grid(n, (0, 0, 0), (1, 1, 1), h, reach)
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
     key = ti.field(ti.i32, shape=n)

@@ -85,7 +85,7 @@ class ParticleColours:
 
         self.sim = sim
         self.render = render
-        self.colours = ti.Vector.field(3, ti.f32, shape=sim.particle_count)
+        self.colours = ti.Vector.field(3, ti.f32, shape=sim.model.capacity)
         table = matplotlib.colormaps[render.colour_map](np.linspace(0.0, 1.0, LUT_SIZE))[:, :3]
         self.table = ti.Vector.field(3, ti.f32, shape=LUT_SIZE)
         self.table.from_numpy(table.astype(np.float32))

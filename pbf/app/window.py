@@ -179,7 +179,7 @@ class WindowViewer:
         # GGUI scales particle radii by width/height: undo it so particles show their simulated size.
         particles = self.sim.readout()
         scene.particles(particles.positions, radius=particles.radius_m * height / width,
-                        per_vertex_color=self.colours.update())
+                        per_vertex_color=self.colours.update(), index_count=particles.count)
         scene.lines(self.edges, width=1.5, color=tuple(self.render.container_rgb))
         canvas = self.window.get_canvas()
         canvas.set_background_color(tuple(self.render.background_rgb))

@@ -37,7 +37,6 @@ class DensityConstraint:
 
     def __init__(self, params: DensityParams, box, grid):
         particle_count = params.particle_count
-        self.count = particle_count
         # Compile-time constants of the kernels below (see pbf.solver.model).
         self.h = params.kernel_radius_m
         self.volume = params.particle_volume_m3
@@ -116,12 +115,12 @@ class DensityConstraint:
                 first: ti.i32):
         """One Jacobi iteration as one kernel: all λ from x, then all corrected positions into x_next,
         and with ``measure`` the error sum. One launch, as a launch costs 30-100 µs on a 2-core CPU."""
-        for i in range(self.count):
+        for i in range(self.grid.active[None]):
             self.lagrange_multiplier(x, i, neighbours, measure, first)
-        for i in range(self.count):
+        for i in range(self.grid.active[None]):
             x_next[i] = self.corrected_position(x, i, neighbours)
         if ti.static(measure):
-            self.error_sum.sum(self.error, 0)
+            self.error_sum.sum(self.error, 0, self.grid.active[None])
 
     def pressure_scale(self, dt: float) -> float:
         """p_i = −ρ0 h² Σλ̂_i / Δt² (Pa per unit ρ0): matching Δx_i = h Σ_j (λ̂_i + λ̂_j) ĝ_ij with the SPH
@@ -136,4 +135,7 @@ class DensityConstraint:
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
         self.iterate(x, x_next, neighbours, bool(measure), first)
-        return self.error_sum.total[0] / self.count if measure else None
+        if not measure:
+            return None
+        live = self.grid.active[None]
+        return self.error_sum.total[0] / live if live else 0.0

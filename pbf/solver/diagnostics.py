@@ -13,22 +13,21 @@ class Diagnostics:
         self.state = state
         self.density = density
         self.grid = grid
-        self.count = state.count
         self.mass = particle_mass_kg
-        self.terms = [ti.field(ti.f32, shape=state.count) for _ in range(3)]
+        self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]
         """max(ρ/ρ0 − 1, 0), |v|² and the neighbour count of each particle."""
-        self.sums = BlockSum(state.count, 3)
+        self.sums = BlockSum(state.capacity, 3)
         """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours, the same bits on any thread count."""
         self.maxima = ti.field(ti.f32, shape=3)
         """max max(ρ/ρ0 − 1, 0), max |v|, max neighbours."""
-        self.density_ratio = ti.field(ti.f32, shape=state.count)
+        self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
         for k in ti.static(range(3)):
             self.maxima[k] = 0.0
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
             error = ti.max(ratio - 1.0, 0.0)
             speed2 = self.state.v[i].norm_sqr()
@@ -38,11 +37,11 @@ class Diagnostics:
             ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
             ti.atomic_max(self.maxima[2], count)
         for k in ti.static(range(3)):
-            self.sums.sum(self.terms[k], k)
+            self.sums.sum(self.terms[k], k, self.state.active[None])
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
             self.density_ratio[i] = ratio
 
@@ -55,7 +54,7 @@ class Diagnostics:
     @ti.kernel
     def _max_speed(self) -> ti.f32:
         fastest = 0.0
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             ti.atomic_max(fastest, self.state.v[i].norm())
         return fastest
 
@@ -71,7 +70,7 @@ class Diagnostics:
         """
         self._reduce(neighbours)
         sums, maxima = self.sums.total.to_numpy(), self.maxima.to_numpy()
-        n = self.count
+        n = max(self.state.count, 1)  # an empty box (before an emitter starts) has zero means
         return {
             "mean_density_error": float(sums[0] / n),
             "max_density_error": float(maxima[0]),

@@ -29,9 +29,11 @@ an overflow recompiles nothing)."""
 
 @ti.data_oriented
 class NeighbourGrid:
-    def __init__(self, params: GridParams):
+    def __init__(self, params: GridParams, active):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         self.particle_count = particle_count
+        self.active = active
+        """The 0-D field of live particles (``State.active``): the first ``active[None]`` slots are sorted."""
         self.kernel_radius = params.kernel_radius_m
         self.lower = ti.Vector(list(params.lower_m))
         extent = np.asarray(params.upper_m, dtype=np.float64) - np.asarray(params.lower_m, dtype=np.float64)
@@ -82,18 +84,18 @@ class NeighbourGrid:
         the particles are, so runs, and a restored snapshot, replay bit for bit. A cell holds one or
         two particles at h/2 wide cells, so an insertion sort costs next to nothing.
         """
-        for i in range(self.particle_count):
+        for i in range(self.active[None]):
             cell = self.linear(self.cell_of(x[i]))
             self.particle_cell[i] = cell
             self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
         self.cell_scan.scan(self.cell_particles, self.cell_start)
-        for i in range(self.particle_count):
+        for i in range(self.active[None]):
             cell = self.particle_cell[i]
             self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
             # Clear the counts for the next sort here rather than in a loop over all cells of its own:
             # the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
             self.cell_particles[cell] = 0
-        for slot in range(self.particle_count):
+        for slot in range(self.active[None]):
             # The thread at a cell's first slot sorts the cell; any other slot of the cell reads some
             # particle of the same cell here, so it never mistakes itself for the first.
             begin = self.cell_start[self.particle_cell[self.sorted_from[slot]]]
@@ -128,7 +130,7 @@ class NeighbourGrid:
         Returns the largest neighbour count."""
         h2 = self.kernel_radius**2
         self.most_neighbours[None] = 0
-        for i in range(self.particle_count):
+        for i in range(self.active[None]):
             xi = x[i]
             c = self.cell_of(xi)
             begin = i * SLOTS
@@ -169,4 +171,4 @@ class NeighbourGrid:
         """Neighbour lists as a list of NumPy arrays of sorted indices (for tests and inspection)."""
         start, end = self.neighbour_start.to_numpy(), self.neighbour_end.to_numpy()
         flat = self.neighbours.to_numpy()
-        return [flat[start[i] : end[i]] for i in range(self.particle_count)]
+        return [flat[start[i] : end[i]] for i in range(int(self.active[None]))]

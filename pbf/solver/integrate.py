@@ -31,14 +31,13 @@ class Integrator:
     def __init__(self, state, box):
         self.state = state
         self.box = box
-        self.count = state.count
-        self.predicted = PredictedPositions(state.count)
-        self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.count))
-        self._int = ti.field(ti.i32, shape=state.count)
+        self.predicted = PredictedPositions(state.capacity)
+        self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.capacity))
+        self._int = ti.field(ti.i32, shape=state.capacity)
 
     @ti.kernel
     def _predict(self, x_pred: ti.template(), dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             v = self.state.v[i] + dt * gravity
             self.state.v[i] = v
             x_pred[i] = self.box.clamp(self.state.x[i] + dt * v)
@@ -49,13 +48,13 @@ class Integrator:
 
     @ti.kernel
     def _reorder(self, sorted_from: ti.template(), x_pred: ti.template()):
-        for slot in range(self.count):
+        for slot in range(self.state.active[None]):
             i = sorted_from[slot]
             self._vec[0, slot] = self.state.x[i]
             self._vec[1, slot] = self.state.v[i]
             self._vec[2, slot] = x_pred[i]
             self._int[slot] = self.state.index[i]
-        for slot in range(self.count):
+        for slot in range(self.state.active[None]):
             self.state.x[slot] = self._vec[0, slot]
             self.state.v[slot] = self._vec[1, slot]
             x_pred[slot] = self._vec[2, slot]

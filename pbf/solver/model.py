@@ -160,7 +160,8 @@ class Model:
     """A scene's derived quantities and stage parameters; build with :meth:`from_scene`."""
 
     scene: Scene
-    particle_count: int
+    capacity: int
+    """Particles allocated: those of the blocks at the start and all that the emitters will add."""
     particle_mass_kg: float
     """m = ρ0 / Σ_j W(x_j): the mass that puts the lattice at exactly ρ0 (see sph.lattice_density_sum)."""
     particle_volume_m3: float
@@ -174,7 +175,7 @@ class Model:
     def from_scene(cls, scene: Scene) -> Model:
         """Derive everything once; raise SceneError if the particles and grid would not fit in memory."""
         spacing, h = scene.fluid.spacing_m, scene.kernel_radius_m
-        n = scene.particle_count
+        n = scene.particle_capacity
         lower, upper = scene.container.min_m, scene.container.max_m
         grid = GridParams.covering(n, lower, upper, h)
         _check_memory(scene, n, grid.cell_count)
@@ -199,7 +200,7 @@ class Model:
         where the ghost planes of :func:`pbf.solver.sph.wall_density_table` complete its neighbourhood.
         """
         spacing = self.scene.fluid.spacing_m
-        positions, velocities = [], []
+        positions, velocities = [np.zeros((0, 3))], [np.zeros((0, 3))]
         for block in self.scene.fluid.blocks:
             counts = block_counts(block, spacing)
             axes = [lo + (np.arange(n) + 0.5) * spacing for lo, n in zip(block.min_m, counts)]

@@ -27,12 +27,11 @@ class VelocityPostprocess:
 
     def __init__(self, params: VelocityParams, state, grid):
         self.state = state
-        self.count = params.particle_count
         self.volume = params.particle_volume_m3
         self.h = params.kernel_radius_m
         self.grid = grid
-        self.omega = ti.Vector.field(3, ti.f32, shape=state.count)
-        self.omega_norm = ti.field(ti.f32, shape=state.count)
+        self.omega = ti.Vector.field(3, ti.f32, shape=params.particle_count)
+        self.omega_norm = ti.field(ti.f32, shape=params.particle_count)
         """|ω_i|, read once per pair by the location vector η: computed once per particle."""
 
     @ti.func
@@ -47,7 +46,7 @@ class VelocityPostprocess:
         h = self.h
         inverse_dt = 1.0 / dt
         if ti.static(with_vorticity):
-            for i in range(self.count):
+            for i in range(self.state.active[None]):
                 xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                 omega = ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
@@ -56,7 +55,7 @@ class VelocityPostprocess:
                         self.velocity(x_pred, j, inverse_dt) - vi)
                 self.omega[i] = omega
                 self.omega_norm[i] = omega.norm()
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
             dv = ti.Vector([0.0, 0.0, 0.0])
             if ti.static(with_vorticity or with_xsph):
@@ -80,7 +79,7 @@ class VelocityPostprocess:
                     if eta_norm > 0.0:
                         dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
             self.state.v[i] = vi + dv
-        for i in range(self.count):
+        for i in range(self.state.active[None]):
             self.state.x[i] = x_pred[i]
 
     def run(self, x_pred, neighbours, dt, vorticity, xsph):

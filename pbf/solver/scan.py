@@ -63,11 +63,13 @@ class BlockSum:
         """The results: ``total[slot]`` of each :meth:`sum`."""
 
     @ti.func
-    def sum(self, values: ti.template(), slot: ti.template()):
-        """total[slot] = Σ_k values[k]. Called at a kernel's top level, like ExclusiveScan.scan."""
+    def sum(self, values: ti.template(), slot: ti.template(), count):
+        """total[slot] = Σ_{k < count} values[k], count ≤ length. Called at a kernel's top level, like
+        ExclusiveScan.scan. The blocks are the same whatever the count, so the result depends only on
+        the values."""
         for b in range(self.blocks):
             partial = ti.cast(0.0, ti.f64)
-            for k in range(b * self.block, ti.min((b + 1) * self.block, self.length)):
+            for k in range(b * self.block, ti.min((b + 1) * self.block, count)):
                 partial += ti.cast(values[k], ti.f64)
             self.partial[b] = partial
         self.total[slot] = 0.0

@@ -15,6 +15,7 @@ from pbf.solver.backend import start_backend
 from pbf.solver.boundary import Box
 from pbf.solver.density import DensityConstraint
 from pbf.solver.diagnostics import Diagnostics
+from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
 from pbf.solver.integrate import Integrator
 from pbf.solver.model import Control, Model
@@ -75,9 +76,10 @@ class Simulation:
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
-        self.state = State(model.particle_count)
+        self.state = State(model.capacity)
         self.box = Box(model.box)
-        self.grid = NeighbourGrid(model.grid)
+        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state)
+        self.grid = NeighbourGrid(model.grid, self.state.active)
         self.integrator = Integrator(self.state, self.box)
         self.density = DensityConstraint(model.density, self.box, self.grid)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
@@ -90,7 +92,8 @@ class Simulation:
 
     @property
     def particle_count(self) -> int:
-        return self.model.particle_count
+        """Live particles (emitters add to them up to ``model.capacity``)."""
+        return self.state.count
 
     def reset(self) -> None:
         """Restore the scene's initial particles, time and control."""
@@ -100,11 +103,12 @@ class Simulation:
 
     def snapshot(self) -> Snapshot:
         """Positions, velocities (creation order), time and frame: what :meth:`restore` takes."""
-        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame)
+        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted))
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
         self.state.load(snapshot.positions_m, snapshot.velocities_m_s)
+        self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
         self.box.move_walls(self.time_s)
@@ -143,6 +147,7 @@ class Simulation:
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         target = control.target_density_error
         x_star = self.integrator.predicted
+        self.emitters.emit(self.time_s)                          # new water from the nozzles
         self.box.move_walls(self.time_s + dt)                    # moving walls stand where x* will
         with hook.stage("predict"):
             self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v

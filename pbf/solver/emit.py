@@ -1,0 +1,81 @@
+"""Emitters: water added while the scene runs, before each substep's prediction.
+
+A nozzle is a disc of lattice sites at the spacing s, perpendicular to its direction. The stream is a
+pile of such layers one spacing apart: layer j leaves the nozzle at t_j = start + j s / u and, at
+time t, has travelled u (t − t_j), so the new water arrives at the rest spacing (no explosion where
+it appears). The layers emitted so far are part of a snapshot, so a restored one replays exactly. Slots for every particle the emitters will add are allocated at the start
+(``Scene.particle_capacity``); new particles take the slots after the live ones.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+from pbf.scene import Emitter
+
+
+def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
+    """(k, 3) offsets (m) of the nozzle's lattice sites from its centre, in its plane."""
+    direction = np.array(emitter.unit_direction())
+    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least along the stream
+    u = np.cross(direction, helper)
+    u /= np.linalg.norm(u)
+    w = np.cross(direction, u)
+    reach = int(math.floor(emitter.radius_m / spacing + 1e-9))
+    limit = (emitter.radius_m / spacing) ** 2 + 1e-9
+    grid = [(i, j) for i in range(-reach, reach + 1) for j in range(-reach, reach + 1) if i * i + j * j <= limit]
+    return np.array([spacing * (i * u + j * w) for i, j in grid]).reshape(-1, 3)
+
+
+@ti.data_oriented
+class Emitters:
+    """Appends each emitter's due layers to the state."""
+
+    def __init__(self, emitters, spacing_m: float, state):
+        self.emitters = emitters
+        self.spacing = spacing_m
+        self.state = state
+        self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
+        largest = max([1] + [len(s) * e.layers(spacing_m) for s, e in zip(self.sites, emitters)])
+        self._positions = ti.Vector.field(3, ti.f32, shape=largest)
+        self._velocities = ti.Vector.field(3, ti.f32, shape=largest)
+        self.emitted = [0] * len(emitters)
+        """Layers each emitter has added so far."""
+
+    def layers_due(self, emitter: Emitter, time_s: float) -> int:
+        """Layers emitted by ``time_s``: those with t_j ≤ time_s, at most the emitter's total."""
+        if time_s < emitter.start_s:
+            return 0
+        moved = (min(time_s, emitter.end_s) - emitter.start_s) * emitter.speed_m_s / self.spacing
+        return min(int(math.floor(moved + 1e-9)) + 1, emitter.layers(self.spacing))
+
+    @ti.kernel
+    def _append(self, count: ti.i32):
+        first = self.state.active[None]
+        for k in range(count):
+            slot = first + k
+            self.state.x[slot] = self._positions[k]
+            self.state.v[slot] = self._velocities[k]
+            self.state.index[slot] = slot  # creation order: the next row of positions()
+        self.state.active[None] = first + count
+
+    def emit(self, now_s: float) -> None:
+        """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
+        time since leaving the nozzle has carried it; the substep moves them on with everything else."""
+        positions, velocities = [], []
+        for k, (emitter, sites) in enumerate(zip(self.emitters, self.sites)):
+            due = self.layers_due(emitter, now_s)
+            direction = np.array(emitter.unit_direction())
+            for j in range(self.emitted[k], due):
+                travelled = emitter.speed_m_s * (now_s - emitter.start_s) - j * self.spacing
+                positions.append(np.array(emitter.position_m) + travelled * direction + sites)
+                velocities.append(np.broadcast_to(emitter.speed_m_s * direction, sites.shape))
+            self.emitted[k] = max(self.emitted[k], due)
+        if positions:
+            new = np.concatenate(positions).astype(np.float32)
+            count = len(new)
+            padded = np.zeros((2, self._positions.shape[0], 3), np.float32)
+            padded[0, :count], padded[1, :count] = new, np.concatenate(velocities)
+            self._positions.from_numpy(padded[0])
+            self._velocities.from_numpy(padded[1])
+            self._append(count)
