@@ -1,6 +1,7 @@
 """The interactive window (Taichi GGUI): orbit camera, keys, a panel of live figures and sliders.
 
-Mouse: left drag orbits around the target, right drag zooms. Keys: W/A/S/D move the target forward,
+Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
+target, shift + right drag (or middle drag) zooms. Keys: W/A/S/D move the target forward,
 left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
 r resets, esc quits. Particles are drawn at their simulated radius with the colours of the headless
 renderer (``pbf.app.render``), the container as lines. ``WindowViewer`` runs it in the loop of
@@ -15,10 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from pbf.app.interact import Hand
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, scene_edges
 
-HELP = ("mouse: left drag orbits, right drag zooms", "keys: WASD/QE move, space pauses, '.' steps,",
-        "r resets, esc quits")
+HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms",
+        "keys: WASD/QE move, space pauses, '.' steps,", "r resets, esc quits")
 PANEL = (0.01, 0.01, 0.3, 0.42)
 """The panel's x, y, width and height as fractions of the window (origin top left)."""
 
@@ -93,6 +95,7 @@ class WindowViewer:
         self.step_once = False
         self.quit = False
         self.drag = None
+        self.hand = Hand(sim)
         self.fps = 0.0
         self.last_frame = time.perf_counter()
 
@@ -133,18 +136,34 @@ class WindowViewer:
         keys = {key: window.is_pressed(key) for key in "wasdqe"}
         self.camera.move(speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]),
                          speed * (keys["e"] - keys["q"]))
+        self.handle_mouse(seconds)
+        return True
+
+    def handle_mouse(self, seconds: float) -> None:
+        """Left drag pushes the water (if the press hit it), right drag orbits, shift + right or middle
+        drag zooms; presses over the panel belong to the panel."""
+        window = self.window
         x, y = window.get_cursor_pos()
-        button = ti.ui.LMB if window.is_pressed(ti.ui.LMB) else ti.ui.RMB if window.is_pressed(ti.ui.RMB) else None
+        width, height = window.get_window_shape()
         over_panel = PANEL[0] <= x <= PANEL[0] + PANEL[2] and PANEL[1] <= 1.0 - y <= PANEL[1] + PANEL[3]
-        if button is None or (self.drag is None and over_panel):
+        if window.is_pressed(ti.ui.LMB):
+            if self.hand.holding:
+                self.hand.drag(self.camera.view(), x, y, width / height, seconds)
+            elif self.drag is None and not over_panel:
+                self.hand.grab(self.camera.view(), x, y, width / height)
+                self.drag = (x, y)  # a press that missed the water does nothing until released
+            return
+        if self.hand.holding:
+            self.hand.release()
+        zooming = window.is_pressed(ti.ui.MMB) or (window.is_pressed(ti.ui.RMB) and window.is_pressed(ti.ui.SHIFT))
+        if not (zooming or window.is_pressed(ti.ui.RMB)) or (self.drag is None and over_panel):
             self.drag = None
         elif self.drag is not None:
             dx, dy = x - self.drag[0], y - self.drag[1]
-            self.camera.orbit(dx, -dy) if button == ti.ui.LMB else self.camera.zoom(dy)
+            self.camera.zoom(dy) if zooming else self.camera.orbit(dx, -dy)
             self.drag = (x, y)
         else:
             self.drag = (x, y)
-        return True
 
     def panel(self, stats: dict) -> None:
         control = self.sim.control

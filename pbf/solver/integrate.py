@@ -1,5 +1,6 @@
 """Time integration: prediction and reordering by cell (Algorithm 1, lines 1-4); lines 20-23 are
 ``pbf.solver.postprocess``."""
+import numpy as np
 import taichi as ti
 
 
@@ -45,6 +46,23 @@ class Integrator:
     def predict(self, dt: float, gravity_m_s2) -> None:
         """v ← v + Δt g;  x* ← x + Δt v, kept inside the box so the grid never sees a lost particle."""
         self._predict(self.predicted.current, dt, gravity_m_s2)
+
+    @ti.kernel
+    def _push(self, point: ti.types.vector(3, ti.f32), velocity: ti.types.vector(3, ti.f32), radius: ti.f32):
+        for i in range(self.state.active[None]):
+            q2 = (self.state.x[i] - point).norm_sqr() / (radius * radius)
+            if q2 < 1.0:
+                w = (1.0 - q2) ** 3
+                self.state.v[i] += w * (velocity - self.state.v[i])
+
+    def push(self, push, speed_limit_m_s: float) -> None:
+        """Blend the velocities near the hand toward its velocity (see ``model.Push``), the hand's speed
+        capped at ``speed_limit_m_s`` so that the CFL limit still holds for what it pushes."""
+        velocity = np.asarray(push.velocity_m_s, np.float64)
+        speed = float(np.linalg.norm(velocity))
+        if speed > speed_limit_m_s:
+            velocity *= speed_limit_m_s / speed
+        self._push(push.point_m, velocity.tolist(), push.radius_m)
 
     @ti.kernel
     def _reorder(self, sorted_from: ti.template(), x_pred: ti.template()):

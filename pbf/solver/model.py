@@ -124,6 +124,17 @@ class VelocityParams:
     particle_volume_m3: float
 
 
+@dataclass(frozen=True)
+class Push:
+    """A hand in the water (the window's mouse drag): particles within ``radius_m`` of ``point_m`` have
+    their velocity blended toward ``velocity_m_s`` by w = (1 − (d/R)²)³, smooth in space and never
+    beyond the hand's own velocity."""
+
+    point_m: Vec3
+    velocity_m_s: Vec3
+    radius_m: float
+
+
 @dataclass
 class Control:
     """What may change between substeps (the window's sliders, a sweep's settings): kernel arguments,
@@ -140,6 +151,8 @@ class Control:
     vorticity: float
     """Vorticity confinement ε (Eq. 14), dimensionless; 0 skips the term."""
     gravity_m_s2: Vec3
+    push: Push | None = None
+    """The hand in the water while the user drags it, else None."""
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:

@@ -148,6 +148,8 @@ class Simulation:
         target = control.target_density_error
         x_star = self.integrator.predicted
         self.emitters.emit(self.time_s)                          # new water from the nozzles
+        if control.push is not None:                             # the user's hand in the water
+            self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.box.move_walls(self.time_s + dt)                    # moving walls stand where x* will
         with hook.stage("predict"):
             self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
