@@ -3,9 +3,9 @@
 Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys: W/A/S/D move the target forward,
 left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
-r resets, esc quits. Particles are drawn at their simulated radius with the colours of the headless
-renderer (``pbf.app.render``), the container as lines. ``WindowViewer`` runs it in the loop of
-``pbf.app.loop``.
+r resets, f turns the emitters on and off, m the wave maker, esc quits. Particles are drawn at their
+simulated radius with the colours of the headless renderer (``pbf.app.render``), the container and
+obstacles as lines. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 import math
 import os
@@ -20,7 +20,8 @@ from pbf.app.interact import Hand
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, scene_edges
 
 HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms",
-        "keys: WASD/QE move, space pauses, '.' steps,", "r resets, esc quits")
+        "keys: WASD/QE move, space pauses, '.' steps,", "r resets, f emitters on/off,",
+        "m wave maker on/off, esc quits")
 PANEL = (0.01, 0.01, 0.3, 0.42)
 """The panel's x, y, width and height as fractions of the window (origin top left)."""
 
@@ -132,6 +133,10 @@ class WindowViewer:
                 self.step_once = True
             elif event.key == "r":
                 self.sim.reset()
+            elif event.key == "f":
+                self.sim.control.emitters_on = not self.sim.control.emitters_on
+            elif event.key == "m":
+                self.sim.control.wave_maker_on = not self.sim.control.wave_maker_on
         speed = 0.5 * self.camera.distance * seconds  # half the viewing distance per second
         keys = {key: window.is_pressed(key) for key in "wasdqe"}
         self.camera.move(speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]),

@@ -72,20 +72,21 @@ class Box:
             self.obstacle_exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
             self.obstacle_exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
 
-    def piston_position_m(self, time_s: float) -> float:
-        """The piston wall at time t: x = x_min + S/2 (1 − cos 2πt/T), at rest at t = 0 and swinging
-        between x_min and x_min + S."""
-        return self.piston_rest_x + 0.5 * self.piston_stroke_m * (1.0 - math.cos(2.0 * math.pi * time_s / self.piston_period_s))
+    def piston_position_m(self, piston_time_s: float) -> float:
+        """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
+        at t = 0 and swinging between x_min and x_min + S. Its clock stops while it is switched off."""
+        phase = 2.0 * math.pi * piston_time_s / self.piston_period_s
+        return self.piston_rest_x + 0.5 * self.piston_stroke_m * (1.0 - math.cos(phase))
 
     def piston_speed_limit_m_s(self) -> float:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move_walls(self, time_s: float) -> None:
-        """Place moving walls where they stand at ``time_s``: the end of the coming substep, where x* is
-        projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt)."""
+    def move_walls(self, piston_time_s: float) -> None:
+        """Place moving walls where they stand at the end of the coming substep, where x* is projected,
+        so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt)."""
         if self.wave_maker:
-            self.piston_x[None] = self.piston_position_m(time_s)
+            self.piston_x[None] = self.piston_position_m(piston_time_s)
 
     @ti.func
     def _lower(self):

@@ -59,12 +59,16 @@ class Emitters:
             self.state.index[slot] = slot  # creation order: the next row of positions()
         self.state.active[None] = first + count
 
-    def emit(self, now_s: float) -> None:
+    def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
-        time since leaving the nozzle has carried it; the substep moves them on with everything else."""
+        time since leaving the nozzle has carried it; the substep moves them on with everything else.
+        When not ``pouring``, the layers due are skipped instead: turned back on, a nozzle resumes its
+        stream rather than releasing everything it held back at once."""
         positions, velocities = [], []
         for k, (emitter, sites) in enumerate(zip(self.emitters, self.sites)):
             due = self.layers_due(emitter, now_s)
+            if not pouring:
+                self.emitted[k] = max(self.emitted[k], due)
             direction = np.array(emitter.unit_direction())
             for j in range(self.emitted[k], due):
                 travelled = emitter.speed_m_s * (now_s - emitter.start_s) - j * self.spacing

@@ -153,6 +153,10 @@ class Control:
     gravity_m_s2: Vec3
     push: Push | None = None
     """The hand in the water while the user drags it, else None."""
+    emitters_on: bool = True
+    """Whether the emitters pour; while off, the layers they would have added are skipped."""
+    wave_maker_on: bool = True
+    """Whether the piston moves; while off it stands still, and it resumes from where it stopped."""
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:

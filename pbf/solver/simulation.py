@@ -103,7 +103,8 @@ class Simulation:
 
     def snapshot(self) -> Snapshot:
         """Positions, velocities (creation order), time and frame: what :meth:`restore` takes."""
-        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted))
+        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
+                        self.piston_time_s)
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
@@ -111,7 +112,9 @@ class Simulation:
         self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
-        self.box.move_walls(self.time_s)
+        # The wave maker's own clock: it stops while control.wave_maker_on is off.
+        self.piston_time_s = self.time_s if snapshot.piston_time_s is None else snapshot.piston_time_s
+        self.box.move_walls(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
@@ -147,10 +150,11 @@ class Simulation:
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         target = control.target_density_error
         x_star = self.integrator.predicted
-        self.emitters.emit(self.time_s)                          # new water from the nozzles
+        self.emitters.emit(self.time_s, control.emitters_on)     # new water from the nozzles
         if control.push is not None:                             # the user's hand in the water
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
-        self.box.move_walls(self.time_s + dt)                    # moving walls stand where x* will
+        self.piston_time_s += dt if control.wave_maker_on else 0.0
+        self.box.move_walls(self.piston_time_s)                  # moving walls stand where x* will
         with hook.stage("predict"):
             self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles

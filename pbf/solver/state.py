@@ -18,6 +18,8 @@ class Snapshot:
     frame: int
     emitted_layers: tuple[int, ...] = ()
     """Layers each emitter had added (empty: none, as at the start)."""
+    piston_time_s: float | None = None
+    """How long the wave maker had run (None: as long as the scene, it was never switched off)."""
 
 
 @ti.data_oriented
