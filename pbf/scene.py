@@ -226,9 +226,9 @@ class Surface:
     mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
     deterministic: bool = key(True, doc="one thread, no subdomains: the same mesh on every run "
                               "(splashsurf's parallel subdomains vary from run to run); false is faster")
-    absorption_per_m: Vec3 = key((2.0, 0.7, 0.35), _vec_non_negative, "Beer–Lambert absorption of red, "
+    absorption_per_m: Vec3 = key((5.0, 1.8, 1.0), _vec_non_negative, "Beer–Lambert absorption of red, "
                                  "green and blue light in render.style = surface, 1/m")
-    water_rgb: Vec3 = key((0.05, 0.3, 0.45), _rgb, "colour of deep water (the light it absorbs is replaced by this)")
+    water_rgb: Vec3 = key((0.03, 0.25, 0.4), _rgb, "colour of deep water (the light it absorbs is replaced by this)")
 
 
 @dataclass(frozen=True)

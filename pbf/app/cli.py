@@ -43,6 +43,8 @@ def parse_args(argv=None):
     view.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees")
     view.add_argument("--colour-by", choices=("speed", "density"), help="particle colour")
     view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
+    view.add_argument("--style", choices=("particles", "surface"),
+                      help="headless frames: particles as coloured spheres, or the water's surface")
     args = parser.parse_args(argv)
     if args.frames < 1:
         parser.error("--frames: expected an integer ≥ 1")
@@ -70,6 +72,8 @@ def view_overrides(parser, args) -> list[str]:
         sets.append(f'render.colour_by="{args.colour_by}"')
     if args.colour_map:
         sets.append(f'render.colour_map="{args.colour_map}"')
+    if args.style:
+        sets.append(f'render.style="{args.style}"')
     return sets
 
 

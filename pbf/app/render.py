@@ -6,7 +6,8 @@ view ray with the particle's sphere, and the nearest hit wins through one 64-bit
 (depth bits, particle id). A second pass shades the winners. The result is the same on every run.
 The interactive window (``pbf.app.window``) uses the same View, colours and background, so its frames
 look like these. Both read the simulation through its read-outs (``Simulation.readout``,
-``Simulation.density_ratios``) and never change it.
+``Simulation.density_ratios``) and never change it. ``render.style = "surface"`` draws the water's
+surface instead, with the screen-space renderer of ``pbf.app.fluid_render``.
 """
 
 import math
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
+from pbf.app.fluid_render import FluidRenderer
 from pbf.scene import Render, Scene
 
 EMPTY = np.iinfo(np.int64).max
@@ -225,19 +227,36 @@ class SphereRenderer:
 
 
 class SceneRenderer:
-    """A Simulation's frames as images: its camera, colours and container, ray-cast headless."""
+    """A Simulation's frames as images: its camera, container and obstacle edges, and the particles as
+    coloured spheres or (``render.style = "surface"``) the water's surface, rendered headless."""
 
-    def __init__(self, sim, width_px=None, height_px=None):
-        render = sim.scene.render
+    def __init__(self, sim, width_px=None, height_px=None, style=None):
+        """``style`` "particles" or "surface" (default: the scene's ``render.style``)."""
+        scene = sim.scene
+        render = scene.render
         self.sim = sim
-        self.view = View.of_scene(sim.scene)
-        self.colours = ParticleColours(sim, render)
-        self.spheres = SphereRenderer(width_px or render.width_px, height_px or render.height_px,
-                                      render.background_rgb, render.container_rgb,
-                                      scene_edges(sim.scene))
+        self.view = View.of_scene(scene)
+        width, height = width_px or render.width_px, height_px or render.height_px
+        if (style or render.style) == "surface":
+            self.colours = None
+            self.spheres = None
+            lower, upper = scene.container.min_m, scene.container.max_m
+            self.fluid = FluidRenderer(width, height, scene.fluid.spacing_m,
+                                       sim.model.particle_mass_kg / scene.fluid.rest_density_kg_m3,
+                                       floor_y_m=lower[1], tile_m=(upper[0] - lower[0]) / 8,
+                                       absorption_per_m=scene.surface.absorption_per_m,
+                                       water_rgb=scene.surface.water_rgb, horizon_rgb=render.background_rgb,
+                                       line_rgb=render.container_rgb, segments=scene_edges(scene))
+        else:
+            self.fluid = None
+            self.colours = ParticleColours(sim, render)
+            self.spheres = SphereRenderer(width, height, render.background_rgb, render.container_rgb,
+                                          scene_edges(scene))
 
     def frame(self) -> np.ndarray:
         """The current state as an (H, W, 3) uint8 image."""
-        colours = self.colours.update()
         particles = self.sim.readout()
+        if self.fluid is not None:
+            return self.fluid.render(self.view, particles.positions, particles.count, LIGHT_DIRECTION)
+        colours = self.colours.update()
         return self.spheres.render(self.view, particles.positions, colours, particles.count, particles.radius_m)

@@ -1,0 +1,142 @@
+"""The screen-space fluid renderer (``--style surface``) on pixels: a still pool is flat, thickness is
+the depth of water, a ball's silhouette stays on the ball, and every run gives the same image."""
+import math
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import taichi as ti
+
+from pbf.app import cli
+from pbf.app.fluid_render import FAR, SPLAT_RADIUS_SPACINGS, FluidRenderer
+from pbf.app.render import LIGHT_DIRECTION, View
+
+SPACING = 0.025
+W, H = 320, 240
+
+
+def lattice(counts, lower=(0.0, 0.0, 0.0)):
+    """Particles at lower + (i + ½) s, as the solver seeds a block."""
+    axes = [lo + (np.arange(n) + 0.5) * SPACING for lo, n in zip(lower, counts)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3).astype(np.float32)
+
+
+def as_field(particles):
+    field = ti.Vector.field(3, ti.f32, shape=max(1, len(particles)))
+    if len(particles):
+        field.from_numpy(particles)
+    return field
+
+
+def render(particles, view):
+    """A W × H renderer over a floor at y = 0; returns it (for its fields) and the image."""
+    renderer = FluidRenderer(W, H, SPACING, SPACING**3, floor_y_m=0.0, tile_m=0.1,
+                             absorption_per_m=(2.0, 0.7, 0.35), water_rgb=(0.05, 0.3, 0.45),
+                             horizon_rgb=(0.96, 0.96, 0.94))
+    return renderer, renderer.render(view, as_field(particles), len(particles), LIGHT_DIRECTION)
+
+
+def coarse_rays(view, renderer):
+    """Unit view rays through the centres of the coarse pixels, (h, w, 3)."""
+    right, up, forward = view.basis()
+    focal = view.focal_px(renderer.coarse_height)
+    rows, cols = np.mgrid[0:renderer.coarse_height, 0:renderer.coarse_width]
+    u = (cols + 0.5 - 0.5 * renderer.coarse_width) / focal
+    w = (0.5 * renderer.coarse_height - rows - 0.5) / focal
+    rays = u[..., None] * right + w[..., None] * up + forward
+    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
+def test_a_still_pool_renders_flat():
+    side, layers = 24, 4  # 0.6 m square, 0.1 m deep
+    pool = lattice((side, layers, side))
+    top = layers * SPACING
+    centre = np.array([side * SPACING / 2, top, side * SPACING / 2])
+    view = View(centre + np.array([0.3, 0.9, 0.7]), centre, 45.0)
+    renderer, _ = render(pool, view)
+    # Coarse pixels whose ray meets the top face at least 3 spacings in from its edges.
+    rays = coarse_rays(view, renderer)
+    t = (top - view.eye[1]) / rays[..., 1]
+    hits = view.eye + t[..., None] * rays
+    margin = 3 * SPACING
+    inner = ((hits[..., 0] > margin) & (hits[..., 0] < side * SPACING - margin)
+             & (hits[..., 2] > margin) & (hits[..., 2] < side * SPACING - margin))
+    assert inner.sum() > 2000
+    normals = renderer.normal.to_numpy()[inner]
+    tilt = np.degrees(np.arccos(np.clip(normals[:, 1], -1.0, 1.0)))
+    assert np.median(tilt) < 1.0
+    assert np.percentile(tilt, 95) < 5.0
+    # And the surface lies on the water: its depth within a spacing of the top face's.
+    _, _, forward = view.basis()
+    expected = (t * (rays @ forward))[inner]
+    assert np.abs(renderer.smooth_depth.to_numpy()[inner] - expected).max() < SPACING
+
+
+def test_thickness_is_the_depth_of_water():
+    side = 16
+    measured = []
+    for layers in (2, 4, 8):
+        pool = lattice((side, layers, side))
+        centre = np.array([side * SPACING / 2, 0.0, side * SPACING / 2])
+        view = View(centre + np.array([0.0, 1.0, 0.0]), centre, 30.0)  # straight down
+        renderer, _ = render(pool, view)
+        h, w = renderer.coarse_height, renderer.coarse_width
+        middle = renderer.thickness.to_numpy()[h // 2 - 10:h // 2 + 10, w // 2 - 10:w // 2 + 10]
+        measured.append(np.median(middle))
+        # Looking straight down, the path through the water is its depth.
+        assert np.median(middle) == pytest.approx(layers * SPACING, rel=0.05)
+    assert measured[0] < measured[1] < measured[2]
+
+
+def test_a_ball_of_water_stays_where_the_ball_is():
+    k = np.arange(-6, 7)
+    offsets = np.stack(np.meshgrid(k, k, k, indexing="ij"), axis=-1).reshape(-1, 3)
+    offsets = offsets[np.linalg.norm(offsets, axis=1) <= 6.0]
+    centre = np.array([0.4, 0.3, 0.2])
+    ball = (centre + SPACING * offsets).astype(np.float32)
+    view = View(centre + np.array([0.5, 0.3, 0.8]), centre, 40.0)
+    renderer, image = render(ball, view)
+    water = renderer.image_depth.to_numpy() < FAR
+    rows, cols = np.nonzero(water)
+    # The silhouette is centred on the ball's projection and is as large as the ball of particles
+    # and their splat radius: within half a spacing.
+    focal = view.focal_px(H)
+    distance = np.linalg.norm(view.eye - centre)
+    assert cols.mean() + 0.5 == pytest.approx(W / 2, abs=1.0)
+    assert rows.mean() + 0.5 == pytest.approx(H / 2, abs=1.0)
+    outermost = SPACING * (6.0 + SPLAT_RADIUS_SPACINGS)  # the farthest particle and its splat sphere
+    radius_px = math.sqrt(water.sum() / math.pi)
+    expected_px = focal * outermost / math.sqrt(distance**2 - outermost**2)
+    assert radius_px == pytest.approx(expected_px, abs=0.5 * focal * SPACING / distance)
+    # Water looks like water: bluer than the floor and sky around it.
+    assert (image[water][:, 2].astype(int) - image[water][:, 0]).mean() > 20
+
+
+def test_no_particles_render_the_background_and_runs_repeat_exactly():
+    view = View(np.array([1.0, 0.8, 1.5]), np.array([0.2, 0.1, 0.2]), 45.0)
+    renderer, empty = render(np.zeros((0, 3), np.float32), view)
+    assert not (renderer.image_depth.to_numpy() < FAR).any()
+    assert np.array_equal(empty, renderer.background.to_numpy())
+    rng = np.random.default_rng(3)
+    splash = (np.array([0.3, 0.3, 0.3]) + rng.normal(0.0, 0.08, (1500, 3))).astype(np.float32)
+    _, first = render(splash, view)
+    renderer, second = render(splash, view)
+    assert np.array_equal(first, second)
+    again = renderer.render(view, as_field(splash), len(splash), LIGHT_DIRECTION)
+    assert np.array_equal(first, again)
+
+
+def test_headless_surface_frames(tmp_path):
+    assert cli.main(["dam_break", "--headless", "--frames", "1", "--out", str(tmp_path), "--size", "160x90",
+                     "--set", "fluid.spacing_m=0.05", "--style", "surface"]) == 0
+    image = iio.imread(tmp_path / "frame_00001.png").astype(int)
+    assert image.shape == (90, 160, 3)
+    assert ((image[..., 2] - image[..., 0]) > 30).mean() > 0.02  # blue-green water is in the picture
+
+
+def test_bad_style_is_refused(tmp_path, capsys):
+    assert cli.main(["dam_break", "--headless", "--out", str(tmp_path / "out"), "--set", "render.style=glass"]) == 2
+    assert "render.style" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(SystemExit):
+        cli.parse_args(["dam_break", "--style", "glass"])
