@@ -144,17 +144,24 @@ class Simulation:
         self.grid.sort(x, self.state.index)
         self.integrator.reorder(self.grid.sorted_from)
 
+    def _outside_inputs(self, dt: float) -> None:
+        """What acts on the water from outside Algorithm 1, before its prediction: new water from the
+        nozzles, the user's hand (velocities, capped so the CFL limit holds), and moving walls placed
+        where they stand at the end of the substep, where x* is projected."""
+        control = self.control
+        self.emitters.emit(self.time_s, control.emitters_on)
+        if control.push is not None:
+            self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
+        self.piston_time_s += dt if control.wave_maker_on else 0.0
+        self.box.move_walls(self.piston_time_s)
+
     def substep(self, dt: float | None = None) -> None:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""
         control, hook = self.control, self.hook
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         target = control.target_density_error
         x_star = self.integrator.predicted
-        self.emitters.emit(self.time_s, control.emitters_on)     # new water from the nozzles
-        if control.push is not None:                             # the user's hand in the water
-            self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
-        self.piston_time_s += dt if control.wave_maker_on else 0.0
-        self.box.move_walls(self.piston_time_s)                  # moving walls stand where x* will
+        self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
         with hook.stage("predict"):
             self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
