@@ -18,6 +18,8 @@ import platform
 import statistics
 from pathlib import Path
 
+from tqdm import tqdm
+
 from pbf.scene import load_scene
 from pbf.solver import Simulation, start_backend
 from pbf.study import sweep as speed_error
@@ -26,17 +28,22 @@ from pbf.study.common import StageTimer, dam_break, stage_breakdown, timed
 
 def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=()) -> dict:
     sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
-    sim.step(warmup_frames)
     substep_ms, mean_errors, max_errors = [], [], []
     dt_ms = []
-    for _ in range(frames):
-        # Whole frames, so the CFL limit may add substeps as in a real run; per substep = frame / substeps.
-        frame_ms = timed(sim.step) * 1e3
-        substep_ms.append(frame_ms / sim.frame_substeps)
-        dt_ms.append(sim.dt_s * 1e3)
-        stats = sim.stats()
-        mean_errors.append(stats["mean_density_error"])
-        max_errors.append(stats["max_density_error"])
+    # On stderr, so that the table on stdout stays clean; the first frames compile the kernels.
+    with tqdm(total=warmup_frames + frames, desc=f"{sim.particle_count:,} particles", unit="frame") as bar:
+        for _ in range(warmup_frames):
+            sim.step()
+            bar.update()
+        for _ in range(frames):
+            # Whole frames, so the CFL limit may add substeps as in a real run; per substep = frame / substeps.
+            frame_ms = timed(sim.step) * 1e3
+            substep_ms.append(frame_ms / sim.frame_substeps)
+            dt_ms.append(sim.dt_s * 1e3)
+            stats = sim.stats()
+            mean_errors.append(stats["mean_density_error"])
+            max_errors.append(stats["max_density_error"])
+            bar.update()
     stages = stage_breakdown(sim, 9)
     median_ms = statistics.median(substep_ms)
     return {
@@ -94,7 +101,7 @@ def terms(args) -> list[dict]:
         snapshot, dt = reference.snapshot(), reference.dt_s
         for sim in variants.values():
             sim.hook = StageTimer()
-        for _ in range(args.rounds):
+        for _ in tqdm(range(args.rounds), desc=f"{reference.particle_count:,} particles: rounds", unit="round"):
             for sim in variants.values():
                 sim.restore(snapshot)
                 sim.substep(dt)
