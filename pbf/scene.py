@@ -203,8 +203,8 @@ class Render:
     container_rgb: Vec3 = key((0.25, 0.25, 0.3), _rgb, "colour of the container's edges")
     width_px: int = key(1280, _even_pixels, "image width, pixels")
     height_px: int = key(720, _even_pixels, "image height, pixels")
-    style: str = key("particles", _one_of("particles", "surface"), "headless frames show particles (shaded "
-                     "spheres in the colour map) or the water's surface (see [surface])")
+    style: str = key("particles", _one_of("particles", "surface"), "frames and the window (at first; key v "
+                     "switches) show particles (spheres in the colour map) or the water's surface (see [surface])")
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,6 @@
 """The screen-space fluid renderer (``--style surface``) on pixels: a still pool is flat, thickness is
-the depth of water, a ball's silhouette stays on the ball, and every run gives the same image."""
+the depth of water, a ball's silhouette stays on the ball, every run gives the same image, and the
+window's key v shows the same surface."""
 import math
 
 import imageio.v3 as iio
@@ -7,9 +8,13 @@ import numpy as np
 import pytest
 import taichi as ti
 
+from scenes import small_dam_break
+
+from pbf import Simulation
 from pbf.app import cli
 from pbf.app.fluid_render import FAR, SPLAT_RADIUS_SPACINGS, FluidRenderer
-from pbf.app.render import LIGHT_DIRECTION, View
+from pbf.app.render import LIGHT_DIRECTION, View, fluid_renderer
+from pbf.app.window import WindowViewer
 
 SPACING = 0.025
 W, H = 320, 240
@@ -140,3 +145,57 @@ def test_bad_style_is_refused(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
     with pytest.raises(SystemExit):
         cli.parse_args(["dam_break", "--style", "glass"])
+
+
+class StandInWindow:
+    """What the window's surface view asks of a GGUI window: events, its size and a canvas."""
+
+    running = True
+
+    def __init__(self):
+        self.events = []
+        self.shown = None
+
+    def get_events(self, kind):
+        events, self.events = self.events, []
+        return events
+
+    def is_pressed(self, key):
+        return False
+
+    def get_cursor_pos(self):
+        return (0.5, 0.5)
+
+    def get_window_shape(self):
+        return (160, 90)
+
+    def get_canvas(self):
+        return self
+
+    def set_image(self, image):
+        self.shown = image.to_numpy()
+
+
+class Key:
+    def __init__(self, key):
+        self.key = key
+
+
+def test_key_v_shows_the_surface_in_the_window():
+    sim = Simulation(small_dam_break())
+    window = StandInWindow()
+    viewer = WindowViewer(sim, window)
+    assert not viewer.surface
+    window.events = [Key("v")]
+    viewer.handle_input(1 / 60)
+    assert viewer.surface
+    viewer.draw()
+    # The canvas takes (width, height) with y up; turned back it is the headless surface frame.
+    shown = np.flipud(window.shown.transpose(1, 0, 2))
+    particles = sim.readout()
+    expected = fluid_renderer(sim, 160, 90).render(viewer.camera.view(), particles.positions, particles.count,
+                                                   LIGHT_DIRECTION)
+    assert np.array_equal(shown, expected)
+    window.events = [Key("v")]
+    viewer.handle_input(1 / 60)
+    assert not viewer.surface

@@ -148,7 +148,8 @@ class FluidRenderer:
     def _environment_image(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
         for row, col in self.background:
             ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
-            self.background[row, col] = ti.cast(ti.min(self._environment(eye, ray.normalized()), 1.0) * 255.0 + 0.5, ti.u8)
+            colour = self._environment(eye, ray.normalized())
+            self.background[row, col] = ti.cast(ti.min(colour, 1.0) * 255.0 + 0.5, ti.u8)
 
     # ------------------------------------------------------------------ the coarse surface passes
 
@@ -169,11 +170,14 @@ class FluidRenderer:
             if depth > radius * 1.01:
                 col = 0.5 * width + focal * centre.dot(right) / depth
                 row = 0.5 * height - focal * centre.dot(up) / depth
-                # The sphere's image fits a square of half-side f r |c| / ((d − r) d) (see SphereRenderer).
+                # The sphere's image lies within f r |c| / ((d − r) d) of its centre's (see SphereRenderer):
+                # each row visits the span of that disc.
                 extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
                 r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
-                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(width, ti.cast(col + extent, ti.i32) + 1)
                 for r in range(r0, r1):
+                    offset = r + 0.5 - row
+                    half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
+                    c0, c1 = ti.max(0, ti.cast(col - half, ti.i32)), ti.min(width, ti.cast(col + half, ti.i32) + 1)
                     for c in range(c0, c1):
                         # The ray eye + t·ray (t the view depth) meets the sphere where
                         # t² |ray|² − 2 t ray·c + |c|² − r² = 0.
@@ -202,7 +206,9 @@ class FluidRenderer:
                 sigma = focal * ROUND_SIGMA_SPACINGS * self.spacing / z
                 # Taps stop at 2σ (95% of the Gaussian) and at the image's edge: a pair with a tap
                 # outside would be left out anyway.
-                border = ti.min(row, self.coarse_height - 1 - row) if step_row else ti.min(col, self.coarse_width - 1 - col)
+                border = ti.min(col, self.coarse_width - 1 - col)
+                if step_row:
+                    border = ti.min(row, self.coarse_height - 1 - row)
                 reach = ti.min(FILTER_MAX_RADIUS_PX, ti.cast(2.0 * sigma, ti.i32), border)
                 # Gaussian weights by recurrence, exp(−(k+1)²/2σ²) = exp(−k²/2σ²) · exp(−(2k+1)/2σ²):
                 # two exponentials per pixel rather than one per tap.
@@ -347,6 +353,11 @@ class FluidRenderer:
     def render(self, view, positions, count: int, light_direction) -> np.ndarray:
         """(H, W, 3) uint8 image of the ``count`` particles at ``positions`` (a Taichi vector field, m)
         seen through ``view`` (a ``pbf.app.render.View``), lit from unit ``light_direction``."""
+        self.draw(view, positions, count, light_direction)
+        return self.image.to_numpy()
+
+    def draw(self, view, positions, count: int, light_direction) -> None:
+        """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
         focal = view.focal_px(self.height)
@@ -365,11 +376,12 @@ class FluidRenderer:
         self._filter(self.depth_pass, self.smooth_depth, 1, 0, coarse_focal,
                      self.thickness_pass, 1.0, self.thickness, True)
         for _ in range(FILTER_ROUNDS - 1):
-            self._filter(self.smooth_depth, self.depth_pass, 0, 1, coarse_focal, self.thickness, 1.0, self.thickness, False)
-            self._filter(self.depth_pass, self.smooth_depth, 1, 0, coarse_focal, self.thickness, 1.0, self.thickness, False)
+            for source, target, step_row, step_col in ((self.smooth_depth, self.depth_pass, 0, 1),
+                                                       (self.depth_pass, self.smooth_depth, 1, 0)):
+                self._filter(source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness,
+                             False)
         self._normals(eye, right, up, forward, coarse_focal)
         self._shade(eye, right, up, forward, coarse_focal, ti.Vector(np.asarray(light_direction, np.float32)))
         self._compose()
         if self.segment_count:
             self._lines(eye, right, up, forward, focal)
-        return self.image.to_numpy()

@@ -226,6 +226,19 @@ class SphereRenderer:
         return (self.image.to_numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
+def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
+    """The screen-space water renderer for a Simulation's scene: its particle volume, its container's
+    floor in tiles an eighth of the box wide, its colours, the container and obstacle edges."""
+    scene = sim.scene
+    lower, upper = scene.container.min_m, scene.container.max_m
+    return FluidRenderer(width_px, height_px, scene.fluid.spacing_m,
+                         sim.model.particle_mass_kg / scene.fluid.rest_density_kg_m3,
+                         floor_y_m=lower[1], tile_m=(upper[0] - lower[0]) / 8,
+                         absorption_per_m=scene.surface.absorption_per_m, water_rgb=scene.surface.water_rgb,
+                         horizon_rgb=scene.render.background_rgb, line_rgb=scene.render.container_rgb,
+                         segments=scene_edges(scene))
+
+
 class SceneRenderer:
     """A Simulation's frames as images: its camera, container and obstacle edges, and the particles as
     coloured spheres or (``render.style = "surface"``) the water's surface, rendered headless."""
@@ -240,13 +253,7 @@ class SceneRenderer:
         if (style or render.style) == "surface":
             self.colours = None
             self.spheres = None
-            lower, upper = scene.container.min_m, scene.container.max_m
-            self.fluid = FluidRenderer(width, height, scene.fluid.spacing_m,
-                                       sim.model.particle_mass_kg / scene.fluid.rest_density_kg_m3,
-                                       floor_y_m=lower[1], tile_m=(upper[0] - lower[0]) / 8,
-                                       absorption_per_m=scene.surface.absorption_per_m,
-                                       water_rgb=scene.surface.water_rgb, horizon_rgb=render.background_rgb,
-                                       line_rgb=render.container_rgb, segments=scene_edges(scene))
+            self.fluid = fluid_renderer(sim, width, height)
         else:
             self.fluid = None
             self.colours = ParticleColours(sim, render)

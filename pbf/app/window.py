@@ -3,9 +3,13 @@
 Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys: W/A/S/D move the target forward,
 left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
-r resets, f turns the emitters on and off, m the wave maker, esc quits. Particles are drawn at their
-simulated radius with the colours of the headless renderer (``pbf.app.render``), the container and
-obstacles as lines. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
+r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
+water's surface, esc quits. Particles are drawn at their simulated radius with the colours of the
+headless renderer (``pbf.app.render``), the container and obstacles as lines. The surface is the
+headless screen-space renderer (``pbf.app.fluid_render``) run on the window's camera every frame and
+shown as the canvas's image: GGUI has no custom shaders, and a mesh reconstructed every frame
+(``pbf.app.surface``) would cost more than the whole surface render. ``WindowViewer`` runs it in the
+loop of ``pbf.app.loop``.
 """
 import math
 import os
@@ -17,13 +21,20 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.interact import Hand
-from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, scene_edges
+from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
 
 HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms",
         "keys: WASD/QE move, space pauses, '.' steps,", "r resets, f emitters on/off,",
-        "m wave maker on/off, esc quits")
+        "m wave maker on/off, v particles/surface, esc quits")
 PANEL = (0.01, 0.01, 0.3, 0.42)
 """The panel's x, y, width and height as fractions of the window (origin top left)."""
+
+
+@ti.kernel
+def to_canvas(image: ti.template(), canvas_image: ti.template()):
+    """Copy an (H, W) image, row 0 at the top, into the (W, H) image GGUI's canvas takes (y up)."""
+    for row, col in image:
+        canvas_image[col, image.shape[0] - 1 - row] = image[row, col]
 
 
 class WindowUnavailable(RuntimeError):
@@ -92,6 +103,10 @@ class WindowViewer:
         self.edges = ti.Vector.field(3, ti.f32, shape=len(edges))
         self.edges.from_numpy(edges)
         self.gg_camera = ti.ui.Camera()
+        self.surface = self.render.style == "surface"
+        """Draw the water's surface (key v) rather than particles."""
+        self.surface_renderer = None
+        self.canvas_image = None
         self.paused = False
         self.step_once = False
         self.quit = False
@@ -137,6 +152,8 @@ class WindowViewer:
                 self.sim.control.emitters_on = not self.sim.control.emitters_on
             elif event.key == "m":
                 self.sim.control.wave_maker_on = not self.sim.control.wave_maker_on
+            elif event.key == "v":
+                self.surface = not self.surface
         speed = 0.5 * self.camera.distance * seconds  # half the viewing distance per second
         keys = {key: window.is_pressed(key) for key in "wasdqe"}
         self.camera.move(speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]),
@@ -188,6 +205,24 @@ class WindowViewer:
                 gui.text(line)
 
     def draw(self) -> None:
+        if self.surface:
+            self.draw_surface()
+        else:
+            self.draw_particles()
+
+    def draw_surface(self) -> None:
+        """The screen-space water surface at the window's size, shown as the canvas's image."""
+        width, height = self.window.get_window_shape()
+        renderer = self.surface_renderer
+        if renderer is None or (renderer.width, renderer.height) != (width, height):  # first use, or resized
+            self.surface_renderer = fluid_renderer(self.sim, width, height)
+            self.canvas_image = ti.Vector.field(3, ti.u8, shape=(width, height))
+        particles = self.sim.readout()
+        self.surface_renderer.draw(self.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION)
+        to_canvas(self.surface_renderer.image, self.canvas_image)
+        self.window.get_canvas().set_image(self.canvas_image)
+
+    def draw_particles(self) -> None:
         view = self.camera.view()
         camera = self.gg_camera
         camera.position(*view.eye)
