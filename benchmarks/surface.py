@@ -2,6 +2,7 @@
 the sphere renderer (``--style surface`` against particles) on the seed dam break.
 
     python benchmarks/surface.py [--sizes 8000 64000] [--frames 90] [--every 10] [--rounds 5]
+    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/surface.py --window    # needs Vulkan
 
 For each size the dam break (the ``dam_break`` preset, its spacing scaled to the particle count) runs
 ``--frames`` frames from rest; every ``--every``-th frame from the 10th on (fall, impact, splash, run-up)
@@ -10,6 +11,10 @@ global grid: the default) and once with splashsurf's parallel subdomains. At the
 frames are also rendered at 1280 × 720 with both renderers, alternating, ``--rounds`` times each.
 Every figure is a median over the frames and rounds (ms of wall time, the frame copied to the host
 included, as the headless writer uses it); the ratio is the median of the per-frame ratios.
+
+``--window`` opens the GGUI window at the seed scene's 1280 × 720 instead and, for ``--frames`` frames,
+steps the simulation and shows each frame twice, as particles and as the surface (key v): the frame
+rate of each is 1 / (median step + median show), the show including the panel and the present.
 """
 import argparse
 import dataclasses
@@ -63,6 +68,29 @@ def measure(particles: int, frames: int, every: int, rounds: int) -> None:
               f"surface / spheres {median(ratios):.2f} (per-frame ratios {min(ratios):.2f}-{max(ratios):.2f})")
 
 
+def measure_window(frames: int) -> None:
+    from pbf.app import window
+
+    sim = Simulation("dam_break", quiet=True)
+    viewer = window.WindowViewer(sim, window.open_window("pbf benchmark", sim.scene.render.width_px,
+                                                         sim.scene.render.height_px))
+    shows = {False: [], True: []}
+    for surface in shows:  # compiles both
+        viewer.surface = surface
+        viewer.show()
+    steps = []
+    for _ in range(frames):
+        steps.append(timed_ms(sim.step)[0])
+        for surface, times in shows.items():
+            viewer.surface = surface
+            times.append(timed_ms(viewer.show)[0])
+    step = statistics.median(steps)
+    for surface, times in shows.items():
+        show = statistics.median(times)
+        print(f"window, {'surface' if surface else 'particles'}: show {show:.0f} ms + step {step:.0f} ms = "
+              f"{1e3 / (show + step):.1f} fps")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[SEED_PARTICLES, 64000])
@@ -70,8 +98,12 @@ def main(argv=None) -> None:
     parser.add_argument("--every", type=int, default=10)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--arch", default="cpu")
+    parser.add_argument("--window", action="store_true", help="the window's frame rate instead (needs a display)")
     args = parser.parse_args(argv)
     start_backend(args.arch, quiet=False)
+    if args.window:
+        measure_window(args.frames)
+        return
     for particles in args.sizes:
         measure(particles, args.frames, args.every, args.rounds)
 
