@@ -4,39 +4,77 @@
     python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz|mesh]...
     python run.py --list
 
-It builds a Simulation and a viewer (window, headless frames or statistics) and hands both to the
-one loop of ``pbf.app.loop``.
+Everything the user gives is checked before Taichi starts and before anything is written: the
+options (each either takes effect or is refused, none is ignored), the scene with its overrides,
+the backend and every output path. A failure prints one line to stderr and returns 2. Only then does
+it build a Simulation and a viewer (window, headless frames or statistics) and hand both to the one
+loop of ``pbf.app.loop``.
 """
 import argparse
+import difflib
+import json
+import os
 import sys
 from pathlib import Path
 
 from pbf import scene as schema
-from pbf.app import export, loop
-from pbf.app.headless import FrameWriter
-from pbf.solver import ARCHES, ENV_VAR, BackendError, Simulation
+from pbf.app import export, outputs
 
-VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
+ARCHES = ("auto", "cpu", "cuda")
+"""``pbf.solver.ARCHES`` (tests/test_options.py checks that they agree), named here so that ``--help``
+and a bad backend are answered without importing the solver."""
+ARCH_VARIABLE = "PBF_ARCH"
+"""``pbf.solver.ENV_VAR``."""
 
 
-def parse_args(argv=None):
-    parser = argparse.ArgumentParser(prog="run.py", description="Position Based Fluids in Taichi.")
-    parser.add_argument("scene", nargs="?", default="dam_break", help="preset name or path to a TOML file")
+class UsageError(ValueError):
+    """A command line that cannot run; the message names the option and what is allowed."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, except that a mistake raises UsageError (one line, no usage block, no exit), so
+    that ``main`` reports every kind of bad input the same way."""
+
+    def error(self, message):
+        raise UsageError(message)
+
+
+def frame_count(text: str) -> int:
+    """--frames: a whole number of frames from 1 to outputs.MAX_FRAMES."""
+    allowed = f"a whole number of frames in [1, {outputs.MAX_FRAMES:,}] (frame files have five digits)"
+    try:
+        value = int(text)
+    except ValueError:  # also an integer of more digits than int() reads
+        raise argparse.ArgumentTypeError(f"expected {allowed}, got {schema.echo(text)}") from None
+    if not 1 <= value <= outputs.MAX_FRAMES:
+        raise argparse.ArgumentTypeError(f"expected {allowed}, got {schema.echo(text)}")
+    return value
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="run.py", description="Position Based Fluids in Taichi.")
+    parser.add_argument("scene", nargs="?", default=None, help="preset name or path to a TOML file (default dam_break)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")
     parser.add_argument("--arch", choices=ARCHES, default=None,
-                        help=f"Taichi backend (default: ${ENV_VAR} or auto)")
+                        help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
-    output = parser.add_argument_group("headless output")
-    output.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
-    output.add_argument("--stats-only", action="store_true", help="simulate and print statistics, render nothing")
-    output.add_argument("--frames", type=int, default=180, help="frames to simulate (default 180: 3 s at 60 fps)")
-    output.add_argument("--out", type=Path, default=None, help="folder for PNG frames (default out/SCENE)")
-    output.add_argument("--video", type=Path, default=None, help="also encode the frames as a video (.mp4)")
+    output = parser.add_argument_group("output")
+    mode = output.add_mutually_exclusive_group()
+    mode.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
+    mode.add_argument("--stats-only", action="store_true", help="simulate and print statistics, render nothing")
+    output.add_argument("--frames", type=frame_count, default=None,
+                        help="frames to simulate (default: 180, 3 s at 60 fps, headless; the window runs until "
+                             "closed)")
+    output.add_argument("--out", default=None,
+                        help="folder for PNG frames (default out/ + the scene file's name; also where the window "
+                             "writes when none can open); frames of an earlier run there are replaced")
+    output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
     output.add_argument("--export", choices=export.EXPORTS, action="append", default=None,
                         help="also write per frame the particles (ply, npz: positions and velocities) or the "
-                             "fluid's surface (mesh: PLY or OBJ, see surface.mesh_format); repeatable")
-    view = parser.add_argument_group("view (shortcuts for --set camera.* and render.*)")
+                             "fluid's surface (mesh: PLY or OBJ, see surface.mesh_format); repeatable; needs "
+                             "--headless")
+    view = parser.add_argument_group("view (shortcuts for --set camera.* and render.*; not with --stats-only)")
     view.add_argument("--size", metavar="WxH", help="image size in pixels, e.g. 1920x1080")
     view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
     view.add_argument("--look-at", metavar="X,Y,Z", help="point at the image centre, m")
@@ -45,36 +83,114 @@ def parse_args(argv=None):
     view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
     view.add_argument("--style", choices=("particles", "surface"),
                       help="headless frames: particles as coloured spheres, or the water's surface")
-    args = parser.parse_args(argv)
-    if args.frames < 1:
-        parser.error("--frames: expected an integer ≥ 1")
-    if args.video is not None and args.video.suffix.lower() not in VIDEO_SUFFIXES:
-        parser.error(f"--video {args.video}: expected a file ending in {', '.join(VIDEO_SUFFIXES)}")
-    args.set = view_overrides(parser, args) + args.set
+    return parser
+
+
+VIEW_OPTIONS = ("size", "camera", "look_at", "fov", "colour_by", "colour_map", "style")
+FILE_OPTIONS = ("video", "export")
+
+
+def _option(dest: str) -> str:
+    return "--" + dest.replace("_", "-")
+
+
+def parse_args(argv=None):
+    """The options, checked; a mistake prints one line to stderr and exits with status 2, as
+    argparse does, but without the usage block."""
+    try:
+        return checked_args(argv)
+    except UsageError as error:
+        print(f"error: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def checked_args(argv=None):
+    """The options, checked for what no single option can see: unknown options (with the closest
+    known one), options that contradict the mode or would do nothing in it, and empty values."""
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        word = unknown[0]
+        if word.startswith("-"):
+            known = [s for action in parser._actions for s in action.option_strings]
+            closest = difflib.get_close_matches(word.split("=", 1)[0], known, n=1, cutoff=0.6)
+            hint = f"; did you mean {closest[0]}?" if closest else "; python run.py --help lists every option"
+            raise UsageError(f"unknown option {schema.echo(word)}{hint}")
+        raise UsageError(f"unexpected argument {schema.echo(word)}: one scene at a time, options start with --")
+    given = [dest for dest in ("scene", "arch", "frames", "out", *FILE_OPTIONS, *VIEW_OPTIONS)
+             if getattr(args, dest) is not None] + [d for d in ("set", "headless", "stats_only") if getattr(args, d)]
+    if args.list and given:
+        other = "the scene" if given[0] == "scene" else _option(given[0])
+        raise UsageError(f"--list lists the presets and takes no other option; drop {other}")
+    for dest in (*FILE_OPTIONS, *VIEW_OPTIONS, "out"):
+        if args.stats_only and getattr(args, dest) is not None:
+            raise UsageError(f"{_option(dest)}: --stats-only renders and writes nothing; drop one of the two")
+    for dest in FILE_OPTIONS:
+        if not (args.headless or args.stats_only) and getattr(args, dest) is not None:
+            raise UsageError(f"{_option(dest)} writes files, which the window does not; add --headless")
+    args.scene = args.scene if args.scene is not None else "dam_break"
+    arch = args.arch or os.environ.get(ARCH_VARIABLE) or "auto"
+    if arch.lower() not in ARCHES:
+        raise UsageError(f"{ARCH_VARIABLE}={schema.echo(arch)}: unknown backend; allowed: {', '.join(ARCHES)}")
+    args.view = view_overrides(args)
     return args
 
 
-def view_overrides(parser, args) -> list[str]:
-    """The view options as --set assignments, so the scene validates them like any other key."""
-    sets = []
-    if args.size:
+def _numbers(text: str, option: str, count: int, example: str) -> list[float]:
+    parts = text.split(",")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != count:
+        raise UsageError(f"{option} {schema.echo(text)}: expected {example}")
+    return values
+
+
+def view_overrides(args) -> dict[str, str]:
+    """The view options as --set assignments (so the scene validates them like any other key), each
+    with the option it came from: ``{"render.width_px=1920": "command line --size 1920x1080"}``.
+    Values are written as TOML here (numbers by repr, strings quoted and escaped by json.dumps), never
+    pasted in, so no option can smuggle in another key."""
+    sets = {}
+    if args.size is not None:
         width, _, height = args.size.lower().partition("x")
-        if not (width.isdigit() and height.isdigit()):
-            parser.error(f"--size {args.size}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720")
-        sets += [f"render.width_px={width}", f"render.height_px={height}"]
-    for option, key in (("camera", "camera.position_m"), ("look_at", "camera.look_at_m")):
-        value = getattr(args, option)
-        if value:
-            sets.append(f"{key}=[{value}]")
-    if args.fov:
-        sets.append(f"camera.fov_deg={args.fov}")
-    if args.colour_by:
-        sets.append(f'render.colour_by="{args.colour_by}"')
-    if args.colour_map:
-        sets.append(f'render.colour_map="{args.colour_map}"')
-    if args.style:
-        sets.append(f'render.style="{args.style}"')
+        if not (width.isdigit() and height.isdigit() and width.isascii() and height.isascii()):
+            raise UsageError(f"--size {schema.echo(args.size)}: expected WIDTHxHEIGHT in pixels, e.g. 1280x720")
+        label = f"command line --size {schema.echo(args.size)}"
+        sets |= {f"render.width_px={int(width)}": label, f"render.height_px={int(height)}": label}
+    for dest, key in (("camera", "camera.position_m"), ("look_at", "camera.look_at_m")):
+        text = getattr(args, dest)
+        if text is not None:
+            values = _numbers(text, _option(dest), 3, "X,Y,Z in metres, e.g. 1.6,1.2,2.0")
+            sets[f"{key}=[{', '.join(map(repr, values))}]"] = f"command line {_option(dest)} {schema.echo(text)}"
+    if args.fov is not None:
+        fov = _numbers(args.fov, "--fov", 1, "degrees, e.g. 35")[0]
+        sets[f"camera.fov_deg={fov!r}"] = f"command line --fov {schema.echo(args.fov)}"
+    for dest, key in (("colour_by", "render.colour_by"), ("colour_map", "render.colour_map"),
+                      ("style", "render.style")):
+        text = getattr(args, dest)
+        if text is not None:
+            sets[f"{key}={json.dumps(text, ensure_ascii=False)}"] = f"command line {_option(dest)} {schema.echo(text)}"
     return sets
+
+
+def load(args) -> schema.Scene:
+    """The scene with the view options and then the --set overrides applied (--set wins); an error
+    in a value from the command line names the option it came from."""
+    try:
+        return schema.load_scene(args.scene, [*args.view, *args.set])
+    except schema.SceneError as error:
+        raise schema.attribute(error, command_line_keys(args)) from None
+
+
+def command_line_keys(args) -> dict[str, str]:
+    """Every dotted key the command line set, with the option that set it last (--set after the
+    view options, as they are applied), for schema.attribute."""
+    labels = {assignment.split("=", 1)[0]: label for assignment, label in args.view.items()}
+    for assignment in args.set:
+        labels[assignment.split("=", 1)[0].strip()] = f"command line --set {schema.echo(assignment)}"
+    return labels
 
 
 def list_presets() -> None:
@@ -83,23 +199,54 @@ def list_presets() -> None:
         print(f"{path.stem:18s} {scene.particle_count:>10,} particles  {scene.description}")
 
 
-def choose_viewer(sim, args):
-    """The viewer the options ask for, and the frames to run (None: until the window closes)."""
-    out = args.out or Path("out") / sim.scene.name
+def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
+    """The frame folder and video the run may write, both checked (OutputError) before it starts;
+    (None, None) for --stats-only, which writes nothing."""
     if args.stats_only:
-        return loop.StatsViewer(sim, args.frames), args.frames
+        return None, None
+    if args.out is not None:
+        out = outputs.check_folder(args.out, "--out")
+    else:
+        default = outputs.default_folder(scene.source)
+        out = outputs.check_folder(str(default), "the default output folder (--out)")
+    video = outputs.check_video(args.video, "--video") if args.video is not None else None
+    return out, video
+
+
+def frame_writer(sim, args, out, video):
+    """The headless viewer, after removing the files an earlier run left in ``out``."""
+    from pbf.app.headless import FrameWriter
+
+    removed = outputs.clear_earlier(out)
+    if removed:
+        print(f"[pbf] removed {len(removed)} files of an earlier run from {out}/ ({removed[0].name} …)")
+    return FrameWriter(sim, args.frames or 180, out, video=video, export=args.export)
+
+
+def choose_viewer(sim, args, out, video):
+    """The viewer the options ask for, and the frames to run (None: until the window closes)."""
+    if args.stats_only:
+        from pbf.app import loop
+
+        return loop.StatsViewer(sim, args.frames or 180), args.frames or 180
     if not args.headless:
         from pbf.app import window
 
         try:
-            return window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
-                                                               sim.scene.render.height_px)), None
+            viewer = window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
+                                                                 sim.scene.render.height_px))
         except window.WindowUnavailable as reason:
-            print(f"[pbf] no window ({reason}); rendering {args.frames} frames headless instead")
-    return FrameWriter(sim, args.frames, out, video=args.video, export=args.export), args.frames
+            print(f"[pbf] no window ({reason}); rendering {args.frames or 180} frames headless into {out}/ instead")
+        else:
+            if args.out is not None:
+                print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
+            return viewer, args.frames
+    return frame_writer(sim, args, out, video), args.frames or 180
 
 
 def report_written(sim, args, viewer) -> None:
+    from pbf.app import loop
+
     print(loop.stats_line(sim))
     written = f"{len(viewer.paths)} frames in {viewer.out_dir}/"
     if args.video:
@@ -110,19 +257,34 @@ def report_written(sim, args, viewer) -> None:
 
 
 def main(argv=None) -> int:
-    args = parse_args(argv)
-    if args.list:
-        list_presets()
-        return 0
+    """Run the command line; returns the exit status (0, or 2 after one line on stderr)."""
     try:
-        scene = schema.load_scene(args.scene, args.set)
-        sim = Simulation(scene, arch=args.arch)
-    except (schema.SceneError, BackendError) as error:
+        args = parse_args(argv)
+        if args.list:
+            list_presets()
+            return 0
+        scene = load(args)
+        out, video = plan_outputs(scene, args)
+    except SystemExit as done:  # --help, or a mistake parse_args reported
+        return done.code
+    except (schema.SceneError, outputs.OutputError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    from pbf.app import loop
+    from pbf.app.headless import FrameWriter
+    from pbf.solver import BackendError, Simulation
+
+    try:
+        sim = Simulation(scene, arch=args.arch)  # derives the Model and checks memory before Taichi allocates
+    except schema.SceneError as error:
+        print(f"error: {schema.attribute(error, command_line_keys(args))}", file=sys.stderr)
+        return 2
+    except BackendError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
           f"{sim.control.iterations} iterations")
-    viewer, frames = choose_viewer(sim, args)
+    viewer, frames = choose_viewer(sim, args, out, video)
     loop.run(sim, viewer, frames)
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)

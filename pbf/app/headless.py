@@ -9,6 +9,7 @@ import imageio.v3 as iio
 from tqdm import tqdm
 
 from pbf.app.export import write_particles
+from pbf.app.outputs import frame_name, particles_name, surface_name
 from pbf.app.surface import reconstruct, write_mesh
 from pbf.app.render import SceneRenderer
 
@@ -16,7 +17,8 @@ from pbf.app.render import SceneRenderer
 class FrameWriter:
     """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame,
     and, when asked, appends each to a video and writes the particles (``particles_00000.ply`` or
-    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``) beside it."""
+    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``) beside it.. The paths
+    are checked before the run (``pbf.app.outputs``); this only creates the folders."""
 
     def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export=(),
                  progress: bool = True):
@@ -43,17 +45,17 @@ class FrameWriter:
     def show(self) -> None:
         number = len(self.paths)
         image = self.renderer.frame()
-        path = self.out_dir / f"frame_{number:05d}.png"
+        path = self.out_dir / frame_name(number)
         iio.imwrite(path, image)
         self.paths.append(path)
         if self.writer is not None:
             self.writer.append_data(image)
         for name in self.exports:
             if name == "mesh":
-                write_mesh(self.out_dir / f"surface_{number:05d}.{self.sim.scene.surface.mesh_format}",
+                write_mesh(self.out_dir / surface_name(number, self.sim.scene.surface.mesh_format),
                            reconstruct(self.sim.positions(), self.sim.scene), self.sim.time_s)
             else:
-                write_particles(self.out_dir / f"particles_{number:05d}.{name}", self.sim.positions(),
+                write_particles(self.out_dir / particles_name(number, name), self.sim.positions(),
                                 self.sim.velocities(), self.sim.time_s)
         self.progress.update()
 

@@ -228,6 +228,9 @@ class Model:
 
 
 def _check_memory(scene: Scene, particles: int, cells: int) -> None:
+    """Refuse, before Taichi allocates anything, a scene whose particles and grid would not fit in
+    memory, would outgrow the kernels' int32 indices, or whose s_corr would overflow float32. The
+    figures are exact integers (and float64), so no count can wrap before it is compared."""
     need = particles * BYTES_PER_PARTICLE + cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:
@@ -236,3 +239,41 @@ def _check_memory(scene: Scene, particles: int, cells: int) -> None:
             f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; "
             f"use a larger spacing or smaller blocks"
         )
+    _check_indices(scene, particles, cells)
+    _check_scorr(scene)
+
+
+INT32_MAX = 2**31 - 1
+"""The largest index of a Taichi field or ndarray the kernels address with int32."""
+
+
+def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) -> None:
+    """The largest arrays, the neighbour slots (``slots`` per particle: pbf.solver.grid.SLOTS, which
+    imports this module) and the cell starts (cells + 1), must be indexable with int32."""
+    if particles * slots > INT32_MAX:
+        raise SceneError(
+            f"{scene.source}: key 'fluid.spacing_m': {particles:,} particles × {slots} neighbour slots "
+            f"= {particles * slots:,} entries, more than the {INT32_MAX:,} an int32 index reaches; allowed: at most "
+            f"{INT32_MAX // slots:,} particles: use a larger spacing or smaller blocks")
+    if cells + 1 > INT32_MAX:
+        raise SceneError(
+            f"{scene.source}: key 'container.max_m': the neighbour grid (cells of h/{NEIGHBOUR_REACH}) over the "
+            f"container has {cells:,} cells, more than the {INT32_MAX:,} an int32 index reaches; use a smaller "
+            f"container or a larger spacing")
+
+
+def _check_scorr(scene: Scene) -> None:
+    """s_corr = −k (W/W(Δq))ⁿ is a float32 power: at the closest pairs (W = W(0)) it must stay finite,
+    or Δx turns to inf and NaN (pbf.solver.density)."""
+    from pbf.scene import FLOAT32_SAFE
+
+    s = scene.solver
+    if s.scorr_k == 0.0:
+        return  # the term is compiled out
+    ratio = float(sph.kernel_np(0.0, 1.0) / sph.kernel_np(s.scorr_dq, 1.0))
+    if ratio > 1.0 and math.log(s.scorr_k) + s.scorr_n * math.log(ratio) > math.log(FLOAT32_SAFE):
+        most = int((math.log(FLOAT32_SAFE) - math.log(s.scorr_k)) / math.log(ratio))
+        raise SceneError(
+            f"{scene.source}: key 'solver.scorr_n': s_corr = k (W/W(Δq))ⁿ reaches {s.scorr_k:g} × {ratio:.4g}^"
+            f"{s.scorr_n} for the closest pairs at solver.scorr_dq = {s.scorr_dq:g}, past float32's range; allowed "
+            f"here: scorr_n ≤ {most}, or a smaller scorr_dq")

@@ -1,0 +1,123 @@
+"""Where a run writes, checked before it starts: the frame folder, the video and the files in them.
+
+A run writes ``frame_NNNNN.png`` and, when asked, ``particles_NNNNN.ply`` or ``.npz`` and
+``surface_NNNNN.ply`` or ``.obj`` into one folder, and a video where ``--video`` says. Every path is
+checked before the simulation starts, so a bad one fails with one message and leaves nothing half
+written: an empty path, the filesystem root, a file where a folder is needed (or a folder where a
+file is), a parent that is a file, a place that cannot be written. Files an earlier run left in
+the folder under these names are removed before the first frame, so that old and new frames never
+mix; nothing else in the folder is touched. Pure standard library: the command line checks its
+outputs without starting Taichi.
+"""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+MAX_FRAMES = 99_999
+"""Frame numbers have five digits (frame_00000.png …), so that the files sort in order."""
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
+OWN_FILE = re.compile(r"(frame_\d{5}\.png|particles_\d{5}\.(ply|npz)|surface_\d{5}\.(ply|obj))")
+"""The names a run writes into its folder (``pbf.app.headless.FrameWriter``), and the only files an
+earlier run's clean-up removes."""
+
+
+class OutputError(ValueError):
+    """An output path that cannot be written; the message names the option, the path and why."""
+
+
+def frame_name(number: int) -> str:
+    return f"frame_{number:05d}.png"
+
+
+def particles_name(number: int, suffix: str) -> str:
+    return f"particles_{number:05d}.{suffix}"
+
+
+def surface_name(number: int, suffix: str) -> str:
+    return f"surface_{number:05d}.{suffix}"
+
+
+def default_folder(scene_path: str) -> Path:
+    """``out/`` + the scene file's name (``out/dam_break`` for ``scenes/dam_break.toml``), made of
+    letters, digits, ``_``, ``-`` and ``.`` only, so no name can lead outside ``out/``."""
+    stem = re.sub(r"[^\w.-]", "_", Path(scene_path).stem).lstrip(".")
+    return Path("out") / (stem or "scene")
+
+
+def _shown(text: str) -> str:
+    return repr(text if len(text) <= 80 else text[:79] + "…")
+
+
+def _writable_place(path: Path, label: str) -> None:
+    """The nearest existing folder on the way to ``path`` must be a folder we may write in."""
+    ancestor = path.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise OutputError(f"{label}: {ancestor} is a file, not a folder; choose another path")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise OutputError(f"{label}: cannot create it, no permission to write in {ancestor}")
+
+
+def check_folder(text: str, label: str) -> Path:
+    """The folder ``text`` names, ready to hold a run's files, or OutputError; writes nothing."""
+    if not text or not text.isprintable():
+        raise OutputError(f"{label} {_shown(text)}: expected the path of a folder for the frames")
+    path = Path(text)
+    try:
+        if path.resolve() == Path(path.resolve().anchor):
+            raise OutputError(f"{label} {_shown(text)}: is the filesystem root; choose a folder for the frames")
+        if path.exists():
+            if not path.is_dir():
+                raise OutputError(f"{label} {_shown(text)}: is a file; expected a folder for the frames")
+            if not os.access(path, os.W_OK | os.X_OK):
+                raise OutputError(f"{label} {_shown(text)}: cannot write into it (no permission)")
+            blocking = next((p for p in earlier_files(path) if p.is_dir() and not p.is_symlink()), None)
+            if blocking is not None:
+                raise OutputError(f"{label} {_shown(text)}: {blocking.name} is a folder where a frame file goes; "
+                                  f"move it or choose another folder")
+        else:
+            _writable_place(path, f"{label} {_shown(text)}")
+    except OSError as error:
+        raise OutputError(f"{label} {_shown(text)}: {error.strerror or error}") from None
+    return path
+
+
+def check_video(text: str, label: str) -> Path:
+    """The video file ``text`` names, ready to be written (an existing one is replaced), or OutputError."""
+    if not text or not text.isprintable():
+        raise OutputError(f"{label} {_shown(text)}: expected the path of a video file, e.g. out/scene.mp4")
+    path = Path(text)
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise OutputError(f"{label} {_shown(text)}: expected a file ending in {', '.join(VIDEO_SUFFIXES)}")
+    try:
+        if path.is_dir():
+            raise OutputError(f"{label} {_shown(text)}: is a folder; expected a video file")
+        if path.exists():
+            if not path.is_file():
+                raise OutputError(f"{label} {_shown(text)}: is not a regular file; expected a video file")
+            if not os.access(path, os.W_OK):
+                raise OutputError(f"{label} {_shown(text)}: cannot replace it (no permission)")
+        else:
+            _writable_place(path, f"{label} {_shown(text)}")
+    except OSError as error:
+        raise OutputError(f"{label} {_shown(text)}: {error.strerror or error}") from None
+    return path
+
+
+def earlier_files(folder: Path) -> list[Path]:
+    """The files in ``folder`` named as a run names its own (an earlier run's frames and particles)."""
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if OWN_FILE.fullmatch(p.name))
+
+
+def clear_earlier(folder: Path) -> list[Path]:
+    """Remove an earlier run's files from ``folder`` (links themselves, never what they point to),
+    so that its frames cannot mix with the new ones; returns what was removed."""
+    removed = earlier_files(folder)
+    for path in removed:
+        path.unlink()
+    return removed

@@ -1,0 +1,90 @@
+"""Class 4 of issue 15: every output path is checked before the simulation starts; a scene's name
+never steers where files go; a rerun never mixes its frames with an earlier run's."""
+import os
+from pathlib import Path
+
+import pytest
+from command_line import assert_one_error, files_under, refused, run_cli
+
+from pbf.app import cli, outputs
+
+COARSE = ["--set", "fluid.spacing_m=0.1", "--size", "32x32"]
+"""The seed scene at 125 particles and thumbnail frames: a run of a frame or two in seconds."""
+
+
+@pytest.fixture
+def here(tmp_path, monkeypatch):
+    """A fresh working folder with a file and a folder in it to misuse."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a_file").write_text("not a folder")
+    (tmp_path / "a_folder.mp4").mkdir()
+    return tmp_path
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["--out", "a_file"], ["--out 'a_file': is a file; expected a folder"]),
+    (["--out", "a_file/frames"], ["--out 'a_file/frames':", "a_file is a file, not a folder"]),
+    (["--out", "a_file/deeper/frames"], ["a_file is a file, not a folder"]),
+    (["--out", "/"], ["--out '/': is the filesystem root"]),
+    (["--out", ""], ["--out '': expected the path of a folder"]),
+    (["--out", "frames\nfolder"], ["expected the path of a folder"]),
+    (["--video", "a_folder.mp4"], ["--video 'a_folder.mp4': is a folder; expected a video file"]),
+    (["--video", "a_file/v.mp4"], ["a_file is a file, not a folder"]),
+    (["--video", ""], ["--video '': expected the path of a video file"]),
+    (["--video", "v.gif"], ["--video 'v.gif': expected a file ending in .mp4"]),
+    (["--out", "x" * 300], ["File name too long"]),
+])
+def test_bad_output_paths_are_refused_before_the_run(here, capsys, argv, names):
+    refused(capsys, ["dam_break", "--headless", "--frames", "1", *argv], *names, cwd=here)
+
+
+def test_a_folder_that_cannot_be_written(here, capsys, monkeypatch):
+    (here / "locked").mkdir()
+    # Root may write anywhere, so the kernel's refusal for a read-only folder is simulated.
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: real_access(path, mode) and Path(path).name != "locked")
+    refused(capsys, ["dam_break", "--headless", "--out", "locked"], "--out 'locked': cannot write into it", cwd=here)
+    refused(capsys, ["dam_break", "--headless", "--out", "locked/sub"], "no permission to write in", cwd=here)
+    refused(capsys, ["dam_break", "--headless", "--video", "locked/v.mp4"], "no permission to write in", cwd=here)
+
+
+def test_a_folder_where_a_frame_goes(here, capsys):
+    (here / "frames" / "frame_00001.png").mkdir(parents=True)
+    refused(capsys, ["dam_break", "--headless", "--out", "frames"],
+            "frame_00001.png is a folder where a frame file goes", cwd=here)
+
+
+def test_the_default_folder_is_the_scene_files_name_inside_out():
+    assert outputs.default_folder("scenes/dam_break.toml") == Path("out/dam_break")
+    assert outputs.default_folder("/tmp/../x/my scene!.toml") == Path("out/my_scene_")
+    assert outputs.default_folder("..toml") == Path("out/scene")
+    assert outputs.default_folder("/a/.hidden.toml") == Path("out/hidden")
+
+
+def test_a_rerun_replaces_the_earlier_runs_files_and_the_name_steers_nothing(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    scene = (Path(cli.schema.SCENES_DIR) / "dam_break.toml").read_text().replace('name = "dam_break"',
+                                                                                 'name = "../../escape"')
+    (tmp_path / "evil.toml").write_text(scene)
+    earlier = tmp_path / "out" / "evil"
+    earlier.mkdir(parents=True)
+    for k in range(6):
+        (earlier / outputs.frame_name(k)).write_bytes(b"old")
+    (earlier / outputs.particles_name(3, "ply")).write_bytes(b"old")
+    (earlier / "notes.txt").write_text("mine")
+    assert cli.main(["evil.toml", "--headless", "--frames", "1", *COARSE]) == 0
+    assert "removed 7 files of an earlier run from out/evil/" in capsys.readouterr().out
+    assert sorted(p.name for p in earlier.iterdir()) == ["frame_00000.png", "frame_00001.png", "notes.txt"]
+    assert (earlier / "frame_00000.png").read_bytes() != b"old"
+    assert {p.relative_to(tmp_path) for p in files_under(tmp_path)} == {
+        Path("evil.toml"), Path("out"), Path("out/evil"), Path("out/evil/frame_00000.png"),
+        Path("out/evil/frame_00001.png"), Path("out/evil/notes.txt")}
+
+
+def test_command_line_refuses_a_file_as_the_frame_folder(tmp_path):
+    (tmp_path / "taken").write_text("")
+    before = files_under(tmp_path)
+    result = run_cli("dam_break", "--headless", "--out", "taken", cwd=tmp_path)
+    assert result.returncode == 2
+    assert_one_error(result.stderr, "--out 'taken': is a file")
+    assert files_under(tmp_path) == before
