@@ -25,6 +25,8 @@ ARCHES = ("auto", "cpu", "cuda")
 and a bad backend are answered without importing the solver."""
 ARCH_VARIABLE = "PBF_ARCH"
 """``pbf.solver.ENV_VAR``."""
+HEADLESS_FRAMES = 180
+"""Frames a headless or statistics run takes without --frames: 3 s at 60 fps."""
 
 
 class UsageError(ValueError):
@@ -32,8 +34,8 @@ class UsageError(ValueError):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, except that a mistake raises UsageError (one line, no usage block, no exit), so
-    that ``main`` reports every kind of bad input the same way."""
+    """argparse, except that a mistake raises UsageError instead of printing the usage block and
+    exiting, so that ``parse_args`` reports argparse's mistakes and its own checks alike."""
 
     def error(self, message):
         raise UsageError(message)
@@ -64,8 +66,8 @@ def build_parser() -> Parser:
     mode.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
     mode.add_argument("--stats-only", action="store_true", help="simulate and print statistics, render nothing")
     output.add_argument("--frames", type=frame_count, default=None,
-                        help="frames to simulate (default: 180, 3 s at 60 fps, headless; the window runs until "
-                             "closed)")
+                        help=f"frames to simulate (default: {HEADLESS_FRAMES}, 3 s at 60 fps, headless; the window "
+                             f"runs until closed)")
     output.add_argument("--out", default=None,
                         help="folder for PNG frames (default out/ + the scene file's name; also where the window "
                              "writes when none can open); frames of an earlier run there are replaced")
@@ -213,22 +215,23 @@ def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
     return out, video
 
 
-def frame_writer(sim, args, out, video):
+def frame_writer(sim, args, frames, out, video):
     """The headless viewer, after removing the files an earlier run left in ``out``."""
     from pbf.app.headless import FrameWriter
 
     removed = outputs.clear_earlier(out)
     if removed:
         print(f"[pbf] removed {len(removed)} files of an earlier run from {out}/ ({removed[0].name} …)")
-    return FrameWriter(sim, args.frames or 180, out, video=video, export=args.export)
+    return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
 def choose_viewer(sim, args, out, video):
     """The viewer the options ask for, and the frames to run (None: until the window closes)."""
+    frames = args.frames or HEADLESS_FRAMES
     if args.stats_only:
         from pbf.app import loop
 
-        return loop.StatsViewer(sim, args.frames or 180), args.frames or 180
+        return loop.StatsViewer(sim, frames), frames
     if not args.headless:
         from pbf.app import window
 
@@ -236,12 +239,12 @@ def choose_viewer(sim, args, out, video):
             viewer = window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
                                                                  sim.scene.render.height_px))
         except window.WindowUnavailable as reason:
-            print(f"[pbf] no window ({reason}); rendering {args.frames or 180} frames headless into {out}/ instead")
+            print(f"[pbf] no window ({reason}); rendering {frames} frames headless into {out}/ instead")
         else:
             if args.out is not None:
                 print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
             return viewer, args.frames
-    return frame_writer(sim, args, out, video), args.frames or 180
+    return frame_writer(sim, args, frames, out, video), frames
 
 
 def report_written(sim, args, viewer) -> None:
