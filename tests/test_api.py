@@ -23,9 +23,6 @@ def test_overrides_apply_to_a_dict_and_to_a_scene():
         load_scene(table, ["solver.iterations=0"])
 
 
-@pytest.mark.xfail(strict=True, reason="Simulation.__init__ (pbf/solver/simulation.py) still builds a dict with "
-                                       "from_dict, ignoring overrides; it should call pbf.scene.load_scene(scene, "
-                                       "overrides), which takes every kind of scene")
 def test_simulation_applies_overrides_to_a_dict():
     with pytest.raises(SceneError, match="key 'solver.iterations'"):
         Simulation(small_dam_break(), overrides=["solver.iterations=0"])

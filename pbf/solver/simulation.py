@@ -67,10 +67,7 @@ class Simulation:
 
     def __init__(self, scene: schema.Scene | dict | str | os.PathLike, arch: str | None = None,
                  overrides=(), quiet: bool = False, hook: StageHook | None = None):
-        if isinstance(scene, dict):
-            scene = schema.from_dict(scene)
-        elif not isinstance(scene, schema.Scene):
-            scene = schema.load_scene(scene, overrides)
+        scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
         self.model = Model.from_scene(scene)  # validates memory before Taichi allocates anything
         self.backend = start_backend(arch, quiet=quiet)
         self.hook = hook or NoHook()
