@@ -1,20 +1,16 @@
 """The screen-space fluid renderer (``--style surface``) on pixels: a still pool is flat, thickness is
-the depth of water, a ball's silhouette stays on the ball, every run gives the same image, and the
-window's key v shows the same surface."""
+the depth of water, a ball's silhouette stays on the ball, and every run gives the same image. (Its
+use in headless runs and the window is tested in ``test_surface.py``, beside the meshes, so that one
+Simulation serves them all.)"""
 import math
 
-import imageio.v3 as iio
 import numpy as np
 import pytest
 import taichi as ti
 
-from scenes import small_dam_break
-
-from pbf import Simulation
 from pbf.app import cli
 from pbf.app.fluid_render import FAR, SPLAT_RADIUS_SPACINGS, FluidRenderer
-from pbf.app.render import LIGHT_DIRECTION, View, fluid_renderer
-from pbf.app.window import WindowViewer
+from pbf.app.render import LIGHT_DIRECTION, View
 
 SPACING = 0.025
 W, H = 320, 240
@@ -33,11 +29,12 @@ def as_field(particles):
     return field
 
 
-def render(particles, view):
-    """A W × H renderer over a floor at y = 0; returns it (for its fields) and the image."""
-    renderer = FluidRenderer(W, H, SPACING, SPACING**3, floor_y_m=0.0, tile_m=0.1,
-                             absorption_per_m=(2.0, 0.7, 0.35), water_rgb=(0.05, 0.3, 0.45),
-                             horizon_rgb=(0.96, 0.96, 0.94))
+def render(particles, view, renderer=None):
+    """Render with ``renderer`` or a new W × H one over a floor at y = 0; returns it (for its fields)
+    and the image."""
+    renderer = renderer or FluidRenderer(W, H, SPACING, SPACING**3, floor_y_m=0.0, tile_m=0.1,
+                                         absorption_per_m=(2.0, 0.7, 0.35), water_rgb=(0.05, 0.3, 0.45),
+                                         horizon_rgb=(0.96, 0.96, 0.94))
     return renderer, renderer.render(view, as_field(particles), len(particles), LIGHT_DIRECTION)
 
 
@@ -80,11 +77,12 @@ def test_a_still_pool_renders_flat():
 def test_thickness_is_the_depth_of_water():
     side = 16
     measured = []
+    renderer = None
     for layers in (2, 4, 8):
         pool = lattice((side, layers, side))
         centre = np.array([side * SPACING / 2, 0.0, side * SPACING / 2])
         view = View(centre + np.array([0.0, 1.0, 0.0]), centre, 30.0)  # straight down
-        renderer, _ = render(pool, view)
+        renderer, _ = render(pool, view, renderer)
         h, w = renderer.coarse_height, renderer.coarse_width
         middle = renderer.thickness.to_numpy()[h // 2 - 10:h // 2 + 10, w // 2 - 10:w // 2 + 10]
         measured.append(np.median(middle))
@@ -124,19 +122,11 @@ def test_no_particles_render_the_background_and_runs_repeat_exactly():
     assert np.array_equal(empty, renderer.background.to_numpy())
     rng = np.random.default_rng(3)
     splash = (np.array([0.3, 0.3, 0.3]) + rng.normal(0.0, 0.08, (1500, 3))).astype(np.float32)
-    _, first = render(splash, view)
-    renderer, second = render(splash, view)
+    _, first = render(splash, view, renderer)  # after the empty frame: nothing of it stays
+    other, second = render(splash, view)  # a renderer of its own
     assert np.array_equal(first, second)
-    again = renderer.render(view, as_field(splash), len(splash), LIGHT_DIRECTION)
+    again = other.render(view, as_field(splash), len(splash), LIGHT_DIRECTION)
     assert np.array_equal(first, again)
-
-
-def test_headless_surface_frames(tmp_path):
-    assert cli.main(["dam_break", "--headless", "--frames", "1", "--out", str(tmp_path), "--size", "160x90",
-                     "--set", "fluid.spacing_m=0.05", "--style", "surface"]) == 0
-    image = iio.imread(tmp_path / "frame_00001.png").astype(int)
-    assert image.shape == (90, 160, 3)
-    assert ((image[..., 2] - image[..., 0]) > 30).mean() > 0.02  # blue-green water is in the picture
 
 
 def test_bad_style_is_refused(tmp_path, capsys):
@@ -146,56 +136,3 @@ def test_bad_style_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         cli.parse_args(["dam_break", "--style", "glass"])
 
-
-class StandInWindow:
-    """What the window's surface view asks of a GGUI window: events, its size and a canvas."""
-
-    running = True
-
-    def __init__(self):
-        self.events = []
-        self.shown = None
-
-    def get_events(self, kind):
-        events, self.events = self.events, []
-        return events
-
-    def is_pressed(self, key):
-        return False
-
-    def get_cursor_pos(self):
-        return (0.5, 0.5)
-
-    def get_window_shape(self):
-        return (160, 90)
-
-    def get_canvas(self):
-        return self
-
-    def set_image(self, image):
-        self.shown = image.to_numpy()
-
-
-class Key:
-    def __init__(self, key):
-        self.key = key
-
-
-def test_key_v_shows_the_surface_in_the_window():
-    sim = Simulation(small_dam_break())
-    window = StandInWindow()
-    viewer = WindowViewer(sim, window)
-    assert not viewer.surface
-    window.events = [Key("v")]
-    viewer.handle_input(1 / 60)
-    assert viewer.surface
-    viewer.draw()
-    # The canvas takes (width, height) with y up; turned back it is the headless surface frame.
-    shown = np.flipud(window.shown.transpose(1, 0, 2))
-    particles = sim.readout()
-    expected = fluid_renderer(sim, 160, 90).render(viewer.camera.view(), particles.positions, particles.count,
-                                                   LIGHT_DIRECTION)
-    assert np.array_equal(shown, expected)
-    window.events = [Key("v")]
-    viewer.handle_input(1 / 60)
-    assert not viewer.surface

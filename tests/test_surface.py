@@ -1,18 +1,36 @@
 """Surface meshes (``pbf.app.surface``, ``--export mesh``): closed, of the water's volume and shape,
-the same on every run, and written in formats other tools read."""
+the same on every run, and written in formats other tools read; and both surfaces where a user meets
+them: headless runs (meshes and ``--style surface`` frames) and the window's key v.
+
+One Simulation serves every test here that needs one: each costs seconds of compiling."""
 import math
 
+import imageio.v3 as iio
 import numpy as np
 import pytest
 from plyfile import PlyData
 from scenes import column_scene
 
-from pbf import Simulation, load_scene
-from pbf.app import cli
+from pbf import Simulation
+from pbf.app import cli, loop
+from pbf.app.headless import FrameWriter
+from pbf.app.render import LIGHT_DIRECTION, fluid_renderer
 from pbf.app.surface import Mesh, reconstruct, write_mesh
+from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
 
 SPACING = 0.025
+
+
+@pytest.fixture(scope="module")
+def settled():
+    """A 0.3 m tank filled 0.3 m deep (12 × 12 × 12 spacings against five walls), its headless frames
+    160 × 90 surfaces, settled for 20 frames; with its snapshot, which each test restores first."""
+    scene = column_scene(height_m=0.3)
+    scene["render"] = {"width_px": 160, "height_px": 90, "style": "surface"}
+    sim = Simulation(scene)
+    sim.step(20)
+    return sim, sim.snapshot()
 
 
 def open_scene(**surface):
@@ -40,9 +58,9 @@ def ball(radius_spacings: float, centre) -> np.ndarray:
     return (np.array(centre) + SPACING * inside).astype(np.float32)
 
 
-def test_resting_water_gives_a_closed_mesh_of_its_volume():
-    sim = Simulation(column_scene(height_m=0.3))  # 12 × 12 × 12 spacings against five walls
-    sim.step(20)
+def test_resting_water_gives_a_closed_mesh_of_its_volume(settled):
+    sim, state = settled
+    sim.restore(state)
     mesh = reconstruct(sim.positions(), sim.scene)
     assert_closed(mesh)
     water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
@@ -110,15 +128,78 @@ def test_written_mesh_reads_back(tmp_path, suffix):
     assert np.allclose(vertices, mesh.vertices, atol=1e-6) and np.array_equal(triangles, mesh.triangles)
 
 
-def test_headless_run_writes_meshes_beside_particles(tmp_path):
-    argv = ["dam_break", "--headless", "--frames", "2", "--out", str(tmp_path), "--size", "64x48",
-            "--set", "fluid.spacing_m=0.05", "--export", "mesh", "--export", "npz", "--set", "surface.mesh_format=obj"]
-    assert cli.main(argv) == 0
-    assert sorted(p.name for p in tmp_path.glob("surface_*")) == [f"surface_{k:05d}.obj" for k in range(3)]
+def test_headless_run_writes_surface_frames_meshes_and_particles(settled, tmp_path):
+    sim, state = settled
+    sim.restore(state)
+    viewer = FrameWriter(sim, 2, tmp_path, export=["mesh", "npz", "mesh"], progress=False)
+    loop.run(sim, viewer, 2)
+    assert sorted(p.name for p in tmp_path.glob("surface_*")) == [f"surface_{k:05d}.ply" for k in range(3)]
     assert len(list(tmp_path.glob("particles_*.npz"))) == 3
-    text = (tmp_path / "surface_00002.obj").read_text()
-    assert text.count("\nf ") > 100
-    assert load_scene("dam_break", ["surface.mesh_format=obj"]).surface.mesh_format == "obj"
+    assert PlyData.read(str(tmp_path / "surface_00002.ply"))["face"].count > 1000
+    image = iio.imread(tmp_path / "frame_00002.png").astype(int)
+    assert image.shape == (90, 160, 3)
+    assert ((image[..., 2] - image[..., 0]) > 30).mean() > 0.05  # blue-green water is in the picture
+
+
+def test_command_line_asks_for_surfaces():
+    args = cli.parse_args(["dam_break", "--headless", "--style", "surface", "--export", "mesh", "--export", "npz",
+                           "--set", "surface.mesh_format=obj"])
+    assert args.export == ["mesh", "npz"]
+    scene = cli.load(args)
+    assert scene.render.style == "surface" and scene.surface.mesh_format == "obj"
+
+
+class StandInWindow:
+    """What the window's surface view asks of a GGUI window: events, its size and a canvas."""
+
+    running = True
+
+    def __init__(self):
+        self.events = []
+        self.shown = None
+
+    def get_events(self, kind):
+        events, self.events = self.events, []
+        return events
+
+    def is_pressed(self, key):
+        return False
+
+    def get_cursor_pos(self):
+        return (0.5, 0.5)
+
+    def get_window_shape(self):
+        return (160, 90)
+
+    def get_canvas(self):
+        return self
+
+    def set_image(self, image):
+        self.shown = image.to_numpy()
+
+
+class Key:
+    def __init__(self, key):
+        self.key = key
+
+
+def test_key_v_switches_the_window_between_surface_and_particles(settled):
+    sim, state = settled
+    sim.restore(state)
+    window = StandInWindow()
+    viewer = WindowViewer(sim, window)
+    assert viewer.surface  # the scene's render.style
+    for expected in (False, True):
+        window.events = [Key("v")]
+        viewer.handle_input(1 / 60)
+        assert viewer.surface == expected
+    viewer.draw()
+    # The canvas takes (width, height) with y up; turned back it is the headless surface frame.
+    shown = np.flipud(window.shown.transpose(1, 0, 2))
+    particles = sim.readout()
+    expected = fluid_renderer(sim, 160, 90).render(viewer.camera.view(), particles.positions, particles.count,
+                                                   LIGHT_DIRECTION)
+    assert np.array_equal(shown, expected)
 
 
 @pytest.mark.parametrize("assignment, key", [
