@@ -36,9 +36,6 @@ class Emitters:
         self.spacing = spacing_m
         self.state = state
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
-        largest = max([1] + [len(s) * e.layers(spacing_m) for s, e in zip(self.sites, emitters)])
-        self._positions = ti.Vector.field(3, ti.f32, shape=largest)
-        self._velocities = ti.Vector.field(3, ti.f32, shape=largest)
         self.emitted = [0] * len(emitters)
         """Layers each emitter has added so far."""
 
@@ -50,14 +47,15 @@ class Emitters:
         return min(int(math.floor(moved + 1e-9)) + 1, emitter.layers(self.spacing))
 
     @ti.kernel
-    def _append(self, count: ti.i32):
+    def _append(self, positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
+                velocities: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
         first = self.state.active[None]
-        for k in range(count):
+        for k in range(positions.shape[0]):
             slot = first + k
-            self.state.x[slot] = self._positions[k]
-            self.state.v[slot] = self._velocities[k]
+            self.state.x[slot] = positions[k]
+            self.state.v[slot] = velocities[k]
             self.state.index[slot] = slot  # creation order: the next row of positions()
-        self.state.active[None] = first + count
+        self.state.active[None] = first + positions.shape[0]
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
@@ -76,10 +74,5 @@ class Emitters:
                 velocities.append(np.broadcast_to(emitter.speed_m_s * direction, sites.shape))
             self.emitted[k] = max(self.emitted[k], due)
         if positions:
-            new = np.concatenate(positions).astype(np.float32)
-            count = len(new)
-            padded = np.zeros((2, self._positions.shape[0], 3), np.float32)
-            padded[0, :count], padded[1, :count] = new, np.concatenate(velocities)
-            self._positions.from_numpy(padded[0])
-            self._velocities.from_numpy(padded[1])
-            self._append(count)
+            # Only the new layers cross to the device (kernel arguments of their own size).
+            self._append(np.concatenate(positions).astype(np.float32), np.concatenate(velocities).astype(np.float32))
