@@ -108,3 +108,22 @@ def test_keys_switch_the_emitters_and_the_wave_maker():
     # back while off as well would add 14.
     assert sim.particle_count - count <= 8 * 9
     assert sim.particle_count > count and float(sim.box.piston_x[None]) > 0.0
+
+
+def test_every_key_is_one_ggui_delivers_and_each_does_what_the_help_says():
+    # GGUI never reports '.', ',', digits or F-keys (measured under Xvfb): a key bound to one of them
+    # could never be pressed.
+    from pbf.app.window import GGUI_KEYS, HELP, KEYS
+
+    assert set(KEYS) <= GGUI_KEYS
+    assert all(any(what in line for line in HELP) for what in KEYS.values())
+    sim = Simulation(POOL)
+    window = StandInWindow()
+    viewer = WindowViewer(sim, window)
+    window.get_events = lambda kind: [Key(ti.ui.SPACE), Key("h")]
+    viewer.handle_input(1 / 60)
+    assert viewer.paused and not viewer.panel_shown
+    window.get_events = lambda kind: [Key("n")]
+    assert viewer.advance()                          # n: one frame ...
+    window.get_events = lambda kind: []
+    assert not viewer.advance()                      # ... and paused again

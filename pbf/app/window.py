@@ -1,9 +1,9 @@
 """The interactive window (Taichi GGUI): orbit camera, keys, a panel of live figures and sliders.
 
 Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
-target, shift + right drag (or middle drag) zooms. Keys: W/A/S/D move the target forward,
-left, back and right, Q/E down and up; space pauses and resumes, '.' steps one frame while paused,
-r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
+target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
+forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
+paused, h hides the panel, r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
 water's surface, esc quits. Particles are drawn at their simulated radius with the colours of the
 headless renderer (``pbf.app.render``), the container and obstacles as lines. The surface is the
 headless screen-space renderer (``pbf.app.fluid_render``) run on the window's camera every frame and
@@ -13,6 +13,7 @@ loop of ``pbf.app.loop``.
 """
 import math
 import os
+import string
 import sys
 import time
 from dataclasses import dataclass
@@ -23,9 +24,25 @@ import taichi as ti
 from pbf.app.interact import Hand
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
 
+KEYS = {
+    ti.ui.SPACE: "pause / resume",
+    "n": "one frame while paused",
+    "r": "reset",
+    "f": "emitters on / off",
+    "m": "wave maker on / off",
+    "v": "particles / surface",
+    "h": "hide / show this panel",
+    ti.ui.ESCAPE: "quit",
+}
+"""The window's keys and what they do (W A S D / Q E, held, move the camera)."""
+GGUI_KEYS = set(string.ascii_lowercase) | {ti.ui.SPACE, ti.ui.ESCAPE, "Tab", "Return", "BackSpace", "Shift",
+                                           "Left", "Right", "Up", "Down"}
+"""Key names GGUI reports. Measured under Xvfb with xdotool: letters and these named keys arrive;
+'.', ',', '/', '-', '=', digits and F1 never do, so no key of ours may be one of them."""
 HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms",
-        "keys: WASD/QE move, space pauses, '.' steps,", "r resets, f emitters on/off,",
-        "m wave maker on/off, v particles/surface, esc quits")
+        "keys: WASD/QE move the camera",
+        *(f"  {'space' if key == ti.ui.SPACE else 'esc' if key == ti.ui.ESCAPE else key}: {what}"
+          for key, what in KEYS.items()))
 PANEL = (0.01, 0.01, 0.3, 0.42)
 """The panel's x, y, width and height as fractions of the window (origin top left)."""
 
@@ -109,6 +126,7 @@ class WindowViewer:
         self.canvas_image = None
         self.paused = False
         self.step_once = False
+        self.panel_shown = True
         self.quit = False
         self.drag = None
         self.hand = Hand(sim)
@@ -144,8 +162,10 @@ class WindowViewer:
                 return False
             if event.key == ti.ui.SPACE:
                 self.paused = not self.paused
-            elif event.key == "." and self.paused:
+            elif event.key == "n" and self.paused:
                 self.step_once = True
+            elif event.key == "h":
+                self.panel_shown = not self.panel_shown
             elif event.key == "r":
                 self.sim.reset()
             elif event.key == "f":
@@ -167,7 +187,8 @@ class WindowViewer:
         window = self.window
         x, y = window.get_cursor_pos()
         width, height = window.get_window_shape()
-        over_panel = PANEL[0] <= x <= PANEL[0] + PANEL[2] and PANEL[1] <= 1.0 - y <= PANEL[1] + PANEL[3]
+        over_panel = self.panel_shown and (PANEL[0] <= x <= PANEL[0] + PANEL[2]
+                                           and PANEL[1] <= 1.0 - y <= PANEL[1] + PANEL[3])
         if window.is_pressed(ti.ui.LMB):
             if self.hand.holding:
                 self.hand.drag(self.camera.view(), x, y, width / height, seconds)
@@ -188,13 +209,18 @@ class WindowViewer:
             self.drag = (x, y)
 
     def panel(self, stats: dict) -> None:
+        if not self.panel_shown:
+            return
         control = self.sim.control
-        with self.window.get_gui().sub_window("pbf", *PANEL) as gui:
+        with self.window.get_gui().sub_window("pbf (h hides)", *PANEL) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
             gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
             gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
+            # The CFL limit may take more substeps than asked, and an error target fewer iterations.
+            gui.text(f"substeps {control.substeps} asked, {stats['substeps']} used; "
+                     f"iterations {stats['iterations']} used")
             control.iterations = gui.slider_int("iterations", control.iterations, 1, 20)
             control.substeps = gui.slider_int("substeps", control.substeps, 1, 16)
             control.xsph = gui.slider_float("XSPH c", control.xsph, 0.0, 0.1)
