@@ -120,9 +120,9 @@ def test_every_key_is_one_ggui_delivers_and_each_does_what_the_help_says():
     sim = Simulation(POOL)
     window = StandInWindow()
     viewer = WindowViewer(sim, window)
-    window.get_events = lambda kind: [Key(ti.ui.SPACE), Key("h")]
+    window.get_events = lambda kind: [Key(ti.ui.SPACE), Key("h"), Key("Tab")]
     viewer.handle_input(1 / 60)
-    assert viewer.paused and not viewer.panel_shown
+    assert viewer.paused and viewer.help_shown and not viewer.panel_shown
     window.get_events = lambda kind: [Key("n")]
     assert viewer.advance()                          # n: one frame ...
     window.get_events = lambda kind: []

@@ -3,7 +3,7 @@
 Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
 forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
-paused, h hides the panel, r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
+paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
 water's surface, esc quits. Particles are drawn at their simulated radius with the colours of the
 headless renderer (``pbf.app.render``), the container and obstacles as lines. The surface is the
 headless screen-space renderer (``pbf.app.fluid_render``) run on the window's camera every frame and
@@ -31,7 +31,8 @@ KEYS = {
     "f": "emitters on / off",
     "m": "wave maker on / off",
     "v": "particles / surface",
-    "h": "hide / show this panel",
+    "h": "help: these lines",
+    "Tab": "hide / show the panel",
     ti.ui.ESCAPE: "quit",
 }
 """The window's keys and what they do (W A S D / Q E, held, move the camera)."""
@@ -43,8 +44,11 @@ HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or 
         "keys: WASD/QE move the camera",
         *(f"  {'space' if key == ti.ui.SPACE else 'esc' if key == ti.ui.ESCAPE else key}: {what}"
           for key, what in KEYS.items()))
-PANEL = (0.01, 0.01, 0.3, 0.42)
-"""The panel's x, y, width and height as fractions of the window (origin top left)."""
+"""The panel's help lines, shown with h (the panel stays compact without them)."""
+PANEL = (0.01, 0.01, 0.3, 0.36)
+"""The panel's x, y, width and height as fractions of the window (origin top left), without the help."""
+HELP_HEIGHT = 0.26
+"""What the help lines add to the panel's height."""
 
 
 @ti.kernel
@@ -127,6 +131,7 @@ class WindowViewer:
         self.paused = False
         self.step_once = False
         self.panel_shown = True
+        self.help_shown = False
         self.quit = False
         self.drag = None
         self.hand = Hand(sim)
@@ -140,7 +145,10 @@ class WindowViewer:
         """Handle the input since the last frame; whether the simulation steps a frame now."""
         now = time.perf_counter()
         seconds, self.last_frame = now - self.last_frame, now
-        self.fps = 0.9 * self.fps + 0.1 / max(seconds, 1e-6)
+        # A running mean of the frame rate, started from the first frame's own rate (from 0, or from
+        # the moment the window opened, it would take dozens of frames to read right).
+        rate = 1.0 / max(seconds, 1e-6)
+        self.fps = rate if self.fps == 0.0 else 0.9 * self.fps + 0.1 * rate
         self.quit = not self.handle_input(seconds)
         stepping = not self.quit and (not self.paused or self.step_once)
         self.step_once = False
@@ -165,6 +173,8 @@ class WindowViewer:
             elif event.key == "n" and self.paused:
                 self.step_once = True
             elif event.key == "h":
+                self.help_shown = not self.help_shown
+            elif event.key == "Tab":
                 self.panel_shown = not self.panel_shown
             elif event.key == "r":
                 self.sim.reset()
@@ -187,8 +197,8 @@ class WindowViewer:
         window = self.window
         x, y = window.get_cursor_pos()
         width, height = window.get_window_shape()
-        over_panel = self.panel_shown and (PANEL[0] <= x <= PANEL[0] + PANEL[2]
-                                           and PANEL[1] <= 1.0 - y <= PANEL[1] + PANEL[3])
+        left, top, panel_width, panel_height = self.panel_rect()
+        over_panel = self.panel_shown and left <= x <= left + panel_width and top <= 1.0 - y <= top + panel_height
         if window.is_pressed(ti.ui.LMB):
             if self.hand.holding:
                 self.hand.drag(self.camera.view(), x, y, width / height, seconds)
@@ -208,11 +218,16 @@ class WindowViewer:
         else:
             self.drag = (x, y)
 
+    def panel_rect(self) -> tuple[float, float, float, float]:
+        """The panel's place and size now: taller while it shows the help."""
+        left, top, width, height = PANEL
+        return left, top, width, height + (HELP_HEIGHT if self.help_shown else 0.0)
+
     def panel(self, stats: dict) -> None:
         if not self.panel_shown:
             return
         control = self.sim.control
-        with self.window.get_gui().sub_window("pbf (h hides)", *PANEL) as gui:
+        with self.window.get_gui().sub_window("pbf (h: help, Tab: hide)", *self.panel_rect()) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
@@ -227,7 +242,7 @@ class WindowViewer:
             control.vorticity = gui.slider_float("vorticity", control.vorticity, 0.0, 0.5)
             gx, gy, gz = control.gravity_m_s2
             control.gravity_m_s2 = (gx, gui.slider_float("gravity y m/s²", gy, -20.0, 0.0), gz)
-            for line in HELP:
+            for line in HELP if self.help_shown else ():
                 gui.text(line)
 
     def draw(self) -> None:
