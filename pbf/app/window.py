@@ -136,7 +136,7 @@ class WindowViewer:
         self.drag = None
         self.hand = Hand(sim)
         self.fps = 0.0
-        self.last_frame = time.perf_counter()
+        self.last_frame: float | None = None
 
     def running(self) -> bool:
         return self.window.running and not self.quit
@@ -144,11 +144,13 @@ class WindowViewer:
     def advance(self) -> bool:
         """Handle the input since the last frame; whether the simulation steps a frame now."""
         now = time.perf_counter()
-        seconds, self.last_frame = now - self.last_frame, now
-        # A running mean of the frame rate, started from the first frame's own rate (from 0, or from
-        # the moment the window opened, it would take dozens of frames to read right).
-        rate = 1.0 / max(seconds, 1e-6)
-        self.fps = rate if self.fps == 0.0 else 0.9 * self.fps + 0.1 * rate
+        seconds = now - self.last_frame if self.last_frame is not None else 1.0 / 60.0
+        # A running mean of the frame rate from the second frame on, started from that frame's own
+        # rate (from 0 it would take dozens of frames to read right).
+        if self.last_frame is not None:
+            rate = 1.0 / max(seconds, 1e-6)
+            self.fps = rate if self.fps == 0.0 else 0.9 * self.fps + 0.1 * rate
+        self.last_frame = now
         self.quit = not self.handle_input(seconds)
         stepping = not self.quit and (not self.paused or self.step_once)
         self.step_once = False
