@@ -113,8 +113,9 @@ def test_keys_switch_the_emitters_and_the_wave_maker():
 def test_every_key_is_one_ggui_delivers_and_each_does_what_the_help_says():
     # GGUI never reports '.', ',', digits or F-keys (measured under Xvfb): a key bound to one of them
     # could never be pressed.
-    from pbf.app.window import GGUI_KEYS, HELP, KEYS
+    from pbf.app.keys import ESCAPE, GGUI_KEYS, HELP, KEYS, SPACE
 
+    assert (SPACE, ESCAPE) == (ti.ui.SPACE, ti.ui.ESCAPE)
     assert set(KEYS) <= GGUI_KEYS
     assert all(any(what in line for line in HELP) for what in KEYS.values())
     sim = Simulation(POOL)

@@ -19,12 +19,26 @@ from pathlib import Path
 
 from pbf import scene as schema
 from pbf.app import export, outputs
+from pbf.app.keys import HELP
 
 ARCHES = ("auto", "cpu", "cuda")
 """``pbf.solver.ARCHES`` (tests/test_options.py checks that they agree), named here so that ``--help``
 and a bad backend are answered without importing the solver."""
 ARCH_VARIABLE = "PBF_ARCH"
 """``pbf.solver.ENV_VAR``."""
+EPILOG = "\n".join([
+    "examples:",
+    "  %(prog)s                   the seed dam break in a window (headless without one)",
+    "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
+    "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
+    "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
+    "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
+    "  %(prog)s --list            the presets",
+    "",
+    "in the window:",
+    *(f"  {line.strip()}" for line in HELP),
+])
+"""The end of --help: examples and the window's mouse and keys."""
 HEADLESS_FRAMES = 180
 """Frames a headless or statistics run takes without --frames: 3 s at 60 fps."""
 
@@ -54,7 +68,10 @@ def frame_count(text: str) -> int:
 
 
 def build_parser() -> Parser:
-    parser = Parser(prog="run.py", description="Position Based Fluids in Taichi.")
+    # No prog: argparse names the program as it was called, run.py or the installed pbf command.
+    parser = Parser(description="Position Based Fluids in Taichi: a window, headless frames and video, "
+                                "particle and surface files.",
+                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG)
     parser.add_argument("scene", nargs="?", default=None, help="preset name or path to a TOML file (default dam_break)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")

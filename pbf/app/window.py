@@ -13,7 +13,6 @@ loop of ``pbf.app.loop``.
 """
 import math
 import os
-import string
 import sys
 import time
 from dataclasses import dataclass
@@ -22,29 +21,9 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.interact import Hand
+from pbf.app.keys import HELP
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
 
-KEYS = {
-    ti.ui.SPACE: "pause / resume",
-    "n": "one frame while paused",
-    "r": "reset",
-    "f": "emitters on / off",
-    "m": "wave maker on / off",
-    "v": "particles / surface",
-    "h": "help: these lines",
-    "Tab": "hide / show the panel",
-    ti.ui.ESCAPE: "quit",
-}
-"""The window's keys and what they do (W A S D / Q E, held, move the camera)."""
-GGUI_KEYS = set(string.ascii_lowercase) | {ti.ui.SPACE, ti.ui.ESCAPE, "Tab", "Return", "BackSpace", "Shift",
-                                           "Left", "Right", "Up", "Down"}
-"""Key names GGUI reports. Measured under Xvfb with xdotool: letters and these named keys arrive;
-'.', ',', '/', '-', '=', digits and F1 never do, so no key of ours may be one of them."""
-HELP = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms",
-        "keys: WASD/QE move the camera",
-        *(f"  {'space' if key == ti.ui.SPACE else 'esc' if key == ti.ui.ESCAPE else key}: {what}"
-          for key, what in KEYS.items()))
-"""The panel's help lines, shown with h (the panel stays compact without them)."""
 PANEL = (0.01, 0.01, 0.3, 0.36)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help."""
 HELP_HEIGHT = 0.26
