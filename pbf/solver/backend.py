@@ -4,6 +4,7 @@
 can also come from the ``PBF_ARCH`` environment variable. Asking for CUDA where there is none is an
 error, never a silent fallback. The chosen backend is printed once.
 """
+import ctypes.util
 import os
 
 import taichi as ti
@@ -20,7 +21,11 @@ _started: str | None = None
 
 
 def _cuda_present() -> bool:
-    """Whether Taichi can start CUDA here (it initialises CUDA once to find out)."""
+    """Whether Taichi can start CUDA here. Without NVIDIA's driver library there is nothing to try;
+    with it, Taichi initialises CUDA once to find out (and, where that fails, says it started on the
+    CPU: a second such line next to the real start)."""
+    if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
+        return False
     try:
         ti.init(arch=ti.cuda, log_level=ti.ERROR)
         found = ti.lang.impl.current_cfg().arch == ti.cuda
