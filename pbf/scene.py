@@ -333,6 +333,8 @@ class Render:
     container_rgb: Vec3 = key((0.25, 0.25, 0.3), _vec_between(0.0, 1.0), "colour of the container's edges")
     width_px: int = key(1280, _even_pixels, "image width, pixels")
     height_px: int = key(720, _even_pixels, "image height, pixels")
+    legend: bool = key(False, doc="draw the colour legend (bar, range and unit) on headless frames; the "
+                       "window's panel always shows it")
     style: str = key("particles", _one_of("particles", "surface"), "frames and the window (at first; key v "
                      "switches) show particles (spheres in the colour map) or the water's surface (see [surface])")
 
@@ -788,6 +790,12 @@ def _check_camera(scene: Scene, source: str) -> None:
                          f"so it looks nowhere; move camera.position_m or set camera.look_at_m elsewhere")
 
 
+def _check_render(scene: Scene, source: str) -> None:
+    if scene.render.legend and scene.render.style == "surface":
+        raise SceneError(f"{source}: key 'render.legend': the surface style has no colour map to explain; "
+                         f"set render.legend = false or render.style = \"particles\"")
+
+
 def _check_scene(scene: Scene) -> None:
     source = scene.source
     _check_container(scene, source)
@@ -797,6 +805,7 @@ def _check_scene(scene: Scene) -> None:
     _check_emitters(scene, source)
     _check_time(scene, source)
     _check_camera(scene, source)
+    _check_render(scene, source)
 
 
 # ----------------------------------------------------------------------------- files, overrides, loading

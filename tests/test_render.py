@@ -132,3 +132,23 @@ def test_bad_input_writes_nothing(tmp_path, capsys, argv, message):
     assert cli.main(argv + ["--headless", "--out", str(out)]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_legend_shows_the_colour_map_and_its_range():
+    # Only the top right corner changes, and the bar holds the colour map's top and bottom colours.
+    import matplotlib
+
+    from pbf.app.legend import BAR_PX, legend_line
+
+    scene = small_dam_break()
+    scene["render"] = {"width_px": 640, "height_px": 360, "legend": True, "colour_map": "viridis"}
+    sim = Simulation(scene)
+    with_legend = SceneRenderer(sim).frame()
+    plain = SceneRenderer(Simulation(dict(scene, render={**scene["render"], "legend": False}))).frame()
+    rows, cols = np.nonzero(np.any(with_legend != plain, axis=2))
+    assert cols.min() > 640 * 0.6 and rows.max() < 360 * 0.7
+    column = with_legend[:, cols.min() + BAR_PX[0] // 2].astype(int)
+    for end in (0.0, 1.0):
+        colour = np.round(np.array(matplotlib.colormaps["viridis"](end)[:3]) * 255)
+        assert np.any(np.all(np.abs(column - colour) <= 2, axis=1))
+    assert legend_line(sim.scene.render) == "colour: speed, viridis from 0 m/s to 3 m/s"

@@ -17,6 +17,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.fluid_render import FluidRenderer
+from pbf.app.legend import draw_legend
 from pbf.scene import Render, Scene
 
 EMPTY = np.iinfo(np.int64).max
@@ -266,4 +267,5 @@ class SceneRenderer:
         if self.fluid is not None:
             return self.fluid.render(self.view, particles.positions, particles.count, LIGHT_DIRECTION)
         colours = self.colours.update()
-        return self.spheres.render(self.view, particles.positions, colours, particles.count, particles.radius_m)
+        image = self.spheres.render(self.view, particles.positions, colours, particles.count, particles.radius_m)
+        return draw_legend(image, self.sim.scene.render) if self.sim.scene.render.legend else image

@@ -22,6 +22,7 @@ import taichi as ti
 
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
+from pbf.app.legend import legend_line
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
 
 PANEL = (0.01, 0.01, 0.3, 0.36)
@@ -214,6 +215,8 @@ class WindowViewer:
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
             gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
             gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
+            if not self.surface:
+                gui.text(legend_line(self.render))
             # The CFL limit may take more substeps than asked, and an error target fewer iterations.
             gui.text(f"substeps {control.substeps} asked, {stats['substeps']} used; "
                      f"iterations {stats['iterations']} used")
