@@ -215,7 +215,10 @@ def command_line_keys(args) -> dict[str, str]:
 def list_presets() -> None:
     for path in sorted(schema.SCENES_DIR.glob("*.toml")):
         scene = schema.load_scene(path)
-        print(f"{path.stem:18s} {scene.particle_count:>10,} particles  {scene.description}")
+        count = f"{scene.particle_count:,}"
+        if scene.emitted_count:  # emitters add particles as the scene runs
+            count += f" → {scene.particle_capacity:,}"
+        print(f"{path.stem:18s} {count:>16} particles  {scene.description}")
 
 
 def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
