@@ -1,8 +1,10 @@
 """Same scene, same backend, same thread count: the same bits, run after run and after a restore."""
 import numpy as np
+import pytest
 from scenes import small_dam_break
 
 from pbf import Simulation
+from pbf.solver import Snapshot
 
 
 def test_runs_and_restored_snapshots_replay_bit_for_bit():
@@ -25,3 +27,13 @@ def test_runs_and_restored_snapshots_replay_bit_for_bit():
     assert np.array_equal(sim.positions(), first)
     assert sim.stats() == first_stats
     assert 1 <= first_stats["iterations"] <= 4  # the target was in play, not always all iterations
+
+
+def test_a_snapshot_that_does_not_fit_is_refused_clearly():
+    sim = Simulation(small_dam_break())
+    snapshot = sim.snapshot()
+    too_many = np.concatenate([snapshot.positions_m, snapshot.positions_m])
+    with pytest.raises(ValueError, match="more than the 1,728 this scene allocates"):
+        sim.restore(Snapshot(too_many, too_many, 0.0, 0))
+    with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
+        sim.restore(Snapshot(snapshot.positions_m[:, :2], snapshot.velocities_m_s, 0.0, 0))

@@ -105,7 +105,14 @@ class Simulation:
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
-        self.state.load(snapshot.positions_m, snapshot.velocities_m_s)
+        positions, velocities = np.asarray(snapshot.positions_m), np.asarray(snapshot.velocities_m_s)
+        if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
+            raise ValueError(f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
+                             f"{positions.shape} and {velocities.shape}")
+        if len(positions) > self.model.capacity:
+            raise ValueError(f"restore: {len(positions):,} particles, more than the {self.model.capacity:,} this "
+                             f"scene allocates (its blocks and emitters)")
+        self.state.load(positions, velocities)
         self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
