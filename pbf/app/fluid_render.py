@@ -37,6 +37,8 @@ import math
 import numpy as np
 import taichi as ti
 
+from pbf.app.pinhole import to_pixel
+
 vec3 = ti.types.vector(3, ti.f32)
 
 FAR = 1e30
@@ -343,12 +345,9 @@ class FluidRenderer:
             samples = 2 * (self.width + self.height)
             for k in range(samples + 1):
                 p = a + (b - a) * (k / samples) - eye
-                depth = p.dot(forward)
-                if depth > 1e-6:
-                    col = ti.cast(0.5 * self.width + focal * p.dot(right) / depth, ti.i32)
-                    row = ti.cast(0.5 * self.height - focal * p.dot(up) / depth, ti.i32)
-                    if 0 <= row < self.height and 0 <= col < self.width and depth < self.image_depth[row, col]:
-                        self.image[row, col] = ti.cast(self.line_colour * 255.0 + 0.5, ti.u8)
+                row, col, depth, inside = to_pixel(p, right, up, forward, focal, self.width, self.height)
+                if inside and depth < self.image_depth[row, col]:
+                    self.image[row, col] = ti.cast(self.line_colour * 255.0 + 0.5, ti.u8)
 
     def render(self, view, positions, count: int, light_direction) -> np.ndarray:
         """(H, W, 3) uint8 image of the ``count`` particles at ``positions`` (a Taichi vector field, m)

@@ -18,6 +18,7 @@ import taichi as ti
 
 from pbf.app.fluid_render import FluidRenderer
 from pbf.app.legend import draw_legend
+from pbf.app.pinhole import to_pixel
 from pbf.scene import Render, Scene
 
 EMPTY = np.iinfo(np.int64).max
@@ -203,15 +204,12 @@ class SphereRenderer:
             samples = 2 * (self.width + self.height)
             for k in range(samples + 1):
                 p = a + (b - a) * (k / samples) - eye
-                depth = p.dot(forward)
-                if depth > 1e-6:
-                    col = ti.cast(0.5 * self.width + focal * p.dot(right) / depth, ti.i32)
-                    row = ti.cast(0.5 * self.height - focal * p.dot(up) / depth, ti.i32)
-                    if 0 <= row < self.height and 0 <= col < self.width:
-                        key = self.keys[row, col]
-                        hit = ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
-                        if key == ti.i64(EMPTY) or p.norm() < hit:
-                            self.image[row, col] = self.line_colour
+                row, col, _, inside = to_pixel(p, right, up, forward, focal, self.width, self.height)
+                if inside:
+                    key = self.keys[row, col]
+                    hit = ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)  # the sphere's distance along the ray
+                    if key == ti.i64(EMPTY) or p.norm() < hit:
+                        self.image[row, col] = self.line_colour
 
     def render(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:
         """(H, W, 3) uint8 image of ``count`` spheres of ``radius_m`` (Taichi fields) and the segments."""
