@@ -25,9 +25,9 @@ from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
 
-PANEL = (0.01, 0.01, 0.3, 0.36)
+PANEL = (0.01, 0.01, 0.3, 0.40)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help."""
-HELP_HEIGHT = 0.26
+HELP_HEIGHT = 0.30
 """What the help lines add to the panel's height."""
 
 
@@ -217,6 +217,10 @@ class WindowViewer:
             gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
             if not self.surface:
                 gui.text(legend_line(self.render))
+            # f and m act only where the scene has emitters or a wave maker; say so either way.
+            scene = self.sim.scene
+            gui.text(f"emitters (f): {('on' if control.emitters_on else 'off') if scene.emitters else 'none here'};  "
+                     f"wave maker (m): {('on' if control.wave_maker_on else 'off') if scene.wave_maker.stroke_m else 'none here'}")
             # The CFL limit may take more substeps than asked, and an error target fewer iterations.
             gui.text(f"substeps {control.substeps} asked, {stats['substeps']} used; "
                      f"iterations {stats['iterations']} used")
