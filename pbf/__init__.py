@@ -9,6 +9,15 @@ renderer, export) and ``pbf.study`` (benchmarks, sweeps, validation), around the
 ``pbf.scene``. ``Simulation`` is imported on first use, so that ``import pbf`` and the scene schema
 load without Taichi.
 """
+import os
+
+# Taichi prints a banner ("[Taichi] version 1.7.4, llvm …, commit …") when it is first imported,
+# unless this variable says no (taichi/_lib/utils.py reads it once, at that import). Every way into
+# the program (run.py, the pbf command, python -m pbf.study.*, the tests' conftest) imports this
+# package before Taichi; the version is named in pbf's own "Starting on" line (pbf.solver.backend).
+# An explicit ENABLE_TAICHI_HEADER_PRINT=1 still brings the banner back.
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
 from pbf.scene import Scene, SceneError, load_scene
 
 __all__ = ["Scene", "SceneError", "Simulation", "load_scene"]

@@ -2,10 +2,17 @@
 
 ``arch="auto"`` takes CUDA when an NVIDIA GPU answers and Taichi's CPU backend otherwise. The choice
 can also come from the ``PBF_ARCH`` environment variable. Asking for CUDA where there is none is an
-error, never a silent fallback. The chosen backend is printed once.
+error, never a silent fallback. The chosen backend is printed once, in one line that names the
+Taichi version: ``[pbf] Starting on cpu (x64, no CUDA GPU found), Taichi 1.7.4``. Taichi's own
+lines stay silent: its banner (``[Taichi] version …``, printed when Taichi is imported) is switched
+off by ``pbf/__init__.py``, and the ``[Taichi] Starting on arch=…`` that ``ti.init`` prints is
+caught here (``_init``).
 """
+import contextlib
 import ctypes.util
+import io
 import os
+import sys
 
 import taichi as ti
 
@@ -19,6 +26,24 @@ class BackendError(RuntimeError):
 
 _started: str | None = None
 
+TAICHI_START_LINE = "[Taichi] Starting on arch="
+"""The line ``ti.init`` prints (``taichi/lang/misc.py``, a plain ``print``) on every start."""
+
+
+def taichi_version() -> str:
+    return ".".join(map(str, ti.__version__))
+
+
+def _init(**options) -> None:
+    """``ti.init(**options)`` without Taichi's "Starting on" line; anything else it prints passes."""
+    printed = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed):
+            ti.init(**options)
+    finally:
+        rest = [line for line in printed.getvalue().splitlines(keepends=True) if not line.startswith(TAICHI_START_LINE)]
+        sys.stdout.write("".join(rest))
+
 
 def _cuda_present() -> bool:
     """Whether Taichi can start CUDA here. Without NVIDIA's driver library there is nothing to try;
@@ -27,7 +52,7 @@ def _cuda_present() -> bool:
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
         return False
     try:
-        ti.init(arch=ti.cuda, log_level=ti.ERROR)
+        _init(arch=ti.cuda, log_level=ti.ERROR)
         found = ti.lang.impl.current_cfg().arch == ti.cuda
     except Exception:  # Taichi raises several types when the driver is missing
         found = False
@@ -64,10 +89,11 @@ def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int
     else:
         chosen = "cpu"
     threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
-    ti.init(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN,
-            advanced_optimization=not fast_compile, **threads)
+    _init(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN,
+          advanced_optimization=not fast_compile, **threads)
     _started = chosen
     if not quiet:
         reason = "CUDA GPU found" if chosen == "cuda" else ("requested" if requested == "cpu" else "no CUDA GPU found")
-        print(f"[pbf] backend: {chosen} ({reason})", flush=True)
+        arch_name = ti.lang.impl.current_cfg().arch.name  # x64, arm64 or cuda
+        print(f"[pbf] Starting on {chosen} ({arch_name}, {reason}), Taichi {taichi_version()}", flush=True)
     return chosen
