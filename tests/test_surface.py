@@ -14,7 +14,7 @@ from scenes import column_scene
 from pbf import Simulation
 from pbf.app import cli, loop
 from pbf.app.headless import FrameWriter
-from pbf.app.render import LIGHT_DIRECTION, fluid_renderer
+from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
 from pbf.app.surface import Mesh, reconstruct, write_mesh
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
@@ -174,8 +174,12 @@ class StandInWindow:
     def get_canvas(self):
         return self
 
-    def set_image(self, image):
-        self.shown = image.to_numpy()
+    @property
+    def canvas(self):  # GGUI's C++ canvas, which pbf.app.window.show_packed hands the frame to
+        return self
+
+    def set_image(self, info):
+        self.shown = info
 
 
 class Key:
@@ -194,8 +198,11 @@ def test_key_v_switches_the_window_between_surface_and_particles(settled):
         viewer.handle_input(1 / 60)
         assert viewer.surface == expected
     viewer.draw()
-    # The canvas takes (width, height) with y up; turned back it is the headless surface frame.
-    shown = np.flipud(window.shown.transpose(1, 0, 2))
+    # The canvas is handed the renderer's (width, height) array of packed RGBA words, y up; turned
+    # back it is the headless surface frame.
+    packed = viewer.surface_renderer.packed
+    assert window.shown.dev_alloc.alloc_id == packed.ctypes.data and list(window.shown.shape) == [160, 90]
+    shown = unpack_rgb(packed)
     particles = sim.readout()
     expected = fluid_renderer(sim, 160, 90).render(viewer.camera.view(), particles.positions, particles.count,
                                                    LIGHT_DIRECTION)

@@ -110,6 +110,8 @@ class FluidRenderer:
         """(eye, target, fov) the background was computed for."""
         self.image_depth = ti.field(ti.f32, shape=full)
         self.image = ti.Vector.field(3, ti.u8, shape=full)
+        self.packed = None
+        """``image`` for the window (``draw_packed``), allocated on first use."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_count = len(points) // 2
         self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
@@ -348,6 +350,22 @@ class FluidRenderer:
                 row, col, depth, inside = to_pixel(p, right, up, forward, focal, self.width, self.height)
                 if inside and depth < self.image_depth[row, col]:
                     self.image[row, col] = ti.cast(self.line_colour * 255.0 + 0.5, ti.u8)
+
+    @ti.kernel
+    def _pack(self, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
+        """``image`` as packed RGBA words in GGUI's canvas layout ((W, H), y up)."""
+        for row, col in self.image:
+            c = ti.cast(self.image[row, col], ti.u32)
+            out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
+
+    def draw_packed(self, view, positions, count: int, light_direction) -> np.ndarray:
+        """Like :meth:`render`, as a (W, H) array of packed RGBA words, y up, the layout GGUI's canvas
+        shows without a conversion pass (the window's surface mode)."""
+        self.draw(view, positions, count, light_direction)
+        if self.packed is None:
+            self.packed = np.zeros((self.width, self.height), np.uint32)
+        self._pack(self.packed)
+        return self.packed
 
     def render(self, view, positions, count: int, light_direction) -> np.ndarray:
         """(H, W, 3) uint8 image of the ``count`` particles at ``positions`` (a Taichi vector field, m)

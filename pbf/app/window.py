@@ -4,12 +4,17 @@ Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbit
 target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
 forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
 paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
-water's surface, esc quits. Particles are drawn at their simulated radius with the colours of the
-headless renderer (``pbf.app.render``), the container and obstacles as lines. The surface is the
-headless screen-space renderer (``pbf.app.fluid_render``) run on the window's camera every frame and
-shown as the canvas's image: GGUI has no custom shaders, and a mesh reconstructed every frame
-(``pbf.app.surface``) would cost more than the whole surface render. ``WindowViewer`` runs it in the
-loop of ``pbf.app.loop``.
+water's surface, esc quits.
+
+Every frame is rendered by the project's own Taichi renderers on the window's camera and handed to
+GGUI's canvas as one image: particles as ray-cast shaded spheres of their simulated radius with the
+container and obstacle edges (``pbf.app.render.SphereRenderer``, the headless frames' renderer), or
+the water's surface (``pbf.app.fluid_render``). GGUI draws that image and the panel. On a CPU with a
+software Vulkan driver (lavapipe) this costs a third of what GGUI's own particles cost, whose
+fragment shader writes depth and so shades every hidden layer of water (docs/BENCHMARKS.md,
+"The window"); GGUI has no custom shaders, and a mesh reconstructed every frame (``pbf.app.surface``)
+would cost more than the whole surface render. The panel shows the simulation's and the renderer's
+milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 import math
 import os
@@ -19,23 +24,37 @@ from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
+from taichi.ui.utils import get_field_info
 
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
-from pbf.app.render import LIGHT_DIRECTION, ParticleColours, View, fluid_renderer, scene_edges
+from pbf.app.render import LIGHT_DIRECTION, ParticleColours, SphereRenderer, View, fluid_renderer, scene_edges
 
-PANEL = (0.01, 0.01, 0.3, 0.40)
+PANEL = (0.01, 0.01, 0.3, 0.43)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help."""
 HELP_HEIGHT = 0.30
 """What the help lines add to the panel's height."""
+STATS_INTERVAL_S = 0.1
+"""The panel's statistics are recomputed at most this often while the simulation runs (a reduction
+over every particle; ten times a second is as often as figures can be read)."""
+SMOOTHING = 0.1
+"""Weight of the newest frame in the running means of the panel's frame rate and milliseconds."""
 
 
-@ti.kernel
-def to_canvas(image: ti.template(), canvas_image: ti.template()):
-    """Copy an (H, W) image, row 0 at the top, into the (W, H) image GGUI's canvas takes (y up)."""
-    for row, col in image:
-        canvas_image[col, image.shape[0] - 1 - row] = image[row, col]
+def show_packed(canvas, packed: np.ndarray) -> None:
+    """Show a (W, H) array of packed RGBA8 words (y up) as the canvas's image. ``Canvas.set_image``
+    converts whatever it is given into exactly this array with a Taichi kernel, a pass over every pixel
+    (``to_rgba8`` in taichi/ui/staging_buffer.py), and hands the result to the C++ canvas; the
+    renderers write this layout themselves, so it goes to the C++ canvas directly (Taichi 1.7.4, pinned
+    in pyproject.toml)."""
+    assert packed.dtype == np.uint32 and packed.ndim == 2 and packed.flags.c_contiguous
+    canvas.canvas.set_image(get_field_info(packed))
+
+
+def running_mean(mean: float | None, value: float) -> float:
+    """The running mean of the panel's figures, started from the first value."""
+    return value if mean is None else (1.0 - SMOOTHING) * mean + SMOOTHING * value
 
 
 class WindowUnavailable(RuntimeError):
@@ -80,12 +99,21 @@ class OrbitCamera:
         self.target = self.target + forward * ahead + right * side + np.array([0.0, up, 0.0])
 
 
-def open_window(title: str, width: int, height: int):
+LAVAPIPE_SETTINGS = {"LP_PERF": "no_linear"}
+"""For Mesa's software Vulkan driver (lavapipe; ignored by every other driver): sample textures
+nearest instead of bilinear. GGUI draws the frame as a texture exactly the window's size, texel
+centres on pixel centres, where both give the same colours; nearest saves 2.4 ms of CPU a frame at
+1280 × 720 (docs/BENCHMARKS.md, "The window"). Set before the driver starts, unless the user set it."""
+
+
+def open_window(title: str, width: int, height: int, vsync: bool = True):
     """A GGUI window, or WindowUnavailable with the reason in one line."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise WindowUnavailable("no display (DISPLAY is not set)")
+    for name, value in LAVAPIPE_SETTINGS.items():
+        os.environ.setdefault(name, value)
     try:
-        return ti.ui.Window(title, (width, height), vsync=True)
+        return ti.ui.Window(title, (width, height), vsync=vsync)
     except RuntimeError as error:
         raise WindowUnavailable(str(error).strip().splitlines()[-1]) from None
 
@@ -100,14 +128,12 @@ class WindowViewer:
         self.render = sim.scene.render
         self.camera = OrbitCamera.from_view(View.of_scene(sim.scene))
         self.colours = ParticleColours(sim, self.render)
-        edges = scene_edges(sim.scene)
-        self.edges = ti.Vector.field(3, ti.f32, shape=len(edges))
-        self.edges.from_numpy(edges)
-        self.gg_camera = ti.ui.Camera()
+        self.edges = scene_edges(sim.scene)
         self.surface = self.render.style == "surface"
         """Draw the water's surface (key v) rather than particles."""
+        self.sphere_renderer = None
         self.surface_renderer = None
-        self.canvas_image = None
+        """Made on first use, and again when the window's size changes."""
         self.paused = False
         self.step_once = False
         self.panel_shown = True
@@ -117,6 +143,15 @@ class WindowViewer:
         self.hand = Hand(sim)
         self.fps = 0.0
         self.last_frame: float | None = None
+        self.sim_ms: float | None = None
+        """Running means: the simulation's step, our renderer's draw, GGUI's show (canvas image, panel,
+        present); ms."""
+        self.draw_ms: float | None = None
+        self.show_ms: float | None = None
+        self.step_started: float | None = None
+        self.stats: dict | None = None
+        self.stats_key = None
+        self.stats_time = 0.0
 
     def running(self) -> bool:
         return self.window.running and not self.quit
@@ -134,12 +169,31 @@ class WindowViewer:
         self.quit = not self.handle_input(seconds)
         stepping = not self.quit and (not self.paused or self.step_once)
         self.step_once = False
+        self.step_started = time.perf_counter() if stepping else None  # the loop steps now
         return stepping
 
     def show(self) -> None:
+        started = time.perf_counter()
+        if self.step_started is not None:  # the time since advance() is the simulation's step
+            ti.sync()  # on CUDA kernels run asynchronously: count them in the step, not in the draw
+            started = time.perf_counter()
+            self.sim_ms = running_mean(self.sim_ms, 1e3 * (started - self.step_started))
+            self.step_started = None
         self.draw()
-        self.panel(self.sim.stats())
+        drawn = time.perf_counter()
+        self.panel(self.current_stats())
         self.window.show()
+        self.draw_ms = running_mean(self.draw_ms, 1e3 * (drawn - started))
+        self.show_ms = running_mean(self.show_ms, 1e3 * (time.perf_counter() - drawn))
+
+    def current_stats(self) -> dict:
+        """The simulation's statistics, recomputed when it has changed and at most every
+        ``STATS_INTERVAL_S`` while it runs (a single step, a reset or a pause shows at once)."""
+        key = (self.sim.frame, self.sim.time_s)
+        now = time.perf_counter()
+        if self.stats is None or (key != self.stats_key and (self.paused or now - self.stats_time >= STATS_INTERVAL_S)):
+            self.stats, self.stats_key, self.stats_time = self.sim.stats(), key, now
+        return self.stats
 
     def close(self) -> None:
         """Nothing to release: GGUI closes the window when the process ends."""
@@ -212,6 +266,7 @@ class WindowViewer:
         with self.window.get_gui().sub_window("pbf (h: help, Tab: hide)", *self.panel_rect()) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
+            gui.text(timing_line(self.sim_ms, self.draw_ms, self.show_ms))
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
             gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
             gui.text(f"max speed {stats['max_speed_m_s']:.2f} m/s")
@@ -234,41 +289,30 @@ class WindowViewer:
                 gui.text(line)
 
     def draw(self) -> None:
-        if self.surface:
-            self.draw_surface()
-        else:
-            self.draw_particles()
-
-    def draw_surface(self) -> None:
-        """The screen-space water surface at the window's size, shown as the canvas's image."""
+        """Render the frame with our renderer at the window's size and hand it to GGUI's canvas."""
         width, height = self.window.get_window_shape()
-        renderer = self.surface_renderer
-        if renderer is None or (renderer.width, renderer.height) != (width, height):  # first use, or resized
-            self.surface_renderer = fluid_renderer(self.sim, width, height)
-            self.canvas_image = ti.Vector.field(3, ti.u8, shape=(width, height))
         particles = self.sim.readout()
-        self.surface_renderer.draw(self.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION)
-        to_canvas(self.surface_renderer.image, self.canvas_image)
-        self.window.get_canvas().set_image(self.canvas_image)
-
-    def draw_particles(self) -> None:
         view = self.camera.view()
-        camera = self.gg_camera
-        camera.position(*view.eye)
-        camera.lookat(*view.target)
-        camera.up(0.0, 1.0, 0.0)
-        camera.fov(view.fov_deg)
-        scene = self.window.get_scene()
-        scene.set_camera(camera)
-        scene.ambient_light((0.35, 0.35, 0.35))
-        light = view.eye + 10.0 * LIGHT_DIRECTION
-        scene.point_light(pos=tuple(light), color=(0.9, 0.9, 0.9))
-        width, height = self.window.get_window_shape()
-        # GGUI scales particle radii by width/height: undo it so particles show their simulated size.
-        particles = self.sim.readout()
-        scene.particles(particles.positions, radius=particles.radius_m * height / width,
-                        per_vertex_color=self.colours.update(), index_count=particles.count)
-        scene.lines(self.edges, width=1.5, color=tuple(self.render.container_rgb))
-        canvas = self.window.get_canvas()
-        canvas.set_background_color(tuple(self.render.background_rgb))
-        canvas.scene(scene)
+        if self.surface:
+            renderer = self.surface_renderer
+            if renderer is None or (renderer.width, renderer.height) != (width, height):  # first use, or resized
+                self.surface_renderer = renderer = fluid_renderer(self.sim, width, height)
+            packed = renderer.draw_packed(view, particles.positions, particles.count, LIGHT_DIRECTION)
+        else:
+            renderer = self.sphere_renderer
+            if renderer is None or (renderer.width, renderer.height) != (width, height):
+                self.sphere_renderer = renderer = SphereRenderer(width, height, self.render.background_rgb,
+                                                                 self.render.container_rgb, self.edges)
+            packed = renderer.draw(view, particles.positions, self.colours.update(), particles.count,
+                                   particles.radius_m)
+        show_packed(self.window.get_canvas(), packed)
+
+
+def timing_line(sim_ms: float | None, draw_ms: float | None, show_ms: float | None) -> str:
+    """The panel's line of milliseconds per frame: the simulation's step apart from the rendering (our
+    renderer's draw, then GGUI's show: the canvas image, the panel and the present)."""
+    def ms(value):
+        return "-" if value is None else f"{value:.1f}"
+
+    render = None if draw_ms is None or show_ms is None else draw_ms + show_ms
+    return f"sim {ms(sim_ms)} ms, render {ms(render)} ms (draw {ms(draw_ms)} + show {ms(show_ms)})"

@@ -1,0 +1,257 @@
+"""Where a frame of the interactive window goes: the simulation's step, our renderer's draw, the
+panel and GGUI's show (the canvas image, the panel's drawing, the present), each in wall-clock and
+CPU milliseconds, for the window's renderer and the levers tried on it (docs/BENCHMARKS.md, "The
+window"). Needs a display and Vulkan; on a machine without either:
+
+    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
+        [--variants window,ggui-particles,...] [--scene dam_break]
+
+Each variant runs in a fresh process (some levers are environment variables read when the Vulkan
+driver or Taichi starts), the variants alternate round by round, and every figure is the median over
+the rounds of a round's median over its frames, after 30 frames of warm-up (JIT, the first impact).
+The frames are those of ``python run.py``: the seed scene from rest at 1280 × 720, the same camera,
+no input. ``cpu`` is the CPU time of the whole process per frame (every thread: Taichi's, the
+Vulkan driver's), ``X`` that of the X server (Xvfb) when there is one to read; on a 2-core machine the
+frame rate cannot exceed 2000 / (cpu + X) whatever overlaps.
+"""
+import argparse
+import gc
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+# What each variant changes against "window" (the window as python run.py opens it).
+VARIANTS = {
+    "window": {},
+    "ggui-particles": {"draw": "ggui"},
+    "ggui-uniform-colour": {"draw": "ggui", "colour": False},
+    "ggui-no-lines": {"draw": "ggui", "lines": False},
+    "surface": {"surface": True},
+    "empty-canvas": {"draw": "none"},
+    "paused": {"paused": True},
+    "paused-ggui-particles": {"paused": True, "draw": "ggui"},
+    "no-panel": {"panel": False},
+    "no-vsync": {"vsync": False},
+    "set-image": {"draw": "set_image"},
+    "unsorted-splat": {"front_to_back": False},
+    "stats-every-frame": {"stats_interval_s": 0.0},
+    "taichi-1-thread": {"cpu_threads": 1},
+    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
+    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}},
+    "lavapipe-bilinear": {"env": {"LP_PERF": ""}},
+    "paused-lavapipe-bilinear": {"paused": True, "env": {"LP_PERF": ""}},
+    "malloc-keeps-memory": {"env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
+                                                      "glibc.malloc.trim_threshold=268435456"}},
+    "paused-malloc-keeps-memory": {"paused": True, "env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
+                                                                         "glibc.malloc.trim_threshold=268435456"}},
+    "gc-freeze": {"gc": "freeze"},
+    "paused-gc-freeze": {"paused": True, "gc": "freeze"},
+}
+DEFAULT_VARIANTS = ("window", "ggui-particles", "surface", "empty-canvas", "paused")
+WARMUP_FRAMES = 30
+PHASES = ("frame", "sim", "draw", "panel", "show")
+
+
+def x_server_cpu_s() -> float | None:
+    """CPU seconds the X server of $DISPLAY has used, if it is an Xvfb or Xorg process we can read."""
+    display = os.environ.get("DISPLAY", "")
+    for proc in Path("/proc").iterdir():
+        try:
+            if not proc.name.isdigit():
+                continue
+            argv = (proc / "cmdline").read_bytes().split(b"\0")
+            if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display.encode() in argv:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
+                return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        except (OSError, IndexError, UnicodeDecodeError):
+            continue
+    return None
+
+
+class Clock:
+    """Wall and process CPU time, in ms, of the phases of one frame."""
+
+    def __init__(self):
+        self.spent = {}
+
+    def timed(self, phase, function):
+        def run(*args, **kwargs):
+            wall, cpu = time.perf_counter(), time.process_time()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                self.add(phase, time.perf_counter() - wall, time.process_time() - cpu)
+        return run
+
+    def add(self, phase, wall_s, cpu_s):
+        w, c = self.spent.get(phase, (0.0, 0.0))
+        self.spent[phase] = (w + 1e3 * wall_s, c + 1e3 * cpu_s)
+
+
+def measure(name: str, frames: int, scene: str) -> dict:
+    """One variant in this process: the medians over ``frames`` frames after the warm-up."""
+    settings = VARIANTS[name]
+    from pbf.app import window  # pbf first: it keeps Taichi's banner off
+    from pbf.solver import Simulation, start_backend
+
+    import taichi as ti
+
+    start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
+    sim = Simulation(scene, quiet=True)
+    width, height = sim.scene.render.width_px, sim.scene.render.height_px
+    try:
+        gui_window = window.open_window("pbf benchmark", width, height, vsync=settings.get("vsync", True))
+    except window.WindowUnavailable as reason:
+        raise SystemExit(f"no window: {reason}") from None
+    viewer = window.WindowViewer(sim, gui_window)
+    viewer.surface = settings.get("surface", False)
+    viewer.paused = settings.get("paused", False)
+    window.STATS_INTERVAL_S = settings.get("stats_interval_s", window.STATS_INTERVAL_S)
+    draw = settings.get("draw", "ours")
+    if draw == "ggui":
+        viewer.draw = lambda: draw_ggui_particles(viewer, settings.get("colour", True), settings.get("lines", True))
+    elif draw == "none":
+        viewer.draw = lambda: viewer.window.get_canvas().set_background_color(tuple(viewer.render.background_rgb))
+    elif draw == "set_image":
+        viewer.draw = lambda: draw_through_set_image(viewer)
+    if not settings.get("front_to_back", True):
+        viewer.draw()  # makes the renderer
+        viewer.sphere_renderer.front_to_back = False
+    if not settings.get("panel", True):
+        viewer.panel = lambda stats: None
+
+    clock = Clock()
+    viewer.draw = clock.timed("draw", viewer.draw)
+    viewer.panel = clock.timed("panel", viewer.panel)
+    viewer.window.show = clock.timed("show", viewer.window.show)
+    rows = []
+    x_start = cpu_start = None
+    viewer.show()
+    for frame in range(WARMUP_FRAMES + frames):
+        if frame == WARMUP_FRAMES:
+            if settings.get("gc") == "freeze":
+                gc.collect()
+                gc.freeze()
+            x_start, cpu_start, wall_start = x_server_cpu_s(), time.process_time(), time.perf_counter()
+        clock.spent = {}
+        wall, cpu = time.perf_counter(), time.process_time()
+        if viewer.advance():
+            clock.timed("sim", lambda: (sim.step(), ti.sync()))()
+        viewer.show()
+        clock.add("frame", time.perf_counter() - wall, time.process_time() - cpu)
+        if frame >= WARMUP_FRAMES:
+            rows.append(dict(clock.spent))
+    elapsed = time.perf_counter() - wall_start
+    x_end = x_server_cpu_s()
+    result = {"variant": name, "fps": frames / elapsed, "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
+              "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames}
+    for phase in PHASES:
+        result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows)
+        result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows)
+    return result
+
+
+def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
+    """The window's drawing before our renderer took over: GGUI's own particles (a sphere impostor per
+    particle whose fragment shader writes depth) and lines."""
+    import taichi as ti
+
+    from pbf.app.render import LIGHT_DIRECTION
+
+    if not hasattr(viewer, "ggui_edges"):
+        viewer.ggui_edges = ti.Vector.field(3, ti.f32, shape=len(viewer.edges))
+        viewer.ggui_edges.from_numpy(viewer.edges)
+        viewer.ggui_camera = ti.ui.Camera()
+    view = viewer.camera.view()
+    camera = viewer.ggui_camera
+    camera.position(*view.eye)
+    camera.lookat(*view.target)
+    camera.up(0.0, 1.0, 0.0)
+    camera.fov(view.fov_deg)
+    scene = viewer.window.get_scene()
+    scene.set_camera(camera)
+    scene.ambient_light((0.35, 0.35, 0.35))
+    scene.point_light(pos=tuple(view.eye + 10.0 * LIGHT_DIRECTION), color=(0.9, 0.9, 0.9))
+    width, height = viewer.window.get_window_shape()
+    particles = viewer.sim.readout()
+    colour = {"per_vertex_color": viewer.colours.update()} if per_vertex_colour else {"color": (0.3, 0.5, 0.9)}
+    scene.particles(particles.positions, radius=particles.radius_m * height / width, index_count=particles.count,
+                    **colour)
+    if lines:
+        scene.lines(viewer.ggui_edges, width=1.5, color=tuple(viewer.render.container_rgb))
+    canvas = viewer.window.get_canvas()
+    canvas.set_background_color(tuple(viewer.render.background_rgb))
+    canvas.scene(scene)
+
+
+def draw_through_set_image(viewer) -> None:
+    """Our renderer's frame handed over through GGUI's public ``Canvas.set_image`` (which converts it
+    with a pass over every pixel) instead of ``window.show_packed``."""
+    from pbf.app import window
+
+    show_packed = window.show_packed
+    window.show_packed = lambda canvas, packed: canvas.set_image(packed.view("u1").reshape(*packed.shape, 4))
+    try:
+        window.WindowViewer.draw(viewer)
+    finally:
+        window.show_packed = show_packed
+
+
+def table(results: dict[str, list[dict]]) -> str:
+    def cell(rows, key):
+        values = [r[key] for r in rows if r[key] is not None]
+        return f"{statistics.median(values):.1f}" if values else "-"
+
+    header = ("| variant | fps | frame ms | sim ms | draw ms | panel ms | show ms | cpu ms/frame | X ms/frame | "
+              "sim, draw, show cpu ms |")
+    lines = [header, "|---|" + "---:|" * (header.count("|") - 2)]
+    for name, rows in results.items():
+        lines.append(f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
+                     f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
+                     f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
+                     f"{cell(rows, 'show_cpu')} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=150, help="measured frames per run (default 150)")
+    parser.add_argument("--rounds", type=int, default=3, help="runs of each variant, alternated (default 3)")
+    parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
+                        help=f"comma-separated, from: {', '.join(VARIANTS)}")
+    parser.add_argument("--scene", default="dam_break")
+    parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
+    args = parser.parse_args(argv)
+    if args.one:
+        print(json.dumps(measure(args.one, args.frames, args.scene)), flush=True)
+        return
+    names = [name.strip() for name in args.variants.split(",") if name.strip()]
+    unknown = [name for name in names if name not in VARIANTS]
+    if unknown:
+        parser.error(f"unknown variant {unknown[0]!r}; known: {', '.join(VARIANTS)}")
+    results = {name: [] for name in names}
+    for round_ in range(args.rounds):
+        for name in names:
+            # Environment variables of a variant are set before the process starts: the C library
+            # and the Vulkan driver read theirs when they load.
+            run = subprocess.run([sys.executable, __file__, "--one", name, "--frames", str(args.frames),
+                                  "--scene", args.scene], capture_output=True, text=True,
+                                 env={**os.environ, **VARIANTS[name].get("env", {})})
+            if run.returncode != 0:
+                raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
+            result = json.loads(run.stdout.strip().splitlines()[-1])
+            results[name].append(result)
+            print(f"round {round_ + 1}/{args.rounds} {name}: {result['fps']:.1f} fps, "
+                  f"sim {result['sim']:.1f} + draw {result['draw']:.1f} + panel {result['panel']:.1f} + "
+                  f"show {result['show']:.1f} ms", file=sys.stderr, flush=True)
+    print(f"{args.scene}, {args.frames} frames × {args.rounds} rounds, medians (ms per frame; cpu: all threads)")
+    print(table(results))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,163 @@
+"""The window's frames without a display: each is our renderer's image handed to GGUI's canvas as
+packed RGBA words (checked against GGUI itself where Vulkan is available), the panel shows the
+simulation's and the renderer's milliseconds apart, and its statistics are not recomputed every
+frame."""
+import re
+import time
+
+import numpy as np
+import pytest
+import taichi as ti
+from scenes import small_dam_break
+
+from pbf import Simulation
+from pbf.app import window as window_module
+from pbf.app.render import SphereRenderer, unpack_rgb
+from pbf.app.window import WindowViewer, show_packed
+
+W, H = 160, 90
+
+
+class Recorder:
+    """GGUI's C++ canvas as ``show_packed`` sees it: records what it was handed."""
+
+    def __init__(self):
+        self.images = []
+
+    def set_image(self, info):
+        self.images.append(info)
+
+
+class Panel:
+    def __init__(self, texts):
+        self.texts = texts
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def text(self, line):
+        self.texts.append(line)
+
+    def slider_int(self, name, value, low, high):
+        return value
+
+    slider_float = slider_int
+
+
+class DrawingWindow:
+    """What WindowViewer asks of a GGUI window to draw a frame: a canvas, a panel, show()."""
+
+    running = True
+
+    def __init__(self):
+        self.canvas = Recorder()
+        self.texts = []
+        self.shown = 0
+
+    def get_events(self, kind):
+        return []
+
+    def is_pressed(self, key):
+        return False
+
+    def get_cursor_pos(self):
+        return (0.5, 0.5)
+
+    def get_window_shape(self):
+        return (W, H)
+
+    def get_canvas(self):
+        return self
+
+    def get_gui(self):
+        return self
+
+    def sub_window(self, name, x, y, width, height):
+        return Panel(self.texts)
+
+    def show(self):
+        self.shown += 1
+
+
+def small_scene():
+    scene = small_dam_break()
+    scene["render"] = {"width_px": W, "height_px": H}
+    return scene
+
+
+def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is():
+    sim = Simulation(small_scene())
+    window = DrawingWindow()
+    viewer = WindowViewer(sim, window)
+    viewer.show()
+    assert window.shown == 1 and len(window.canvas.images) == 1
+    info = window.canvas.images[0]
+    packed = viewer.sphere_renderer.packed
+    assert list(info.shape) == [W, H] and info.field_source == ti._lib.core.FieldSource.HostMappedPtr
+    assert info.dev_alloc.alloc_id == packed.ctypes.data  # the renderer's own array, no copy in between
+    # The same picture as the headless renderer draws from the window's camera.
+    particles = sim.readout()
+    reference = SphereRenderer(W, H, sim.scene.render.background_rgb, sim.scene.render.container_rgb, viewer.edges)
+    expected = reference.render(viewer.camera.view(), particles.positions, viewer.colours.update(), particles.count,
+                                particles.radius_m)
+    assert np.array_equal(unpack_rgb(packed), expected)
+    viewer.surface = True  # key v: the surface renderer's image, through the same hand-over
+    viewer.show()
+    assert window.canvas.images[-1].dev_alloc.alloc_id == viewer.surface_renderer.packed.ctypes.data
+    image = unpack_rgb(viewer.surface_renderer.packed)
+    assert np.array_equal(image, viewer.surface_renderer.image.to_numpy())
+
+
+def test_the_panel_shows_simulation_and_render_milliseconds_apart():
+    sim = Simulation(small_scene())
+    window = DrawingWindow()
+    viewer = WindowViewer(sim, window)
+    viewer.show()
+    assert [text for text in window.texts if text.startswith("sim ")] == [
+        "sim - ms, render - ms (draw - + show -)"]  # nothing stepped or drawn yet
+    assert viewer.advance()
+    time.sleep(0.05)  # a step of 50 ms, as the loop's sim.step() would take
+    viewer.show()
+    viewer.show()  # the panel of a frame shows the previous frame's rendering
+    line = [text for text in window.texts if text.startswith("sim ")][-1]
+    sim_ms, render_ms, draw_ms, show_ms = map(float, re.fullmatch(
+        r"sim (\S+) ms, render (\S+) ms \(draw (\S+) \+ show (\S+)\)", line).groups())
+    assert 50.0 <= sim_ms < 1000.0
+    assert draw_ms > 0.0 and show_ms >= 0.0 and render_ms == pytest.approx(draw_ms + show_ms, abs=0.11)
+
+
+def test_statistics_are_recomputed_at_most_every_interval_while_running(monkeypatch):
+    monkeypatch.setattr(window_module, "STATS_INTERVAL_S", 1e9)
+    sim = Simulation(small_scene())
+    viewer = WindowViewer(sim, DrawingWindow())
+    assert viewer.current_stats()["frame"] == 0
+    sim.step()
+    assert viewer.current_stats()["frame"] == 0  # running: the figures of a moment ago
+    viewer.paused = True
+    assert viewer.current_stats()["frame"] == 1  # paused (or a single step): at once
+    monkeypatch.setattr(window_module, "STATS_INTERVAL_S", 0.0)
+    viewer.paused = False
+    sim.step()
+    assert viewer.current_stats()["frame"] == 2
+
+
+def test_ggui_shows_a_packed_image_as_its_own_set_image_does():
+    # Against GGUI itself, offscreen; needs Vulkan (a GPU driver, or Mesa's lavapipe).
+    try:
+        window = ti.ui.Window("packed", (64, 48), show_window=False)
+    except RuntimeError as error:
+        pytest.skip(f"no GGUI here: {str(error).strip().splitlines()[-1]}")
+    rgb = np.zeros((64, 48, 3), np.uint8)
+    rgb[...] = (20, 40, 60)
+    rgb[:32, 24:] = (250, 10, 10)  # x < 32 and y ≥ 24, y up: the top left quarter
+    packed = np.zeros((64, 48), np.uint32)
+    packed.view(np.uint8).reshape(64, 48, 4)[...] = np.concatenate([rgb, np.full((64, 48, 1), 255, np.uint8)], -1)
+    show_packed(window.get_canvas(), packed)
+    ours = np.round(window.get_image_buffer_as_numpy()[..., :3] * 255).astype(np.uint8)  # (W, H), y up
+    window.get_canvas().set_image(rgb)  # GGUI's public way, through its conversion kernel
+    theirs = np.round(window.get_image_buffer_as_numpy()[..., :3] * 255).astype(np.uint8)
+    assert np.array_equal(ours, theirs)
+    assert tuple(ours[5, 45]) == (250, 10, 10) and tuple(ours[50, 5]) == (20, 40, 60)
