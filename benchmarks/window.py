@@ -24,16 +24,19 @@ import sys
 import time
 from pathlib import Path
 
+BEFORE = {"env": {"LP_PERF": ""}, "stats_interval_s": 0.0}
+"""With "draw": "ggui", the window as it was before our renderer drew it: GGUI's particles and lines,
+lavapipe's default (bilinear) sampling, statistics every frame."""
 # What each variant changes against "window" (the window as python run.py opens it).
 VARIANTS = {
     "window": {},
-    "ggui-particles": {"draw": "ggui"},
-    "ggui-uniform-colour": {"draw": "ggui", "colour": False},
-    "ggui-no-lines": {"draw": "ggui", "lines": False},
+    "ggui-particles": {"draw": "ggui", **BEFORE},
+    "ggui-uniform-colour": {"draw": "ggui", "colour": False, **BEFORE},
+    "ggui-no-lines": {"draw": "ggui", "lines": False, **BEFORE},
     "surface": {"surface": True},
     "empty-canvas": {"draw": "none"},
     "paused": {"paused": True},
-    "paused-ggui-particles": {"paused": True, "draw": "ggui"},
+    "paused-ggui-particles": {"paused": True, "draw": "ggui", **BEFORE},
     "no-panel": {"panel": False},
     "no-vsync": {"vsync": False},
     "set-image": {"draw": "set_image"},
