@@ -276,10 +276,17 @@ class Time:
 
 @dataclass(frozen=True)
 class Solver:
-    iterations: int = key(4, _between(1, 100), "Jacobi iterations of the density constraint per substep (the most, "
+    iterations: int = key(10, _between(1, 100), "Jacobi iterations of the density constraint per substep (the most, "
                           "with target_density_error)")
-    target_density_error: float = key(0.0, _between(0.0, 1.0), "stop iterating once the mean of max(ρ/ρ0 − 1, 0) "
-                                      "is below this; 0 always runs all iterations")
+    min_iterations: int = key(1, _between(1, 100), "Jacobi iterations every substep runs, whatever the error")
+    target_density_error: float = key(0.001, _between(0.0, 1.0), "stop iterating once the mean of max(ρ/ρ0 − 1, 0) "
+                                      "is below this (and min_iterations ran); 0 always runs all iterations")
+    chebyshev_rho: float = key(0.9, _between(0.0, 0.99), "spectral radius ρ assumed by the Chebyshev "
+                               "acceleration of the Jacobi iterations (Wang 2015); 0: plain Jacobi")
+    divergence_iterations: int = key(1, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
+                                     "(velocity level, before the prediction) per substep; 0 switches it off")
+    warm_start: float = key(1.0, _between(0.0, 1.0), "fraction of the last substep's divergence pressure the "
+                            "next one starts from")
     kernel_ratio: float = key(2.2, _between(1.5, 4.0), "smoothing radius over spacing, h/s")
     relaxation: float = key(0.1, _between(1e-6, 100.0), "ε of Eq. (10) in the dimensionless form; it keeps λ "
                             "finite for a particle with no neighbour (float32: ≥ 1e-6)")
@@ -770,6 +777,14 @@ def default_look_at_m(scene: Scene) -> Vec3:
     return (centre[0], centre[1] - 0.08 * (hi[1] - lo[1]), centre[2])
 
 
+def _check_solver(scene: Scene, source: str) -> None:
+    """The iteration counts must leave room between the least and the most."""
+    s = scene.solver
+    if s.min_iterations > s.iterations:
+        raise SceneError(f"{source}: key 'solver.min_iterations' = {s.min_iterations} is more than solver.iterations = "
+                         f"{s.iterations}, the most a substep runs; allowed: 1 to {s.iterations}")
+
+
 def _check_camera(scene: Scene, source: str) -> None:
     lo, hi = scene.container.min_m, scene.container.max_m
     centre = [0.5 * (a + b) for a, b in zip(lo, hi)]
@@ -804,6 +819,7 @@ def _check_scene(scene: Scene) -> None:
     _check_wave_maker(scene, source)
     _check_emitters(scene, source)
     _check_time(scene, source)
+    _check_solver(scene, source)
     _check_camera(scene, source)
     _check_render(scene, source)
 

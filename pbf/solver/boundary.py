@@ -57,6 +57,8 @@ class Box:
         self.piston_period_s = params.piston_period_s
         self.piston_x = ti.field(ti.f32, shape=())
         """Where the piston wall stands now (m); set by :meth:`move_walls` before each substep."""
+        self.piston_v = ti.field(ti.f32, shape=())
+        """The piston's velocity over the coming substep (m/s, along x)."""
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
         self.obstacle_count = len(params.obstacles)
@@ -82,11 +84,15 @@ class Box:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move_walls(self, piston_time_s: float) -> None:
-        """Place moving walls where they stand at the end of the coming substep, where x* is projected,
-        so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt)."""
+    def move_walls(self, piston_time_s: float, dt: float = 0.0) -> None:
+        """Place moving walls where they stand at the end of the coming substep of ``dt``, where x* is
+        projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt);
+        the piston's velocity over that substep is what the divergence pre-correction sees (0 when
+        ``dt`` is 0: placed, not moved)."""
         if self.wave_maker:
-            self.piston_x[None] = self.piston_position_m(piston_time_s)
+            position = self.piston_position_m(piston_time_s)
+            self.piston_v[None] = (position - self.piston_x[None]) / dt if dt > 0.0 else 0.0
+            self.piston_x[None] = position
 
     @ti.func
     def _lower(self):
@@ -95,6 +101,16 @@ class Box:
         if ti.static(self.wave_maker):
             lower[0] = self.piston_x[None]
         return lower
+
+    @ti.func
+    def wall_velocity(self, p):
+        """Velocity of the wall ghost that p sees (m/s): the piston's within h of it, else zero."""
+        velocity = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.wave_maker):
+            below = p[0] - self.piston_x[None]
+            if below < self.kernel_radius and below <= self.upper[0] - p[0]:
+                velocity[0] = self.piston_v[None]
+        return velocity
 
     @ti.func
     def clamp(self, p):

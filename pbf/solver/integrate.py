@@ -1,5 +1,5 @@
-"""Time integration: prediction and reordering by cell (Algorithm 1, lines 1-4); lines 20-23 are
-``pbf.solver.postprocess``."""
+"""Time integration: external forces, prediction and reordering by cell (Algorithm 1, lines 1-4);
+lines 20-23 are ``pbf.solver.postprocess``."""
 import numpy as np
 import taichi as ti
 
@@ -35,17 +35,25 @@ class Integrator:
         self.predicted = PredictedPositions(state.capacity)
         self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.capacity))
         self._int = ti.field(ti.i32, shape=state.capacity)
+        self._scalar = ti.field(ti.f32, shape=state.capacity)
 
     @ti.kernel
-    def _predict(self, x_pred: ti.template(), dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
+    def _accelerate(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
         for i in range(self.state.active[None]):
-            v = self.state.v[i] + dt * gravity
-            self.state.v[i] = v
-            x_pred[i] = self.box.clamp(self.state.x[i] + dt * v)
+            self.state.v[i] += dt * gravity
 
-    def predict(self, dt: float, gravity_m_s2) -> None:
-        """v ← v + Δt g;  x* ← x + Δt v, kept inside the box so the grid never sees a lost particle."""
-        self._predict(self.predicted.current, dt, gravity_m_s2)
+    def accelerate(self, dt: float, gravity_m_s2) -> None:
+        """v ← v + Δt g (Algorithm 1, line 2)."""
+        self._accelerate(dt, gravity_m_s2)
+
+    @ti.kernel
+    def _predict(self, x_pred: ti.template(), dt: ti.f32):
+        for i in range(self.state.active[None]):
+            x_pred[i] = self.box.clamp(self.state.x[i] + dt * self.state.v[i])
+
+    def predict(self, dt: float) -> None:
+        """x* ← x + Δt v (line 3), kept inside the box so the grid never sees a lost particle."""
+        self._predict(self.predicted.current, dt)
 
     @ti.kernel
     def _push(self, point: ti.types.vector(3, ti.f32), velocity: ti.types.vector(3, ti.f32), radius: ti.f32):
@@ -72,12 +80,14 @@ class Integrator:
             self._vec[1, slot] = self.state.v[i]
             self._vec[2, slot] = x_pred[i]
             self._int[slot] = self.state.index[i]
+            self._scalar[slot] = self.state.multiplier[i]
         for slot in range(self.state.active[None]):
             self.state.x[slot] = self._vec[0, slot]
             self.state.v[slot] = self._vec[1, slot]
             x_pred[slot] = self._vec[2, slot]
             self.state.index[slot] = self._int[slot]
+            self.state.multiplier[slot] = self._scalar[slot]
 
     def reorder(self, sorted_from) -> None:
-        """Apply the grid's counting-sort permutation to the state and to x*."""
+        """Apply the grid's counting-sort permutation to the state (Λ included) and to x*."""
         self._reorder(sorted_from, self.predicted.current)

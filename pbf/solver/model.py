@@ -142,10 +142,18 @@ class Control:
 
     iterations: int
     """Jacobi iterations per substep (the most, with a target)."""
+    min_iterations: int
+    """Jacobi iterations every substep runs before the target may stop them."""
     substeps: int
     """Substeps per frame asked for; the CFL limit may take more."""
     target_density_error: float
     """Stop iterating once the mean of max(ρ/ρ0 − 1, 0) is below this; 0 runs all iterations."""
+    chebyshev_rho: float
+    """ρ of the Chebyshev weights of the Jacobi iterations; 0 leaves them plain."""
+    divergence_iterations: int
+    """Iterations of the divergence pre-correction; 0 skips the pass."""
+    warm_start: float
+    """Fraction of the last substep's divergence pressure the next starts from."""
     xsph: float
     """XSPH c (Eq. 15), dimensionless; 0 skips the term."""
     vorticity: float
@@ -160,8 +168,10 @@ class Control:
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:
-        return cls(scene.solver.iterations, scene.time.substeps, scene.solver.target_density_error,
-                   scene.viscosity.xsph, scene.vorticity.epsilon, scene.gravity_m_s2)
+        s = scene.solver
+        return cls(s.iterations, s.min_iterations, scene.time.substeps, s.target_density_error, s.chebyshev_rho,
+                   s.divergence_iterations, s.warm_start, scene.viscosity.xsph, scene.vorticity.epsilon,
+                   scene.gravity_m_s2)
 
 
 def available_memory_bytes() -> int:

@@ -13,7 +13,8 @@ import numpy as np
 from pbf import scene as schema
 from pbf.solver.backend import start_backend
 from pbf.solver.boundary import Box
-from pbf.solver.density import DensityConstraint
+from pbf.solver.density import Chebyshev, DensityConstraint
+from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.diagnostics import Diagnostics
 from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
@@ -22,7 +23,8 @@ from pbf.solver.model import Control, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
 
-STAGES = ("predict", "sort by cell", "neighbour lists", "solver iterations", "velocity, vorticity, XSPH, x = x*")
+STAGES = ("predict", "sort by cell", "neighbour lists", "divergence pre-correction", "solver iterations",
+          "velocity, vorticity, XSPH, x = x*")
 """The stages :meth:`Simulation.substep` reports to its :class:`StageHook`, in order."""
 
 
@@ -79,6 +81,7 @@ class Simulation:
         self.grid = NeighbourGrid(model.grid, self.state.active)
         self.integrator = Integrator(self.state, self.box)
         self.density = DensityConstraint(model.density, self.box, self.grid)
+        self.divergence = DivergenceCorrection(model.density, self.state, self.box, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
         self.reset()
@@ -99,9 +102,10 @@ class Simulation:
         self.restore(Snapshot(positions, velocities, 0.0, 0))
 
     def snapshot(self) -> Snapshot:
-        """Positions, velocities (creation order), time and frame: what :meth:`restore` takes."""
+        """Positions, velocities, the divergence pressure (creation order), time and frame: what
+        :meth:`restore` takes."""
         return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
-                        self.piston_time_s)
+                        self.piston_time_s, self.state.in_creation_order(self.state.multiplier))
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
@@ -109,10 +113,14 @@ class Simulation:
         if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
             raise ValueError(f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
                              f"{positions.shape} and {velocities.shape}")
+        multipliers = snapshot.divergence_multipliers
+        if multipliers is not None and np.shape(multipliers) != positions.shape[:1]:
+            raise ValueError(f"restore: expected divergence_multipliers of shape ({len(positions)},), got "
+                             f"{np.shape(multipliers)}")
         if len(positions) > self.model.capacity:
             raise ValueError(f"restore: {len(positions):,} particles, more than the {self.model.capacity:,} this "
                              f"scene allocates (its blocks and emitters)")
-        self.state.load(positions, velocities)
+        self.state.load(positions, velocities, multipliers)
         self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
@@ -157,7 +165,7 @@ class Simulation:
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
-        self.box.move_walls(self.piston_time_s)
+        self.box.move_walls(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""
@@ -167,19 +175,28 @@ class Simulation:
         x_star = self.integrator.predicted
         self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
         with hook.stage("predict"):
-            self.integrator.predict(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
+            self.integrator.accelerate(dt, control.gravity_m_s2)  # lines 1-4: v += Δt g, x* = x + Δt v
+            self.integrator.predict(dt)
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
             self._sort_by_cell(x_star.current)
         with hook.stage("neighbour lists"):
             self.grid.build_neighbours(x_star.current)
+        with hook.stage("divergence pre-correction"):            # ours: v made divergence-free (at x,
+            if control.divergence_iterations > 0:                # warm-started), then x* = x + Δt v again
+                self.divergence.run(self.grid.neighbours, dt, control.warm_start, control.divergence_iterations)
+                self.integrator.predict(dt)
         with hook.stage("solver iterations"):
+            chebyshev, last_error = Chebyshev(control.chebyshev_rho), math.inf
             for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
                 error = self.density.project(x_star.current, x_star.other, self.grid.neighbours,
-                                             measure=target > 0.0, first=k == 0)
+                                             measure=target > 0.0, first=k == 0, weight=chebyshev.next())
                 x_star.swap()                                    # Jacobi: x* + Δx went into the other buffer
                 self.iterations_used = k + 1
-                if target > 0.0 and error < target:              # the error this iteration started from
-                    break
+                if target > 0.0 and error < target and k + 1 >= control.min_iterations:
+                    break                                        # the error this iteration started from
+                if target > 0.0 and error > last_error:          # the acceleration overshot: plain again
+                    chebyshev.restart()
+                last_error = error
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             self.postprocess.run(x_star.current, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
                                  control.vorticity, control.xsph)           # confinement, XSPH, x = x*
@@ -204,9 +221,12 @@ class Simulation:
         return self.state.velocities()
 
     def pressures(self) -> np.ndarray:
-        """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers, in creation order."""
+        """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers (the position
+        iterations' and the divergence pre-correction's), in creation order."""
         scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
-        return self.state.in_creation_order(self.density.lam_total) * np.float32(scale)
+        total = (self.state.in_creation_order(self.density.lam_total)
+                 + self.state.in_creation_order(self.state.multiplier) * np.float32(self.dt_s**2))
+        return total * np.float32(scale)
 
     def neighbour_counts(self) -> np.ndarray:
         """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""

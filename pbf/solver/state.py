@@ -20,6 +20,8 @@ class Snapshot:
     """Layers each emitter had added (empty: none, as at the start)."""
     piston_time_s: float | None = None
     """How long the wave maker had run (None: as long as the scene, it was never switched off)."""
+    divergence_multipliers: np.ndarray | None = None
+    """(n,) float32 Λ, the divergence pressure the next substep starts from (None: none, as at rest)."""
 
 
 @ti.data_oriented
@@ -32,6 +34,8 @@ class State:
     * ``x``: (capacity,) vector(3, f32), positions, m
     * ``v``: (capacity,) vector(3, f32), velocities, m/s
     * ``index``: (capacity,) i32, the particle's creation index (its row in :meth:`positions`)
+    * ``multiplier``: (capacity,) f32, Λ of ``pbf.solver.divergence``: the last substep's divergence
+      pressure, which the next one starts from
     * ``active``: () i32, the number of live particles
     """
 
@@ -41,6 +45,7 @@ class State:
         self.v = ti.Vector.field(3, ti.f32, shape=capacity)
         self.index = ti.field(ti.i32, shape=capacity)
         self.active = ti.field(ti.i32, shape=())
+        self.multiplier = ti.field(ti.f32, shape=capacity)
         self._unsorted = ti.Vector.field(3, ti.f32, shape=capacity)
         self._unsorted_scalar = ti.field(ti.f32, shape=capacity)
 
@@ -49,13 +54,18 @@ class State:
         """The number of live particles (one read from the device)."""
         return int(self.active[None])
 
-    def load(self, positions: np.ndarray, velocities: np.ndarray) -> None:
-        """Make the particles of (n, 3) arrays in creation order (m, m/s) the live ones, n ≤ capacity."""
+    def load(self, positions: np.ndarray, velocities: np.ndarray, multipliers: np.ndarray | None = None) -> None:
+        """Make the particles of (n, 3) arrays in creation order (m, m/s) the live ones, n ≤ capacity,
+        with their (n,) Λ (zero when None)."""
         n = len(positions)
         padded = np.zeros((2, self.capacity, 3), np.float32)
         padded[0, :n], padded[1, :n] = positions, velocities
         self.x.from_numpy(padded[0])
         self.v.from_numpy(padded[1])
+        scalars = np.zeros(self.capacity, np.float32)
+        if multipliers is not None:
+            scalars[:n] = multipliers
+        self.multiplier.from_numpy(scalars)
         self.index.from_numpy(np.arange(self.capacity, dtype=np.int32))
         self.active[None] = n
 

@@ -1,0 +1,122 @@
+"""The divergence pre-correction: a velocity-level pass inside the prediction (Algorithm 1, between
+the neighbour search and the iterations) that removes the part of v that would compress the fluid,
+with pressure warm-started from the previous substep; x* is then predicted again from the new v.
+
+Why. PBF's iterations start every substep from zero pressure. A pool at rest needs the hydrostatic
+pressure, built anew each substep from the compression gravity causes, and a few Jacobi iterations
+rebuild the long waves of that pressure (the column's height) only partly: the seed pool stayed 1.25%
+compressed. Carrying the multipliers of the position iterations over instead acts as an integral
+controller on positions and left a pool at rest jittering at 0.1-0.4 m/s (docs/BENCHMARKS.md, levers).
+Carried over at the velocity level, as in DFSPH's divergence solver (Bender & Koschier 2015) and in
+the warm-started velocity solvers of rigid-body contact, the pressure impulse is damped by the very
+velocities it acts on, and the position iterations are left with what the velocity pass missed.
+
+What. The change of the density constraint of ``pbf.solver.density`` that v would cause over Δt,
+
+    ΔC_i = (Δt/h) [Σ_j ĝ_ij · (v_i − v_j) + ĝ_wall · (v_i − v_wall)],
+
+is driven to c_i = ΔC_i + min(C_i, 0) ≤ 0 (a particle below ρ0 may fill up to it, one at or above ρ0
+may not compress further; its existing error is the position iterations' job, as carrying that over
+is what made the integral controller) by Jacobi iterations in the form of Eq. 10:
+
+    δλ̂_i = −ω c_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂),   Λ_i ← min(Λ_i + δλ̂_i, 0)
+    Δv_i  = (h/Δt) [Σ_j (δλ̂_i + δλ̂_j) ĝ_ij + δλ̂_i ĝ_wall]
+
+Λ_i, the multiplier accumulated over the substep, is clamped at zero (pressure, never suction: a
+separating surface stays free, a lone particle falls freely), and the next substep starts by
+applying Λ again (warm start, scaled by (Δt_new/Δt_old)² when the CFL limit changes the step: Λ/Δt²
+is a pressure), so its iterations only correct the change. Positions stay at x during the pass; the
+neighbour lists are those just built at x* (pairs that only come within h at x are separating, and
+the kernel gives pairs beyond h nothing).
+"""
+import taichi as ti
+
+from pbf.solver.grid import NeighbourList
+from pbf.solver.model import DensityParams
+from pbf.solver.sph import kernel, kernel_and_gradient, kernel_gradient
+
+
+@ti.data_oriented
+class DivergenceCorrection:
+    """The pass's kernels and scratch. Λ persists between substeps as ``State.multiplier`` = Λ/Δt² (1/s²),
+    a pressure, which needs no record of the Δt it was found with."""
+
+    def __init__(self, params: DensityParams, state, box, grid, density):
+        self.state = state
+        self.box = box
+        self.grid = grid
+        self.density = density
+        self.h = params.kernel_radius_m
+        self.volume = params.particle_volume_m3
+        self.omega = params.omega
+        self.relaxation = params.relaxation
+        self.denominator = ti.field(ti.f32, shape=params.particle_count)
+        """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ at the fixed positions."""
+        self.deficit = ti.field(ti.f32, shape=params.particle_count)
+        """min(C_i, 0) at x: how far below ρ0 particle i may still fill."""
+        self.increment = ti.field(ti.f32, shape=params.particle_count)
+        """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
+
+    @ti.func
+    def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), h_over_dt, start: ti.template()):
+        """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
+        min(C_i, 0) and the denominator of δλ̂_i."""
+        xi = x[i]
+        h = self.h
+        increment_i = self.increment[i]
+        dv = ti.Vector([0.0, 0.0, 0.0])
+        ratio = self.volume * kernel(0.0, h)
+        gradient_i = ti.Vector([0.0, 0.0, 0.0])
+        sum_sq = 0.0
+        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+            j = neighbours[k]
+            if ti.static(start):
+                w, grad_w = kernel_and_gradient(xi - x[j], h)
+                g = self.volume * h * grad_w
+                ratio += self.volume * w
+                gradient_i += g
+                sum_sq += g.norm_sqr()
+                dv += (increment_i + self.increment[j]) * g
+            else:
+                dv += (increment_i + self.increment[j]) * self.volume * h * kernel_gradient(xi - x[j], h)
+        wall, wall_gradient = self.box.wall_density(xi)
+        dv += increment_i * h * wall_gradient
+        if ti.static(start):
+            self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
+            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + self.relaxation
+        return h_over_dt * dv
+
+    @ti.kernel
+    def start(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, warm: ti.f32):
+        """v += Δv of the warm start Λ ← warm · Λ, with min(C_i, 0) and the denominators at x."""
+        for i in range(self.state.active[None]):
+            self.state.multiplier[i] *= warm
+            self.increment[i] = self.state.multiplier[i] * dt * dt
+        for i in range(self.state.active[None]):
+            self.state.v[i] += self.velocity_change(x, i, neighbours, self.h / dt, True)
+
+    @ti.kernel
+    def iterate(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
+        """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
+        h = self.h
+        for i in range(self.state.active[None]):
+            xi, vi = x[i], self.state.v[i]
+            rate = 0.0
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                j = neighbours[k]
+                rate += self.volume * h * kernel_gradient(xi - x[j], h).dot(vi - self.state.v[j])
+            _, wall_gradient = self.box.wall_density(xi)
+            rate += h * wall_gradient.dot(vi - self.box.wall_velocity(xi))
+            carried = self.state.multiplier[i] * dt * dt
+            c = dt / h * rate + self.deficit[i]
+            total = ti.min(carried - self.omega * c / self.denominator[i], 0.0)
+            self.increment[i] = total - carried
+            self.state.multiplier[i] = total / (dt * dt)
+        for i in range(self.state.active[None]):
+            self.state.v[i] += self.velocity_change(x, i, neighbours, h / dt, False)
+
+    def run(self, neighbours, dt: float, warm: float, iterations: int) -> None:
+        """Warm start with ``warm`` · Λ, then ``iterations`` Jacobi iterations on state.v at state.x."""
+        self.start(self.state.x, neighbours, dt, warm)
+        for _ in range(iterations):
+            self.iterate(self.state.x, neighbours, dt)
