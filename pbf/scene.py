@@ -272,6 +272,8 @@ class Time:
     max_cfl: float = key(1.2, _between(0.01, 4.0), "most particle spacings the fastest particle may travel in one "
                          "substep; a frame takes more substeps when it would go further")
     max_substeps: int = key(64, _between(1, 1000), "cap on the substeps one frame may take (a warning when reached)")
+    settle_s: float = key(0.0, _between(0.0, 60.0), "seconds of solver steps, velocities zeroed after each, that "
+                          "bring the blocks to the solver's own rest state before t = 0 (not with emitters)")
 
 
 @dataclass(frozen=True)
@@ -777,6 +779,13 @@ def default_look_at_m(scene: Scene) -> Vec3:
     return (centre[0], centre[1] - 0.08 * (hi[1] - lo[1]), centre[2])
 
 
+def _check_settle(scene: Scene, source: str) -> None:
+    """Settling runs the blocks alone: water that an emitter adds later cannot be settled beforehand."""
+    if scene.time.settle_s > 0.0 and scene.emitters:
+        raise SceneError(f"{source}: key 'time.settle_s' = {_num(scene.time.settle_s)} settles the blocks before t = 0, "
+                         f"but this scene has emitters, whose water arrives later; allowed: 0 with emitters")
+
+
 def _check_solver(scene: Scene, source: str) -> None:
     """The iteration counts must leave room between the least and the most."""
     s = scene.solver
@@ -820,6 +829,7 @@ def _check_scene(scene: Scene) -> None:
     _check_emitters(scene, source)
     _check_time(scene, source)
     _check_solver(scene, source)
+    _check_settle(scene, source)
     _check_camera(scene, source)
     _check_render(scene, source)
 

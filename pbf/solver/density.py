@@ -153,9 +153,10 @@ class Chebyshev:
 
         w = 1 (the first iteration),  2 / (2 − ρ²) (the second),  4 / (4 − ρ² w_prev) (later),
 
-    ρ the spectral radius assumed for the plain iteration (0: plain Jacobi, every w = 1). The weights
-    rise from 1 toward 2 / (1 + √(1 − ρ²)): they extrapolate along the slow long waves that plain
-    Jacobi shrinks by little per iteration. :meth:`restart` falls back to plain Jacobi and begins
+    ρ the spectral radius assumed for the plain iteration (0: plain Jacobi, every w = 1). After the
+    first, the weights fall from 2 / (2 − ρ²) toward 2 / (1 + √(1 − ρ²)) (1.39 at ρ = 0.9): they
+    extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9
+    is the boldest setting a pool at rest tolerates (0.95 set it boiling, docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins
     the sequence again, for when the error rose (ρ was too bold for this state).
     """
 

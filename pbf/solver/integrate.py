@@ -47,6 +47,12 @@ class Integrator:
         self._accelerate(dt, gravity_m_s2)
 
     @ti.kernel
+    def damp(self, factor: ti.f32):
+        """v ← factor · v (settling before t = 0, ``Simulation.reset``)."""
+        for i in range(self.state.active[None]):
+            self.state.v[i] *= factor
+
+    @ti.kernel
     def _predict(self, x_pred: ti.template(), dt: ti.f32):
         for i in range(self.state.active[None]):
             x_pred[i] = self.box.clamp(self.state.x[i] + dt * self.state.v[i])

@@ -5,7 +5,7 @@ import contextlib
 import math
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ContextManager, Protocol
 
 import numpy as np
@@ -26,6 +26,11 @@ from pbf.solver.state import Snapshot, State
 STAGES = ("predict", "sort by cell", "neighbour lists", "divergence pre-correction", "solver iterations",
           "velocity, vorticity, XSPH, x = x*")
 """The stages :meth:`Simulation.substep` reports to its :class:`StageHook`, in order."""
+
+
+SETTLE_DAMPING = 0.9
+"""Velocities are multiplied by this after each substep of settling (``time.settle_s``): zeroing them
+left only the iterations' creep, and settled too slowly; 0.9 comes to rest within a second."""
 
 
 class StageHook(Protocol):
@@ -96,10 +101,26 @@ class Simulation:
         return self.state.count
 
     def reset(self) -> None:
-        """Restore the scene's initial particles, time and control."""
+        """Restore the scene's initial particles, time and control (settled, with time.settle_s)."""
         self.control = Control.from_scene(self.scene)
         positions, velocities = self.model.initial_particles()
         self.restore(Snapshot(positions, velocities, 0.0, 0))
+        if self.scene.time.settle_s > 0.0:
+            self._settle(self.scene.time.settle_s)
+
+    def _settle(self, seconds: float) -> None:
+        """Step ``seconds`` with the velocities damped by SETTLE_DAMPING after each substep (the wave
+        maker standing still), then start the clock at t = 0 from there: the blocks come close to the
+        positions and the pressure the solver itself holds at rest, so a tank at rest starts near rest
+        instead of sagging into it (docs/VALIDATION.md)."""
+        dt = self.scene.time.frame_dt_s / self.control.substeps
+        self.control.wave_maker_on = False
+        for _ in range(math.ceil(seconds / dt - 1e-9)):
+            self.substep(dt)
+            self.integrator.damp(SETTLE_DAMPING)
+        self.control.wave_maker_on = True
+        settled = self.snapshot()
+        self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
         """Positions, velocities, the divergence pressure (creation order), time and frame: what
