@@ -285,7 +285,7 @@ class Solver:
                                       "is below this (and min_iterations ran); 0 always runs all iterations")
     chebyshev_rho: float = key(0.9, _between(0.0, 0.99), "spectral radius ρ assumed by the Chebyshev "
                                "acceleration of the Jacobi iterations (Wang 2015); 0: plain Jacobi")
-    divergence_iterations: int = key(1, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
+    divergence_iterations: int = key(0, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
                                      "(velocity level, before the prediction) per substep; 0 switches it off")
     warm_start: float = key(1.0, _between(0.0, 1.0), "fraction of the last substep's divergence pressure the "
                             "next one starts from")

@@ -98,7 +98,9 @@ def pair_separation(distance_h, **solver):
     scene = {"name": "pair", "gravity_m_s2": [0.0, 0.0, 0.0],
              "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [1.0, 1.0, 1.0]},
              "fluid": {"spacing_m": 0.05, "blocks": [{"min_m": [0.4, 0.5, 0.5], "max_m": [0.5, 0.55, 0.55]}]},
-             "viscosity": {"xsph": 0.0}, "vorticity": {"epsilon": 0.0}, "solver": solver}
+             "viscosity": {"xsph": 0.0}, "vorticity": {"epsilon": 0.0},
+             # All 4 iterations: the error target would stop after the first (C < 0 reads as no error).
+             "solver": {"iterations": 4, "target_density_error": 0.0, **solver}}
     sim = Simulation(scene)
     h = sim.scene.kernel_radius_m
     start = np.array([[0.5, 0.5, 0.5], [0.5 + distance_h * h, 0.5, 0.5]], np.float32)
