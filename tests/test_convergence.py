@@ -11,7 +11,7 @@ from pbf.solver.density import Chebyshev
 from pbf.study.common import colour_surface_height, fill_height_m
 
 
-def dam_break_errors(overrides, frames=30):
+def dam_break_errors(overrides, frames=20):
     """Mean over frames of the mean density error, and the largest max, of the small dam break."""
     sim = Simulation(small_dam_break(), overrides=overrides)
     means, maxima = [], []
@@ -84,7 +84,7 @@ def test_divergence_pressure_carries_the_hydrostatic_load():
     # A settled column: pressure grows as ρ0 g depth in the interior, and the part the divergence pass
     # carries from substep to substep (Λ) is most of it, so the position iterations only mop up.
     sim = Simulation(column_scene(spacing_m=0.05, substeps=4, iterations=10, divergence_iterations=1))
-    sim.step(90)
+    sim.step(60)
     x = sim.positions()
     carried = sim.state.in_creation_order(sim.state.multiplier) * np.float32(sim.dt_s**2)
     carried *= sim.density.pressure_scale(sim.dt_s) * 1000.0
