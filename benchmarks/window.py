@@ -8,11 +8,14 @@ window"). Needs a display and Vulkan; on a machine without either:
 
 Each variant runs in a fresh process (some levers are environment variables read when the Vulkan
 driver or Taichi starts), the variants alternate round by round, and every figure is the median over
-the rounds of a round's median over its frames, after 30 frames of warm-up (JIT, the first impact).
-The frames are those of ``python run.py``: the seed scene from rest at 1280 × 720, the same camera,
-no input. ``cpu`` is the CPU time of the whole process per frame (every thread: Taichi's, the
-Vulkan driver's), ``X`` that of the X server (Xvfb) when there is one to read; on a 2-core machine the
-frame rate cannot exceed 2000 / (cpu + X) whatever overlaps.
+the rounds of a round's median over its frames, after 30 frames of warm-up (JIT, the first impact);
+``fps`` is the frames over the wall time they took. The frames are those of ``python run.py``: the
+seed scene from rest at 1280 × 720, the same camera, no input, and (variant "window") the
+simulation a frame ahead in a process of its own (``pbf.app.pipeline``); then "sim" is the wait for
+it and "sim in its process" its own step. ``cpu`` is the CPU time of the window's process per frame
+(every thread: Taichi's, the Vulkan driver's), ``sim process cpu`` that of the simulation's process,
+``X`` that of the X server (Xvfb) when there is one to read: on a 2-core machine the frame rate cannot
+exceed 2000 / (their sum), whatever overlaps.
 """
 import argparse
 import gc
@@ -24,39 +27,47 @@ import sys
 import time
 from pathlib import Path
 
-BEFORE = {"env": {"LP_PERF": ""}, "stats_interval_s": 0.0}
-"""With "draw": "ggui", the window as it was before our renderer drew it: GGUI's particles and lines,
-lavapipe's default (bilinear) sampling, statistics every frame."""
+ONE = {"pipeline": False}
+"""The simulation stepped in the window's own process, between frames, instead of a frame ahead in a
+process of its own (``pbf.app.pipeline``): the levers of the rendering are measured this way, where
+each of their milliseconds adds to the frame."""
+BEFORE = {"draw": "ggui", "env": {"LP_PERF": ""}, "stats_interval_s": 0.0, **ONE}
+"""The window as it was before these changes: GGUI's own particles and lines, lavapipe's default
+(bilinear) sampling, statistics every frame, the simulation in the same process."""
 # What each variant changes against "window" (the window as python run.py opens it).
 VARIANTS = {
     "window": {},
-    "ggui-particles": {"draw": "ggui", **BEFORE},
-    "ggui-uniform-colour": {"draw": "ggui", "colour": False, **BEFORE},
-    "ggui-no-lines": {"draw": "ggui", "lines": False, **BEFORE},
+    "one-process": ONE,
+    "before": BEFORE,
+    "before-uniform-colour": {**BEFORE, "colour": False},
+    "before-no-lines": {**BEFORE, "lines": False},
+    "paused": {"paused": True, **ONE},
+    "paused-before": {"paused": True, **BEFORE},
+    "empty-canvas": {"draw": "none", **ONE},
     "surface": {"surface": True},
-    "empty-canvas": {"draw": "none"},
-    "paused": {"paused": True},
-    "paused-ggui-particles": {"paused": True, "draw": "ggui", **BEFORE},
-    "no-panel": {"panel": False},
-    "no-vsync": {"vsync": False},
-    "set-image": {"draw": "set_image"},
-    "unsorted-splat": {"front_to_back": False},
-    "stats-every-frame": {"stats_interval_s": 0.0},
-    "taichi-1-thread": {"cpu_threads": 1},
-    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
-    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}},
-    "lavapipe-bilinear": {"env": {"LP_PERF": ""}},
-    "paused-lavapipe-bilinear": {"paused": True, "env": {"LP_PERF": ""}},
+    "surface-one-process": {"surface": True, **ONE},
+    "set-image": {"draw": "set_image", **ONE},
+    "unsorted-splat": {"front_to_back": False, **ONE},
+    "lavapipe-bilinear": {"env": {"LP_PERF": ""}, **ONE},
+    "stats-every-frame": {"stats_interval_s": 0.0, **ONE},
+    "no-panel": {"panel": False, **ONE},
+    "no-vsync": {"vsync": False, **ONE},
+    "taichi-1-thread": {"cpu_threads": 1, **ONE},
+    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}, **ONE},
+    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}, **ONE},
+    "gc-freeze": {"gc": "freeze", **ONE},
     "malloc-keeps-memory": {"env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
-                                                      "glibc.malloc.trim_threshold=268435456"}},
-    "paused-malloc-keeps-memory": {"paused": True, "env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
-                                                                         "glibc.malloc.trim_threshold=268435456"}},
-    "gc-freeze": {"gc": "freeze"},
-    "paused-gc-freeze": {"paused": True, "gc": "freeze"},
+                                                      "glibc.malloc.trim_threshold=268435456"}, **ONE},
 }
-DEFAULT_VARIANTS = ("window", "ggui-particles", "surface", "empty-canvas", "paused")
+DEFAULT_VARIANTS = ("window", "one-process", "before", "paused", "empty-canvas")
 WARMUP_FRAMES = 30
-PHASES = ("frame", "sim", "draw", "panel", "show")
+PHASES = ("frame", "sim", "sim_own", "draw", "panel", "show")
+
+
+def process_cpu_s(pid: int) -> float:
+    """CPU seconds process ``pid`` has used (all its threads)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def x_server_cpu_s() -> float | None:
@@ -68,8 +79,7 @@ def x_server_cpu_s() -> float | None:
                 continue
             argv = (proc / "cmdline").read_bytes().split(b"\0")
             if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display.encode() in argv:
-                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()
-                return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+                return process_cpu_s(int(proc.name))
         except (OSError, IndexError, UnicodeDecodeError):
             continue
     return None
@@ -99,17 +109,23 @@ def measure(name: str, frames: int, scene: str) -> dict:
     """One variant in this process: the medians over ``frames`` frames after the warm-up."""
     settings = VARIANTS[name]
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
+    from pbf.app.pipeline import SimulationProcess
+    from pbf.scene import load_scene
     from pbf.solver import Simulation, start_backend
 
     import taichi as ti
 
-    start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
-    sim = Simulation(scene, quiet=True)
-    width, height = sim.scene.render.width_px, sim.scene.render.height_px
+    backend = start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
+    scene = load_scene(scene)
     try:
-        gui_window = window.open_window("pbf benchmark", width, height, vsync=settings.get("vsync", True))
+        gui_window = window.open_window("pbf benchmark", scene.render.width_px, scene.render.height_px,
+                                        vsync=settings.get("vsync", True))
     except window.WindowUnavailable as reason:
         raise SystemExit(f"no window: {reason}") from None
+    if settings.get("pipeline", True) and backend == "cpu":  # as the command line makes it for the window
+        sim = SimulationProcess(scene, arch=backend, quiet=True)
+    else:
+        sim = Simulation(scene, arch=backend, quiet=True)
     viewer = window.WindowViewer(sim, gui_window)
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
@@ -127,6 +143,12 @@ def measure(name: str, frames: int, scene: str) -> dict:
     if not settings.get("panel", True):
         viewer.panel = lambda stats: None
 
+    def step():
+        sim.step()
+        ti.sync()
+        if getattr(sim, "step_ms", None) is not None:  # the other process's own time for the frame
+            clock.add("sim_own", 1e-3 * sim.step_ms, 0.0)
+
     clock = Clock()
     viewer.draw = clock.timed("draw", viewer.draw)
     viewer.panel = clock.timed("panel", viewer.panel)
@@ -140,21 +162,28 @@ def measure(name: str, frames: int, scene: str) -> dict:
                 gc.collect()
                 gc.freeze()
             x_start, cpu_start, wall_start = x_server_cpu_s(), time.process_time(), time.perf_counter()
+            other_start = process_cpu_s(sim.process.pid) if hasattr(sim, "process") else None
         clock.spent = {}
         wall, cpu = time.perf_counter(), time.process_time()
         if viewer.advance():
-            clock.timed("sim", lambda: (sim.step(), ti.sync()))()
+            clock.timed("sim", step)()
         viewer.show()
         clock.add("frame", time.perf_counter() - wall, time.process_time() - cpu)
         if frame >= WARMUP_FRAMES:
             rows.append(dict(clock.spent))
     elapsed = time.perf_counter() - wall_start
     x_end = x_server_cpu_s()
-    result = {"variant": name, "fps": frames / elapsed, "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
-              "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames}
+    other_end = process_cpu_s(sim.process.pid) if hasattr(sim, "process") else None
+    if hasattr(sim, "close"):
+        sim.close()
+    result = {"variant": name, "fps": frames / elapsed, "load": os.getloadavg()[0],
+              "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
+              "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
+              "sim_process_cpu": None if other_end is None else 1e3 * (other_end - other_start) / frames}
     for phase in PHASES:
-        result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows)
-        result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows)
+        present = any(phase in row for row in rows)
+        result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows) if present else None
+        result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows) if present else None
     return result
 
 
@@ -192,12 +221,27 @@ def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
 
 
 def draw_through_set_image(viewer) -> None:
-    """Our renderer's frame handed over through GGUI's public ``Canvas.set_image`` (which converts it
-    with a pass over every pixel) instead of ``window.show_packed``."""
+    """Our renderer's frame handed over as the window did before ``show_packed``: copied into a (W, H)
+    field of RGB bytes (y up) and given to GGUI's public ``Canvas.set_image``, which converts it into
+    packed words with a pass of its own."""
+    import taichi as ti
+
     from pbf.app import window
 
+    @ti.kernel
+    def to_field(packed: ti.types.ndarray(dtype=ti.u32, ndim=2), rgb: ti.template()):
+        for x, y in rgb:
+            word = packed[x, y]
+            rgb[x, y] = ti.Vector([word & 0xFF, (word >> 8) & 0xFF, (word >> 16) & 0xFF], ti.u8)
+
+    def set_image(canvas, packed):
+        if getattr(viewer, "rgb_field", None) is None or viewer.rgb_field.shape != packed.shape:
+            viewer.rgb_field = ti.Vector.field(3, ti.u8, shape=packed.shape)
+        to_field(packed, viewer.rgb_field)
+        canvas.set_image(viewer.rgb_field)
+
     show_packed = window.show_packed
-    window.show_packed = lambda canvas, packed: canvas.set_image(packed.view("u1").reshape(*packed.shape, 4))
+    window.show_packed = set_image
     try:
         window.WindowViewer.draw(viewer)
     finally:
@@ -209,14 +253,16 @@ def table(results: dict[str, list[dict]]) -> str:
         values = [r[key] for r in rows if r[key] is not None]
         return f"{statistics.median(values):.1f}" if values else "-"
 
-    header = ("| variant | fps | frame ms | sim ms | draw ms | panel ms | show ms | cpu ms/frame | X ms/frame | "
-              "sim, draw, show cpu ms |")
+    header = ("| variant | fps | frame ms | sim ms | sim in its process ms | draw ms | panel ms | show ms | "
+              "cpu ms/frame | sim process cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |")
     lines = [header, "|---|" + "---:|" * (header.count("|") - 2)]
     for name, rows in results.items():
         lines.append(f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
+                     f"{cell(rows, 'sim_own')} | "
                      f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
+                     f"{cell(rows, 'sim_process_cpu')} | "
                      f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
-                     f"{cell(rows, 'show_cpu')} |")
+                     f"{cell(rows, 'show_cpu')} | {cell(rows, 'load')} |")
     return "\n".join(lines)
 
 
@@ -249,9 +295,10 @@ def main(argv=None) -> None:
                 raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
             result = json.loads(run.stdout.strip().splitlines()[-1])
             results[name].append(result)
-            print(f"round {round_ + 1}/{args.rounds} {name}: {result['fps']:.1f} fps, "
-                  f"sim {result['sim']:.1f} + draw {result['draw']:.1f} + panel {result['panel']:.1f} + "
-                  f"show {result['show']:.1f} ms", file=sys.stderr, flush=True)
+            phases = " + ".join(f"{phase} {result[phase]:.1f}" for phase in ("sim", "draw", "panel", "show")
+                                if result[phase] is not None)
+            print(f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps, "
+                  f"{phases} ms", file=sys.stderr, flush=True)
     print(f"{args.scene}, {args.frames} frames × {args.rounds} rounds, medians (ms per frame; cpu: all threads)")
     print(table(results))
 
