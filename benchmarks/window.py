@@ -4,18 +4,18 @@ CPU milliseconds, for the window's renderer and the levers tried on it (docs/BEN
 window"). Needs a display and Vulkan; on a machine without either:
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
-        [--variants window,ggui-particles,...] [--scene dam_break]
+        [--variants window,before,...] [--scene dam_break]
 
 Each variant runs in a fresh process (some levers are environment variables read when the Vulkan
 driver or Taichi starts), the variants alternate round by round, and every figure is the median over
 the rounds of a round's median over its frames, after 30 frames of warm-up (JIT, the first impact);
 ``fps`` is the frames over the wall time they took. The frames are those of ``python run.py``: the
-seed scene from rest at 1280 × 720, the same camera, no input, and (variant "window") the
-simulation a frame ahead in a process of its own (``pbf.app.pipeline``); then "sim" is the wait for
-it and "sim in its process" its own step. ``cpu`` is the CPU time of the window's process per frame
-(every thread: Taichi's, the Vulkan driver's), ``sim process cpu`` that of the simulation's process,
-``X`` that of the X server (Xvfb) when there is one to read: on a 2-core machine the frame rate cannot
-exceed 2000 / (their sum), whatever overlaps.
+seed scene from rest at 1280 × 720, the same camera, no input. ``cpu`` is the CPU time of the
+window's process per frame (every thread: Taichi's, the Vulkan driver's), ``X`` that of the X server
+(Xvfb) when there is one to read, and for "sim-in-second-process" (the solver a frame ahead in a
+process of its own; "sim" is then the wait for it, "sim in its process" its own step) ``sim process
+cpu`` that of the other process: on a 2-core machine the frame rate cannot exceed 2000 / (their sum),
+whatever overlaps.
 """
 import argparse
 import gc
@@ -27,39 +27,36 @@ import sys
 import time
 from pathlib import Path
 
-ONE = {"pipeline": False}
-"""The simulation stepped in the window's own process, between frames, instead of a frame ahead in a
-process of its own (``pbf.app.pipeline``): the levers of the rendering are measured this way, where
-each of their milliseconds adds to the frame."""
-BEFORE = {"draw": "ggui", "env": {"LP_PERF": ""}, "stats_interval_s": 0.0, **ONE}
+BEFORE = {"draw": "ggui", "env": {"LP_PERF": ""}, "stats_interval_s": 0.0}
 """The window as it was before these changes: GGUI's own particles and lines, lavapipe's default
-(bilinear) sampling, statistics every frame, the simulation in the same process."""
+(bilinear) sampling, statistics every frame."""
 # What each variant changes against "window" (the window as python run.py opens it).
 VARIANTS = {
     "window": {},
-    "one-process": ONE,
     "before": BEFORE,
     "before-uniform-colour": {**BEFORE, "colour": False},
     "before-no-lines": {**BEFORE, "lines": False},
-    "paused": {"paused": True, **ONE},
+    "paused": {"paused": True},
     "paused-before": {"paused": True, **BEFORE},
-    "empty-canvas": {"draw": "none", **ONE},
+    "empty-canvas": {"draw": "none"},
     "surface": {"surface": True},
-    "surface-one-process": {"surface": True, **ONE},
-    "set-image": {"draw": "set_image", **ONE},
-    "unsorted-splat": {"front_to_back": False, **ONE},
-    "lavapipe-bilinear": {"env": {"LP_PERF": ""}, **ONE},
-    "stats-every-frame": {"stats_interval_s": 0.0, **ONE},
-    "no-panel": {"panel": False, **ONE},
-    "no-vsync": {"vsync": False, **ONE},
-    "taichi-1-thread": {"cpu_threads": 1, **ONE},
-    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}, **ONE},
-    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}, **ONE},
-    "gc-freeze": {"gc": "freeze", **ONE},
+    "set-image": {"draw": "set_image"},
+    "unsorted-splat": {"front_to_back": False},
+    "lavapipe-bilinear": {"env": {"LP_PERF": ""}},
+    "paused-lavapipe-no-texturing": {"paused": True, "env": {"LP_PERF": "no_linear,no_tex"}},
+    "stats-every-frame": {"stats_interval_s": 0.0},
+    "no-panel": {"panel": False},
+    "no-vsync": {"vsync": False},
+    "taichi-1-thread": {"cpu_threads": 1},
+    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
+    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}},
+    "gc-freeze": {"gc": "freeze"},
     "malloc-keeps-memory": {"env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
-                                                      "glibc.malloc.trim_threshold=268435456"}, **ONE},
+                                                      "glibc.malloc.trim_threshold=268435456"}},
+    "sim-in-second-process": {"sim_process": True},
+    "sim-in-second-process-renderer-1-thread": {"sim_process": True, "cpu_threads": 1},
 }
-DEFAULT_VARIANTS = ("window", "one-process", "before", "paused", "empty-canvas")
+DEFAULT_VARIANTS = ("window", "before", "paused", "empty-canvas", "sim-in-second-process")
 WARMUP_FRAMES = 30
 PHASES = ("frame", "sim", "sim_own", "draw", "panel", "show")
 
@@ -109,23 +106,17 @@ def measure(name: str, frames: int, scene: str) -> dict:
     """One variant in this process: the medians over ``frames`` frames after the warm-up."""
     settings = VARIANTS[name]
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
-    from pbf.app.pipeline import SimulationProcess
-    from pbf.scene import load_scene
     from pbf.solver import Simulation, start_backend
 
     import taichi as ti
 
-    backend = start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
-    scene = load_scene(scene)
+    start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
+    sim = Simulation(scene, quiet=True)
     try:
-        gui_window = window.open_window("pbf benchmark", scene.render.width_px, scene.render.height_px,
+        gui_window = window.open_window("pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px,
                                         vsync=settings.get("vsync", True))
     except window.WindowUnavailable as reason:
         raise SystemExit(f"no window: {reason}") from None
-    if settings.get("pipeline", True) and backend == "cpu":  # as the command line makes it for the window
-        sim = SimulationProcess(scene, arch=backend, quiet=True)
-    else:
-        sim = Simulation(scene, arch=backend, quiet=True)
     viewer = window.WindowViewer(sim, gui_window)
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
@@ -143,11 +134,14 @@ def measure(name: str, frames: int, scene: str) -> dict:
     if not settings.get("panel", True):
         viewer.panel = lambda stats: None
 
+    other = SimulationProcess(sim, scene) if settings.get("sim_process") else None
+
     def step():
-        sim.step()
-        ti.sync()
-        if getattr(sim, "step_ms", None) is not None:  # the other process's own time for the frame
-            clock.add("sim_own", 1e-3 * sim.step_ms, 0.0)
+        if other:
+            other.step()
+        else:
+            sim.step()
+            ti.sync()
 
     clock = Clock()
     viewer.draw = clock.timed("draw", viewer.draw)
@@ -162,7 +156,7 @@ def measure(name: str, frames: int, scene: str) -> dict:
                 gc.collect()
                 gc.freeze()
             x_start, cpu_start, wall_start = x_server_cpu_s(), time.process_time(), time.perf_counter()
-            other_start = process_cpu_s(sim.process.pid) if hasattr(sim, "process") else None
+            other_start = process_cpu_s(other.process.pid) if other else None
         clock.spent = {}
         wall, cpu = time.perf_counter(), time.process_time()
         if viewer.advance():
@@ -173,9 +167,11 @@ def measure(name: str, frames: int, scene: str) -> dict:
             rows.append(dict(clock.spent))
     elapsed = time.perf_counter() - wall_start
     x_end = x_server_cpu_s()
-    other_end = process_cpu_s(sim.process.pid) if hasattr(sim, "process") else None
-    if hasattr(sim, "close"):
-        sim.close()
+    other_end = process_cpu_s(other.process.pid) if other else None
+    if other:
+        for row, step_ms in zip(rows, other.step_ms[-len(rows):]):
+            row["sim_own"] = (step_ms, 0.0)
+        other.close()
     result = {"variant": name, "fps": frames / elapsed, "load": os.getloadavg()[0],
               "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
               "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
@@ -185,6 +181,56 @@ def measure(name: str, frames: int, scene: str) -> dict:
         result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows) if present else None
         result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows) if present else None
     return result
+
+
+class SimulationProcess:
+    """The one lever that can overlap the simulation with the rendering, as a prototype: the solver in a
+    process of its own, a frame ahead (in one process they cannot overlap: a Taichi kernel launch and
+    GGUI's show both hold Python's GIL from start to end). ``step`` takes the frame the other process
+    finished (positions and velocities through a pipe, into the fields of this process's Simulation,
+    which the renderer reads) and starts it on the next, so the two run side by side; the step phase
+    then measures the wait, and ``step_ms`` keeps the other process's own time per frame."""
+
+    def __init__(self, sim, scene: str):
+        import multiprocessing
+
+        self.sim = sim
+        self.step_ms = []
+        context = multiprocessing.get_context("spawn")  # a fresh interpreter: Taichi does not survive fork
+        self.connection, child = context.Pipe()
+        self.process = context.Process(target=simulate, args=(scene, child), daemon=True)
+        self.process.start()
+        self.connection.recv()  # built and compiled
+        self.connection.send("step")
+
+    def step(self):
+        positions, velocities, step_ms = self.connection.recv()
+        self.connection.send("step")
+        self.sim.state.x.from_numpy(positions)  # the fields Simulation.readout() hands the renderer
+        self.sim.state.v.from_numpy(velocities)
+        self.step_ms.append(step_ms)
+
+    def close(self):
+        self.connection.send("stop")
+        self.process.join(timeout=10)
+
+
+def simulate(scene: str, connection) -> None:
+    """The other process of ``SimulationProcess``: steps a frame whenever asked and sends its particles."""
+    from pbf.solver import Simulation, start_backend
+
+    import taichi as ti
+
+    start_backend(quiet=True)
+    sim = Simulation(scene, quiet=True)
+    sim.step()
+    connection.send("ready")
+    while connection.recv() == "step":
+        started = time.perf_counter()
+        sim.step()
+        ti.sync()
+        step_ms = 1e3 * (time.perf_counter() - started)
+        connection.send((sim.state.x.to_numpy(), sim.state.v.to_numpy(), step_ms))
 
 
 def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:

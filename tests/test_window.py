@@ -117,14 +117,14 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     viewer = WindowViewer(sim, window)
     viewer.show()
     assert [text for text in window.texts if text.startswith(("sim ", "render "))] == [
-        "sim - ms", "render - ms (draw - + show -)"]  # nothing stepped or drawn yet
+        "sim - ms per frame", "render - ms (draw - + show -)"]  # nothing stepped or drawn yet
     assert viewer.advance()
     time.sleep(0.05)  # a step of 50 ms, as the loop's sim.step() would take
     viewer.show()
     viewer.show()  # the panel of a frame shows the previous frame's rendering
     sim_line = [text for text in window.texts if text.startswith("sim ")][-1]
     render_line = [text for text in window.texts if text.startswith("render ")][-1]
-    sim_ms = float(re.fullmatch(r"sim (\S+) ms", sim_line).group(1))
+    sim_ms = float(re.fullmatch(r"sim (\S+) ms per frame", sim_line).group(1))
     render_ms, draw_ms, show_ms = map(float, re.fullmatch(r"render (\S+) ms \(draw (\S+) \+ show (\S+)\)",
                                                           render_line).groups())
     assert 50.0 <= sim_ms < 1000.0

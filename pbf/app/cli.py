@@ -245,48 +245,25 @@ def frame_writer(sim, args, frames, out, video):
     return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
-def open_window(args, scene, out):
-    """The GGUI window the options ask for, or None: headless or statistics asked for, or no window can
-    open here (said in one line, and the run renders headless instead)."""
-    if args.headless or args.stats_only:
-        return None
-    from pbf.app import window
-
-    try:
-        opened = window.open_window(f"pbf: {scene.name}", scene.render.width_px, scene.render.height_px)
-    except window.WindowUnavailable as reason:
-        print(f"[pbf] no window ({reason}); rendering {args.frames or HEADLESS_FRAMES} frames headless into {out}/ "
-              f"instead")
-        return None
-    if args.out is not None:
-        print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
-    return opened
-
-
-def make_simulation(scene, backend: str, window):
-    """The Simulation; for the window on a CPU, one stepped in a process of its own, a frame ahead, so
-    that rendering a frame overlaps computing the next (``pbf.app.pipeline``; on a GPU the step is
-    short and its particles would cross to the host and back)."""
-    from pbf.solver import Simulation
-
-    if window is not None and backend == "cpu":
-        from pbf.app.pipeline import SimulationProcess
-
-        return SimulationProcess(scene, arch=backend)
-    return Simulation(scene, arch=backend)
-
-
-def choose_viewer(sim, args, out, video, window):
+def choose_viewer(sim, args, out, video):
     """The viewer the options ask for, and the frames to run (None: until the window closes)."""
     frames = args.frames or HEADLESS_FRAMES
     if args.stats_only:
         from pbf.app import loop
 
         return loop.StatsViewer(sim, frames), frames
-    if window is not None:
-        from pbf.app.window import WindowViewer
+    if not args.headless:
+        from pbf.app import window
 
-        return WindowViewer(sim, window), args.frames
+        try:
+            viewer = window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
+                                                                 sim.scene.render.height_px))
+        except window.WindowUnavailable as reason:
+            print(f"[pbf] no window ({reason}); rendering {frames} frames headless into {out}/ instead")
+        else:
+            if args.out is not None:
+                print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
+            return viewer, args.frames
     return frame_writer(sim, args, frames, out, video), frames
 
 
@@ -318,27 +295,20 @@ def main(argv=None) -> int:
         return 2
     from pbf.app import loop
     from pbf.app.headless import FrameWriter
-    from pbf.solver import BackendError, Model, start_backend
+    from pbf.solver import BackendError, Simulation
 
     try:
-        Model.from_scene(scene)  # the memory check, before Taichi allocates anything or a window opens
-        backend = start_backend(args.arch)
-        window = open_window(args, scene, out)
-        sim = make_simulation(scene, backend, window)
+        sim = Simulation(scene, arch=args.arch)  # derives the Model and checks memory before Taichi allocates
     except schema.SceneError as error:
         print(f"error: {schema.attribute(error, command_line_keys(args))}", file=sys.stderr)
         return 2
     except BackendError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    try:
-        print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
-              f"{sim.control.iterations} iterations")
-        viewer, frames = choose_viewer(sim, args, out, video, window)
-        loop.run(sim, viewer, frames)
-    finally:
-        if hasattr(sim, "close"):  # a SimulationProcess: end its process
-            sim.close()
+    print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
+          f"{sim.control.iterations} iterations")
+    viewer, frames = choose_viewer(sim, args, out, video)
+    loop.run(sim, viewer, frames)
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)
     return 0

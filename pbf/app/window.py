@@ -148,8 +148,6 @@ class WindowViewer:
         present); ms."""
         self.draw_ms: float | None = None
         self.show_ms: float | None = None
-        self.wait_ms: float | None = None
-        """With the simulation in its own process (``pbf.app.pipeline``): the wait for its frame, ms."""
         self.step_started: float | None = None
         self.stats: dict | None = None
         self.stats_key = None
@@ -179,13 +177,7 @@ class WindowViewer:
         if self.step_started is not None:  # the time since advance() is the simulation's step
             ti.sync()  # on CUDA kernels run asynchronously: count them in the step, not in the draw
             started = time.perf_counter()
-            stepped_ms = 1e3 * (started - self.step_started)
-            own_ms = getattr(self.sim, "step_ms", None)  # a SimulationProcess: its step ran beside our frame
-            if own_ms is None:
-                self.sim_ms = running_mean(self.sim_ms, stepped_ms)
-            else:
-                self.sim_ms = running_mean(self.sim_ms, own_ms)
-                self.wait_ms = running_mean(self.wait_ms, stepped_ms)
+            self.sim_ms = running_mean(self.sim_ms, 1e3 * (started - self.step_started))
             self.step_started = None
         self.draw()
         drawn = time.perf_counter()
@@ -274,7 +266,7 @@ class WindowViewer:
         with self.window.get_gui().sub_window("pbf (h: help, Tab: hide)", *self.panel_rect()) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
-            for line in timing_lines(self.sim_ms, self.draw_ms, self.show_ms, self.wait_ms):
+            for line in timing_lines(self.sim_ms, self.draw_ms, self.show_ms):
                 gui.text(line)
             gui.text(f"{stats['particles']:,} particles, dt = {self.sim.dt_s * 1e3:.2f} ms")
             gui.text(f"density error mean {stats['mean_density_error']:.3%}  max {stats['max_density_error']:.2%}")
@@ -317,15 +309,11 @@ class WindowViewer:
         show_packed(self.window.get_canvas(), packed)
 
 
-def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | None,
-                 wait_ms: float | None = None) -> tuple[str, str]:
+def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | None) -> tuple[str, str]:
     """The panel's milliseconds per frame: the simulation's step, and apart from it the rendering (our
-    renderer's draw, then GGUI's show: the canvas image, the panel and the present). With the
-    simulation in a process of its own (``pbf.app.pipeline``) its step runs beside the rendering;
-    ``wait_ms`` is how long a frame still waited for it."""
+    renderer's draw, then GGUI's show: the canvas image, the panel and the present)."""
     def ms(value):
         return "-" if value is None else f"{value:.1f}"
 
     render = None if draw_ms is None or show_ms is None else draw_ms + show_ms
-    where = "" if wait_ms is None else f" (own process, waited {ms(wait_ms)})"
-    return f"sim {ms(sim_ms)} ms{where}", f"render {ms(render)} ms (draw {ms(draw_ms)} + show {ms(show_ms)})"
+    return f"sim {ms(sim_ms)} ms per frame", f"render {ms(render)} ms (draw {ms(draw_ms)} + show {ms(show_ms)})"
