@@ -275,7 +275,7 @@ class SphereRenderer:
                forward: vec3, focal: ti.f32, light: vec3, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
         for col, y in self.keys:
             key = self.keys[col, y]
-            colour = self.background
+            word = pack_rgba(self.background)  # a constant: most pixels are background
             if key != ti.i64(EMPTY):
                 row = self.height - 1 - y
                 i = ti.cast(key & ti.i64(0xFFFFFFFF), ti.i32)
@@ -289,8 +289,8 @@ class SphereRenderer:
                 specular = cosine * cosine * cosine * cosine * cosine  # cosine⁴⁰ = (cosine⁵)⁸, by squaring
                 for _ in ti.static(range(3)):
                     specular *= specular
-                colour = ti.min(colours[i] * (0.35 + 0.65 * diffuse) + 0.25 * specular, 1.0)
-            out[col, y] = pack_rgba(colour)
+                word = pack_rgba(colours[i] * (0.35 + 0.65 * diffuse) + 0.25 * specular)
+            out[col, y] = word
 
     @ti.kernel
     def _lines(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32,
