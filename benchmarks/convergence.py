@@ -5,10 +5,13 @@
 Each variant is the preset with some ``--set`` overrides. The measure is issue 14's: the mean over the
 first ``--frames`` frames of ``stats()['mean_density_error']`` after each frame, the largest
 ``max_density_error`` of those frames, and the seconds of compute per simulated second (``step()``
-alone, synchronised; the statistics outside the timer). Variants run frame by frame from rest in
-turn, ``--rounds`` times, in one process (each compiled once before timing): the table gives the
-median time of the rounds and its ratio to the first row, so rows of one run compare fairly on a
-noisy machine. Errors are the same every round (the solver is deterministic).
+alone, synchronised; the statistics outside the timer). All variants run from rest in one process
+(each compiled once before timing), interleaved frame by frame: frame k of every variant, then
+frame k + 1. The VM's speed drifts by ±20% over seconds as its neighbours load the host, and
+interleaving puts that drift into every row alike: the ratios to the first row repeat within about
+2% from round to round, where timing the variants one after another gave ±15%. The table gives the
+median over ``--rounds`` rounds and each round's ratio. Errors are the same every round (the solver
+is deterministic).
 """
 import argparse
 import statistics
@@ -35,25 +38,36 @@ VARIANTS = {
     "Chebyshev + divergence + target": ("solver.divergence_iterations=1", "time.max_cfl=1.2"),
     "Chebyshev + divergence + target, CFL 2.0": ("solver.divergence_iterations=1",),
     "the preset (Chebyshev + target, CFL 2.0)": (),
+    "preset, kernel support h = 2.0 s": ("solver.kernel_ratio=2.0",),
+    "preset, h = 2.0 s, target 0.08%, ≤ 14 its": ("solver.kernel_ratio=2.0", "solver.target_density_error=0.0008",
+                                                  "solver.iterations=14"),
+    "preset, 1 substep, ≤ 20 its": ("time.substeps=1", "solver.iterations=20"),
+    "preset, target 0.12%": ("solver.target_density_error=0.0012",),
 }
 
 
-def run(sim: Simulation, frames: int) -> dict:
-    sim.reset()
-    seconds, means, maxima, iterations, substeps = 0.0, [], [], [], []
+def run(sims: dict, frames: int) -> dict:
+    """One round: every simulation from rest, ``frames`` frames, interleaved frame by frame."""
+    tallies = {name: {"seconds": 0.0, "means": [], "maxima": [], "iterations": [], "substeps": []} for name in sims}
+    for sim in sims.values():
+        sim.reset()
     for _ in range(frames):
-        ti.sync()
-        start = time.perf_counter()
-        sim.step()
-        ti.sync()
-        seconds += time.perf_counter() - start
-        stats = sim.stats()
-        means.append(stats["mean_density_error"])
-        maxima.append(stats["max_density_error"])
-        iterations.append(stats["iterations"])
-        substeps.append(stats["substeps"])
-    return {"seconds": seconds / (frames * sim.scene.time.frame_dt_s), "mean": float(np.mean(means)),
-            "max": max(maxima), "iterations": float(np.mean(iterations)), "substeps": float(np.mean(substeps))}
+        for name, sim in sims.items():
+            tally = tallies[name]
+            ti.sync()
+            start = time.perf_counter()
+            sim.step()
+            ti.sync()
+            tally["seconds"] += time.perf_counter() - start
+            stats = sim.stats()
+            tally["means"].append(stats["mean_density_error"])
+            tally["maxima"].append(stats["max_density_error"])
+            tally["iterations"].append(stats["iterations"])
+            tally["substeps"].append(stats["substeps"])
+    return {name: {"seconds": t["seconds"] / (frames * sims[name].scene.time.frame_dt_s),
+                   "mean": float(np.mean(t["means"])), "max": max(t["maxima"]),
+                   "iterations": float(np.mean(t["iterations"])), "substeps": float(np.mean(t["substeps"]))}
+            for name, t in tallies.items()}
 
 
 def main(argv=None):
@@ -69,17 +83,18 @@ def main(argv=None):
         sim.step(2)  # compile every kernel before any timing
     results = {name: [] for name in sims}
     for _ in range(args.rounds):
-        for name, sim in sims.items():
-            results[name].append(run(sim, args.frames))
+        for name, row in run(sims, args.frames).items():
+            results[name].append(row)
     base = statistics.median(r["seconds"] for r in results[next(iter(results))])
-    print(f"{args.scene}, first {args.frames} frames, {args.rounds} rounds (median time)")
+    print(f"{args.scene}, first {args.frames} frames, {args.rounds} rounds interleaved frame by frame (median time)")
     print(f"{'variant':42s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
-          f"{'s per sim s':>11s} {'ratio':>6s}")
+          f"{'s per sim s':>11s} {'ratio':>6s}  each round")
     for name, rows in results.items():
         seconds = statistics.median(r["seconds"] for r in rows)
         r = rows[0]
+        rounds = " ".join(f"{row['seconds'] / base:.2f}" for row in rows)
         print(f"{name:42s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} {r['substeps']:8.2f} "
-              f"{seconds:11.3f} {seconds / base:6.2f}")
+              f"{seconds:11.3f} {seconds / base:6.2f}  {rounds}")
     print("* iterations of each frame's last substep, averaged over the frames")
 
 
