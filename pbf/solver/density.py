@@ -18,6 +18,11 @@ the same column stays under 0.11 m/s.
 
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
 (into a second buffer: the iterations alternate between two), Chebyshev-accelerated (:class:`Chebyshev`).
+The denominator of λ̂_i is computed in a substep's first iteration and kept for the rest: it only
+scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
+and Δx still follows the current gradients), and the positions move by a few per cent of h within
+a substep, so it changes by little. Later λ passes then sum the density alone, without the
+gradients, and an iteration costs 13% less (docs/BENCHMARKS.md).
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
 (``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
 under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
@@ -57,6 +62,8 @@ class DensityConstraint:
         """Σ_i max(C_i, 0), summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """Σ of λ̂_i over this substep's iterations: the pressure impulse (see pressure_scale)."""
+        self.denominator = ti.field(ti.f32, shape=particle_count)
+        """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration."""
 
     @ti.func
     def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
@@ -76,16 +83,33 @@ class DensityConstraint:
         return ratio + wall, gradient_i + h * wall_gradient, sum_sq
 
     @ti.func
+    def ratio(self, x: ti.template(), i, neighbours: ti.template()):
+        """ρ_i/ρ0 alone: the sum of :meth:`ratio_and_gradients` without the gradients."""
+        xi = x[i]
+        h = self.h
+        ratio = self.volume * kernel(0.0, h)
+        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+            ratio += self.volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
+        wall, _ = self.box.wall_density(xi)
+        return ratio + wall
+
+    @ti.func
     def lagrange_multiplier(self, x: ti.template(), i, neighbours: ti.template(), measure: ti.template(), first):
-        """λ̂_i (Eq. 10, dimensionless), added to the substep's total; with ``measure``, max(C_i, 0) is
-        kept for error_sum."""
-        ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
+        """λ̂_i (Eq. 10, dimensionless), added to the substep's total; the denominator is computed in the
+        ``first`` iteration and kept (module docstring). With ``measure``, max(C_i, 0) is kept for
+        error_sum."""
+        ratio = 0.0
+        if first:
+            ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
+            self.denominator[i] = gradient_i.norm_sqr() + sum_sq + self.relaxation
+        else:
+            ratio = self.ratio(x, i, neighbours)
         c = ratio - 1.0
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
         if ti.static(self.clamp_pressure):
             c = ti.max(c, 0.0)
-        lam = -self.omega * c / (gradient_i.norm_sqr() + sum_sq + self.relaxation)
+        lam = -self.omega * c / self.denominator[i]
         self.lam[i] = lam
         self.lam_total[i] = lam + ti.select(first, 0.0, self.lam_total[i])
 
