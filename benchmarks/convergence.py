@@ -1,6 +1,7 @@
 """The seed preset's convergence levers, A/B in one run: error over the first second against time.
 
     python benchmarks/convergence.py [--rounds 3] [--frames 60] [--threads N] [--scene dam_break]
+                                     [--as-filed COMMIT]
 
 Each variant is the preset with some ``--set`` overrides. The measure is issue 14's: the mean over the
 first ``--frames`` frames of ``stats()['mean_density_error']`` after each frame, the largest
@@ -12,8 +13,21 @@ interleaving puts that drift into every row alike: the ratios to the first row r
 2% from round to round, where timing the variants one after another gave ±15%. The table gives the
 median over ``--rounds`` rounds and each round's ratio. Errors are the same every round (the solver
 is deterministic).
+
+The first row is the preset issue 14 measured, run by its own code: the ``pbf`` package and scenes of
+commit ``--as-filed`` (default AS_FILED), extracted with ``git archive`` into a temporary folder and
+imported under another name in the same process, so that it is interleaved like the rest. The
+ratios are to that row. The next row, "before", is the same configuration on today's code, which
+has every per-pass saving made since (so its ratio is the stricter one). Outside a git checkout, or
+with ``--as-filed ''``, the first row is left out and the ratios are to "before".
 """
 import argparse
+import importlib
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 import statistics
 import time
 
@@ -21,6 +35,9 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import Simulation, start_backend
+
+AS_FILED = "31d5946"
+"""The commit whose seed preset issue 14 measured (2 substeps × 4 plain Jacobi iterations)."""
 
 BEFORE = ("solver.chebyshev_rho=0", "solver.divergence_iterations=0", "solver.iterations=4",
           "solver.target_density_error=0", "time.max_cfl=1.2")
@@ -44,6 +61,27 @@ VARIANTS = {
     "preset, 1 substep, ≤ 20 its": ("time.substeps=1", "solver.iterations=20"),
     "preset, target 0.12%": ("solver.target_density_error=0.0012",),
 }
+
+
+def as_filed(commit: str, scene: str, workdir: Path):
+    """A Simulation of ``scene`` as shipped at ``commit``, run by that commit's own code (imported as
+    ``pbf_as_filed``), or None with a note when git cannot give it."""
+    repository = Path(__file__).resolve().parent.parent
+    archive = subprocess.run(["git", "-C", str(repository), "archive", commit, "pbf", "scenes"], capture_output=True)
+    if archive.returncode != 0:
+        print(f"note: no row for commit {commit!r} ({archive.stderr.decode().strip() or 'git archive failed'})")
+        return None
+    subprocess.run(["tar", "-x", "-C", str(workdir)], input=archive.stdout, check=True)
+    package = workdir / "pbf_as_filed"
+    (workdir / "pbf").rename(package)
+    for module in package.glob("*.py"):  # that commit's package is flat: pbf/*.py
+        text = module.read_text()
+        module.write_text(re.sub(r"\b(from|import) pbf\b", r"\1 pbf_as_filed", text))
+    sys.path.insert(0, str(workdir))
+    backend = importlib.import_module("pbf_as_filed.backend")
+    backend._started = "cpu"  # Taichi already runs (start_backend): its start() must not ti.init again
+    simulation = importlib.import_module("pbf_as_filed.simulation")
+    return simulation.Simulation(str(workdir / "scenes" / f"{scene}.toml"), quiet=True)
 
 
 def run(sims: dict, frames: int) -> dict:
@@ -76,23 +114,32 @@ def main(argv=None):
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--threads", type=int, default=None, help="Taichi CPU threads (default: all cores)")
+    parser.add_argument("--as-filed", default=AS_FILED, metavar="COMMIT",
+                        help=f"first row: the preset and code of this commit (default {AS_FILED}; '' for none)")
     args = parser.parse_args(argv)
     start_backend("cpu", cpu_threads=args.threads)
-    sims = {name: Simulation(args.scene, overrides=overrides, quiet=True) for name, overrides in VARIANTS.items()}
+    sims = {}
+    workdir = tempfile.TemporaryDirectory()
+    if args.as_filed:
+        filed = as_filed(args.as_filed, args.scene, Path(workdir.name))
+        if filed is not None:
+            sims[f"as filed ({args.as_filed}): its preset, its code"] = filed
+    sims.update({name: Simulation(args.scene, overrides=overrides, quiet=True) for name, overrides in VARIANTS.items()})
     for sim in sims.values():
         sim.step(2)  # compile every kernel before any timing
     results = {name: [] for name in sims}
     for _ in range(args.rounds):
         for name, row in run(sims, args.frames).items():
             results[name].append(row)
-    base = statistics.median(r["seconds"] for r in results[next(iter(results))])
+    bases = [r["seconds"] for r in results[next(iter(results))]]
+    base = statistics.median(bases)
     print(f"{args.scene}, first {args.frames} frames, {args.rounds} rounds interleaved frame by frame (median time)")
     print(f"{'variant':42s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
           f"{'s per sim s':>11s} {'ratio':>6s}  each round")
     for name, rows in results.items():
         seconds = statistics.median(r["seconds"] for r in rows)
         r = rows[0]
-        rounds = " ".join(f"{row['seconds'] / base:.2f}" for row in rows)
+        rounds = " ".join(f"{row['seconds'] / b:.2f}" for row, b in zip(rows, bases))
         print(f"{name:42s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} {r['substeps']:8.2f} "
               f"{seconds:11.3f} {seconds / base:6.2f}  {rounds}")
     print("* iterations of each frame's last substep, averaged over the frames")

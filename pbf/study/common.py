@@ -92,7 +92,9 @@ def fill_height_m(sim: Simulation) -> float:
 
 def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
     """Height where the SPH colour field Σ_j V W(x − x_j) falls to ½: the free surface, averaged over
-    vertical probes at every (x, z) of ``xs`` × ``zs``."""
+    vertical probes at every (x, z) of ``xs`` × ``zs``. Each probe samples 400 heights over
+    ``y_range`` and interpolates linearly between the two around the crossing (the samples alone put
+    every height on a 2-mm grid, as coarse as the wave heights and surface sags it measures)."""
     ys = np.linspace(*y_range, 400)
     heights = []
     for x in xs:
@@ -101,5 +103,9 @@ def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
             near = positions[(np.abs(positions[:, 0] - x) < h) & (np.abs(positions[:, 2] - z) < h)]
             distances = np.linalg.norm(probes[:, None, :] - near[None, :, :], axis=2)
             colour = volume_m3 * kernel_np(distances, h).sum(axis=1)
-            heights.append(ys[np.argmax(colour < 0.5)])
+            k = int(np.argmax(colour < 0.5))  # the first sample below ½ (0: none above it)
+            if k == 0:
+                heights.append(ys[0])
+            else:
+                heights.append(ys[k - 1] + (colour[k - 1] - 0.5) / (colour[k - 1] - colour[k]) * (ys[k] - ys[k - 1]))
     return float(np.mean(heights))
