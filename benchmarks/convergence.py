@@ -24,12 +24,12 @@ with ``--as-filed ''``, the first row is left out and the ratios are to "before"
 import argparse
 import importlib
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
-from pathlib import Path
-import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 import taichi as ti

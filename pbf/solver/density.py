@@ -22,7 +22,9 @@ The denominator of λ̂_i is computed in a substep's first iteration and kept fo
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
 a substep, so it changes by little. Later λ passes then sum the density alone, without the
-gradients, and an iteration costs 13% less (docs/BENCHMARKS.md).
+gradients: a later iteration costs 0.88 ms against the first's 1.05, the seed preset's frame 13%
+less. The price, in docs/BENCHMARKS.md: a deep tank at 1-2 substeps with a fixed iteration count,
+already at the edge of stability, sloshes (every preset holds still as before).
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
 (``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
 under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long

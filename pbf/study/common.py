@@ -103,7 +103,7 @@ def colour_surface_height(positions, volume_m3, h, xs, zs, y_range) -> float:
             near = positions[(np.abs(positions[:, 0] - x) < h) & (np.abs(positions[:, 2] - z) < h)]
             distances = np.linalg.norm(probes[:, None, :] - near[None, :, :], axis=2)
             colour = volume_m3 * kernel_np(distances, h).sum(axis=1)
-            k = int(np.argmax(colour < 0.5))  # the first sample below ½ (0: none above it)
+            k = int(np.argmax(colour < 0.5))  # the first sample below ½; 0 when the first is, or none is
             if k == 0:
                 heights.append(ys[0])
             else:
