@@ -38,3 +38,21 @@ def test_a_snapshot_that_does_not_fit_is_refused_clearly():
         sim.restore(Snapshot(too_many, too_many, 0.0, 0))
     with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
         sim.restore(Snapshot(snapshot.positions_m[:, :2], snapshot.velocities_m_s, 0.0, 0))
+
+
+def test_reset_returns_to_the_settled_start_without_settling_again():
+    # reset() settles once (time.settle_s) and restores that state afterwards: the same bits as a
+    # fresh Simulation, and the next frames replay.
+    overrides = ["time.settle_s=0.1"]
+    sim = Simulation(small_dam_break(), overrides=overrides)
+    start = sim.positions()
+    sim.step(5)
+    after_five = sim.positions()
+    substeps = []
+    sim.substep = lambda dt=None, _run=sim.substep: (substeps.append(dt), _run(dt))[1]
+    sim.reset()
+    assert substeps == []  # restored, not settled again
+    assert np.array_equal(sim.positions(), start)
+    assert np.array_equal(Simulation(small_dam_break(), overrides=overrides).positions(), start)
+    sim.step(5)
+    assert np.array_equal(sim.positions(), after_five)

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 from tqdm import tqdm
 
-from pbf.solver import Control, Simulation, Snapshot
+from pbf.solver import Simulation
 from pbf.study.common import scaled, timed
 
 ITERATIONS = (1, 2, 3, 4, 6, 8, 12)
@@ -49,15 +49,9 @@ class Point:
     pareto: bool = False
 
 
-def configure(sim: Simulation, iterations: int, substeps: int, target: float, start: Snapshot | None = None) -> None:
-    """Back to the scene's start (or to ``start``, the same state taken once: a preset with
-    time.settle_s settles in reset(), 2 s of substeps per point at 64,000 particles), then the point's
-    solver setting."""
-    if start is None:
-        sim.reset()
-    else:
-        sim.control = Control.from_scene(sim.scene)
-        sim.restore(start)
+def configure(sim: Simulation, iterations: int, substeps: int, target: float) -> None:
+    """Back to the scene's start (settled once, with time.settle_s), then the point's solver setting."""
+    sim.reset()
     sim.control.iterations = iterations
     sim.control.substeps = substeps
     sim.control.target_density_error = target
@@ -125,13 +119,12 @@ def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, 
         for particles in sizes:
             dam = Simulation(scaled("dam_break", particles, 8000, overrides), quiet=True)
             tank = Simulation(scaled("hydrostatic", particles, 5120, overrides), quiet=True)
-            settled = tank.snapshot()  # the tank as reset() settled it, for every point
             for iterations, substeps, goal in settings:
                 bar.set_postfix_str(f"{dam.particle_count:,} particles, {iterations} it, {substeps} substeps"
                                     + (f", target {goal:.2%}" if goal else ""))
                 configure(dam, iterations, substeps, goal)
                 figures = run_dam_break(dam, frames)
-                configure(tank, iterations, substeps, goal, settled)
+                configure(tank, iterations, substeps, goal)
                 figures.update(run_rest(tank, rest_settle, rest_frames))
                 points.append(Point(dam.particle_count, iterations, substeps, goal, **figures))
                 bar.update()
