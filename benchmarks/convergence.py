@@ -137,13 +137,14 @@ def main(argv=None):
     bases = [r["seconds"] for r in results[next(iter(results))]]
     base = statistics.median(bases)
     print(f"{args.scene}, first {args.frames} frames, {args.rounds} rounds interleaved frame by frame (median time)")
-    print(f"{'variant':42s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
+    width = max(map(len, results))
+    print(f"{'variant':{width}s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
           f"{'s per sim s':>11s} {'ratio':>6s}  each round")
     for name, rows in results.items():
         seconds = statistics.median(r["seconds"] for r in rows)
         r = rows[0]
         rounds = " ".join(f"{row['seconds'] / b:.2f}" for row, b in zip(rows, bases))
-        print(f"{name:42s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} {r['substeps']:8.2f} "
+        print(f"{name:{width}s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} {r['substeps']:8.2f} "
               f"{seconds:11.3f} {seconds / base:6.2f}  {rounds}")
     print("* iterations of each frame's last substep, averaged over the frames")
 
