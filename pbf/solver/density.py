@@ -184,9 +184,10 @@ class Chebyshev:
     first, the weights fall from 2 / (2 − ρ²) toward 2 / (1 + √(1 − ρ²)) (1.39 at ρ = 0.9): they
     extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9,
     the default, holds every pool still; the splashing presets (the seed, ``double_dam_break``,
-    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still); at 0.93 that pool's fastest particle reached 0.12 m/s, at 0.95 the
-    ``hydrostatic`` tank boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins
-    the sequence again, for when the error rose (ρ was too bold for this state).
+    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still). At 0.93
+    the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the ``hydrostatic`` tank
+    boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
+    again, for when the error rose (ρ was too bold for this state).
     """
 
     def __init__(self, rho: float):
