@@ -112,5 +112,4 @@ def restart_backend() -> None:
     """
     if _started is None:
         raise BackendError("restart_backend(): no backend has been started in this process")
-    ti.reset()
-    _init(**_options)
+    _init(**_options)  # ti.init begins with ti.reset(), which frees the runtime
