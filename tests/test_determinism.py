@@ -56,3 +56,15 @@ def test_reset_returns_to_the_settled_start_without_settling_again():
     assert np.array_equal(Simulation(small_dam_break(), overrides=overrides).positions(), start)
     sim.step(5)
     assert np.array_equal(sim.positions(), after_five)
+
+
+@pytest.mark.parametrize("iterations", [3, 4])
+def test_predicted_positions_end_every_substep_in_the_first_buffer(iterations):
+    # Every kernel but the iterations reads x* from the first buffer (and so compiles once, not again
+    # at the first substep with an iteration count of the other parity); the positions are x* there.
+    sim = Simulation(small_dam_break(iterations=iterations))
+    sim.step(3)
+    x_star = sim.integrator.predicted
+    assert not x_star.in_second
+    n = sim.particle_count
+    assert np.array_equal(x_star.first.to_numpy()[:n], sim.state.x.to_numpy()[:n])

@@ -28,7 +28,8 @@ def test_surge_front_ignores_spray():
 
 
 def test_hydrostatic_pressure_and_surface():
-    # The hydrostatic preset at twice its spacing (640 particles, Δt scaled with it), 2 s.
+    # The hydrostatic preset at twice its spacing (640 particles, Δt scaled with it), 2 s; the pressure
+    # is each particle's mean over the last second (validate.PRESSURE_FRAMES).
     run = validate.hydrostatic(frames=120, samples=4, overrides=["fluid.spacing_m=0.05", "time.substeps=4"])
     assert run.slope_pa_m == pytest.approx(run.expected_slope_pa_m, rel=0.1)
     assert run.pressure_rms_error < 0.1
@@ -68,7 +69,7 @@ def test_validate_command_line():
     # None named means all (Python 3.11's argparse rejected that when it checked the choices).
     assert validate.parse_args([]).cases == ("martin_moyce", "hydrostatic", "wave_tank")
     assert validate.parse_args(["hydrostatic"]).cases == ["hydrostatic"]
-    for bad in (["--divisors", "10"], ["dam_break"]):
+    for bad in (["--divisors", "10"], ["--divisors", "0"], ["--frames", "0"], ["dam_break"]):
         with pytest.raises(SystemExit):
             validate.parse_args(bad)
 

@@ -17,7 +17,7 @@ about 0.3 h, it still parts pairs that come closer (its job in spray), and the f
 the same column stays under 0.11 m/s.
 
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
-(into a second buffer: the iterations alternate between two), Chebyshev-accelerated (:class:`Chebyshev`).
+(into a second buffer: the iterations alternate between two, ``PredictedPositions``), Chebyshev-accelerated (:class:`Chebyshev`).
 The denominator of λ̂_i is computed in a substep's first iteration and kept for the rest: it only
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
@@ -68,59 +68,74 @@ class DensityConstraint:
         """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration."""
 
     @ti.func
-    def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
-        """ρ_i/ρ0, Σ_j ĝ_ij + ĝ_wall and Σ_j |ĝ_ij|² for particle i (the parts of Eq. 10)."""
-        xi = x[i]
+    def pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
+        """The neighbours' part of ρ_i/ρ0 (self term included), and with ``gradients`` of Σ_j ĝ_ij and
+        Σ_j |ĝ_ij|², for particle i at xi; the wall's part is :meth:`Box.wall_density`'s."""
         h = self.h
         ratio = self.volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-            w, grad_w = kernel_and_gradient(xi - x[neighbours[k]], h)
-            ratio += self.volume * w
-            g = self.volume * h * grad_w
-            gradient_i += g
-            sum_sq += g.norm_sqr()
-        wall, wall_gradient = self.box.wall_density(xi)
-        return ratio + wall, gradient_i + h * wall_gradient, sum_sq
+            if ti.static(gradients):
+                w, grad_w = kernel_and_gradient(xi - x[neighbours[k]], h)
+                ratio += self.volume * w
+                g = self.volume * h * grad_w
+                gradient_i += g
+                sum_sq += g.norm_sqr()
+            else:
+                ratio += self.volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
+        return ratio, gradient_i, sum_sq
 
     @ti.func
-    def ratio(self, x: ti.template(), i, neighbours: ti.template()):
-        """ρ_i/ρ0 alone: the sum of :meth:`ratio_and_gradients` without the gradients."""
+    def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
+        """ρ_i/ρ0, Σ_j ĝ_ij + ĝ_wall and Σ_j |ĝ_ij|² for particle i (the parts of Eq. 10)."""
         xi = x[i]
-        h = self.h
-        ratio = self.volume * kernel(0.0, h)
-        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-            ratio += self.volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
-        wall, _ = self.box.wall_density(xi)
-        return ratio + wall
+        ratio, gradient_i, sum_sq = self.pair_sums(x, xi, i, neighbours, True)
+        wall, wall_gradient = self.box.wall_density(xi)
+        return ratio + wall, gradient_i + self.h * wall_gradient, sum_sq
 
     @ti.func
-    def lagrange_multiplier(self, x: ti.template(), i, neighbours: ti.template(), measure: ti.template(), first):
-        """λ̂_i (Eq. 10, dimensionless), added to the substep's total; the denominator is computed in the
-        ``first`` iteration and kept (module docstring). With ``measure``, max(C_i, 0) is kept for
-        error_sum."""
+    def own_position(self, first: ti.template(), second: ti.template(), from_second, i):
+        """x_i from the buffer ``from_second`` picks."""
+        xi = first[i]
+        if from_second:
+            xi = second[i]
+        return xi
+
+    @ti.func
+    def lagrange_multiplier(self, first: ti.template(), second: ti.template(), from_second, i,
+                            neighbours: ti.template(), measure: ti.template(), first_iteration):
+        """λ̂_i (Eq. 10, dimensionless) at the positions in the buffer ``from_second`` picks, added to the
+        substep's total; the denominator is computed in the ``first_iteration`` and kept (module
+        docstring). With ``measure``, max(C_i, 0) is kept for error_sum."""
+        xi = self.own_position(first, second, from_second, i)
+        wall, wall_gradient = self.box.wall_density(xi)
         ratio = 0.0
-        if first:
-            ratio, gradient_i, sum_sq = self.ratio_and_gradients(x, i, neighbours)
-            self.denominator[i] = gradient_i.norm_sqr() + sum_sq + self.relaxation
+        if first_iteration:
+            gradient_i, sum_sq = ti.Vector([0.0, 0.0, 0.0]), 0.0
+            if from_second:
+                ratio, gradient_i, sum_sq = self.pair_sums(second, xi, i, neighbours, True)
+            else:
+                ratio, gradient_i, sum_sq = self.pair_sums(first, xi, i, neighbours, True)
+            self.denominator[i] = (gradient_i + self.h * wall_gradient).norm_sqr() + sum_sq + self.relaxation
         else:
-            ratio = self.ratio(x, i, neighbours)
-        c = ratio - 1.0
+            if from_second:
+                ratio, _, _ = self.pair_sums(second, xi, i, neighbours, False)
+            else:
+                ratio, _, _ = self.pair_sums(first, xi, i, neighbours, False)
+        c = ratio + wall - 1.0
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
         if ti.static(self.clamp_pressure):
             c = ti.max(c, 0.0)
         lam = -self.omega * c / self.denominator[i]
         self.lam[i] = lam
-        self.lam_total[i] = lam + ti.select(first, 0.0, self.lam_total[i])
+        self.lam_total[i] = lam + ti.select(first_iteration, 0.0, self.lam_total[i])
 
     @ti.func
-    def corrected_position(self, x: ti.template(), i, neighbours: ti.template()):
-        """x_i + Δx_i (Eqs. 11-12); Jacobi, so x is only read."""
+    def pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template()):
+        """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi; Jacobi, so x is only read."""
         h = self.h
-        xi = x[i]
-        lam_i = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             j = neighbours[k]
@@ -129,27 +144,52 @@ class DensityConstraint:
             if ti.static(self.scorr_k > 0.0):
                 s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** self.scorr_n
             dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * grad_w
+        return dx
+
+    @ti.func
+    def jacobi_step(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
+                    weight):
+        """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, Chebyshev-weighted against the
+        other buffer's x_i (the iteration before) and collided with the box (line 15), into that buffer."""
+        h = self.h
+        xi = self.own_position(first, second, from_second, i)
+        lam_i = self.lam[i]
+        dx = ti.Vector([0.0, 0.0, 0.0])
+        earlier = xi
+        if from_second:
+            dx = self.pair_correction(second, xi, i, lam_i, neighbours)
+            earlier = first[i]
+        else:
+            dx = self.pair_correction(first, xi, i, lam_i, neighbours)
+            earlier = second[i]
         _, wall_gradient = self.box.wall_density(xi)
         dx += lam_i * h * wall_gradient
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
         dx *= ti.min(1.0, self.max_correction / (dx.norm() + 1e-12))
-        return xi + h * dx
+        corrected = xi + h * dx
+        moved = self.box.clamp(ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)))
+        if from_second:
+            first[i] = moved
+        else:
+            second[i] = moved
 
     @ti.kernel
-    def iterate(self, x: ti.template(), x_next: ti.template(), neighbours: NeighbourList, measure: ti.template(),
-                first: ti.i32, weight: ti.f32) -> ti.f64:
+    def iterate(self, first: ti.template(), second: ti.template(), from_second: ti.i32, neighbours: NeighbourList,
+                measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> ti.f64:
         """One Jacobi iteration as one kernel: all λ from x, then all corrected positions, Chebyshev-
-        weighted against x_next (which holds the positions of the iteration before) and collided with
-        the box (Algorithm 1, line 15), into x_next; with ``measure`` returns the mean error (else 0).
-        One launch, and the error comes back as its return value: a launch costs 30-100 µs on a 2-core
-        CPU, and reading a field from Python after a launch 40 µs more."""
+        weighted against the other buffer (which holds the positions of the iteration before) and
+        collided with the box (Algorithm 1, line 15), into that buffer; x is ``second`` when
+        ``from_second``, else ``first``. With ``measure`` returns the mean error (else 0).
+
+        The buffers come in a fixed order and the direction as a flag, branched on around the neighbour
+        sums only (the same way for every particle, so predicted), so that the kernel compiles once
+        (``PredictedPositions``) and the wall and collision code, which obstacles make long, once in it. One launch, and the error comes back as its return value: a launch
+        costs 30-100 µs on a 2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
-            self.lagrange_multiplier(x, i, neighbours, measure, first)
+            self.lagrange_multiplier(first, second, from_second, i, neighbours, measure, first_iteration)
         for i in range(self.grid.active[None]):
-            corrected = self.corrected_position(x, i, neighbours)
-            earlier = x_next[i]
-            x_next[i] = self.box.clamp(ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)))
+            self.jacobi_step(first, second, from_second, i, neighbours, weight)
         mean_error = ti.cast(0.0, ti.f64)
         if ti.static(measure):
             self.error_sum.sum(self.error, 0, self.grid.active[None])
@@ -161,16 +201,19 @@ class DensityConstraint:
         pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
         return -self.h**2 / dt**2
 
-    def project(self, x, x_next, neighbours, measure: bool = False, first: bool = False, weight: float = 1.0):
-        """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19): reads positions x,
-        writes the corrected ones into x_next (the two buffers of ``PredictedPositions``, so x_next
-        holds the positions of the iteration before x), as x_next + weight (x + Δx − x_next): the
-        Chebyshev step (:class:`Chebyshev`), plain Jacobi at weight 1.
+    def project(self, predicted, neighbours, measure: bool = False, first: bool = False, weight: float = 1.0):
+        """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19) on the x* of
+        ``predicted`` (a ``PredictedPositions``): reads the buffer that holds x*, writes the corrected
+        positions into the other (which holds the positions of the iteration before) as
+        x_prev + weight (x + Δx − x_prev), the Chebyshev step (:class:`Chebyshev`), plain Jacobi at
+        weight 1, and swaps them.
 
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
-        mean_error = self.iterate(x, x_next, neighbours, bool(measure), first, weight)
+        mean_error = self.iterate(predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure),
+                                  first, weight)
+        predicted.swap()
         return mean_error if measure else None
 
 
@@ -184,7 +227,8 @@ class Chebyshev:
     first, the weights fall from 2 / (2 − ρ²) toward 2 / (1 + √(1 − ρ²)) (1.39 at ρ = 0.9): they
     extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9,
     the default, holds every pool still; the splashing presets (the seed, ``double_dam_break``,
-    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still). At 0.93
+    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still), and
+    the ``hydrostatic`` tank 0 (plain Jacobi, for its pressure read-out: ``Simulation.pressures``). At 0.93
     the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the ``hydrostatic`` tank
     boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
     again, for when the error rose (ρ was too bold for this state).

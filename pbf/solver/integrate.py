@@ -6,23 +6,40 @@ import taichi as ti
 
 @ti.data_oriented
 class PredictedPositions:
-    """x*, the predicted positions (m): two (n,) vector(3, f32) buffers. Prediction writes
-    :attr:`current`; each Jacobi iteration reads it, writes :attr:`other`, and :meth:`swap` makes
-    that the current one, which saves a copy (a parallel loop, 20-40 µs on a 2-core CPU) per iteration."""
+    """x*, the predicted positions (m): two (n,) vector(3, f32) buffers, :attr:`first` and
+    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other
+    (:attr:`in_second` says which holds x* now), which saves a copy per iteration. :meth:`gather`
+    brings x* back into the first after the iterations, so that every other kernel only ever sees
+    the first buffer.
 
-    def __init__(self, particle_count: int):
-        self._buffers = [ti.Vector.field(3, ti.f32, shape=particle_count) for _ in range(2)]
+    Why not pass "the current buffer" around: a Taichi kernel compiles once per field it is given,
+    so each kernel that took the current buffer compiled twice, the second time when an iteration
+    count of the other parity first came, which could be seconds into a run (a 2 s freeze of the
+    window at the first frame with an odd count, in `double_dam_break` and `wave_tank`). Now the
+    iterations take both buffers in a fixed order and a flag, and the rest take the first: one
+    compile each, at the first substep."""
 
-    @property
-    def current(self):
-        return self._buffers[0]
-
-    @property
-    def other(self):
-        return self._buffers[1]
+    def __init__(self, particle_count: int, active):
+        self.first = ti.Vector.field(3, ti.f32, shape=particle_count)
+        self.second = ti.Vector.field(3, ti.f32, shape=particle_count)
+        self.active = active
+        self.in_second = False
+        """Whether x* is in :attr:`second` (after an odd number of iterations)."""
 
     def swap(self) -> None:
-        self._buffers.reverse()
+        """An iteration wrote x* into the other buffer."""
+        self.in_second = not self.in_second
+
+    @ti.kernel
+    def _copy_back(self):
+        for i in range(self.active[None]):
+            self.first[i] = self.second[i]
+
+    def gather(self) -> None:
+        """Make the first buffer hold x* (a copy after an odd number of iterations)."""
+        if self.in_second:
+            self._copy_back()
+            self.in_second = False
 
 
 @ti.data_oriented
@@ -32,7 +49,7 @@ class Integrator:
     def __init__(self, state, box):
         self.state = state
         self.box = box
-        self.predicted = PredictedPositions(state.capacity)
+        self.predicted = PredictedPositions(state.capacity, state.active)
         self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.capacity))
         self._int = ti.field(ti.i32, shape=state.capacity)
         self._scalar = ti.field(ti.f32, shape=state.capacity)
@@ -59,7 +76,7 @@ class Integrator:
 
     def predict(self, dt: float) -> None:
         """x* ← x + Δt v (line 3), kept inside the box so the grid never sees a lost particle."""
-        self._predict(self.predicted.current, dt)
+        self._predict(self.predicted.first, dt)
 
     @ti.kernel
     def _push(self, point: ti.types.vector(3, ti.f32), velocity: ti.types.vector(3, ti.f32), radius: ti.f32):
@@ -96,4 +113,4 @@ class Integrator:
 
     def reorder(self, sorted_from) -> None:
         """Apply the grid's counting-sort permutation to the state (Λ included) and to x*."""
-        self._reorder(sorted_from, self.predicted.current)
+        self._reorder(sorted_from, self.predicted.first)

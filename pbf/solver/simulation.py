@@ -206,9 +206,9 @@ class Simulation:
             self.integrator.accelerate(dt, control.gravity_m_s2)  # lines 1-4: v += Δt g, x* = x + Δt v
             self.integrator.predict(dt)
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
-            self._sort_by_cell(x_star.current)
+            self._sort_by_cell(x_star.first)
         with hook.stage("neighbour lists"):
-            self.grid.build_neighbours(x_star.current)
+            self.grid.build_neighbours(x_star.first)
         with hook.stage("divergence pre-correction"):            # ours: v made divergence-free (at x,
             if control.divergence_iterations > 0:                # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, control.warm_start, control.divergence_iterations)
@@ -216,17 +216,17 @@ class Simulation:
         with hook.stage("solver iterations"):
             chebyshev, last_error = Chebyshev(control.chebyshev_rho), math.inf
             for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
-                error = self.density.project(x_star.current, x_star.other, self.grid.neighbours,
+                error = self.density.project(x_star, self.grid.neighbours,  # Jacobi, into the other buffer
                                              measure=target > 0.0, first=k == 0, weight=chebyshev.next())
-                x_star.swap()                                    # Jacobi: x* + Δx went into the other buffer
                 self.iterations_used = k + 1
                 if target > 0.0 and error < target and k + 1 >= control.min_iterations:
                     break                                        # the error this iteration started from
                 if target > 0.0 and error > last_error:          # the acceleration overshot: plain again
                     chebyshev.restart()
                 last_error = error
+            x_star.gather()                                      # x* back in the first buffer
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
-            self.postprocess.run(x_star.current, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
+            self.postprocess.run(x_star.first, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
                                  control.vorticity, control.xsph)           # confinement, XSPH, x = x*
         self.time_s += dt
         self.last_dt_s = dt
@@ -250,7 +250,13 @@ class Simulation:
 
     def pressures(self) -> np.ndarray:
         """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers (the position
-        iterations' and the divergence pre-correction's), in creation order."""
+        iterations' and the divergence pre-correction's), in creation order.
+
+        The impulse the positions took only under plain Jacobi (``solver.chebyshev_rho = 0``, as the
+        ``hydrostatic`` preset runs): Chebyshev weights recombine the iterates, and the sum of the
+        multipliers then reads a hydrostatic gradient 20-40% low and swings from frame to frame
+        (docs/VALIDATION.md). One substep's multipliers are noisy per particle either way: average
+        over frames for a field."""
         scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
         total = (self.state.in_creation_order(self.density.lam_total)
                  + self.state.in_creation_order(self.state.multiplier) * np.float32(self.dt_s**2))
