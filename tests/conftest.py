@@ -1,6 +1,6 @@
 """All tests share one Taichi CPU runtime, compiled for speed of compiling: each Simulation compiles
 its kernels anew, and without Taichi's advanced optimisation that takes 1.6 s instead of 6.2 s, with
-the same results (see pbf.solver.backend.start_backend)."""
+the same results up to rounding (see pbf.solver.backend.start_backend)."""
 import pytest
 
 from pbf.solver.backend import restart_backend, start_backend
