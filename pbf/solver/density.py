@@ -17,7 +17,8 @@ about 0.3 h, it still parts pairs that come closer (its job in spray), and the f
 the same column stays under 0.11 m/s.
 
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
-(into a second buffer: the iterations alternate between two, ``PredictedPositions``), Chebyshev-accelerated (:class:`Chebyshev`).
+(into a second buffer: the iterations alternate between two, ``PredictedPositions``),
+Chebyshev-accelerated (:class:`Chebyshev`).
 The denominator of λ̂_i is computed in a substep's first iteration and kept for the rest: it only
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
@@ -184,8 +185,9 @@ class DensityConstraint:
 
         The buffers come in a fixed order and the direction as a flag, branched on around the neighbour
         sums only (the same way for every particle, so predicted), so that the kernel compiles once
-        (``PredictedPositions``) and the wall and collision code, which obstacles make long, once in it. One launch, and the error comes back as its return value: a launch
-        costs 30-100 µs on a 2-core CPU, and reading a field from Python after a launch 40 µs more."""
+        (``PredictedPositions``), and the wall and collision code, which obstacles make long, once in
+        it. One launch, and the error comes back as its return value: a launch costs 30-100 µs on a
+        2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
             self.lagrange_multiplier(first, second, from_second, i, neighbours, measure, first_iteration)
         for i in range(self.grid.active[None]):
@@ -228,9 +230,9 @@ class Chebyshev:
     extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9,
     the default, holds every pool still; the splashing presets (the seed, ``double_dam_break``,
     ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still), and
-    the ``hydrostatic`` tank 0 (plain Jacobi, for its pressure read-out: ``Simulation.pressures``). At 0.93
-    the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the ``hydrostatic`` tank
-    boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
+    the ``hydrostatic`` tank 0 (plain Jacobi, for its pressure read-out: ``Simulation.pressures``).
+    At 0.93 the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the
+    ``hydrostatic`` tank boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
     again, for when the error rose (ρ was too bold for this state).
     """
 

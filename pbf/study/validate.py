@@ -138,6 +138,8 @@ iteration count the error target stops at changes."""
 def hydrostatic(frames: int = 600, samples: int = 30, overrides=()) -> HydrostaticRun:
     """Run the ``hydrostatic`` preset ``frames`` frames; sample the surface ``samples`` times, and the
     pressure over the last PRESSURE_FRAMES frames."""
+    if frames < 1 or samples < 1:
+        raise ValueError(f"hydrostatic: frames = {frames}, samples = {samples}; allowed: 1 or more each")
     scene = load_scene("hydrostatic", overrides)
     sim = Simulation(scene, quiet=True)
     lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
