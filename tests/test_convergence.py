@@ -82,10 +82,11 @@ def test_the_seed_preset_reaches_its_error_target():
 
 def test_divergence_pressure_carries_the_hydrostatic_load():
     # A settled column: pressure grows as ρ0 g depth in the interior, and the part the divergence pass
-    # carries from substep to substep (Λ) is a large share of it (a third: 0.34 of the slope, which reads +6%). Plain Jacobi with a fixed count, where pressures() is exactly the multipliers the positions
-    # moved by (under Chebyshev weights Σλ̂ reads the gradient 20-30% low on this column: the weights
-    # recombine the iterates), averaged over a second: the column breathes, and one frame's slope
-    # swings by ±10-50% (docs/VALIDATION.md).
+    # carries from substep to substep (Λ) is a large share of it (a third: 0.34 of the slope, which
+    # reads +6%). Plain Jacobi with a fixed count, where pressures() is exactly the multipliers the
+    # positions moved by (under Chebyshev weights Σλ̂ reads the gradient 20-30% low on this column: the
+    # weights recombine the iterates), averaged over a second: the column breathes, and one frame's
+    # slope swings by ±10-50% (docs/VALIDATION.md).
     sim = Simulation(column_scene(spacing_m=0.0375, substeps=4, iterations=10, divergence_iterations=1,
                                   chebyshev_rho=0.0, target_density_error=0.0))
     sim.step(60)
