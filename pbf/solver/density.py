@@ -64,7 +64,14 @@ class DensityConstraint:
         self.error_sum = BlockSum(particle_count)
         """Σ_i max(C_i, 0), summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
-        """Σ of λ̂_i over this substep's iterations: the pressure impulse (see pressure_scale)."""
+        """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
+        impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
+        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (:class:`Chebyshev`), so the multiplier they have
+        moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for plain
+        Jacobi (w = 1). The plain sum under Chebyshev weights read the `hydrostatic` tank's gradient
+        35% low; this reads it within 2% once averaged over a frame's substeps (docs/VALIDATION.md)."""
+        self.lam_before = ti.field(ti.f32, shape=particle_count)
+        """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
         """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration."""
 
@@ -105,10 +112,11 @@ class DensityConstraint:
 
     @ti.func
     def lagrange_multiplier(self, first: ti.template(), second: ti.template(), from_second, i,
-                            neighbours: ti.template(), measure: ti.template(), first_iteration):
-        """λ̂_i (Eq. 10, dimensionless) at the positions in the buffer ``from_second`` picks, added to the
-        substep's total; the denominator is computed in the ``first_iteration`` and kept (module
-        docstring). With ``measure``, max(C_i, 0) is kept for error_sum."""
+                            neighbours: ti.template(), measure: ti.template(), first_iteration, weight):
+        """λ̂_i (Eq. 10, dimensionless) at the positions in the buffer ``from_second`` picks, combined into
+        the substep's L with this iteration's Chebyshev ``weight`` (lam_total); the denominator is
+        computed in the ``first_iteration`` and kept (module docstring). With ``measure``, max(C_i, 0)
+        is kept for error_sum."""
         xi = self.own_position(first, second, from_second, i)
         wall, wall_gradient = self.box.wall_density(xi)
         ratio = 0.0
@@ -131,7 +139,11 @@ class DensityConstraint:
             c = ti.max(c, 0.0)
         lam = -self.omega * c / self.denominator[i]
         self.lam[i] = lam
-        self.lam_total[i] = lam + ti.select(first_iteration, 0.0, self.lam_total[i])
+        # The multiplier the positions have moved by, combined as the positions are (see lam_total).
+        earlier = ti.select(first_iteration, 0.0, self.lam_before[i])
+        total = ti.select(first_iteration, 0.0, self.lam_total[i])
+        self.lam_before[i] = total
+        self.lam_total[i] = earlier + weight * (total + lam - earlier)
 
     @ti.func
     def pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template()):
@@ -189,7 +201,7 @@ class DensityConstraint:
         it. One launch, and the error comes back as its return value: a launch costs 30-100 µs on a
         2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
-            self.lagrange_multiplier(first, second, from_second, i, neighbours, measure, first_iteration)
+            self.lagrange_multiplier(first, second, from_second, i, neighbours, measure, first_iteration, weight)
         for i in range(self.grid.active[None]):
             self.jacobi_step(first, second, from_second, i, neighbours, weight)
         mean_error = ti.cast(0.0, ti.f64)
@@ -199,8 +211,8 @@ class DensityConstraint:
         return mean_error
 
     def pressure_scale(self, dt: float) -> float:
-        """p_i = −ρ0 h² Σλ̂_i / Δt² (Pa per unit ρ0): matching Δx_i = h Σ_j (λ̂_i + λ̂_j) ĝ_ij with the SPH
-        pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
+        """p_i = −ρ0 h² L_i / Δt² (Pa per unit ρ0, L_i = lam_total): matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
+        with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
         return -self.h**2 / dt**2
 
     def project(self, predicted, neighbours, measure: bool = False, first: bool = False, weight: float = 1.0):
@@ -229,10 +241,9 @@ class Chebyshev:
     first, the weights fall from 2 / (2 − ρ²) toward 2 / (1 + √(1 − ρ²)) (1.39 at ρ = 0.9): they
     extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9,
     the default, holds every pool still; the splashing presets (the seed, ``double_dam_break``,
-    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still), and
-    the ``hydrostatic`` tank 0 (plain Jacobi, for its pressure read-out: ``Simulation.pressures``).
-    At 0.93 the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the
-    ``hydrostatic`` tank boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
+    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still). At 0.93
+    the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the ``hydrostatic`` tank
+    boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
     again, for when the error rose (ρ was too bold for this state).
     """
 

@@ -52,7 +52,7 @@ class Integrator:
         self.predicted = PredictedPositions(state.capacity, state.active)
         self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.capacity))
         self._int = ti.field(ti.i32, shape=state.capacity)
-        self._scalar = ti.field(ti.f32, shape=state.capacity)
+        self._scalar = ti.field(ti.f32, shape=(2, state.capacity))
 
     @ti.kernel
     def _accelerate(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
@@ -103,14 +103,17 @@ class Integrator:
             self._vec[1, slot] = self.state.v[i]
             self._vec[2, slot] = x_pred[i]
             self._int[slot] = self.state.index[i]
-            self._scalar[slot] = self.state.multiplier[i]
+            self._scalar[0, slot] = self.state.multiplier[i]
+            self._scalar[1, slot] = self.state.pressure_sum[i]
         for slot in range(self.state.active[None]):
             self.state.x[slot] = self._vec[0, slot]
             self.state.v[slot] = self._vec[1, slot]
             x_pred[slot] = self._vec[2, slot]
             self.state.index[slot] = self._int[slot]
-            self.state.multiplier[slot] = self._scalar[slot]
+            self.state.multiplier[slot] = self._scalar[0, slot]
+            self.state.pressure_sum[slot] = self._scalar[1, slot]
 
     def reorder(self, sorted_from) -> None:
-        """Apply the grid's counting-sort permutation to the state (Λ included) and to x*."""
+        """Apply the grid's counting-sort permutation to the state (Λ and the pressure sum included) and
+        to x*."""
         self._reorder(sorted_from, self.predicted.first)

@@ -41,8 +41,10 @@ class VelocityPostprocess:
 
     @ti.kernel
     def finish(self, x_pred: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
-               xsph: ti.f32, with_vorticity: ti.template(), with_xsph: ti.template()):
-        """v from x* and x, ω (if confining), confinement and XSPH into v, then x ← x*: one launch."""
+               xsph: ti.f32, with_vorticity: ti.template(), with_xsph: ti.template(), impulse: ti.template(),
+               pressure_per_impulse: ti.f32, first_of_frame: ti.i32):
+        """v from x* and x, ω (if confining), confinement and XSPH into v, then x ← x* and the substep's
+        pressure added to the frame's sum: one launch."""
         h = self.h
         inverse_dt = 1.0 / dt
         if ti.static(with_vorticity):
@@ -81,8 +83,15 @@ class VelocityPostprocess:
             self.state.v[i] = vi + dv
         for i in range(self.state.active[None]):
             self.state.x[i] = x_pred[i]
+            # The pressure of this substep, from the position iterations' multiplier L and the
+            # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
+            pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
+            self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
 
-    def run(self, x_pred, neighbours, dt, vorticity, xsph):
+    def run(self, x_pred, neighbours, dt, vorticity, xsph, impulse, pressure_per_impulse, first_of_frame):
         """Lines 20-23 of Algorithm 1: v = (x* − x)/Δt, confinement (if ε > 0) and XSPH (if c > 0) on v,
-        then x = x*."""
-        self.finish(x_pred, neighbours, dt, vorticity, xsph, vorticity > 0.0, xsph > 0.0)
+        then x = x*; and the pressure (Pa) of the multipliers ``impulse`` (L, per particle) and Λ, at
+        ``pressure_per_impulse`` Pa per unit of L, added to ``State.pressure_sum`` (which starts again
+        at the ``first_of_frame`` substep)."""
+        self.finish(x_pred, neighbours, dt, vorticity, xsph, vorticity > 0.0, xsph > 0.0, impulse,
+                    pressure_per_impulse, first_of_frame)

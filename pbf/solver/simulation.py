@@ -158,6 +158,8 @@ class Simulation:
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
+        self.pressure_substeps = 0
+        """Substeps summed in ``State.pressure_sum`` since the frame began (pressures())."""
         self._sort_by_cell(self.state.x)  # neighbour lists for stats() before the first step
         self.grid.build_neighbours(self.state.x)
 
@@ -227,7 +229,11 @@ class Simulation:
             x_star.gather()                                      # x* back in the first buffer
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             self.postprocess.run(x_star.first, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
-                                 control.vorticity, control.xsph)           # confinement, XSPH, x = x*
+                                 control.vorticity, control.xsph,           # confinement, XSPH, x = x*;
+                                 self.density.lam_total,                    # and the pressure, summed
+                                 self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
+                                 self.pressure_substeps == 0)
+        self.pressure_substeps += 1
         self.time_s += dt
         self.last_dt_s = dt
 
@@ -235,6 +241,7 @@ class Simulation:
         """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
         for _ in range(frames):
             self.frame_substeps = self.substeps_needed()
+            self.pressure_substeps = 0                           # pressures(): this frame's mean
             dt = self.scene.time.frame_dt_s / self.frame_substeps
             for _ in range(self.frame_substeps):
                 self.substep(dt)
@@ -249,18 +256,15 @@ class Simulation:
         return self.state.velocities()
 
     def pressures(self) -> np.ndarray:
-        """(n,) float32 pressure in Pa from the last substep's Lagrange multipliers (the position
-        iterations' and the divergence pre-correction's), in creation order.
-
-        The impulse the positions took only under plain Jacobi (``solver.chebyshev_rho = 0``, as the
-        ``hydrostatic`` preset runs): Chebyshev weights recombine the iterates, and the sum of the
-        multipliers then reads a hydrostatic gradient 20-40% low and swings from frame to frame
-        (docs/VALIDATION.md). One substep's multipliers are noisy per particle either way: average
-        over frames for a field."""
-        scale = self.density.pressure_scale(self.dt_s) * self.scene.fluid.rest_density_kg_m3
-        total = (self.state.in_creation_order(self.density.lam_total)
-                 + self.state.in_creation_order(self.state.multiplier) * np.float32(self.dt_s**2))
-        return total * np.float32(scale)
+        """(n,) float32 pressure in Pa, in creation order: the mean over the last frame's substeps (or
+        over those run since, with :meth:`substep`) of p = −ρ0 h² (L/Δt² + Λ), L the multiplier the
+        position iterations moved the particle by and Λ the divergence pre-correction's
+        (``DensityConstraint.lam_total``). Under Chebyshev weights one substep's pressure alternates
+        from substep to substep (its gradient by ±15% in the ``hydrostatic`` tank); a frame's mean
+        holds still to 2% (docs/VALIDATION.md). Zero before the first substep after a restore. Each
+        particle's value is still noisy (a few per cent of ρ0 g H): average over frames for a field."""
+        total = self.state.in_creation_order(self.state.pressure_sum)
+        return total / np.float32(max(self.pressure_substeps, 1))
 
     def neighbour_counts(self) -> np.ndarray:
         """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""

@@ -36,6 +36,9 @@ class State:
     * ``index``: (capacity,) i32, the particle's creation index (its row in :meth:`positions`)
     * ``multiplier``: (capacity,) f32, Λ of ``pbf.solver.divergence``: the last substep's divergence
       pressure, which the next one starts from
+    * ``pressure_sum``: (capacity,) f32, Pa, the sum of each substep's pressure since the frame began
+      (``Simulation.pressures`` divides it by the count): one substep's alternates under Chebyshev
+      weights, a frame's mean does not
     * ``active``: () i32, the number of live particles
     """
 
@@ -46,6 +49,7 @@ class State:
         self.index = ti.field(ti.i32, shape=capacity)
         self.active = ti.field(ti.i32, shape=())
         self.multiplier = ti.field(ti.f32, shape=capacity)
+        self.pressure_sum = ti.field(ti.f32, shape=capacity)
         self._unsorted = ti.Vector.field(3, ti.f32, shape=capacity)
         self._unsorted_scalar = ti.field(ti.f32, shape=capacity)
 
@@ -66,6 +70,7 @@ class State:
         if multipliers is not None:
             scalars[:n] = multipliers
         self.multiplier.from_numpy(scalars)
+        self.pressure_sum.fill(0.0)
         self.index.from_numpy(np.arange(self.capacity, dtype=np.int32))
         self.active[None] = n
 
