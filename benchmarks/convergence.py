@@ -39,30 +39,28 @@ from pbf.solver import Simulation, start_backend
 AS_FILED = "31d5946"
 """The commit whose seed preset issue 14 measured (2 substeps × 4 plain Jacobi iterations)."""
 
-BEFORE = ("solver.chebyshev_rho=0", "solver.divergence_iterations=0", "solver.iterations=4",
-          "solver.target_density_error=0", "time.max_cfl=1.2")
+UNTIL_GHOST = ("solver.kernel_ratio=2.2", "solver.surface_density=false", "solver.target_density_error=0.001")
+"""The seed preset before the surface ghost (2026-11-24): h = 2.2 s, no ghost, target 0.1%."""
+
+BEFORE = UNTIL_GHOST + ("solver.chebyshev_rho=0", "solver.divergence_iterations=0", "solver.iterations=4",
+                        "solver.target_density_error=0", "time.max_cfl=1.2")
 """The seed preset as shipped before issue 14: 4 plain Jacobi iterations, every substep, CFL 1.2."""
 
 VARIANTS = {
     "before: 4 plain Jacobi iterations, CFL 1.2": BEFORE,
-    "+ Chebyshev ρ 0.9": ("solver.chebyshev_rho=0.9", "solver.divergence_iterations=0", "solver.iterations=4",
-                          "solver.target_density_error=0", "time.max_cfl=1.2"),
-    "+ divergence pre-correction": ("solver.chebyshev_rho=0", "solver.divergence_iterations=1", "solver.iterations=4",
-                                    "solver.target_density_error=0", "time.max_cfl=1.2"),
-    "+ error target 0.1% (≤ 10 iterations)": ("solver.chebyshev_rho=0", "solver.divergence_iterations=0",
-                                              "time.max_cfl=1.2"),
-    "Chebyshev ρ 0.9 + target": ("solver.chebyshev_rho=0.9", "solver.divergence_iterations=0", "time.max_cfl=1.2"),
-    "Chebyshev ρ 0.9 + divergence + target": ("solver.chebyshev_rho=0.9", "solver.divergence_iterations=1",
-                                              "time.max_cfl=1.2"),
-    "Chebyshev ρ 0.9 + divergence + target, CFL 2.0": ("solver.chebyshev_rho=0.9", "solver.divergence_iterations=1"),
-    "Chebyshev ρ 0.9 + target, CFL 2.0 (the preset until ρ 0.92)": ("solver.chebyshev_rho=0.9",),
-    "the preset (Chebyshev ρ 0.92 + target, CFL 2.0)": (),
-    "preset, ρ 0.93": ("solver.chebyshev_rho=0.93",),
-    "preset, kernel support h = 2.0 s": ("solver.kernel_ratio=2.0",),
-    "preset, h = 2.0 s, target 0.08%, ≤ 14 its": ("solver.kernel_ratio=2.0", "solver.target_density_error=0.0008",
-                                                  "solver.iterations=14"),
+    "+ Chebyshev ρ 0.9": BEFORE + ("solver.chebyshev_rho=0.9",),
+    "Chebyshev ρ 0.9 + target 0.1%": UNTIL_GHOST + ("solver.chebyshev_rho=0.9", "time.max_cfl=1.2"),
+    "Chebyshev ρ 0.9 + divergence + target, CFL 2.0": UNTIL_GHOST + ("solver.chebyshev_rho=0.9",
+                                                                    "solver.divergence_iterations=1"),
+    "the preset until the ghost (ρ 0.92, CFL 2.0, h 2.2 s)": UNTIL_GHOST,
+    "that, ρ 0.93": UNTIL_GHOST + ("solver.chebyshev_rho=0.93",),
+    "that + surface ghost": UNTIL_GHOST + ("solver.surface_density=true",),
+    "that, h = 2.0 s": UNTIL_GHOST + ("solver.kernel_ratio=2.0",),
+    "that, h = 2.0 s + surface ghost": UNTIL_GHOST + ("solver.kernel_ratio=2.0", "solver.surface_density=true"),
+    "the preset (h = 2.0 s + surface ghost, target 0.09%)": (),
+    "preset without the surface ghost": ("solver.surface_density=false",),
+    "preset, target 0.08%": ("solver.target_density_error=0.0008",),
     "preset, 1 substep, ≤ 20 its": ("time.substeps=1", "solver.iterations=20"),
-    "preset, target 0.12%": ("solver.target_density_error=0.0012",),
 }
 
 

@@ -298,6 +298,8 @@ class Solver:
     scorr_n: int = key(8, _between(1, 32), "s_corr exponent n (Eq. 11); 8 confines it to pairs closer than ~0.3 h")
     scorr_dq: float = key(0.2, _between(0.0, 0.9), "s_corr reference distance Δq/h (Eq. 11)")
     wall_density: bool = key(True, doc="add the density of the ghost fluid behind walls (no stacking)")
+    surface_density: bool = key(False, doc="add the density of ghost fluid beyond the free surface, placed by "
+                                "each particle's colour gradient (the surface layer sits a spacing high)")
 
 
 @dataclass(frozen=True)

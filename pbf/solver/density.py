@@ -26,6 +26,18 @@ a substep, so it changes by little. Later λ passes then sum the density alone, 
 gradients: a later iteration costs 0.88 ms against the first's 1.05, the seed preset's frame 13%
 less. The price, in docs/BENCHMARKS.md: a deep tank at 1-2 substeps with a fixed iteration count,
 already at the edge of stability, sloshes (every preset holds still as before).
+The free surface (``solver.surface_density``). A particle in the top layer of a pool has half a
+neighbourhood, reads about 0.82 ρ0 and is left free by the clamp; gravity then settles the layer into
+the hollows of the one below, 0.73 s above it instead of a spacing, and the settled seed pool stood
+1.5% below its fill height (docs/VALIDATION.md). As the wall term supplies the ghost fluid behind a
+wall, ψ_i supplies the ghost fluid beyond the free surface, C_i = ρ_i/ρ0 + ψ_i − 1, so that the top
+layer pushes back at a lattice layer's height. Where the surface lies is read from the colour
+gradient: a particle's own |ĝ_i| is 0.1-0.2 of noise in a disordered interior against 0.7-1.1 in the
+top layer, and ψ read from it made the surface jitter at 0.2 m/s, so it is smoothed over the
+neighbourhood first, which needs every ĝ_j: in the substep's first iteration the λ pass stores ĝ_i,
+a second loop smooths it into ψ_i and only then forms λ̂_i. ψ is a constant of the substep (like the
+denominator): with its own gradient the top layer stopped pushing itself up and the tank boiled.
+
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
 (``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
 under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
@@ -57,6 +69,19 @@ class DensityConstraint:
         self.max_correction = params.max_correction
         self.box = box
         self.grid = grid
+        self.surface_density = params.surface_density
+        g_below, g_top, psi_top = params.surface_calibration
+        self.surface_offset = g_below + 0.25 * (g_top - g_below)
+        self.surface_slope = 1.0 / (0.5 * (g_top - g_below))
+        self.surface_top = psi_top
+        scratch = particle_count if params.surface_density else 1
+        self.surface = ti.field(ti.f32, shape=scratch)
+        """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
+        iteration."""
+        self.colour_gradient = ti.Vector.field(3, ti.f32, shape=scratch)
+        """ĝ_i = Σ_j ĝ_ij + ĝ_wall of the substep's first iteration, which ψ is smoothed from."""
+        self.plain_error = ti.field(ti.f32, shape=scratch)
+        """ρ_i/ρ0 − 1 (walls included, the ghost not) of the substep's first iteration."""
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
         self.error = ti.field(ti.f32, shape=particle_count)
@@ -111,12 +136,11 @@ class DensityConstraint:
         return xi
 
     @ti.func
-    def lagrange_multiplier(self, first: ti.template(), second: ti.template(), from_second, i,
-                            neighbours: ti.template(), measure: ti.template(), first_iteration, weight):
-        """λ̂_i (Eq. 10, dimensionless) at the positions in the buffer ``from_second`` picks, combined into
-        the substep's L with this iteration's Chebyshev ``weight`` (lam_total); the denominator is
-        computed in the ``first_iteration`` and kept (module docstring). With ``measure``, max(C_i, 0)
-        is kept for error_sum."""
+    def constraint(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
+                   first_iteration):
+        """C_i = ρ_i/ρ0 − 1 (walls included, the surface ghost not) at the positions in the buffer
+        ``from_second`` picks; in the ``first_iteration`` also the denominator of λ̂_i, kept for the
+        substep (module docstring), and the colour gradient the surface ghost is smoothed from."""
         xi = self.own_position(first, second, from_second, i)
         wall, wall_gradient = self.box.wall_density(xi)
         ratio = 0.0
@@ -126,13 +150,44 @@ class DensityConstraint:
                 ratio, gradient_i, sum_sq = self.pair_sums(second, xi, i, neighbours, True)
             else:
                 ratio, gradient_i, sum_sq = self.pair_sums(first, xi, i, neighbours, True)
-            self.denominator[i] = (gradient_i + self.h * wall_gradient).norm_sqr() + sum_sq + self.relaxation
+            total_gradient = gradient_i + self.h * wall_gradient
+            self.denominator[i] = total_gradient.norm_sqr() + sum_sq + self.relaxation
+            if ti.static(self.surface_density):
+                self.colour_gradient[i] = total_gradient
         else:
             if from_second:
                 ratio, _, _ = self.pair_sums(second, xi, i, neighbours, False)
             else:
                 ratio, _, _ = self.pair_sums(first, xi, i, neighbours, False)
-        c = ratio + wall - 1.0
+        return ratio + wall - 1.0
+
+    @ti.func
+    def surface_ghost(self, x: ti.template(), i, neighbours: ti.template()):
+        """ψ_i/ρ0, the density of the ghost fluid beyond the free surface (module docstring), from the
+        colour gradients smoothed over the neighbourhood, g = |Σ_j V W_ij ĝ_j| (self included): ψ_top
+        where g reads as in the top layer of a lattice under a flat surface, 0 where it reads as in the
+        layer below, a smoothstep between the quarter and three-quarter points
+        (``pbf.solver.sph.surface_ghost_calibration``). ψ fills at most twice the particle's deficit
+        1 − ρ_i/ρ0: a layer squeezed against a wall at an impact, whose colour gradient the wall term
+        turns outward, lacks nothing, and a particle at or above ρ0 is skipped without a neighbour loop
+        (most of a pool)."""
+        psi = 0.0
+        cap = -2.0 * self.plain_error[i]
+        if cap > 0.002:
+            xi = x[i]
+            smoothed = self.volume * kernel(0.0, self.h) * self.colour_gradient[i]
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                j = neighbours[k]
+                smoothed += self.volume * kernel((xi - x[j]).norm_sqr(), self.h) * self.colour_gradient[j]
+            u = ti.min(ti.max((smoothed.norm() - self.surface_offset) * self.surface_slope, 0.0), 1.0)
+            psi = ti.min(self.surface_top * u * u * (3.0 - 2.0 * u), cap)
+        return psi
+
+    @ti.func
+    def lagrange_multiplier(self, i, c, measure: ti.template(), first_iteration, weight):
+        """λ̂_i (Eq. 10, dimensionless) for the constraint value ``c``, combined into the substep's L with
+        this iteration's Chebyshev ``weight`` (lam_total). With ``measure``, max(C_i, 0) is kept for
+        error_sum."""
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
         if ti.static(self.clamp_pressure):
@@ -201,7 +256,19 @@ class DensityConstraint:
         it. One launch, and the error comes back as its return value: a launch costs 30-100 µs on a
         2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
-            self.lagrange_multiplier(first, second, from_second, i, neighbours, measure, first_iteration, weight)
+            c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
+            if ti.static(self.surface_density):
+                if first_iteration:
+                    self.plain_error[i] = c  # λ̂ waits for the ghost, which needs every ĝ_j
+                else:
+                    self.lagrange_multiplier(i, c + self.surface[i], measure, first_iteration, weight)
+            else:
+                self.lagrange_multiplier(i, c, measure, first_iteration, weight)
+        if ti.static(self.surface_density):
+            for i in range(self.grid.active[None] * first_iteration):  # an empty loop after the first
+                # A substep's first iteration always starts from the first buffer (project()).
+                self.surface[i] = self.surface_ghost(first, i, neighbours)
+                self.lagrange_multiplier(i, self.plain_error[i] + self.surface[i], measure, first_iteration, weight)
         for i in range(self.grid.active[None]):
             self.jacobi_step(first, second, from_second, i, neighbours, weight)
         mean_error = ti.cast(0.0, ti.f64)
@@ -225,6 +292,7 @@ class DensityConstraint:
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
+        assert not (first and predicted.in_second), "a substep's x* starts in the first buffer"
         mean_error = self.iterate(predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure),
                                   first, weight)
         predicted.swap()

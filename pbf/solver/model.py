@@ -113,6 +113,10 @@ class DensityParams:
     """1 / W(Δq h, h), the s_corr reference of Eq. (11), 1/m⁻³."""
     max_correction: float
     """Largest move of one iteration, in h."""
+    surface_density: bool = False
+    """Whether the ghost density beyond the free surface is added (``pbf.solver.density``)."""
+    surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
 
 
 @dataclass(frozen=True)
@@ -213,7 +217,9 @@ class Model:
             particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.relaxation,
             omega=min(1.0, STABLE_GAIN / sph.jacobi_gain(h / spacing, s.relaxation)),
             clamp_pressure=s.clamp_pressure, scorr_k=s.scorr_k, scorr_n=s.scorr_n,
-            inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION)
+            inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION,
+            surface_density=s.surface_density,
+            surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0))
         return cls(scene, n, mass, volume, grid,
                    BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
                              tuple((o.min_m, o.max_m) for o in scene.obstacles),

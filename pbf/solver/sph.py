@@ -93,17 +93,54 @@ def wall_density_table(spacing, h, samples):
     initial lattice (d = s/2) this restores the interior density exactly, so a block resting against a
     wall neither stacks nor shows a density dip. Returned as the table and its derivative in d.
     """
+    d = np.linspace(0.0, h, samples)
+    density = ghost_lattice_density(d, spacing, h)
+    return density, np.gradient(density, d)
+
+
+def ghost_lattice_density(d, spacing, h):
+    """ρ/ρ0 that the lattice planes at d + s/2 + k s (k = 0, 1, ...) give a particle, for an array d."""
     n = int(math.ceil(h / spacing))
     lateral = np.arange(-n, n + 1) * spacing
     la, lb = np.meshgrid(lateral, lateral, indexing="ij")
     lateral_r2 = (la * la + lb * lb).ravel()
-    d = np.linspace(0.0, h, samples)
-    density = np.zeros(samples)
+    density = np.zeros(len(d))
     for k in range(n + 1):
         plane = d + 0.5 * spacing + k * spacing
         density += kernel_np(np.sqrt(plane[:, None] ** 2 + lateral_r2[None, :]), h).sum(axis=1)
-    density /= lattice_density_sum(spacing, h)
-    return density, np.gradient(density, d)
+    return density / lattice_density_sum(spacing, h)
+
+
+def surface_ghost_calibration(spacing, h):
+    """(g_below, g_top, ψ_top): the free-surface ghost of ``pbf.solver.density`` calibrated on a
+    lattice filling the half-space below a flat surface, in units of s.
+
+    g is the smoothed colour gradient |Σ_j V W_ij ĝ_j| (self included) of a particle, ĝ_j = h Σ_k V
+    ∇W_jk the colour gradient of each neighbour; g_top and g_below are its values in the lattice's top
+    layer and in the layer under it; ψ_top/ρ0 is what the top layer misses, the density of the lattice
+    planes above it (``ghost_lattice_density`` at d = s/2). The solver maps g to the ghost density
+    linearly, 0 at g_below and ψ_top at g_top, so the top layer of a lattice reads ρ0 and every layer
+    under it is left as it is.
+    """
+    s = 1.0
+    h = h / spacing
+    n = int(math.ceil(h)) + 1
+    lateral = np.arange(-n, n + 1) * s
+    layers = np.arange(0, 2 * n + 3)
+    sites = np.array([(a, -k * s, b) for k in layers for a in lateral for b in lateral])
+    volume = 1.0 / lattice_density_sum(s, h)
+
+    def colour_gradient_y(layer):
+        r = np.array([0.0, -layer * s, 0.0]) - sites
+        return h * volume * kernel_gradient_np(r, h)[:, 1].sum()
+
+    raw = np.array([colour_gradient_y(k) for k in layers])
+
+    def smoothed(layer):
+        weights = volume * kernel_np(np.linalg.norm(np.array([0.0, -layer * s, 0.0]) - sites, axis=1), h)
+        return float(abs(weights @ raw[np.rint(-sites[:, 1] / s).astype(int)]))
+
+    return smoothed(1), smoothed(0), float(ghost_lattice_density(np.array([0.5 * s]), s, h)[0])
 
 
 def wall_overlap_tables(spacing, h, samples):
