@@ -169,8 +169,8 @@ class DensityConstraint:
         layer below, a smoothstep between the quarter and three-quarter points
         (``pbf.solver.sph.surface_ghost_calibration``). ψ fills at most twice the particle's deficit
         1 − ρ_i/ρ0: a layer squeezed against a wall at an impact, whose colour gradient the wall term
-        turns outward, lacks nothing, and a particle at or above ρ0 is skipped without a neighbour loop
-        (most of a pool)."""
+        turns outward, lacks nothing, and a particle above 0.999 ρ0 is skipped without a neighbour loop
+        (most of a pool; ψ ≤ 0.002 there)."""
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
         if cap > 0.002:
