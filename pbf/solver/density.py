@@ -26,6 +26,7 @@ a substep, so it changes by little. Later λ passes then sum the density alone, 
 gradients: a later iteration costs 0.88 ms against the first's 1.05, the seed preset's frame 13%
 less. The price, in docs/BENCHMARKS.md: a deep tank at 1-2 substeps with a fixed iteration count,
 already at the edge of stability, sloshes (every preset holds still as before).
+
 The free surface (``solver.surface_density``). A particle in the top layer of a pool has half a
 neighbourhood, reads about 0.82 ρ0 and is left free by the clamp; gravity then settles the layer into
 the hollows of the one below, 0.73 s above it instead of a spacing, and the settled seed pool stood
@@ -51,6 +52,14 @@ from pbf.solver.scan import BlockSum
 from pbf.solver.sph import kernel, kernel_and_gradient
 
 
+SURFACE_RAMP = (0.25, 0.75)
+"""Where between the smoothed colour gradient of a lattice's second layer (0) and of its top layer (1)
+the surface ghost's smoothstep starts and ends: a disordered surface spreads both by about ±0.1 of
+their gap, and ψ_top is reached (and held) before the top layer's value."""
+SURFACE_SKIP = 0.002
+"""ψ is left at 0, without its neighbour loop, where twice the deficit 1 − ρ/ρ0 is below this."""
+
+
 @ti.data_oriented
 class DensityConstraint:
     """The constraint's kernels and scratch: λ̂ per particle, its sum over a substep, the error sum."""
@@ -71,8 +80,8 @@ class DensityConstraint:
         self.grid = grid
         self.surface_density = params.surface_density
         g_below, g_top, psi_top = params.surface_calibration
-        self.surface_offset = g_below + 0.25 * (g_top - g_below)
-        self.surface_slope = 1.0 / (0.5 * (g_top - g_below))
+        self.surface_offset = g_below + SURFACE_RAMP[0] * (g_top - g_below)
+        self.surface_slope = 1.0 / ((SURFACE_RAMP[1] - SURFACE_RAMP[0]) * (g_top - g_below))
         self.surface_top = psi_top
         scratch = particle_count if params.surface_density else 1
         self.surface = ti.field(ti.f32, shape=scratch)
@@ -166,14 +175,13 @@ class DensityConstraint:
         """ψ_i/ρ0, the density of the ghost fluid beyond the free surface (module docstring), from the
         colour gradients smoothed over the neighbourhood, g = |Σ_j V W_ij ĝ_j| (self included): ψ_top
         where g reads as in the top layer of a lattice under a flat surface, 0 where it reads as in the
-        layer below, a smoothstep between the quarter and three-quarter points
-        (``pbf.solver.sph.surface_ghost_calibration``). ψ fills at most twice the particle's deficit
-        1 − ρ_i/ρ0: a layer squeezed against a wall at an impact, whose colour gradient the wall term
-        turns outward, lacks nothing, and a particle above 0.999 ρ0 is skipped without a neighbour loop
-        (most of a pool; ψ ≤ 0.002 there)."""
+        layer below, a smoothstep between (SURFACE_RAMP; ``pbf.solver.sph.surface_ghost_calibration``).
+        ψ fills at most twice the particle's deficit 1 − ρ_i/ρ0: a layer squeezed against a wall at an
+        impact, whose colour gradient the wall term turns outward, lacks nothing; a particle above
+        0.999 ρ0 (most of a pool) is left at 0 without the neighbour loop (SURFACE_SKIP)."""
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
-        if cap > 0.002:
+        if cap > SURFACE_SKIP:
             xi = x[i]
             smoothed = self.volume * kernel(0.0, self.h) * self.colour_gradient[i]
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
