@@ -75,7 +75,20 @@ class NeighbourGrid:
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
         """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch), particles of one
-        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders.
+        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders."""
+        self._sort(x, key)
+
+    @ti.kernel
+    def sort_and_permute(self, x: ti.template(), key: ti.template(), mover: ti.template()):
+        """:meth:`sort`, then ``mover.permute(sorted_from)`` in the same launch: ``mover`` (the
+        ``Integrator``) applies the permutation to every per-particle array, ``x`` included. A launch
+        costs 50-100 µs on a 2-core CPU, about what the reorder's own work does at 8,000 particles."""
+        self._sort(x, key)
+        mover.permute(self.sorted_from)
+
+    @ti.func
+    def _sort(self, x: ti.template(), key: ti.template()):
+        """The loops of :meth:`sort`, at the top level of the kernel that calls it (so parallel).
 
         The ranks the atomic counter hands out depend on which thread gets there first, so within a
         cell the order would change from run to run, and with it the order of every neighbour sum:

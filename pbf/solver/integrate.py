@@ -55,13 +55,13 @@ class Integrator:
         self._scalar = ti.field(ti.f32, shape=(2, state.capacity))
 
     @ti.kernel
-    def _accelerate(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
+    def advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
+        """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the box as in
+        :meth:`predict`; one launch for both."""
         for i in range(self.state.active[None]):
-            self.state.v[i] += dt * gravity
-
-    def accelerate(self, dt: float, gravity_m_s2) -> None:
-        """v ← v + Δt g (Algorithm 1, line 2)."""
-        self._accelerate(dt, gravity_m_s2)
+            v = self.state.v[i] + dt * gravity
+            self.state.v[i] = v
+            self.predicted.first[i] = self.box.clamp(self.state.x[i] + dt * v)
 
     @ti.kernel
     def damp(self, factor: ti.f32):
@@ -95,8 +95,11 @@ class Integrator:
             velocity *= speed_limit_m_s / speed
         self._push(push.point_m, velocity.tolist(), push.radius_m)
 
-    @ti.kernel
-    def _reorder(self, sorted_from: ti.template(), x_pred: ti.template()):
+    @ti.func
+    def permute(self, sorted_from: ti.template()):
+        """Apply the grid's counting-sort permutation to the state (Λ and the pressure sum included)
+        and to x*: loops for the top level of the grid's sort kernel (``NeighbourGrid.sort_and_permute``)."""
+        x_pred = ti.static(self.predicted.first)
         for slot in range(self.state.active[None]):
             i = sorted_from[slot]
             self._vec[0, slot] = self.state.x[i]
@@ -112,8 +115,3 @@ class Integrator:
             self.state.index[slot] = self._int[slot]
             self.state.multiplier[slot] = self._scalar[0, slot]
             self.state.pressure_sum[slot] = self._scalar[1, slot]
-
-    def reorder(self, sorted_from) -> None:
-        """Apply the grid's counting-sort permutation to the state (Λ and the pressure sum included) and
-        to x*."""
-        self._reorder(sorted_from, self.predicted.first)

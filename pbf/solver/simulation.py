@@ -183,8 +183,7 @@ class Simulation:
 
     def _sort_by_cell(self, x) -> None:
         """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
-        self.grid.sort(x, self.state.index)
-        self.integrator.reorder(self.grid.sorted_from)
+        self.grid.sort_and_permute(x, self.state.index, self.integrator)
 
     def _outside_inputs(self, dt: float) -> None:
         """What acts on the water from outside Algorithm 1, before its prediction: new water from the
@@ -205,8 +204,7 @@ class Simulation:
         x_star = self.integrator.predicted
         self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
         with hook.stage("predict"):
-            self.integrator.accelerate(dt, control.gravity_m_s2)  # lines 1-4: v += Δt g, x* = x + Δt v
-            self.integrator.predict(dt)
+            self.integrator.advance(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
             self._sort_by_cell(x_star.first)
         with hook.stage("neighbour lists"):
