@@ -298,6 +298,9 @@ class Solver:
     scorr_n: int = key(8, _between(1, 32), "s_corr exponent n (Eq. 11); 8 confines it to pairs closer than ~0.3 h")
     scorr_dq: float = key(0.2, _between(0.0, 0.9), "s_corr reference distance Δq/h (Eq. 11)")
     wall_density: bool = key(True, doc="add the density of the ghost fluid behind walls (no stacking)")
+    wall_mirror: bool = key(False, doc="the ghost fluid behind the container's walls is the mirror image of the "
+                            "fluid, moving with it, instead of a fixed lattice: particles at a wall carry the pressure "
+                            "of their neighbours, not twice it (needs wall_density)")
     surface_density: bool = key(False, doc="add the density of ghost fluid beyond the free surface, placed by "
                                 "each particle's colour gradient (the surface layer sits a spacing high)")
 
@@ -789,11 +792,14 @@ def _check_settle(scene: Scene, source: str) -> None:
 
 
 def _check_solver(scene: Scene, source: str) -> None:
-    """The iteration counts must leave room between the least and the most."""
+    """The iteration counts must leave room between the least and the most; a mirrored wall needs a wall."""
     s = scene.solver
     if s.min_iterations > s.iterations:
         raise SceneError(f"{source}: key 'solver.min_iterations' = {s.min_iterations} is more than solver.iterations = "
                          f"{s.iterations}, the most a substep runs; allowed: 1 to {s.iterations}")
+    if s.wall_mirror and not s.wall_density:
+        raise SceneError(f"{source}: key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but "
+                         f"solver.wall_density = false leaves none; allowed: false, or solver.wall_density = true")
 
 
 def _check_camera(scene: Scene, source: str) -> None:

@@ -34,6 +34,9 @@ def scene_with(**tables):
     ({"obstacles": [{"min_m": [0.5, 0.0, 0.1], "max_m": [0.7, 0.2, 0.3]}], "time": {"max_cfl": 2.0}},
      "key 'time.max_cfl' = 2 lets particles cross an obstacle"),
     ({"fluid": {"max_particles": 10}}, "key 'fluid.max_particles' = 10 is less than the 1,728 particles"),
+    ({"solver": {"wall_mirror": True, "wall_density": False}},
+     "key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but solver.wall_density = false "
+     "leaves none; allowed: false, or solver.wall_density = true"),
 ])
 def test_settings_that_cannot_both_hold(changes, message):
     with pytest.raises(SceneError) as error:

@@ -61,14 +61,20 @@ def test_the_seed_pool_settles_level_and_still():
     # Issue 14: the seed dam break after 10 s, compressed ≤ 0.2% in the mean and its free surface
     # within 0.5% of the fill height (it sat 1.5% low without the ghost). The pool still rocks: its
     # fastest particle reads 0.02-0.1 m/s from frame to frame (0.05-0.07 without the ghost).
+    # The surface is the mean of 11 readings over the last 2 s (8-10 s): one frame's reading swings by
+    # ±0.1% with the pool's waves (−0.39 to −0.59% in the suite's compile, −0.16 to −0.40% as shipped),
+    # and a single frame at 10 s had passed or failed with the last bits of the arithmetic.
     sim = Simulation("dam_break")
-    sim.step(600)
-    stats = sim.stats()
+    sim.step(480)
     h = sim.scene.kernel_radius_m
     fill = fill_height_m(sim)
     probes = np.linspace(h, 0.8 - h, 3)
-    surface = colour_surface_height(sim.positions(), sim.model.particle_volume_m3, h, probes, probes,
-                                    (0.5 * fill, 1.5 * fill))
+    surfaces = []
+    for _ in range(11):
+        sim.step(12)
+        surfaces.append(colour_surface_height(sim.positions(), sim.model.particle_volume_m3, h, probes, probes,
+                                              (0.5 * fill, 1.5 * fill)))
+    stats = sim.stats()
     assert stats["mean_density_error"] <= 0.002
-    assert surface == pytest.approx(fill, rel=0.005)
+    assert np.mean(surfaces) == pytest.approx(fill, rel=0.005)
     assert stats["max_speed_m_s"] < 0.15

@@ -36,6 +36,9 @@ class Box:
         self.upper = ti.Vector(list(params.upper_m))
         self.kernel_radius = params.kernel_radius_m
         self.with_wall_density = params.wall_density
+        self.mirror_reach = params.kernel_radius_m - params.particle_radius_m
+        """A wall's mirror images of the fluid come within h of a particle only if the particle is closer
+        than this to the wall, as no particle comes closer to it than r (the collision)."""
         spacing_m, kernel_radius_m = params.spacing_m, params.kernel_radius_m
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
@@ -186,6 +189,35 @@ class Box:
         return value, gradient
 
     @ti.func
+    def mirror_walls(self, p):
+        """The container walls that mirror the fluid near p (``solver.wall_mirror``, ``pbf.solver.density``):
+        per axis, 1 where the nearer wall is closer than h − r, and that wall's coordinate."""
+        near = ti.Vector([0, 0, 0])
+        plane = ti.Vector([0.0, 0.0, 0.0])
+        lower = self._lower()
+        for axis in ti.static(range(3)):
+            below = p[axis] - lower[axis]
+            above = self.upper[axis] - p[axis]
+            if ti.min(below, above) < self.mirror_reach:
+                near[axis] = 1
+                plane[axis] = self.upper[axis]
+                if below <= above:
+                    plane[axis] = lower[axis]
+        return near, plane
+
+    @ti.func
+    def obstacle_density(self, p):
+        """The obstacles' part of :meth:`wall_density`: their ghost density ρ/ρ0 and its gradient (1/m)."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_wall_density and self.obstacle_count > 0):
+            for o in range(self.obstacle_count):
+                d, g = self._obstacle_ghost(p, o)
+                density += d
+                gradient += g
+        return density, gradient
+
+    @ti.func
     def wall_density(self, p):
         """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner), and its gradient
         with respect to p (1/m)."""
@@ -214,11 +246,9 @@ class Box:
                 o, g = self._corner(distance)
                 density += o
                 gradient += side * g
-            if ti.static(self.obstacle_count > 0):
-                for o in range(self.obstacle_count):
-                    d, g = self._obstacle_ghost(p, o)
-                    density += d
-                    gradient += g
+            obstacles, obstacle_gradient = self.obstacle_density(p)
+            density += obstacles
+            gradient += obstacle_gradient
         return density, gradient
 
     @ti.func

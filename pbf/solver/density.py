@@ -39,6 +39,22 @@ neighbourhood first, which needs every ĝ_j: in the substep's first iteration th
 a second loop smooths it into ψ_i and only then forms λ̂_i. ψ is a constant of the substep (like the
 denominator): with its own gradient the top layer stopped pushing itself up and the tank boiled.
 
+The walls (``solver.wall_mirror``). By default the ghost fluid behind the container's walls is a fixed
+lattice, its density and gradient looked up in tables (``Box.wall_density``). A particle at a wall
+then has half a neighbourhood that moves: to hold its density it takes twice its neighbours'
+multiplier, and that doubled pressure held the layer at the back wall of the Martin & Moyce
+collapse 0.57 s above its neighbours (docs/VALIDATION.md). With ``solver.wall_mirror`` the ghost is the
+mirror image of the fluid in every wall within reach, one image across each wall, edge and corner
+(R_S reflects in the walls S), and it moves with the water:
+
+    ρ_i/ρ0 = V Σ_{j ∈ N_i ∪ {i}} Σ_S W(x_i − R_S x_j)                   (S = ∅: the fluid itself)
+    Δx_i   = h [Σ_j (λ̂_i + λ̂_j) Σ_S ĝ(x_i − R_S x_j) + 2 λ̂_i Σ_{S≠∅} ĝ(x_i − R_S x_i)]
+
+A pair's images act like the pair; a particle's own image moves with it, so it counts twice in
+∂C_i/∂x_i, and ∂C_i/∂x_j = −Σ_S R_S ĝ(x_i − R_S x_j). On a lattice the images are the tables' ghost
+lattice; at a free surface they end where the water does. Obstacles keep their tables, and so does
+the divergence pre-correction (``pbf.solver.divergence``).
+
 Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
 (``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
 under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
@@ -78,6 +94,7 @@ class DensityConstraint:
         self.max_correction = params.max_correction
         self.box = box
         self.grid = grid
+        self.wall_mirror = params.wall_mirror
         self.surface_density = params.surface_density
         g_below, g_top, psi_top = params.surface_calibration
         self.surface_offset = g_below + SURFACE_RAMP[0] * (g_top - g_below)
@@ -110,9 +127,69 @@ class DensityConstraint:
         """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration."""
 
     @ti.func
+    def fixed_walls(self, xi):
+        """The ghost density ρ/ρ0 behind the walls that is held still, and its gradient (1/m): the ghost
+        tables of the container and the obstacles, or with ``solver.wall_mirror`` the obstacles' only."""
+        wall, wall_gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.wall_mirror):
+            wall, wall_gradient = self.box.obstacle_density(xi)
+        else:
+            wall, wall_gradient = self.box.wall_density(xi)
+        return wall, wall_gradient
+
+    @ti.func
+    def image_sums(self, xi, xj, near, plane, gradients: ti.template()):
+        """Σ W(x_i − x') over the mirror images x' of x_j in the container walls ``near`` x_i: one across
+        each, one across each edge, one across the corner (with the fluid they fill the space around a
+        lattice in a corner). With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the image's
+        reflection (∂/∂x_j of W(x_i − x') is −R∇W)."""
+        h = self.h
+        w_sum = 0.0
+        g_sum = ti.Vector([0.0, 0.0, 0.0])
+        reflected_sum = ti.Vector([0.0, 0.0, 0.0])
+        for mask in ti.static(range(1, 8)):
+            m = ti.static([float(mask >> a & 1) for a in range(3)])  # 1 on the axes reflected
+            flip = ti.Vector([1.0 - 2.0 * m[0], 1.0 - 2.0 * m[1], 1.0 - 2.0 * m[2]])  # −1 there
+            use = 1
+            for a in ti.static(range(3)):
+                if ti.static(m[a] > 0.0):
+                    use *= near[a]
+            if use != 0:
+                r = xi - (flip * xj + 2.0 * ti.Vector(m) * plane)  # x' = x_j reflected: 2 P_a − x_j,a
+                if r.norm_sqr() < h * h:  # most images are out of reach: no square root for them
+                    if ti.static(gradients):
+                        w, g = kernel_and_gradient(r, h)
+                        w_sum += w
+                        g_sum += g
+                        reflected_sum += flip * g
+                    else:
+                        w_sum += kernel(r.norm_sqr(), h)
+        return w_sum, g_sum, reflected_sum
+
+    @ti.func
     def pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
-        """The neighbours' part of ρ_i/ρ0 (self term included), and with ``gradients`` of Σ_j ĝ_ij and
-        Σ_j |ĝ_ij|², for particle i at xi; the wall's part is :meth:`Box.wall_density`'s."""
+        """The fluid's part of ρ_i/ρ0 for particle i at xi (its own term included, and with
+        ``solver.wall_mirror`` the mirror images in the container's walls); with ``gradients`` also
+        Σ_j ĝ_ij (the pairs' part of ∂C_i/∂x_i), Σ_j |∂C_i/∂x_j|² and ĝ_self, the gradient of the
+        particle's own images held still (they move with it, so ∂C_i/∂x_i counts them twice)."""
+        ratio, gradient_i, sum_sq = 0.0, ti.Vector([0.0, 0.0, 0.0]), 0.0
+        own_images = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.wall_mirror):
+            near, plane = self.box.mirror_walls(xi)
+            # A loop of its own for the particles at a wall: with the images' code in the common loop,
+            # every particle's pairs took 2.5 times as long, the few at a wall or not.
+            if near.sum() > 0:
+                ratio, gradient_i, sum_sq, own_images = self.mirrored_pair_sums(x, xi, i, neighbours, near, plane,
+                                                                                gradients)
+            else:
+                ratio, gradient_i, sum_sq = self.plain_pair_sums(x, xi, i, neighbours, gradients)
+        else:
+            ratio, gradient_i, sum_sq = self.plain_pair_sums(x, xi, i, neighbours, gradients)
+        return ratio, gradient_i, sum_sq, own_images
+
+    @ti.func
+    def plain_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
+        """:meth:`pair_sums` without mirror images."""
         h = self.h
         ratio = self.volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
@@ -129,12 +206,35 @@ class DensityConstraint:
         return ratio, gradient_i, sum_sq
 
     @ti.func
-    def ratio_and_gradients(self, x: ti.template(), i, neighbours: ti.template()):
-        """ρ_i/ρ0, Σ_j ĝ_ij + ĝ_wall and Σ_j |ĝ_ij|² for particle i (the parts of Eq. 10)."""
+    def mirrored_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane,
+                           gradients: ti.template()):
+        """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
+        h = self.h
+        w_self, g_self, _ = self.image_sums(xi, xi, near, plane, gradients)
+        ratio = self.volume * (kernel(0.0, h) + w_self)
+        own_images = self.volume * h * g_self
+        gradient_i = ti.Vector([0.0, 0.0, 0.0])
+        sum_sq = 0.0
+        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+            xj = x[neighbours[k]]
+            if ti.static(gradients):
+                w, grad_w = kernel_and_gradient(xi - xj, h)
+                w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, True)
+                ratio += self.volume * (w + w_images)
+                gradient_i += self.volume * h * (grad_w + g_images)
+                sum_sq += (self.volume * h * (grad_w + reflected)).norm_sqr()
+            else:
+                w_images, _, _ = self.image_sums(xi, xj, near, plane, False)
+                ratio += self.volume * (kernel((xi - xj).norm_sqr(), h) + w_images)
+        return ratio, gradient_i, sum_sq, own_images
+
+    @ti.func
+    def density_ratio(self, x: ti.template(), i, neighbours: ti.template()):
+        """ρ_i/ρ0 of particle i: the fluid and the ghost fluid behind the walls."""
         xi = x[i]
-        ratio, gradient_i, sum_sq = self.pair_sums(x, xi, i, neighbours, True)
-        wall, wall_gradient = self.box.wall_density(xi)
-        return ratio + wall, gradient_i + self.h * wall_gradient, sum_sq
+        ratio, _, _, _ = self.pair_sums(x, xi, i, neighbours, False)
+        wall, _ = self.fixed_walls(xi)
+        return ratio + wall
 
     @ti.func
     def own_position(self, first: ti.template(), second: ti.template(), from_second, i):
@@ -151,23 +251,24 @@ class DensityConstraint:
         ``from_second`` picks; in the ``first_iteration`` also the denominator of λ̂_i, kept for the
         substep (module docstring), and the colour gradient the surface ghost is smoothed from."""
         xi = self.own_position(first, second, from_second, i)
-        wall, wall_gradient = self.box.wall_density(xi)
+        wall, wall_gradient = self.fixed_walls(xi)
         ratio = 0.0
         if first_iteration:
-            gradient_i, sum_sq = ti.Vector([0.0, 0.0, 0.0]), 0.0
+            gradient_i, sum_sq, own_images = ti.Vector([0.0, 0.0, 0.0]), 0.0, ti.Vector([0.0, 0.0, 0.0])
             if from_second:
-                ratio, gradient_i, sum_sq = self.pair_sums(second, xi, i, neighbours, True)
+                ratio, gradient_i, sum_sq, own_images = self.pair_sums(second, xi, i, neighbours, True)
             else:
-                ratio, gradient_i, sum_sq = self.pair_sums(first, xi, i, neighbours, True)
-            total_gradient = gradient_i + self.h * wall_gradient
-            self.denominator[i] = total_gradient.norm_sqr() + sum_sq + self.relaxation
+                ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
+            # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
+            colour = gradient_i + own_images + self.h * wall_gradient
+            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + self.relaxation
             if ti.static(self.surface_density):
-                self.colour_gradient[i] = total_gradient
+                self.colour_gradient[i] = colour
         else:
             if from_second:
-                ratio, _, _ = self.pair_sums(second, xi, i, neighbours, False)
+                ratio, _, _, _ = self.pair_sums(second, xi, i, neighbours, False)
             else:
-                ratio, _, _ = self.pair_sums(first, xi, i, neighbours, False)
+                ratio, _, _, _ = self.pair_sums(first, xi, i, neighbours, False)
         return ratio + wall - 1.0
 
     @ti.func
@@ -210,17 +311,36 @@ class DensityConstraint:
 
     @ti.func
     def pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template()):
-        """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi; Jacobi, so x is only read."""
+        """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi, with ``solver.wall_mirror``
+        also the pairs' mirror images with (λ̂_i + λ̂_j) and the particle's own with 2 λ̂_i (they move
+        with it); Jacobi, so x is only read."""
         h = self.h
         dx = ti.Vector([0.0, 0.0, 0.0])
-        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-            j = neighbours[k]
-            w, grad_w = kernel_and_gradient(xi - x[j], h)
-            s_corr = 0.0
-            if ti.static(self.scorr_k > 0.0):
-                s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** self.scorr_n
-            dx += (lam_i + self.lam[j] + s_corr) * self.volume * h * grad_w
+        if ti.static(self.wall_mirror):
+            near, plane = self.box.mirror_walls(xi)
+            if near.sum() > 0:  # a loop of its own, as in pair_sums
+                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, True)
+                dx = 2.0 * lam_i * self.volume * h * g_self
+                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                    j = neighbours[k]
+                    w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, True)
+                    dx += self.pair_term(x, xi, lam_i, j) + (lam_i + self.lam[j]) * self.volume * h * g_images
+            else:
+                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                    dx += self.pair_term(x, xi, lam_i, neighbours[k])
+        else:
+            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
+                dx += self.pair_term(x, xi, lam_i, neighbours[k])
         return dx
+
+    @ti.func
+    def pair_term(self, x: ti.template(), xi, lam_i, j):
+        """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12)."""
+        w, grad_w = kernel_and_gradient(xi - x[j], self.h)
+        s_corr = 0.0
+        if ti.static(self.scorr_k > 0.0):
+            s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** self.scorr_n
+        return (lam_i + self.lam[j] + s_corr) * self.volume * self.h * grad_w
 
     @ti.func
     def jacobi_step(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
@@ -238,7 +358,7 @@ class DensityConstraint:
         else:
             dx = self.pair_correction(first, xi, i, lam_i, neighbours)
             earlier = second[i]
-        _, wall_gradient = self.box.wall_density(xi)
+        _, wall_gradient = self.fixed_walls(xi)
         dx += lam_i * h * wall_gradient
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.

@@ -28,7 +28,7 @@ class Diagnostics:
         for k in ti.static(range(3)):
             self.maxima[k] = 0.0
         for i in range(self.state.active[None]):
-            ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
+            ratio = self.density.density_ratio(self.state.x, i, neighbours)
             error = ti.max(ratio - 1.0, 0.0)
             speed2 = self.state.v[i].norm_sqr()
             count = ti.cast(self.grid.neighbour_end[i] - self.grid.neighbour_start[i], ti.f32)
@@ -42,7 +42,7 @@ class Diagnostics:
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
         for i in range(self.state.active[None]):
-            ratio, _, _ = self.density.ratio_and_gradients(self.state.x, i, neighbours)
+            ratio = self.density.density_ratio(self.state.x, i, neighbours)
             self.density_ratio[i] = ratio
 
     def density_ratios(self, neighbours):

@@ -117,6 +117,9 @@ class DensityParams:
     """Whether the ghost density beyond the free surface is added (``pbf.solver.density``)."""
     surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
+    wall_mirror: bool = False
+    """Whether the ghost fluid behind the container's walls is the fluid's mirror image (``pbf.solver.density``)
+    rather than the fixed ghost lattice of ``Box.wall_density``."""
 
 
 @dataclass(frozen=True)
@@ -219,7 +222,8 @@ class Model:
             clamp_pressure=s.clamp_pressure, scorr_k=s.scorr_k, scorr_n=s.scorr_n,
             inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION,
             surface_density=s.surface_density,
-            surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0))
+            surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
+            wall_mirror=s.wall_mirror)
         return cls(scene, n, mass, volume, grid,
                    BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
                              tuple((o.min_m, o.max_m) for o in scene.obstacles),
