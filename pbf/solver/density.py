@@ -319,6 +319,8 @@ class DensityConstraint:
         if ti.static(self.wall_mirror):
             near, plane = self.box.mirror_walls(xi)
             if near.sum() > 0:  # a loop of its own, as in pair_sums
+                # Unused results named, not "_": Taichi gives one "_" a single type, and a second "_"
+                # of another type (a float, then a vector) broke its compile without optimisation.
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, True)
                 dx = 2.0 * lam_i * self.volume * h * g_self
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
