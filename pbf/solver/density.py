@@ -124,7 +124,9 @@ class DensityConstraint:
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
-        """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration."""
+        """|∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration: with the
+        ghost tables |Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂; with mirrored walls the images' terms too
+        (:meth:`pair_sums`)."""
 
     @ti.func
     def fixed_walls(self, xi):

@@ -75,7 +75,9 @@ class NeighbourGrid:
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
         """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch), particles of one
-        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders."""
+        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The solver uses
+        :meth:`sort_and_permute`; this is the sort alone, for a caller with arrays of its own (the grid's
+        tests check it against brute force)."""
         self._sort(x, key)
 
     @ti.kernel
