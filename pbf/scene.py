@@ -38,6 +38,15 @@ MAX_TABLES = 1000
 """Most [[fluid.blocks]] in a scene: the overlap check compares every pair."""
 MAX_OBSTACLES = 100
 """Most [[obstacles]]: each is checked against every block and every obstacle before it."""
+MAX_ITERATIONS = 100
+"""Most Jacobi iterations a substep may run (solver.iterations): with substeps ≤ 1000, a bound on a
+frame's cost."""
+MIN_ITERATIONS = 2
+"""solver.min_iterations's default; a scene with fewer solver.iterations runs them all (any other value
+above solver.iterations is refused)."""
+CHEBYSHEV_RHO = 0.9
+"""solver.chebyshev_rho's default, which only acceleration = "chebyshev" reads: any other value with
+another acceleration is refused (it would do nothing)."""
 POSITION_REACH_SPACINGS = 2**16
 """How far from the origin, in spacings, a wall may lie. Positions are float32 (24-bit significand):
 at 2¹⁶ spacings one unit in the last place is 2⁻⁷ of a spacing, the finest resolution the neighbour
@@ -278,13 +287,18 @@ class Time:
 
 @dataclass(frozen=True)
 class Solver:
-    iterations: int = key(10, _between(1, 100), "Jacobi iterations of the density constraint per substep (the most, "
-                          "with target_density_error)")
-    min_iterations: int = key(1, _between(1, 100), "Jacobi iterations every substep runs, whatever the error")
+    iterations: int = key(10, _between(1, MAX_ITERATIONS), "Jacobi iterations of the density constraint per "
+                          "substep (the most, with target_density_error)")
+    min_iterations: int = key(MIN_ITERATIONS, _between(1, MAX_ITERATIONS), "Jacobi iterations every substep runs, whatever the "
+                              "error (one plain iteration alone leaves the shortest waves reversed: "
+                              "pbf.solver.acceleration)")
     target_density_error: float = key(0.001, _between(0.0, 1.0), "stop iterating once the mean of max(ρ/ρ0 − 1, 0) "
                                       "is below this (and min_iterations ran); 0 always runs all iterations")
-    chebyshev_rho: float = key(0.9, _between(0.0, 0.99), "spectral radius ρ assumed by the Chebyshev "
-                               "acceleration of the Jacobi iterations (Wang 2015); 0: plain Jacobi")
+    acceleration: str = key("stable", _one_of("stable", "chebyshev", "none"), "weights of the Jacobi iterations' "
+                            "two-step acceleration: stable (none reverses an error mode enough to pump it), chebyshev "
+                            "(Wang 2015, with chebyshev_rho) or none (plain Jacobi); pbf.solver.acceleration")
+    chebyshev_rho: float = key(CHEBYSHEV_RHO, _between(0.0, 0.99), "spectral radius ρ assumed by acceleration = "
+                               "\"chebyshev\"; 0: plain Jacobi")
     divergence_iterations: int = key(0, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
                                      "(velocity level, before the prediction) per substep; 0 switches it off")
     warm_start: float = key(1.0, _between(0.0, 1.0), "fraction of the last substep's divergence pressure the "
@@ -792,11 +806,16 @@ def _check_settle(scene: Scene, source: str) -> None:
 
 
 def _check_solver(scene: Scene, source: str) -> None:
-    """The iteration counts must leave room between the least and the most; a mirrored wall needs a wall."""
+    """The iteration counts must leave room between the least and the most; ρ only goes with Chebyshev
+    weights; a mirrored wall needs a wall."""
     s = scene.solver
-    if s.min_iterations > s.iterations:
+    if s.min_iterations > s.iterations and s.min_iterations != MIN_ITERATIONS:
         raise SceneError(f"{source}: key 'solver.min_iterations' = {s.min_iterations} is more than solver.iterations = "
                          f"{s.iterations}, the most a substep runs; allowed: 1 to {s.iterations}")
+    if s.acceleration != "chebyshev" and s.chebyshev_rho != CHEBYSHEV_RHO:
+        raise SceneError(f"{source}: key 'solver.chebyshev_rho' = {_num(s.chebyshev_rho)} sets the ρ of Chebyshev weights, "
+                         f"but solver.acceleration = \"{s.acceleration}\" does not use them; allowed: "
+                         f"solver.acceleration = \"chebyshev\", or no solver.chebyshev_rho")
     if s.wall_mirror and not s.wall_density:
         raise SceneError(f"{source}: key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but "
                          f"solver.wall_density = false leaves none; allowed: false, or solver.wall_density = true")

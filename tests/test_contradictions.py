@@ -6,6 +6,7 @@ from scenes import small_dam_break
 from pbf import SceneError
 from pbf.app.render import View
 from pbf.scene import default_look_at_m, from_dict
+from pbf.solver.model import Control
 
 NOZZLE = {"position_m": [0.6, 0.6, 0.2], "direction": [0.0, -1.0, 0.0], "radius_m": 0.05, "end_s": 0.5}
 
@@ -37,11 +38,22 @@ def scene_with(**tables):
     ({"solver": {"wall_mirror": True, "wall_density": False}},
      "key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but solver.wall_density = false "
      "leaves none; allowed: false, or solver.wall_density = true"),
+    ({"solver": {"chebyshev_rho": 0.95}},
+     "key 'solver.chebyshev_rho' = 0.95 sets the ρ of Chebyshev weights, but solver.acceleration = \"stable\" "
+     "does not use them"),
+    ({"solver": {"acceleration": "none", "chebyshev_rho": 0.0}}, "key 'solver.chebyshev_rho' = 0"),
+    ({"solver": {"iterations": 3, "min_iterations": 4}}, "key 'solver.min_iterations' = 4 is more than"),
 ])
 def test_settings_that_cannot_both_hold(changes, message):
     with pytest.raises(SceneError) as error:
         from_dict(scene_with(**changes), "test.toml")
     assert str(error.value).startswith("test.toml: ") and message in str(error.value), str(error.value)
+
+
+def test_the_default_least_iterations_yield_to_fewer_most():
+    # solver.min_iterations defaults to 2; a scene that asks for 1 iteration at most runs 1, unrefused.
+    scene = from_dict(scene_with(solver={"iterations": 1}))
+    assert scene.solver.iterations == 1 and Control.from_scene(scene).min_iterations == 1
 
 
 def test_the_default_look_at_point_is_the_renderers():

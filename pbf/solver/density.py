@@ -18,7 +18,7 @@ the same column stays under 0.11 m/s.
 
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
 (into a second buffer: the iterations alternate between two, ``PredictedPositions``),
-Chebyshev-accelerated (:class:`Chebyshev`).
+accelerated by the weights of ``pbf.solver.acceleration``.
 The denominator of λ̂_i is computed in a substep's first iteration and kept for the rest: it only
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
@@ -117,9 +117,9 @@ class DensityConstraint:
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
         impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
-        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (:class:`Chebyshev`), so the multiplier they have
+        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (``pbf.solver.acceleration``), so the multiplier they have
         moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for plain
-        Jacobi (w = 1). The plain sum under Chebyshev weights read the `hydrostatic` tank's gradient
+        Jacobi (w = 1). The plain sum under accelerated (Chebyshev) weights read the `hydrostatic` tank's gradient
         35% low; this reads it within 2% once averaged over a frame's substeps (docs/VALIDATION.md)."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
@@ -297,7 +297,7 @@ class DensityConstraint:
     @ti.func
     def lagrange_multiplier(self, i, c, measure: ti.template(), first_iteration, weight):
         """λ̂_i (Eq. 10, dimensionless) for the constraint value ``c``, combined into the substep's L with
-        this iteration's Chebyshev ``weight`` (lam_total). With ``measure``, max(C_i, 0) is kept for
+        this iteration's ``weight`` (lam_total). With ``measure``, max(C_i, 0) is kept for
         error_sum."""
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
@@ -349,7 +349,7 @@ class DensityConstraint:
     @ti.func
     def jacobi_step(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
                     weight):
-        """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, Chebyshev-weighted against the
+        """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
         other buffer's x_i (the iteration before) and collided with the box (line 15), into that buffer."""
         h = self.h
         xi = self.own_position(first, second, from_second, i)
@@ -377,7 +377,7 @@ class DensityConstraint:
     @ti.kernel
     def iterate(self, first: ti.template(), second: ti.template(), from_second: ti.i32, neighbours: NeighbourList,
                 measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> ti.f64:
-        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions, Chebyshev-
+        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions,
         weighted against the other buffer (which holds the positions of the iteration before) and
         collided with the box (Algorithm 1, line 15), into that buffer; x is ``second`` when
         ``from_second``, else ``first``. With ``measure`` returns the mean error (else 0).
@@ -409,6 +409,22 @@ class DensityConstraint:
             mean_error = self.error_sum.total[0] / ti.max(self.grid.active[None], 1)
         return mean_error
 
+    @ti.kernel
+    def _between(self, first: ti.template(), second: ti.template(), newer_in_second: ti.i32, fraction: ti.f32):
+        for i in range(self.grid.active[None]):
+            newer, older = first[i], second[i]
+            if newer_in_second:
+                newer, older = second[i], first[i]
+            first[i] = self.box.clamp(newer + fraction * (older - newer))
+            self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
+
+    def step_back(self, predicted, fraction: float) -> None:
+        """Take back ``fraction`` of the last iteration: x* = x^{k+1} + fraction (x^k − x^{k+1}), and L
+        alike, into the first buffer (the iteration before is still in the other; box collision again,
+        as a point between two outside an obstacle may lie in it)."""
+        self._between(predicted.first, predicted.second, predicted.in_second, fraction)
+        predicted.in_second = False
+
     def pressure_scale(self, dt: float) -> float:
         """p_i = −ρ0 h² L_i / Δt² (Pa per unit ρ0, L_i = lam_total): matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
         with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
@@ -418,7 +434,7 @@ class DensityConstraint:
         """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19) on the x* of
         ``predicted`` (a ``PredictedPositions``): reads the buffer that holds x*, writes the corrected
         positions into the other (which holds the positions of the iteration before) as
-        x_prev + weight (x + Δx − x_prev), the Chebyshev step (:class:`Chebyshev`), plain Jacobi at
+        x_prev + weight (x + Δx − x_prev), the accelerated step (``pbf.solver.acceleration``), plain Jacobi at
         weight 1, and swaps them.
 
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
@@ -430,37 +446,3 @@ class DensityConstraint:
         predicted.swap()
         return mean_error if measure else None
 
-
-class Chebyshev:
-    """The weights of Chebyshev semi-iterative acceleration (Wang 2015, Eq. 12) for the Jacobi iterations:
-    x^{k+1} = x^{k−1} + w_{k+1} (x̂^{k+1} − x^{k−1}), x̂ the plain Jacobi update of x^k, with
-
-        w = 1 (the first iteration),  2 / (2 − ρ²) (the second),  4 / (4 − ρ² w_prev) (later),
-
-    ρ the spectral radius assumed for the plain iteration (0: plain Jacobi, every w = 1). After the
-    first, the weights fall from 2 / (2 − ρ²) toward 2 / (1 + √(1 − ρ²)) (1.39 at ρ = 0.9): they
-    extrapolate along the slow long waves that plain Jacobi shrinks by little per iteration. ρ = 0.9,
-    the default, holds every pool still; the splashing presets (the seed, ``double_dam_break``,
-    ``drop_into_pool``) run 0.92 (less error in less time, and their settled pools as still). At 0.93
-    the settled seed pool's fastest particle reached 0.12 m/s, and at 0.95 the ``hydrostatic`` tank
-    boiled (docs/BENCHMARKS.md). :meth:`restart` falls back to plain Jacobi and begins the sequence
-    again, for when the error rose (ρ was too bold for this state).
-    """
-
-    def __init__(self, rho: float):
-        self.rho2 = rho * rho
-        self.weight = 0.0  # none yet: the next is the first
-
-    def next(self) -> float:
-        """The weight of the next iteration."""
-        if self.rho2 == 0.0 or self.weight == 0.0:
-            self.weight = 1.0
-        elif self.weight == 1.0:
-            self.weight = 2.0 / (2.0 - self.rho2)
-        else:
-            self.weight = 4.0 / (4.0 - self.rho2 * self.weight)
-        return self.weight
-
-    def restart(self) -> None:
-        """Begin again at weight 1."""
-        self.weight = 0.0

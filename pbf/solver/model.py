@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pbf.scene import Scene, SceneError, block_counts
-from pbf.solver import sph
+from pbf.scene import MAX_ITERATIONS, Scene, SceneError, block_counts
+from pbf.solver import acceleration, sph
 
 Vec3 = tuple[float, float, float]
 
@@ -155,8 +155,6 @@ class Control:
     """Substeps per frame asked for; the CFL limit may take more."""
     target_density_error: float
     """Stop iterating once the mean of max(ρ/ρ0 − 1, 0) is below this; 0 runs all iterations."""
-    chebyshev_rho: float
-    """ρ of the Chebyshev weights of the Jacobi iterations; 0 leaves them plain."""
     divergence_iterations: int
     """Iterations of the divergence pre-correction; 0 skips the pass."""
     warm_start: float
@@ -176,9 +174,18 @@ class Control:
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:
         s = scene.solver
-        return cls(s.iterations, s.min_iterations, scene.time.substeps, s.target_density_error, s.chebyshev_rho,
+        return cls(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps, s.target_density_error,
                    s.divergence_iterations, s.warm_start, scene.viscosity.xsph, scene.vorticity.epsilon,
                    scene.gravity_m_s2)
+
+
+def iteration_weights(solver, lowest: float) -> tuple[float, ...]:
+    """The weights of ``solver.acceleration`` for as many iterations as a substep may run; ``lowest``
+    is the smallest factor 1 − ω μ a plain iteration applies to any error mode."""
+    if solver.acceleration == "stable":
+        return acceleration.stable_weights(lowest, MAX_ITERATIONS)
+    rho = solver.chebyshev_rho if solver.acceleration == "chebyshev" else 0.0
+    return acceleration.chebyshev_weights(rho, MAX_ITERATIONS)
 
 
 def available_memory_bytes() -> int:
@@ -204,6 +211,9 @@ class Model:
     box: BoxParams
     density: DensityParams
     velocity: VelocityParams
+    iteration_weights: tuple[float, ...]
+    """w_1 … w_100 of the Jacobi iterations' acceleration (``solver.acceleration``, ``pbf.solver.acceleration``),
+    one per iteration a substep may run (the schema's most)."""
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Model:
@@ -216,9 +226,10 @@ class Model:
         mass = scene.fluid.rest_density_kg_m3 / sph.lattice_density_sum(spacing, h)
         volume = mass / scene.fluid.rest_density_kg_m3
         s = scene.solver
+        gain = sph.jacobi_gain(h / spacing, s.relaxation)
+        omega = min(1.0, STABLE_GAIN / gain)
         density = DensityParams(
-            particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.relaxation,
-            omega=min(1.0, STABLE_GAIN / sph.jacobi_gain(h / spacing, s.relaxation)),
+            particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.relaxation, omega=omega,
             clamp_pressure=s.clamp_pressure, scorr_k=s.scorr_k, scorr_n=s.scorr_n,
             inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION,
             surface_density=s.surface_density,
@@ -228,7 +239,7 @@ class Model:
                    BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
                              tuple((o.min_m, o.max_m) for o in scene.obstacles),
                              scene.wave_maker.stroke_m, scene.wave_maker.period_s),
-                   density, VelocityParams(n, h, volume))
+                   density, VelocityParams(n, h, volume), iteration_weights(s, 1.0 - omega * gain))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
         """Lattice positions (m) and velocities (m/s) of every block, float32 arrays of shape (n, 3).

@@ -13,7 +13,8 @@ import numpy as np
 from pbf import scene as schema
 from pbf.solver.backend import start_backend
 from pbf.solver.boundary import Box
-from pbf.solver.density import Chebyshev, DensityConstraint
+from pbf.solver.acceleration import Weights
+from pbf.solver.density import DensityConstraint
 from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.diagnostics import Diagnostics
 from pbf.solver.emit import Emitters
@@ -214,15 +215,17 @@ class Simulation:
                 self.divergence.run(self.grid.neighbours, dt, control.warm_start, control.divergence_iterations)
                 self.integrator.predict(dt)
         with hook.stage("solver iterations"):
-            chebyshev, last_error = Chebyshev(control.chebyshev_rho), math.inf
+            weights, last_error = Weights(self.model.iteration_weights), math.inf
             for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
                 error = self.density.project(x_star, self.grid.neighbours,  # Jacobi, into the other buffer
-                                             measure=target > 0.0, first=k == 0, weight=chebyshev.next())
+                                             measure=target > 0.0, first=k == 0, weight=weights.next())
                 self.iterations_used = k + 1
                 if target > 0.0 and error < target and k + 1 >= control.min_iterations:
+                    if k + 1 > control.min_iterations and last_error >= target:  # crossed in iteration k − 1:
+                        self.density.step_back(x_star, (target - error) / (last_error - error))  # a count between
                     break                                        # the error this iteration started from
                 if target > 0.0 and error > last_error:          # the acceleration overshot: plain again
-                    chebyshev.restart()
+                    weights.restart()
                 last_error = error
             x_star.gather()                                      # x* back in the first buffer
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
@@ -257,7 +260,7 @@ class Simulation:
         """(n,) float32 pressure in Pa, in creation order: the mean over the last frame's substeps (or
         over those run since, with :meth:`substep`) of p = −ρ0 h² (L/Δt² + Λ), L the multiplier the
         position iterations moved the particle by and Λ the divergence pre-correction's
-        (``DensityConstraint.lam_total``). Under Chebyshev weights one substep's pressure alternates
+        (``DensityConstraint.lam_total``). Under accelerated weights one substep's pressure alternates
         from substep to substep (its gradient by ±15% in the ``hydrostatic`` tank); a frame's mean
         holds still to 2% (docs/VALIDATION.md). Zero before the first substep after a restore. Each
         particle's value is still noisy (a few per cent of ρ0 g H): average over frames for a field."""

@@ -37,7 +37,7 @@ class State:
     * ``multiplier``: (capacity,) f32, Λ of ``pbf.solver.divergence``: the last substep's divergence
       pressure, which the next one starts from
     * ``pressure_sum``: (capacity,) f32, Pa, the sum of each substep's pressure since the frame began
-      (``Simulation.pressures`` divides it by the count): one substep's alternates under Chebyshev
+      (``Simulation.pressures`` divides it by the count): one substep's alternates under accelerated
       weights, a frame's mean does not
     * ``active``: () i32, the number of live particles
     """

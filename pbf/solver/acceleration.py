@@ -1,0 +1,101 @@
+"""The weights that accelerate the Jacobi iterations of the density constraint (``solver.acceleration``).
+
+Every scheme here is the two-step (semi-iterative) recurrence of Wang 2015, Eq. 12,
+
+    x^{k+1} = x^{k−1} + w_{k+1} (x̂^{k+1} − x^{k−1}),    x̂^{k+1} the plain Jacobi update of x^k,
+
+and differs only in its weights w_1 = 1, w_2, w_3, …. Linearised about rest, one plain iteration maps
+each error mode to λ times itself, λ = 1 − ω μ in [1 − ω μ_max, 1] (``pbf.solver.sph.jacobi_gain``:
+[−0.8, 1] for STABLE_GAIN 1.8), and k weighted iterations map it to P_k(λ), with
+
+    P_0 = 1,  P_1 = λ,  P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1}.
+
+Why the Chebyshev weights are not the default. They make P_k the Chebyshev polynomial that is least on
+[−ρ, ρ], which is how they speed up the slow long waves (λ near 1). But that polynomial swings
+negative: at ρ = 0.9, P_2 reaches −0.68 (at λ = 0) and P_3 −0.46. A PBF substep turns the residual
+into velocity, v = (x* − x)/Δt, so a mode whose compression c the iterations leave at P·(what the
+prediction brought) follows c_{n+1} = P (2 c_n − c_{n−1}) from substep to substep: its roots
+z = P ± √(P² − P) leave the unit circle when P < −1/3. A substep that stops after 2 or 3 Chebyshev
+iterations therefore pumps those modes. It does, measured: a 6 × 8 × 6 tank at rest under 8 substeps
+with a fixed 2 iterations moved at 5.1% of √(gH) rms, with 3 at 1.9% and with 4 (P_4 ≥ −0.30) at
+0.08%; with the error target, which stops after 1-5 iterations, at 0.9-1.1% with bursts to 4%
+(docs/VALIDATION.md).
+
+The stable weights (the default). w_1 = 1, and each later weight is the largest for which P_k stays
+at or above −REVERSAL (1/4, inside the −1/3 bound) and within ±1 over the whole spectrum: the boldest
+extrapolation along the slow modes that reverses no mode enough to pump it. The weights rise from
+1.25 toward 1.8-1.9 (past Chebyshev's 1.39 limit at ρ = 0.9), so after 5 or more iterations the slow
+modes converge faster than under Chebyshev weights, and after 2-3 a little slower. The same tank
+holds still (0.00% with any fixed count of 2 or more), and the seed preset's mean error halves at the
+same cost (docs/BENCHMARKS.md). One plain iteration (P_1 = λ) still reaches −0.8 in the shortest
+waves, which is why ``solver.min_iterations`` is 2 by default.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+REVERSAL = 0.25
+"""The most a weighted sequence of iterations may reverse any error mode (P_k ≥ −REVERSAL): inside the
+1/3 past which a substep pumps the mode (module docstring)."""
+WEIGHT_CAP = 1.9
+"""The largest stable weight: in the two-step recurrence a mode's error decays by at least √(w − 1) per
+iteration (0.95 here); toward 2 the recurrence stops damping, and past 30 iterations the unbounded
+choice jumped between 1.1 and 3.4."""
+SPECTRUM_SAMPLES = 4001
+"""Points of the spectrum the polynomials are checked on (their extremes move by < 1e-4 with more)."""
+
+
+def stable_weights(lowest: float, count: int, reversal: float = REVERSAL) -> tuple[float, ...]:
+    """w_1 … w_count of the stable weights for a plain iteration whose modes' factors λ fill
+    [``lowest``, 1] (module docstring). Each is the largest w ≤ WEIGHT_CAP with −reversal ≤ P_k ≤ 1 on
+    the spectrum; P_{k+1} = a + w b is linear in w at every λ, so the bound is a minimum over λ."""
+    lam = np.linspace(lowest, 1.0, SPECTRUM_SAMPLES)[:-1]  # at λ = 1 every P_k is 1, whatever w
+    before, now = np.ones_like(lam), lam.copy()
+    weights = [1.0]
+    for _ in range(count - 1):
+        a, b = before, lam * now - before
+        rising, falling = b > 1e-12, b < -1e-12
+        ceiling = min(np.min((1.0 - a[rising]) / b[rising], initial=math.inf),
+                      np.min((a[falling] + reversal) / -b[falling], initial=math.inf), WEIGHT_CAP)
+        floor = max(np.max((-reversal - a[rising]) / b[rising], initial=-math.inf),
+                    np.max((a[falling] - 1.0) / -b[falling], initial=-math.inf), 1.0)
+        if not ceiling >= floor:
+            raise ValueError(f"no weight keeps iteration {len(weights) + 1} within [−{reversal}, 1] on the spectrum "
+                             f"[{lowest:.3g}, 1]")
+        weight = float(ceiling)
+        weights.append(weight)
+        before, now = now, weight * lam * now + (1.0 - weight) * before
+    return tuple(weights)
+
+
+def chebyshev_weights(rho: float, count: int) -> tuple[float, ...]:
+    """w_1 … w_count of Chebyshev semi-iterative acceleration (Wang 2015, Eq. 12) for spectral radius ρ:
+    1, 2 / (2 − ρ²), then 4 / (4 − ρ² w_prev), falling toward 2 / (1 + √(1 − ρ²)); all 1 at ρ = 0."""
+    weights = [1.0]
+    rho2 = rho * rho
+    for _ in range(count - 1):
+        last = weights[-1]
+        weights.append(1.0 if rho2 == 0.0 else 2.0 / (2.0 - rho2) if last == 1.0 else 4.0 / (4.0 - rho2 * last))
+    return tuple(weights)
+
+
+class Weights:
+    """The weight of each next iteration of a substep, from a table (:func:`stable_weights`,
+    :func:`chebyshev_weights`, or all 1 for plain Jacobi); :meth:`restart` begins the table again
+    (plain), for when the error rose."""
+
+    def __init__(self, table: tuple[float, ...]):
+        self.table = table
+        self.done = 0
+
+    def next(self) -> float:
+        """The weight of the next iteration."""
+        weight = self.table[min(self.done, len(self.table) - 1)]
+        self.done += 1
+        return weight
+
+    def restart(self) -> None:
+        """Begin again at w_1 = 1."""
+        self.done = 0
