@@ -299,6 +299,9 @@ class Solver:
                             "(Wang 2015, with chebyshev_rho) or none (plain Jacobi); pbf.solver.acceleration")
     chebyshev_rho: float = key(CHEBYSHEV_RHO, _between(0.0, 0.99), "spectral radius ρ assumed by acceleration = "
                                "\"chebyshev\"; 0: plain Jacobi")
+    step_back: bool = key(True, doc="when the target stops the iterations, take back the share of the last one it did "
+                          "not need (a count between two: a pool at rest holds still); false stops after whole "
+                          "iterations, below the target (cheaper error in a splash)")
     divergence_iterations: int = key(0, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
                                      "(velocity level, before the prediction) per substep; 0 switches it off")
     warm_start: float = key(1.0, _between(0.0, 1.0), "fraction of the last substep's divergence pressure the "

@@ -67,6 +67,26 @@ def test_weights_restart_from_the_first():
     assert weights.next() == 1.0
 
 
+def test_the_step_back_lands_between_the_last_two_iterations():
+    sim = Simulation(small_dam_break())
+    sim.step(20)                                         # mid-splash: the iterations move particles
+    x_star, neighbours = sim.integrator.predicted, sim.grid.neighbours
+    sim.integrator.advance(sim.dt_s, sim.control.gravity_m_s2)  # a substep's start (Simulation.substep)
+    sim.grid.sort_and_permute(x_star.first, sim.state.index, sim.integrator)
+    sim.grid.build_neighbours(x_star.first)
+    for k, weight in enumerate((1.0, 1.25, 1.5)):
+        sim.density.project(x_star, neighbours, measure=True, first=k == 0, weight=weight)
+    newer = (x_star.second if x_star.in_second else x_star.first).to_numpy()
+    older = (x_star.first if x_star.in_second else x_star.second).to_numpy()
+    pressure_newer, pressure_older = sim.density.lam_total.to_numpy(), sim.density.lam_before.to_numpy()
+    assert np.abs(newer - older).max() > 1e-4
+    sim.density.step_back(x_star, 0.25)
+    assert not x_star.in_second
+    np.testing.assert_allclose(x_star.first.to_numpy(), newer + 0.25 * (older - newer), atol=1e-6)
+    np.testing.assert_allclose(sim.density.lam_total.to_numpy(), pressure_newer + 0.25 * (pressure_older - pressure_newer),
+                               atol=1e-6)
+
+
 def rest_speed(acceleration, iterations, frames=120):
     """rms speed over sqrt(g H), the largest of 6 samples over the last ``frames`` / 2 frames, of a
     6 × 8 × 6 tank settled for 1 s, under 8 substeps a frame and a fixed count of iterations."""

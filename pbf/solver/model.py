@@ -155,6 +155,8 @@ class Control:
     """Substeps per frame asked for; the CFL limit may take more."""
     target_density_error: float
     """Stop iterating once the mean of max(ρ/ρ0 − 1, 0) is below this; 0 runs all iterations."""
+    step_back: bool
+    """Take back the share of the last iteration the target did not need (``DensityConstraint.step_back``)."""
     divergence_iterations: int
     """Iterations of the divergence pre-correction; 0 skips the pass."""
     warm_start: float
@@ -175,7 +177,7 @@ class Control:
     def from_scene(cls, scene: Scene) -> Control:
         s = scene.solver
         return cls(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps, s.target_density_error,
-                   s.divergence_iterations, s.warm_start, scene.viscosity.xsph, scene.vorticity.epsilon,
+                   s.step_back, s.divergence_iterations, s.warm_start, scene.viscosity.xsph, scene.vorticity.epsilon,
                    scene.gravity_m_s2)
 
 

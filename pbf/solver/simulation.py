@@ -221,8 +221,10 @@ class Simulation:
                                              measure=target > 0.0, first=k == 0, weight=weights.next())
                 self.iterations_used = k + 1
                 if target > 0.0 and error < target and k + 1 >= control.min_iterations:
-                    if k + 1 > control.min_iterations and last_error >= target:  # crossed in iteration k − 1:
-                        self.density.step_back(x_star, (target - error) / (last_error - error))  # a count between
+                    if control.step_back and k + 1 > control.min_iterations and last_error >= target:
+                        # The target fell between the last two errors: take back the share of the last
+                        # iteration it did not need, a count in between (DensityConstraint.step_back).
+                        self.density.step_back(x_star, (target - error) / (last_error - error))
                     break                                        # the error this iteration started from
                 if target > 0.0 and error > last_error:          # the acceleration overshot: plain again
                     weights.restart()
