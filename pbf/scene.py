@@ -289,9 +289,9 @@ class Time:
 class Solver:
     iterations: int = key(10, _between(1, MAX_ITERATIONS), "Jacobi iterations of the density constraint per "
                           "substep (the most, with target_density_error)")
-    min_iterations: int = key(MIN_ITERATIONS, _between(1, MAX_ITERATIONS), "Jacobi iterations every substep runs, whatever the "
-                              "error (one plain iteration alone leaves the shortest waves reversed: "
-                              "pbf.solver.acceleration)")
+    min_iterations: int = key(MIN_ITERATIONS, _between(1, MAX_ITERATIONS), "Jacobi iterations every substep "
+                              "runs, whatever the error (one plain iteration alone leaves the shortest waves "
+                              "reversed: pbf.solver.acceleration)")
     target_density_error: float = key(0.001, _between(0.0, 1.0), "stop iterating once the mean of max(ρ/ρ0 − 1, 0) "
                                       "is below this (and min_iterations ran); 0 always runs all iterations")
     acceleration: str = key("stable", _one_of("stable", "chebyshev", "none"), "weights of the Jacobi iterations' "
@@ -816,8 +816,8 @@ def _check_solver(scene: Scene, source: str) -> None:
         raise SceneError(f"{source}: key 'solver.min_iterations' = {s.min_iterations} is more than solver.iterations = "
                          f"{s.iterations}, the most a substep runs; allowed: 1 to {s.iterations}")
     if s.acceleration != "chebyshev" and s.chebyshev_rho != CHEBYSHEV_RHO:
-        raise SceneError(f"{source}: key 'solver.chebyshev_rho' = {_num(s.chebyshev_rho)} sets the ρ of Chebyshev weights, "
-                         f"but solver.acceleration = \"{s.acceleration}\" does not use them; allowed: "
+        raise SceneError(f"{source}: key 'solver.chebyshev_rho' = {_num(s.chebyshev_rho)} sets the ρ of Chebyshev "
+                         f"weights, but solver.acceleration = \"{s.acceleration}\" does not use them; allowed: "
                          f"solver.acceleration = \"chebyshev\", or no solver.chebyshev_rho")
     if s.wall_mirror and not s.wall_density:
         raise SceneError(f"{source}: key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but "

@@ -83,23 +83,24 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     sim.density.step_back(x_star, 0.25)
     assert not x_star.in_second
     np.testing.assert_allclose(x_star.first.to_numpy(), newer + 0.25 * (older - newer), atol=1e-6)
-    np.testing.assert_allclose(sim.density.lam_total.to_numpy(), pressure_newer + 0.25 * (pressure_older - pressure_newer),
-                               atol=1e-6)
+    np.testing.assert_allclose(sim.density.lam_total.to_numpy(),
+                               pressure_newer + 0.25 * (pressure_older - pressure_newer), atol=1e-6)
 
 
 def rest_speed(acceleration, iterations, frames=120):
     """rms speed over sqrt(g H), the largest of 6 samples over the last ``frames`` / 2 frames, of a
     6 × 8 × 6 tank settled for 1 s, under 8 substeps a frame and a fixed count of iterations."""
     height = 0.2
+    block = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, height, 0.15]}
     sim = Simulation({"name": "tank", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, 0.3, 0.15]},
-                      "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, height, 0.15]}]},
-                      "time": {"substeps": 8, "settle_s": 1.0},
+                      "fluid": {"spacing_m": 0.025, "blocks": [block]}, "time": {"substeps": 8, "settle_s": 1.0},
                       "solver": {"acceleration": acceleration, "iterations": iterations, "target_density_error": 0.0}})
     sim.step(frames // 2)
     speeds = []
     for _ in range(6):
         sim.step(frames // 12)
-        speeds.append(math.sqrt(2 * sim.stats()["kinetic_energy_j"] / (sim.model.particle_mass_kg * sim.particle_count)))
+        energy = sim.stats()["kinetic_energy_j"]
+        speeds.append(math.sqrt(2 * energy / (sim.model.particle_mass_kg * sim.particle_count)))
     return max(speeds) / math.sqrt(9.81 * height)
 
 

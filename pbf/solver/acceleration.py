@@ -26,7 +26,7 @@ at or above −REVERSAL (1/4, inside the −1/3 bound) and within ±1 over the w
 extrapolation along the slow modes that reverses no mode enough to pump it. The weights rise from
 1.25 toward 1.8-1.9 (past Chebyshev's 1.39 limit at ρ = 0.9), so after 5 or more iterations the slow
 modes converge faster than under Chebyshev weights, and after 2-3 a little slower. The same tank
-holds still (0.00% with any fixed count of 2 or more), and the seed preset's mean error halves at the
+holds still (0.00% with a fixed count of 2 or 3), and the seed preset's mean error halves at the
 same cost (docs/BENCHMARKS.md). One plain iteration (P_1 = λ) still reaches −0.8 in the shortest
 waves, which is why ``solver.min_iterations`` is 2 by default.
 """

@@ -117,10 +117,11 @@ class DensityConstraint:
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
         impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
-        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (``pbf.solver.acceleration``), so the multiplier they have
-        moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for plain
-        Jacobi (w = 1). The plain sum under accelerated (Chebyshev) weights read the `hydrostatic` tank's gradient
-        35% low; this reads it within 2% once averaged over a frame's substeps (docs/VALIDATION.md)."""
+        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (``pbf.solver.acceleration``), so the multiplier
+        they have moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for
+        plain Jacobi (w = 1). The plain sum under accelerated (Chebyshev) weights read the `hydrostatic`
+        tank's gradient 35% low; this reads it within 2% once averaged over a frame's substeps
+        (docs/VALIDATION.md)."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
@@ -441,8 +442,8 @@ class DensityConstraint:
         """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19) on the x* of
         ``predicted`` (a ``PredictedPositions``): reads the buffer that holds x*, writes the corrected
         positions into the other (which holds the positions of the iteration before) as
-        x_prev + weight (x + Δx − x_prev), the accelerated step (``pbf.solver.acceleration``), plain Jacobi at
-        weight 1, and swaps them.
+        x_prev + weight (x + Δx − x_prev), the accelerated step (``pbf.solver.acceleration``), plain
+        Jacobi at weight 1, and swaps them.
 
         ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
