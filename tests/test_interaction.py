@@ -1,6 +1,7 @@
 """The mouse moves the water: driven through the window's own input handling, with a stand-in for the
 GGUI window (no display needed)."""
 import numpy as np
+import pytest
 import taichi as ti
 
 from pbf import Simulation
@@ -34,6 +35,7 @@ class StandInWindow:
         return (1280, 720)
 
 
+@pytest.mark.slow
 def test_dragging_pushes_the_water_under_the_cursor_and_nothing_else():
     sim, reference = Simulation(POOL), Simulation(POOL)
     window = StandInWindow()

@@ -27,6 +27,7 @@ def test_surge_front_ignores_spray():
     assert validate.surge_front(positions, counts, spacing_m=0.01) == pytest.approx(0.205)
 
 
+@pytest.mark.slow
 def test_hydrostatic_pressure_and_surface():
     # The hydrostatic preset at twice its spacing (640 particles, Δt scaled with it), 4 s; the pressure
     # is each particle's mean over the last second (validate.PRESSURE_FRAMES). Measured: slope +4.9%
