@@ -17,7 +17,8 @@ os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(1 << 29))
 @pytest.fixture(scope="session", autouse=True)
 def taichi_cpu():
     # pytest-xdist (pyproject.toml: -n 2) runs two workers on the two cores: one Taichi thread each.
-    start_backend("cpu", quiet=True, fast_compile=True, cpu_threads=1 if os.environ.get("PYTEST_XDIST_WORKER") else None)
+    threads = 1 if os.environ.get("PYTEST_XDIST_WORKER") else None
+    start_backend("cpu", quiet=True, fast_compile=True, cpu_threads=threads)
 
 
 @pytest.fixture(scope="module", autouse=True)
