@@ -301,7 +301,7 @@ class Solver:
                                "\"chebyshev\"; 0: plain Jacobi")
     step_back: bool = key(True, doc="when the target stops the iterations, take back the share of the last one it did "
                           "not need (a count between two: a pool at rest holds still); false stops after whole "
-                          "iterations, below the target (cheaper error in a splash)")
+                          "iterations, below the target (cheaper error in a splash); only with a target")
     divergence_iterations: int = key(0, _between(0, 100), "Jacobi iterations of the divergence pre-correction "
                                      "(velocity level, before the prediction) per substep; 0 switches it off")
     warm_start: float = key(1.0, _between(0.0, 1.0), "fraction of the last substep's divergence pressure the "
@@ -810,7 +810,7 @@ def _check_settle(scene: Scene, source: str) -> None:
 
 def _check_solver(scene: Scene, source: str) -> None:
     """The iteration counts must leave room between the least and the most; ρ only goes with Chebyshev
-    weights; a mirrored wall needs a wall."""
+    weights and the step back with a target; a mirrored wall needs a wall."""
     s = scene.solver
     if s.min_iterations > s.iterations and s.min_iterations != MIN_ITERATIONS:
         raise SceneError(f"{source}: key 'solver.min_iterations' = {s.min_iterations} is more than solver.iterations = "
@@ -819,6 +819,10 @@ def _check_solver(scene: Scene, source: str) -> None:
         raise SceneError(f"{source}: key 'solver.chebyshev_rho' = {_num(s.chebyshev_rho)} sets the ρ of Chebyshev "
                          f"weights, but solver.acceleration = \"{s.acceleration}\" does not use them; allowed: "
                          f"solver.acceleration = \"chebyshev\", or no solver.chebyshev_rho")
+    if not s.step_back and s.target_density_error == 0.0:
+        raise SceneError(f"{source}: key 'solver.step_back' = false changes where the error target stops the "
+                         f"iterations, but solver.target_density_error = 0 runs them all; allowed: true, or a "
+                         f"target above 0")
     if s.wall_mirror and not s.wall_density:
         raise SceneError(f"{source}: key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but "
                          f"solver.wall_density = false leaves none; allowed: false, or solver.wall_density = true")

@@ -43,6 +43,9 @@ def scene_with(**tables):
      "does not use them"),
     ({"solver": {"acceleration": "none", "chebyshev_rho": 0.0}}, "key 'solver.chebyshev_rho' = 0"),
     ({"solver": {"iterations": 3, "min_iterations": 4}}, "key 'solver.min_iterations' = 4 is more than"),
+    ({"solver": {"step_back": False, "target_density_error": 0.0}},
+     "key 'solver.step_back' = false changes where the error target stops the iterations, but "
+     "solver.target_density_error = 0 runs them all"),
 ])
 def test_settings_that_cannot_both_hold(changes, message):
     with pytest.raises(SceneError) as error:

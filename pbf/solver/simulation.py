@@ -90,6 +90,8 @@ class Simulation:
         self.divergence = DivergenceCorrection(model.density, self.state, self.box, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
+        self.weights = Weights(model.iteration_weights)
+        """The iterations' weights (solver.acceleration), restarted at each substep."""
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
         resets restore it instead of settling again: 2 s of substeps at 64,000 particles)."""
@@ -215,7 +217,8 @@ class Simulation:
                 self.divergence.run(self.grid.neighbours, dt, control.warm_start, control.divergence_iterations)
                 self.integrator.predict(dt)
         with hook.stage("solver iterations"):
-            weights, last_error = Weights(self.model.iteration_weights), math.inf
+            weights, last_error = self.weights, math.inf
+            weights.restart()
             for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
                 error = self.density.project(x_star, self.grid.neighbours,  # Jacobi, into the other buffer
                                              measure=target > 0.0, first=k == 0, weight=weights.next())
