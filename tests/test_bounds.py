@@ -100,7 +100,7 @@ def test_each_number_is_refused_outside_its_bounds_only(dotted, value):
 
 
 def test_derived_float32_figures_stay_in_range():
-    # The figures of the bounds comment in pbf/scene.py, from the bounds themselves.
+    # The figures of the bounds comment in pbf/scene/schema.py, from the bounds themselves.
     s_min, s_max = Fluid.__dataclass_fields__["spacing_m"].metadata["check"].bounds
     r_min, r_max = Solver.__dataclass_fields__["kernel_ratio"].metadata["check"].bounds
     dt_frame_min = Time.__dataclass_fields__["frame_dt_s"].metadata["check"].bounds[0]
@@ -187,13 +187,6 @@ def test_a_container_of_a_million_metres_is_refused_for_its_cell_count(plenty_of
         Model.from_scene(from_dict(scene))
 
 
-def test_scorr_power_must_stay_inside_float32():
-    scene = set_key("solver", {"scorr_dq": 0.9, "scorr_n": 12})
-    with pytest.raises(SceneError, match="key 'solver.scorr_n': .* allowed here: scorr_n ≤ 11"):
-        Model.from_scene(from_dict(scene))
-    Model.from_scene(from_dict(set_key("solver", {"scorr_dq": 0.9, "scorr_n": 11})))
-
-
 def assert_runs_cleanly(scene, frames):
     """Build and step ``scene``: finite statistics, read-outs and pressures, particles in the box,
     and no NumPy floating-point warning on the way."""
@@ -224,13 +217,12 @@ def test_the_fastest_allowed_start_runs_cleanly():
     # The finest spacing at the edge of float32's reach, with the softest λ and the strongest terms.
     {"container": {"min_m": [6.5512] * 3, "max_m": [6.5536] * 3},
      "fluid": {"spacing_m": 1e-4, "blocks": [{"min_m": [6.5512] * 3, "max_m": [6.552] * 3}]},
-     "solver": {"relaxation": 1e-6, "clamp_pressure": False, "scorr_dq": 0.9, "scorr_n": 11, "scorr_k": 1.0,
-                "kernel_ratio": 4.0}, "vorticity": {"epsilon": 1.0}, "viscosity": {"xsph": 1.0}},
+     "solver": {"scorr_k": 1.0, "kernel_ratio": 4.0, "expert": {"relaxation": 1e-6}}, "vorticity": {"epsilon": 1.0}, "viscosity": {"xsph": 1.0}},
     # The coarsest spacing, far from the origin, densest and stiffest.
     {"container": {"min_m": [-6553600.0] * 3, "max_m": [-6551600.0] * 3},
      "fluid": {"spacing_m": 100.0, "rest_density_kg_m3": 1e5,
                "blocks": [{"min_m": [-6553600.0] * 3, "max_m": [-6552600.0] * 3}]},
-     "solver": {"relaxation": 100.0, "kernel_ratio": 1.5, "scorr_k": 1.0},
+     "solver": {"kernel_ratio": 1.5, "scorr_k": 1.0, "expert": {"relaxation": 100.0}},
      "time": {"frame_dt_s": 1.0, "max_substeps": 1000}},
 ])
 def test_extreme_allowed_scales_run_cleanly(scene):

@@ -35,16 +35,16 @@ def scene_with(**tables):
     ({"obstacles": [{"min_m": [0.5, 0.0, 0.1], "max_m": [0.7, 0.2, 0.3]}], "time": {"max_cfl": 2.0}},
      "key 'time.max_cfl' = 2 lets particles cross an obstacle"),
     ({"fluid": {"max_particles": 10}}, "key 'fluid.max_particles' = 10 is less than the 1,728 particles"),
-    ({"solver": {"wall_mirror": True, "wall_density": False}},
-     "key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but solver.wall_density = false "
-     "leaves none; allowed: false, or solver.wall_density = true"),
-    ({"solver": {"chebyshev_rho": 0.95}},
-     "key 'solver.chebyshev_rho' = 0.95 sets the ρ of Chebyshev weights, but solver.acceleration = \"stable\" "
-     "does not use them"),
-    ({"solver": {"acceleration": "none", "chebyshev_rho": 0.0}}, "key 'solver.chebyshev_rho' = 0"),
+    ({"solver": {"wall_mirror": True, "expert": {"wall_density": False}}},
+     "key 'solver.wall_mirror' = true mirrors the ghost fluid behind the walls, but solver.expert.wall_density = "
+     "false leaves none; allowed: false, or solver.expert.wall_density = true"),
+    ({"solver": {"expert": {"chebyshev_rho": 0.95}}},
+     "key 'solver.expert.chebyshev_rho' = 0.95 sets the ρ of Chebyshev weights, but solver.expert.acceleration = "
+     "\"stable\" does not use them"),
+    ({"solver": {"expert": {"acceleration": "none", "chebyshev_rho": 0.0}}}, "key 'solver.expert.chebyshev_rho' = 0"),
     ({"solver": {"iterations": 3, "min_iterations": 4}}, "key 'solver.min_iterations' = 4 is more than"),
-    ({"solver": {"step_back": False, "target_density_error": 0.0}},
-     "key 'solver.step_back' = false changes where the error target stops the iterations, but "
+    ({"solver": {"expert": {"step_back": False}, "target_density_error": 0.0}},
+     "key 'solver.expert.step_back' = false changes where the error target stops the iterations, but "
      "solver.target_density_error = 0 runs them all"),
 ])
 def test_settings_that_cannot_both_hold(changes, message):

@@ -94,7 +94,8 @@ def rest_speed(acceleration, iterations, frames=120):
     block = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, height, 0.15]}
     sim = Simulation({"name": "tank", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, 0.3, 0.15]},
                       "fluid": {"spacing_m": 0.025, "blocks": [block]}, "time": {"substeps": 8, "settle_s": 1.0},
-                      "solver": {"acceleration": acceleration, "iterations": iterations, "target_density_error": 0.0}})
+                      "solver": {"expert": {"acceleration": acceleration}, "iterations": iterations,
+                                 "target_density_error": 0.0}})
     sim.step(frames // 2)
     speeds = []
     for _ in range(6):
@@ -118,9 +119,9 @@ def test_a_few_stable_iterations_hold_a_tank_still_where_chebyshev_pumps_it(iter
 @pytest.mark.parametrize("acceleration", ["stable", pytest.param("chebyshev", marks=pytest.mark.slow)])
 def test_accelerated_iterations_converge_faster_than_plain_jacobi(acceleration):
     # The same 4 iterations every substep (no target), through the impact.
-    plain, plain_max = dam_break_errors(["solver.acceleration=none", "solver.target_density_error=0",
+    plain, plain_max = dam_break_errors(["solver.expert.acceleration=none", "solver.target_density_error=0",
                                          "solver.divergence_iterations=0"])
-    accelerated, accelerated_max = dam_break_errors([f"solver.acceleration={acceleration}",
+    accelerated, accelerated_max = dam_break_errors([f"solver.expert.acceleration={acceleration}",
                                                      "solver.target_density_error=0",
                                                      "solver.divergence_iterations=0"])
     assert accelerated < 0.75 * plain
@@ -172,7 +173,7 @@ def test_divergence_pressure_carries_the_hydrostatic_load():
     # Plain Jacobi with a fixed count: under Chebyshev weights (then the default) and a target the share
     # read 0.31-0.46 and the slope +4 to +10% between the suite's compile and the full one.
     sim = Simulation(column_scene(spacing_m=0.0375, substeps=4, iterations=10, divergence_iterations=1,
-                                  acceleration="none", target_density_error=0.0))
+                                  expert={"acceleration": "none"}, target_density_error=0.0))
     sim.step(60)
     h = sim.scene.kernel_radius_m
     total_slopes, carried_slopes = [], []

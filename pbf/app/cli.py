@@ -3,6 +3,7 @@
     python run.py [SCENE] [--set KEY=VALUE]...               # the window (headless when none can open)
     python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz|mesh]...
     python run.py --list
+    python run.py --keys                                      # every scene key (docs/KEYS.md)
 
 Everything the user gives is checked before Taichi starts and before anything is written: the
 options (each either takes effect or is refused, none is ignored), the scene with its overrides,
@@ -78,6 +79,8 @@ def build_parser() -> Parser:
     parser.add_argument("--arch", choices=ARCHES, default=None,
                         help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
+    parser.add_argument("--keys", action="store_true",
+                        help="print the reference of every scene key (Markdown, as docs/KEYS.md) and exit")
     output = parser.add_argument_group("output")
     mode = output.add_mutually_exclusive_group()
     mode.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
@@ -138,9 +141,12 @@ def checked_args(argv=None):
         raise UsageError(f"unexpected argument {schema.echo(word)}: one scene at a time, options start with --")
     given = [dest for dest in ("scene", "arch", "frames", "out", *FILE_OPTIONS, *VIEW_OPTIONS)
              if getattr(args, dest) is not None] + [d for d in ("set", "headless", "stats_only") if getattr(args, d)]
-    if args.list and given:
-        other = "the scene" if given[0] == "scene" else _option(given[0])
-        raise UsageError(f"--list lists the presets and takes no other option; drop {other}")
+    if args.list and args.keys:
+        raise UsageError("--list and --keys each print a reference; give one of the two")
+    for flag, does in (("list", "lists the presets"), ("keys", "prints the key reference")):
+        if getattr(args, flag) and given:
+            other = "the scene" if given[0] == "scene" else _option(given[0])
+            raise UsageError(f"--{flag} {does} and takes no other option; drop {other}")
     for dest in (*FILE_OPTIONS, *VIEW_OPTIONS, "out"):
         if args.stats_only and getattr(args, dest) is not None:
             raise UsageError(f"{_option(dest)}: --stats-only renders and writes nothing; drop one of the two")
@@ -285,6 +291,11 @@ def main(argv=None) -> int:
         args = parse_args(argv)
         if args.list:
             list_presets()
+            return 0
+        if args.keys:
+            from pbf.scene.reference import reference
+
+            print(reference(), end="")
             return 0
         scene = load(args)
         out, video = plan_outputs(scene, args)

@@ -1,4 +1,4 @@
-"""The weights that accelerate the Jacobi iterations of the density constraint (``solver.acceleration``).
+"""The weights that accelerate the Jacobi iterations of the density constraint (``solver.expert.acceleration``).
 
 Every scheme here is the two-step (semi-iterative) recurrence of Wang 2015, Eq. 12,
 

@@ -63,7 +63,7 @@ waves, which carry most of the density error, still converge.
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
-from pbf.solver.model import DensityParams
+from pbf.solver.model import SCORR_N, DensityParams
 from pbf.solver.scan import BlockSum
 from pbf.solver.sph import kernel, kernel_and_gradient
 
@@ -87,9 +87,7 @@ class DensityConstraint:
         self.volume = params.particle_volume_m3
         self.relaxation = params.relaxation
         self.omega = params.omega
-        self.clamp_pressure = params.clamp_pressure
         self.scorr_k = params.scorr_k
-        self.scorr_n = params.scorr_n
         self.inverse_w_dq = params.inverse_w_dq
         self.max_correction = params.max_correction
         self.box = box
@@ -302,8 +300,7 @@ class DensityConstraint:
         error_sum."""
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
-        if ti.static(self.clamp_pressure):
-            c = ti.max(c, 0.0)
+        c = ti.max(c, 0.0)  # only compressed particles push: no attraction at the free surface
         lam = -self.omega * c / self.denominator[i]
         self.lam[i] = lam
         # The multiplier the positions have moved by, combined as the positions are (see lam_total).
@@ -344,7 +341,7 @@ class DensityConstraint:
         w, grad_w = kernel_and_gradient(xi - x[j], self.h)
         s_corr = 0.0
         if ti.static(self.scorr_k > 0.0):
-            s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** self.scorr_n
+            s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** ti.static(SCORR_N)
         return (lam_i + self.lam[j] + s_corr) * self.volume * self.h * grad_w
 
     @ti.func

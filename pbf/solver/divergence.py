@@ -87,10 +87,9 @@ class DivergenceCorrection:
         return h_over_dt * dv
 
     @ti.kernel
-    def start(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32, warm: ti.f32):
-        """v += Δv of the warm start Λ ← warm · Λ, with min(C_i, 0) and the denominators at x."""
+    def start(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
+        """v += Δv of the warm start (the last substep's Λ), with min(C_i, 0) and the denominators at x."""
         for i in range(self.state.active[None]):
-            self.state.multiplier[i] *= warm
             self.increment[i] = self.state.multiplier[i] * dt * dt
         for i in range(self.state.active[None]):
             self.state.v[i] += self.velocity_change(x, i, neighbours, self.h / dt, True)
@@ -115,8 +114,8 @@ class DivergenceCorrection:
         for i in range(self.state.active[None]):
             self.state.v[i] += self.velocity_change(x, i, neighbours, h / dt, False)
 
-    def run(self, neighbours, dt: float, warm: float, iterations: int) -> None:
-        """Warm start with ``warm`` · Λ, then ``iterations`` Jacobi iterations on state.v at state.x."""
-        self.start(self.state.x, neighbours, dt, warm)
+    def run(self, neighbours, dt: float, iterations: int) -> None:
+        """Warm start with the last substep's Λ, then ``iterations`` Jacobi iterations on state.v at state.x."""
+        self.start(self.state.x, neighbours, dt)
         for _ in range(iterations):
             self.iterate(self.state.x, neighbours, dt)

@@ -27,10 +27,14 @@ Vec3 = tuple[float, float, float]
 NEIGHBOUR_REACH = 2
 """Grid cells per h. Cells h/2 wide put every neighbour within 2 cells, so a particle checks the 5×5×5
 cells around it, (5/2)³ = 15.6 h³ of space, against 27 h³ for cells h wide and 3×3×3: 42% fewer
-distance tests. Measured on the 8,000-particle dam break: sort + neighbour lists 2.56 against 2.93 ms
-(median of 40 interleaved runs), the same lists."""
+distance tests, the same lists, and a faster sort and neighbour search (docs/BENCHMARKS.md, "Levers")."""
 MAX_CORRECTION = 0.1
 """Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
+SCORR_N = 8
+"""The exponent n of s_corr (Eq. 11). The paper's 4 still pushes at the lattice spacing, so water at rest
+kept jostling; 8 confines the term to pairs closer than about 0.3 h (pbf.solver.density)."""
+SCORR_DQ = 0.2
+"""Δq/h of s_corr (Eq. 11), the paper's."""
 STABLE_GAIN = 1.8
 """Largest per-iteration gain ω·μ allowed for any error mode: below 2, so every mode decays."""
 BYTES_PER_PARTICLE = 600
@@ -105,10 +109,7 @@ class DensityParams:
     """ε̂ of Eq. (10), dimensionless."""
     omega: float
     """ω, the Jacobi under-relaxation of λ: STABLE_GAIN over the largest gain of any error mode."""
-    clamp_pressure: bool
-    """C_i = max(ρ_i/ρ0 − 1, 0): only compressed particles push."""
     scorr_k: float
-    scorr_n: int
     inverse_w_dq: float
     """1 / W(Δq h, h), the s_corr reference of Eq. (11), 1/m⁻³."""
     max_correction: float
@@ -159,8 +160,6 @@ class Control:
     """Take back the share of the last iteration the target did not need (``DensityConstraint.step_back``)."""
     divergence_iterations: int
     """Iterations of the divergence pre-correction; 0 skips the pass."""
-    warm_start: float
-    """Fraction of the last substep's divergence pressure the next starts from."""
     xsph: float
     """XSPH c (Eq. 15), dimensionless; 0 skips the term."""
     vorticity: float
@@ -177,16 +176,16 @@ class Control:
     def from_scene(cls, scene: Scene) -> Control:
         s = scene.solver
         return cls(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps, s.target_density_error,
-                   s.step_back, s.divergence_iterations, s.warm_start, scene.viscosity.xsph, scene.vorticity.epsilon,
+                   s.expert.step_back, s.divergence_iterations, scene.viscosity.xsph, scene.vorticity.epsilon,
                    scene.gravity_m_s2)
 
 
-def iteration_weights(solver, lowest: float) -> tuple[float, ...]:
-    """The weights of ``solver.acceleration`` for as many iterations as a substep may run; ``lowest``
+def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
+    """The weights of ``solver.expert.acceleration`` for as many iterations as a substep may run; ``lowest``
     is the smallest factor 1 − ω μ a plain iteration applies to any error mode."""
-    if solver.acceleration == "stable":
+    if expert.acceleration == "stable":
         return acceleration.stable_weights(lowest, MAX_ITERATIONS)
-    rho = solver.chebyshev_rho if solver.acceleration == "chebyshev" else 0.0
+    rho = expert.chebyshev_rho if expert.acceleration == "chebyshev" else 0.0
     return acceleration.chebyshev_weights(rho, MAX_ITERATIONS)
 
 
@@ -214,7 +213,7 @@ class Model:
     density: DensityParams
     velocity: VelocityParams
     iteration_weights: tuple[float, ...]
-    """w_1 … w_100 of the Jacobi iterations' acceleration (``solver.acceleration``, ``pbf.solver.acceleration``),
+    """w_1 … w_100 of the Jacobi iterations' acceleration (``solver.expert.acceleration``, ``pbf.solver.acceleration``),
     one per iteration a substep may run (the schema's most)."""
 
     @classmethod
@@ -228,20 +227,19 @@ class Model:
         mass = scene.fluid.rest_density_kg_m3 / sph.lattice_density_sum(spacing, h)
         volume = mass / scene.fluid.rest_density_kg_m3
         s = scene.solver
-        gain = sph.jacobi_gain(h / spacing, s.relaxation)
+        gain = sph.jacobi_gain(h / spacing, s.expert.relaxation)
         omega = min(1.0, STABLE_GAIN / gain)
         density = DensityParams(
-            particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.relaxation, omega=omega,
-            clamp_pressure=s.clamp_pressure, scorr_k=s.scorr_k, scorr_n=s.scorr_n,
-            inverse_w_dq=1.0 / float(sph.kernel_np(s.scorr_dq * h, h)), max_correction=MAX_CORRECTION,
+            particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.expert.relaxation,
+            omega=omega, scorr_k=s.scorr_k, inverse_w_dq=1.0 / float(sph.kernel_np(SCORR_DQ * h, h)), max_correction=MAX_CORRECTION,
             surface_density=s.surface_density,
             surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
             wall_mirror=s.wall_mirror)
         return cls(scene, n, mass, volume, grid,
-                   BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.wall_density,
+                   BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.expert.wall_density,
                              tuple((o.min_m, o.max_m) for o in scene.obstacles),
                              scene.wave_maker.stroke_m, scene.wave_maker.period_s),
-                   density, VelocityParams(n, h, volume), iteration_weights(s, 1.0 - omega * gain))
+                   density, VelocityParams(n, h, volume), iteration_weights(s.expert, 1.0 - omega * gain))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
         """Lattice positions (m) and velocities (m/s) of every block, float32 arrays of shape (n, 3).
@@ -273,7 +271,6 @@ def _check_memory(scene: Scene, particles: int, cells: int) -> None:
             f"use a larger spacing or smaller blocks"
         )
     _check_indices(scene, particles, cells)
-    _check_scorr(scene)
 
 
 INT32_MAX = 2**31 - 1
@@ -294,19 +291,3 @@ def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) ->
             f"container has {cells:,} cells, more than the {INT32_MAX:,} an int32 index reaches; use a smaller "
             f"container or a larger spacing")
 
-
-def _check_scorr(scene: Scene) -> None:
-    """s_corr = −k (W/W(Δq))ⁿ is a float32 power: at the closest pairs (W = W(0)) it must stay finite,
-    or Δx turns to inf and NaN (pbf.solver.density)."""
-    from pbf.scene import FLOAT32_SAFE
-
-    s = scene.solver
-    if s.scorr_k == 0.0:
-        return  # the term is compiled out
-    ratio = float(sph.kernel_np(0.0, 1.0) / sph.kernel_np(s.scorr_dq, 1.0))
-    if ratio > 1.0 and math.log(s.scorr_k) + s.scorr_n * math.log(ratio) > math.log(FLOAT32_SAFE):
-        most = int((math.log(FLOAT32_SAFE) - math.log(s.scorr_k)) / math.log(ratio))
-        raise SceneError(
-            f"{scene.source}: key 'solver.scorr_n': s_corr = k (W/W(Δq))ⁿ reaches {s.scorr_k:g} × {ratio:.4g}^"
-            f"{s.scorr_n} for the closest pairs at solver.scorr_dq = {s.scorr_dq:g}, past float32's range; allowed "
-            f"here: scorr_n ≤ {most}, or a smaller scorr_dq")

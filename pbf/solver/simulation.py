@@ -91,7 +91,7 @@ class Simulation:
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
         self.weights = Weights(model.iteration_weights)
-        """The iterations' weights (solver.acceleration), restarted at each substep."""
+        """The iterations' weights (solver.expert.acceleration), restarted at each substep."""
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
         resets restore it instead of settling again: 2 s of substeps at 64,000 particles)."""
@@ -214,7 +214,7 @@ class Simulation:
             self.grid.build_neighbours(x_star.first)
         with hook.stage("divergence pre-correction"):            # ours: v made divergence-free (at x,
             if control.divergence_iterations > 0:                # warm-started), then x* = x + Δt v again
-                self.divergence.run(self.grid.neighbours, dt, control.warm_start, control.divergence_iterations)
+                self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
         with hook.stage("solver iterations"):
             weights, last_error = self.weights, math.inf

@@ -83,8 +83,8 @@ TERMS = {
     "no vorticity confinement": ["vorticity.epsilon=0"],
     "no XSPH viscosity": ["viscosity.xsph=0"],
     "no s_corr": ["solver.scorr_k=0"],
-    "no wall density": ["solver.wall_density=false"],
-    "none of the four": ["vorticity.epsilon=0", "viscosity.xsph=0", "solver.scorr_k=0", "solver.wall_density=false"],
+    "no wall density": ["solver.expert.wall_density=false"],
+    "none of the four": ["vorticity.epsilon=0", "viscosity.xsph=0", "solver.scorr_k=0", "solver.expert.wall_density=false"],
 }
 
 

@@ -1,0 +1,35 @@
+"""The key reference is generated from the schema: docs/KEYS.md must be its current output, and every
+key of the schema must appear in it with its bounds."""
+import dataclasses
+from pathlib import Path
+
+from pbf.app.cli import main
+from pbf.scene import Fluid, Scene, Solver
+from pbf.scene.reference import reference
+from pbf.scene.schema import _schema_keys
+
+KEYS_MD = Path(__file__).resolve().parent.parent / "docs" / "KEYS.md"
+
+
+def test_docs_keys_is_current():
+    assert KEYS_MD.read_text(encoding="utf-8") == reference(), "docs/KEYS.md is stale: run `pbf --keys > docs/KEYS.md`"
+
+
+def test_every_key_is_listed_with_its_range():
+    text = reference()
+    for dotted in _schema_keys(Scene):
+        listed = dotted.replace(".blocks.", ".blocks[].").replace("obstacles.", "obstacles[].")
+        listed = listed.replace("emitters.", "emitters[].")
+        dataclass_table = any(dataclasses.is_dataclass(f.default) for f in dataclasses.fields(Scene)
+                              if f.name == dotted)
+        assert dataclass_table or f"`{listed}`" in text or f"[{listed}]" in text, dotted
+    assert "| `fluid.spacing_m` | number | `0.025` | [0.0001, 100] |" in text
+    assert "[1, 100]" in text.split("`solver.iterations`")[1].split("\n")[0]
+    assert Fluid.__dataclass_fields__["spacing_m"].metadata["doc"] in text
+    assert '"stable", "chebyshev", "none"' in text.split("`solver.expert.acceleration`")[1].split("\n")[0]
+    assert Solver.__dataclass_fields__["expert"]
+
+
+def test_the_command_line_prints_it(capsys):
+    assert main(["--keys"]) == 0
+    assert capsys.readouterr().out == reference()
