@@ -48,7 +48,7 @@ def test_a_squeezed_layer_gets_no_ghost():
     sim = Simulation(scene)
     centre = np.array([0.15, 0.0, 0.15], np.float32)
     x = centre + 0.9 * (sim.positions() - centre)
-    sim.state.load(x, np.zeros_like(x))
+    sim.state.load({"x": x, "v": np.zeros_like(x)})
     psi = ghost_of_the_first_substep(sim)
     h, top = sim.scene.kernel_radius_m, x[:, 1].max()
     in_top = np.all(np.abs(x[:, [0, 2]] - 0.15) < 0.1 - h, axis=1) & (x[:, 1] > top - 0.5 * 0.025)

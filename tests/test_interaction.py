@@ -102,14 +102,14 @@ def test_keys_switch_the_emitters_and_the_wave_maker():
     count = sim.particle_count
     sim.step(10)
     assert sim.particle_count == count                                   # no water poured
-    assert float(sim.box.piston_x[None]) == 0.0                          # the piston stood still
+    assert float(sim.boundaries.container.piston_x[None]) == 0.0                          # the piston stood still
     window.get_events = lambda kind: [Key("f"), Key("m")]
     viewer.handle_input(1 / 60)
     sim.step(10)
     # Resumed at 40 layers a second of 9 particles: 10 frames add 7 layers; releasing the layers held
     # back while off as well would add 14.
     assert sim.particle_count - count <= 8 * 9
-    assert sim.particle_count > count and float(sim.box.piston_x[None]) > 0.0
+    assert sim.particle_count > count and float(sim.boundaries.container.piston_x[None]) > 0.0
 
 
 def test_every_key_is_one_ggui_delivers_and_each_does_what_the_help_says():

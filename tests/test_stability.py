@@ -37,8 +37,8 @@ def test_particles_starting_at_one_point():
     # huge density and nearly no constraint gradient, so λ is large and Δx must still stay bounded.
     sim = Simulation(scene([{"min_m": [0.1, 0.1, 0.1], "max_m": [0.3, 0.3, 0.3]}]))
     rng = np.random.default_rng(1)
-    sim.state.load(np.full((sim.particle_count, 3), 0.2, np.float32) + rng.normal(0, 1e-6, (sim.particle_count, 3)),
-                   np.zeros((sim.particle_count, 3), np.float32))
+    sim.state.load({"x": np.full((sim.particle_count, 3), 0.2, np.float32)
+                    + rng.normal(0, 1e-6, (sim.particle_count, 3)), "v": np.zeros((sim.particle_count, 3), np.float32)})
     for _ in range(4):
         sim.step(15)
         assert_sane(sim, energy_bound_j=sim.particle_count * sim.model.particle_mass_kg * 0.5 * 5.0**2)

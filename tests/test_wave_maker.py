@@ -18,7 +18,7 @@ def tank(**extra):
 
 def test_the_piston_pushes_the_water_and_nothing_gets_behind_it():
     sim = Simulation(tank())
-    box = sim.box
+    box = sim.boundaries.container
     assert box.piston_position_m(0.0) == 0.0
     assert box.piston_position_m(PERIOD / 2) == pytest.approx(STROKE)
     assert box.piston_position_m(PERIOD) == pytest.approx(0.0, abs=1e-12)

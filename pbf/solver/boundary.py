@@ -1,5 +1,13 @@
-"""The boundary: the container (an axis-aligned box) and static box obstacles inside it, with
-collision and the density of the missing wall neighbours.
+"""The boundaries of the fluid, behind one interface: the container (an axis-aligned box whose
+lower-x wall may be a piston wave maker) and the static box obstacles inside it.
+
+Every boundary offers the solver the same three things, as Taichi functions of a position p:
+``project(p)`` (the collision of Algorithm 1, line 15: p moved out of the solid), ``ghost(p)`` (the
+density ρ/ρ0 of the ghost fluid behind it and its gradient) and ``velocity(p)`` (the velocity of that
+ghost, for the divergence pre-correction), and on the host ``move(clock_s, dt)`` (placed where it
+stands at the end of the coming substep) and ``speed_limit_m_s()`` (for the CFL limit).
+:class:`Boundaries` holds them in a fixed order and is what the stages call, so a moving body is one
+more boundary in its tuple.
 
 A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
 the solver pulls it into the wall, where clamping stacks it. We add the density of ghost fluid behind
@@ -22,31 +30,26 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import sph
-from pbf.solver.model import BoxParams
+from pbf.solver.model import BoundaryParams
 
 TABLE_SAMPLES = 512
 OVERLAP_SAMPLES = 32
 
 
 @ti.data_oriented
-class Box:
-    def __init__(self, params: BoxParams):
-        self.radius = params.particle_radius_m
-        self.lower = ti.Vector(list(params.lower_m))
-        self.upper = ti.Vector(list(params.upper_m))
-        self.kernel_radius = params.kernel_radius_m
-        self.with_wall_density = params.wall_density
-        self.mirror_reach = params.kernel_radius_m - params.particle_radius_m
-        """A wall's mirror images of the fluid come within h of a particle only if the particle is closer
-        than this to the wall, as no particle comes closer to it than r (the collision)."""
-        spacing_m, kernel_radius_m = params.spacing_m, params.kernel_radius_m
+class GhostTables:
+    """The ghost density of a half-space (a wall), a quadrant (an edge) and an octant (a corner) of the
+    fluid lattice, by wall distance, with their gradients (``pbf.solver.sph``); shared by every boundary."""
+
+    def __init__(self, spacing_m: float, kernel_radius_m: float, edges_and_corners: bool):
+        self.kernel_radius = kernel_radius_m
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.density_table.from_numpy(density.astype(np.float32))
         self.slope_table.from_numpy(slope.astype(np.float32))
         n = OVERLAP_SAMPLES
-        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if params.wall_density else (
+        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if edges_and_corners else (
             np.zeros((n, n)), np.zeros((n, n, 2)), np.zeros((n, n, n)), np.zeros((n, n, n, 3)))
         self.edge = ti.field(ti.f32, shape=(n, n))
         self.edge_gradient = ti.Vector.field(2, ti.f32, shape=(n, n))
@@ -54,28 +57,105 @@ class Box:
         self.corner_gradient = ti.Vector.field(3, ti.f32, shape=(n, n, n))
         for field, table in zip((self.edge, self.edge_gradient, self.corner, self.corner_gradient), tables):
             field.from_numpy(table.astype(np.float32))
+
+    @ti.func
+    def wall(self, distance):
+        """Ghost density ρ_wall/ρ0 and its slope d(ρ_wall/ρ0)/dd at wall distance d (linear interpolation)."""
+        u = ti.max(distance, 0.0) / self.kernel_radius * (TABLE_SAMPLES - 1)
+        k = ti.min(ti.cast(u, ti.i32), TABLE_SAMPLES - 2)
+        t = u - k
+        density = (1 - t) * self.density_table[k] + t * self.density_table[k + 1]
+        slope = (1 - t) * self.slope_table[k] + t * self.slope_table[k + 1]
+        return density, slope
+
+    @ti.func
+    def cell(self, distance):
+        """Cell index and fraction of a wall distance on the overlap tables' grid."""
+        u = ti.min(ti.max(distance, 0.0) / self.kernel_radius, 1.0) * (OVERLAP_SAMPLES - 1)
+        k = ti.min(ti.cast(u, ti.i32), OVERLAP_SAMPLES - 2)
+        return k, u - k
+
+    @ti.func
+    def quadrant(self, da, db):
+        """Bilinear quadrant density and its gradient in (da, db)."""
+        i, s = self.cell(da)
+        k, t = self.cell(db)
+        value = 0.0
+        gradient = ti.Vector([0.0, 0.0])
+        for a, b in ti.static(ti.ndrange(2, 2)):
+            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t)
+            value += weight * self.edge[i + a, k + b]
+            gradient += weight * self.edge_gradient[i + a, k + b]
+        return value, gradient
+
+    @ti.func
+    def octant(self, d):
+        """Trilinear octant density and its gradient in the three wall distances d."""
+        i, s = self.cell(d[0])
+        j, t = self.cell(d[1])
+        k, u = self.cell(d[2])
+        value = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        for a, b, c in ti.static(ti.ndrange(2, 2, 2)):
+            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t) * (u if c else 1.0 - u)
+            value += weight * self.corner[i + a, j + b, k + c]
+            gradient += weight * self.corner_gradient[i + a, j + b, k + c]
+        return value, gradient
+
+    @ti.func
+    def half_spaces(self, active, d):
+        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
+        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1."""
+        value = 0.0
+        slope = ti.Vector([0.0, 0.0, 0.0])
+        count = active.sum()
+        if count == 0:
+            value = 1.0
+        elif count == 1:
+            for a in ti.static(range(3)):
+                if active[a]:
+                    value, slope[a] = self.wall(d[a])
+        elif count == 2:
+            for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
+                if active[a] and active[b]:
+                    q, g = self.quadrant(d[a], d[b])
+                    value, slope[a], slope[b] = q, g[0], g[1]
+        else:
+            value, slope = self.octant(d)
+        return value, slope
+
+
+@ti.data_oriented
+class Container:
+    """The axis-aligned box the fluid lives in; with a wave maker its lower-x wall is a piston."""
+
+    def __init__(self, params: BoundaryParams, tables: GhostTables):
+        self.tables = tables
+        self.radius = params.particle_radius_m
+        self.lower = ti.Vector(list(params.lower_m))
+        self.upper = ti.Vector(list(params.upper_m))
+        self.kernel_radius = params.kernel_radius_m
+        self.with_wall_density = params.wall_density
+        self.mirrored = params.wall_mirror
+        """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``,
+        ``pbf.solver.density``) rather than the tables: then the density constraint leaves out
+        :meth:`ghost` and mirrors the fluid in the walls :meth:`mirror_walls` names."""
+        self.mirror_reach = params.kernel_radius_m - params.particle_radius_m
+        """A wall's mirror images of the fluid come within h of a particle only if the particle is closer
+        than this to the wall, as no particle comes closer to it than r (the collision)."""
         self.wave_maker = params.piston_stroke_m > 0.0
         """Whether the container's lower-x wall is a piston wave maker (compiled out when not)."""
         self.piston_stroke_m = params.piston_stroke_m
         self.piston_period_s = params.piston_period_s
         self.piston_x = ti.field(ti.f32, shape=())
-        """Where the piston wall stands now (m); set by :meth:`move_walls` before each substep."""
+        """Where the piston wall stands now (m); set by :meth:`move` before each substep."""
         self.piston_v = ti.field(ti.f32, shape=())
         """The piston's velocity over the coming substep (m/s, along x)."""
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
-        self.obstacle_count = len(params.obstacles)
-        slots = max(1, self.obstacle_count)
-        self.obstacle_lower = ti.Vector.field(3, ti.f32, shape=slots)
-        self.obstacle_upper = ti.Vector.field(3, ti.f32, shape=slots)
-        # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
-        self.obstacle_exit_lower = ti.Vector.field(3, ti.i32, shape=slots)
-        self.obstacle_exit_upper = ti.Vector.field(3, ti.i32, shape=slots)
-        for k, (lower, upper) in enumerate(params.obstacles):
-            self.obstacle_lower[k] = lower
-            self.obstacle_upper[k] = upper
-            self.obstacle_exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
-            self.obstacle_exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
+        self._piston_x_host = float(np.float32(params.lower_m[0]))
+        """piston_x as the device holds it (float32), kept on the host so that moving the piston reads
+        nothing back from the device."""
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
@@ -83,19 +163,20 @@ class Box:
         phase = 2.0 * math.pi * piston_time_s / self.piston_period_s
         return self.piston_rest_x + 0.5 * self.piston_stroke_m * (1.0 - math.cos(phase))
 
-    def piston_speed_limit_m_s(self) -> float:
+    def speed_limit_m_s(self) -> float:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move_walls(self, piston_time_s: float, dt: float = 0.0) -> None:
+    def move(self, piston_time_s: float, dt: float = 0.0) -> None:
         """Place moving walls where they stand at the end of the coming substep of ``dt``, where x* is
         projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt);
         the piston's velocity over that substep is what the divergence pre-correction sees (0 when
         ``dt`` is 0: placed, not moved)."""
         if self.wave_maker:
             position = self.piston_position_m(piston_time_s)
-            self.piston_v[None] = (position - self.piston_x[None]) / dt if dt > 0.0 else 0.0
+            self.piston_v[None] = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
             self.piston_x[None] = position
+            self._piston_x_host = float(np.float32(position))
 
     @ti.func
     def _lower(self):
@@ -106,7 +187,7 @@ class Box:
         return lower
 
     @ti.func
-    def wall_velocity(self, p):
+    def velocity(self, p):
         """Velocity of the wall ghost that p sees (m/s): the piston's within h of it, else zero."""
         velocity = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wave_maker):
@@ -116,77 +197,9 @@ class Box:
         return velocity
 
     @ti.func
-    def clamp(self, p):
-        """Project p into the container shrunk by the particle radius and out of every obstacle grown
-        by it (the collision of Algorithm 1, line 15)."""
-        q = ti.max(self._lower() + self.radius, ti.min(p, self.upper - self.radius))
-        if ti.static(self.obstacle_count > 0):
-            for o in range(self.obstacle_count):
-                q = self._push_out(q, o)
-        return q
-
-    @ti.func
-    def _push_out(self, p, o):
-        """p moved out of obstacle o (grown by the particle radius) through the nearest open face.
-        Obstacles are at least two spacings thick and a particle moves at most time.max_cfl spacings
-        in a substep, so the nearest face is the one it came through."""
-        lower = self.obstacle_lower[o] - self.radius
-        upper = self.obstacle_upper[o] + self.radius
-        q = p
-        if (p > lower).all() and (p < upper).all():
-            best, axis, target = 1e30, 0, 0.0
-            for a in ti.static(range(3)):
-                if self.obstacle_exit_lower[o][a] and p[a] - lower[a] < best:
-                    best, axis, target = p[a] - lower[a], a, lower[a]
-                if self.obstacle_exit_upper[o][a] and upper[a] - p[a] < best:
-                    best, axis, target = upper[a] - p[a], a, upper[a]
-            if best < 1e30:
-                q[axis] = target
-        return q
-
-    @ti.func
-    def _lookup(self, distance):
-        """Ghost density ρ_wall/ρ0 and its slope d(ρ_wall/ρ0)/dd at wall distance d (linear interpolation)."""
-        u = ti.max(distance, 0.0) / self.kernel_radius * (TABLE_SAMPLES - 1)
-        k = ti.min(ti.cast(u, ti.i32), TABLE_SAMPLES - 2)
-        t = u - k
-        density = (1 - t) * self.density_table[k] + t * self.density_table[k + 1]
-        slope = (1 - t) * self.slope_table[k] + t * self.slope_table[k + 1]
-        return density, slope
-
-    @ti.func
-    def _cell(self, distance):
-        """Cell index and fraction of a wall distance on the overlap tables' grid."""
-        u = ti.min(ti.max(distance, 0.0) / self.kernel_radius, 1.0) * (OVERLAP_SAMPLES - 1)
-        k = ti.min(ti.cast(u, ti.i32), OVERLAP_SAMPLES - 2)
-        return k, u - k
-
-    @ti.func
-    def _edge(self, da, db):
-        """Bilinear quadrant density and its gradient in (da, db)."""
-        i, s = self._cell(da)
-        k, t = self._cell(db)
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0])
-        for a, b in ti.static(ti.ndrange(2, 2)):
-            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t)
-            value += weight * self.edge[i + a, k + b]
-            gradient += weight * self.edge_gradient[i + a, k + b]
-        return value, gradient
-
-    @ti.func
-    def _corner(self, d):
-        """Trilinear octant density and its gradient in the three wall distances d."""
-        i, s = self._cell(d[0])
-        j, t = self._cell(d[1])
-        k, u = self._cell(d[2])
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        for a, b, c in ti.static(ti.ndrange(2, 2, 2)):
-            weight = (s if a else 1.0 - s) * (t if b else 1.0 - t) * (u if c else 1.0 - u)
-            value += weight * self.corner[i + a, j + b, k + c]
-            gradient += weight * self.corner_gradient[i + a, j + b, k + c]
-        return value, gradient
+    def project(self, p):
+        """p moved into the container shrunk by the particle radius."""
+        return ti.max(self._lower() + self.radius, ti.min(p, self.upper - self.radius))
 
     @ti.func
     def mirror_walls(self, p):
@@ -206,19 +219,7 @@ class Box:
         return near, plane
 
     @ti.func
-    def obstacle_density(self, p):
-        """The obstacles' part of :meth:`wall_density`: their ghost density ρ/ρ0 and its gradient (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_wall_density and self.obstacle_count > 0):
-            for o in range(self.obstacle_count):
-                d, g = self._obstacle_ghost(p, o)
-                density += d
-                gradient += g
-        return density, gradient
-
-    @ti.func
-    def wall_density(self, p):
+    def ghost(self, p):
         """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner), and its gradient
         with respect to p (1/m)."""
         density = 0.0
@@ -233,28 +234,100 @@ class Box:
                 distance[axis] = ti.min(below, above)
                 if distance[axis] < self.kernel_radius:
                     side[axis] = 1.0 if below <= above else -1.0
-                    d, s = self._lookup(distance[axis])
+                    d, s = self.tables.wall(distance[axis])
                     density += d
                     gradient[axis] += side[axis] * s
             for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
                 if side[a] != 0.0 and side[b] != 0.0:
-                    q, g = self._edge(distance[a], distance[b])
+                    q, g = self.tables.quadrant(distance[a], distance[b])
                     density -= q
                     gradient[a] -= side[a] * g[0]
                     gradient[b] -= side[b] * g[1]
             if side[0] != 0.0 and side[1] != 0.0 and side[2] != 0.0:
-                o, g = self._corner(distance)
+                o, g = self.tables.octant(distance)
                 density += o
                 gradient += side * g
-            obstacles, obstacle_gradient = self.obstacle_density(p)
-            density += obstacles
-            gradient += obstacle_gradient
+        return density, gradient
+
+
+@ti.data_oriented
+class Obstacles:
+    """Static boxes inside the container that the water flows around."""
+
+    mirrored = False
+
+    def __init__(self, params: BoundaryParams, tables: GhostTables):
+        self.tables = tables
+        self.radius = params.particle_radius_m
+        self.kernel_radius = params.kernel_radius_m
+        self.with_wall_density = params.wall_density
+        self.count = len(params.obstacles)
+        slots = max(1, self.count)
+        self.lower = ti.Vector.field(3, ti.f32, shape=slots)
+        self.upper = ti.Vector.field(3, ti.f32, shape=slots)
+        # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
+        self.exit_lower = ti.Vector.field(3, ti.i32, shape=slots)
+        self.exit_upper = ti.Vector.field(3, ti.i32, shape=slots)
+        for k, (lower, upper) in enumerate(params.obstacles):
+            self.lower[k] = lower
+            self.upper[k] = upper
+            self.exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
+            self.exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
+
+    def move(self, clock_s: float, dt: float = 0.0) -> None:
+        """Obstacles stand still."""
+
+    def speed_limit_m_s(self) -> float:
+        return 0.0
+
+    @ti.func
+    def velocity(self, p):
+        return ti.Vector([0.0, 0.0, 0.0])
+
+    @ti.func
+    def project(self, p):
+        """p moved out of every obstacle grown by the particle radius."""
+        q = p
+        if ti.static(self.count > 0):
+            for o in range(self.count):
+                q = self._push_out(q, o)
+        return q
+
+    @ti.func
+    def _push_out(self, p, o):
+        """p moved out of obstacle o (grown by the particle radius) through the nearest open face.
+        Obstacles are at least two spacings thick and a particle moves at most time.max_cfl spacings
+        in a substep, so the nearest face is the one it came through."""
+        lower = self.lower[o] - self.radius
+        upper = self.upper[o] + self.radius
+        q = p
+        if (p > lower).all() and (p < upper).all():
+            best, axis, target = 1e30, 0, 0.0
+            for a in ti.static(range(3)):
+                if self.exit_lower[o][a] and p[a] - lower[a] < best:
+                    best, axis, target = p[a] - lower[a], a, lower[a]
+                if self.exit_upper[o][a] and upper[a] - p[a] < best:
+                    best, axis, target = upper[a] - p[a], a, upper[a]
+            if best < 1e30:
+                q[axis] = target
+        return q
+
+    @ti.func
+    def ghost(self, p):
+        """The obstacles' ghost density ρ/ρ0 and its gradient (1/m)."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_wall_density and self.count > 0):
+            for o in range(self.count):
+                d, g = self._ghost_of(p, o)
+                density += d
+                gradient += g
         return density, gradient
 
     @ti.func
-    def _obstacle_ghost(self, p, o):
+    def _ghost_of(self, p, o):
         """Ghost density of obstacle o and its gradient: the 27-term expansion of the module docstring."""
-        lower, upper = self.obstacle_lower[o], self.obstacle_upper[o]
+        lower, upper = self.lower[o], self.upper[o]
         h = self.kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
@@ -293,29 +366,58 @@ class Box:
                     if active[a] and d[a] >= h:
                         valid = False
                 if valid:
-                    value, slope = self._ghost(active, d)
+                    value, slope = self.tables.half_spaces(active, d)
                     density += sign * value
                     gradient += sign * d_sign * slope
         return density, gradient
 
+
+@ti.data_oriented
+class Boundaries:
+    """Every boundary of the fluid in a fixed order (the container, then the obstacles): what the
+    stages call. Each call visits the parts in that order, so sums come out the same bit for bit."""
+
+    def __init__(self, params: BoundaryParams):
+        self.tables = GhostTables(params.spacing_m, params.kernel_radius_m, params.wall_density)
+        self.container = Container(params, self.tables)
+        self.obstacles = Obstacles(params, self.tables)
+        self.parts = (self.container, self.obstacles)
+
+    def move(self, clock_s: float, dt: float = 0.0) -> None:
+        """Place moving boundaries where they stand at the end of the coming substep of ``dt``
+        (``clock_s``: the wave maker's clock, which stops while it is switched off)."""
+        for part in self.parts:
+            part.move(clock_s, dt)
+
+    def speed_limit_m_s(self) -> float:
+        """The fastest any boundary moves (the CFL limit counts it)."""
+        return max(part.speed_limit_m_s() for part in self.parts)
+
     @ti.func
-    def _ghost(self, active, d):
-        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
-        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1."""
-        value = 0.0
-        slope = ti.Vector([0.0, 0.0, 0.0])
-        count = active.sum()
-        if count == 0:
-            value = 1.0
-        elif count == 1:
-            for a in ti.static(range(3)):
-                if active[a]:
-                    value, slope[a] = self._lookup(d[a])
-        elif count == 2:
-            for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
-                if active[a] and active[b]:
-                    q, g = self._edge(d[a], d[b])
-                    value, slope[a], slope[b] = q, g[0], g[1]
-        else:
-            value, slope = self._corner(d)
-        return value, slope
+    def project(self, p):
+        """p moved inside the fluid's domain: into the container, out of every solid (line 15)."""
+        q = p
+        for k in ti.static(range(len(self.parts))):
+            q = self.parts[k].project(q)
+        return q
+
+    @ti.func
+    def ghost(self, p, leave_out_mirrored: ti.template()):
+        """Ghost density ρ/ρ0 behind every boundary within h of p, and its gradient (1/m); with
+        ``leave_out_mirrored`` without the boundaries whose ghost is the fluid's mirror image."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        for k in ti.static(range(len(self.parts))):
+            if ti.static(not (leave_out_mirrored and self.parts[k].mirrored)):
+                d, g = self.parts[k].ghost(p)
+                density += d
+                gradient += g
+        return density, gradient
+
+    @ti.func
+    def velocity(self, p):
+        """Velocity of the ghost fluid p sees (m/s): the sum of the boundaries' (at most one moves near p)."""
+        v = ti.Vector([0.0, 0.0, 0.0])
+        for k in ti.static(range(len(self.parts))):
+            v += self.parts[k].velocity(p)
+        return v

@@ -40,7 +40,7 @@ a second loop smooths it into ψ_i and only then forms λ̂_i. ψ is a constant 
 denominator): with its own gradient the top layer stopped pushing itself up and the tank boiled.
 
 The walls (``solver.wall_mirror``). By default the ghost fluid behind the container's walls is a fixed
-lattice, its density and gradient looked up in tables (``Box.wall_density``). A particle at a wall
+lattice, its density and gradient looked up in tables (``Container.ghost``). A particle at a wall
 then has half a neighbourhood that moves: to hold its density it takes twice its neighbours'
 multiplier, and that doubled pressure held the layer at the back wall of the Martin & Moyce
 collapse 0.57 s above its neighbours (docs/VALIDATION.md). With ``solver.wall_mirror`` the ghost is the
@@ -80,7 +80,7 @@ SURFACE_SKIP = 0.002
 class DensityConstraint:
     """The constraint's kernels and scratch: λ̂ per particle, its sum over a substep, the error sum."""
 
-    def __init__(self, params: DensityParams, box, grid):
+    def __init__(self, params: DensityParams, boundaries, grid):
         particle_count = params.particle_count
         # Compile-time constants of the kernels below (see pbf.solver.model).
         self.h = params.kernel_radius_m
@@ -90,7 +90,7 @@ class DensityConstraint:
         self.scorr_k = params.scorr_k
         self.inverse_w_dq = params.inverse_w_dq
         self.max_correction = params.max_correction
-        self.box = box
+        self.boundaries = boundaries
         self.grid = grid
         self.wall_mirror = params.wall_mirror
         self.surface_density = params.surface_density
@@ -131,12 +131,7 @@ class DensityConstraint:
     def fixed_walls(self, xi):
         """The ghost density ρ/ρ0 behind the walls that is held still, and its gradient (1/m): the ghost
         tables of the container and the obstacles, or with ``solver.wall_mirror`` the obstacles' only."""
-        wall, wall_gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.wall_mirror):
-            wall, wall_gradient = self.box.obstacle_density(xi)
-        else:
-            wall, wall_gradient = self.box.wall_density(xi)
-        return wall, wall_gradient
+        return self.boundaries.ghost(xi, True)
 
     @ti.func
     def image_sums(self, xi, xj, near, plane, gradients: ti.template()):
@@ -176,7 +171,7 @@ class DensityConstraint:
         ratio, gradient_i, sum_sq = 0.0, ti.Vector([0.0, 0.0, 0.0]), 0.0
         own_images = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
-            near, plane = self.box.mirror_walls(xi)
+            near, plane = self.boundaries.container.mirror_walls(xi)
             # A loop of its own for the particles at a wall: with the images' code in the common loop,
             # every particle's pairs took 2.5 times as long, the few at a wall or not.
             if near.sum() > 0:
@@ -317,7 +312,7 @@ class DensityConstraint:
         h = self.h
         dx = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
-            near, plane = self.box.mirror_walls(xi)
+            near, plane = self.boundaries.container.mirror_walls(xi)
             if near.sum() > 0:  # a loop of its own, as in pair_sums
                 # Unused results named, not "_": Taichi gives one "_" a single type, and a second "_"
                 # of another type (a float, then a vector) broke its compile without optimisation.
@@ -348,7 +343,7 @@ class DensityConstraint:
     def jacobi_step(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
                     weight):
         """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
-        other buffer's x_i (the iteration before) and collided with the box (line 15), into that buffer."""
+        other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
         h = self.h
         xi = self.own_position(first, second, from_second, i)
         lam_i = self.lam[i]
@@ -366,7 +361,7 @@ class DensityConstraint:
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
         dx *= ti.min(1.0, self.max_correction / (dx.norm() + 1e-12))
         corrected = xi + h * dx
-        moved = self.box.clamp(ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)))
+        moved = self.boundaries.project(ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)))
         if from_second:
             first[i] = moved
         else:
@@ -377,7 +372,7 @@ class DensityConstraint:
                 measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> ti.f64:
         """One Jacobi iteration as one kernel: all λ from x, then all corrected positions,
         weighted against the other buffer (which holds the positions of the iteration before) and
-        collided with the box (Algorithm 1, line 15), into that buffer; x is ``second`` when
+        collided with the boundaries (Algorithm 1, line 15), into that buffer; x is ``second`` when
         ``from_second``, else ``first``. With ``measure`` returns the mean error (else 0).
 
         The buffers come in a fixed order and the direction as a flag, branched on around the neighbour
@@ -413,12 +408,12 @@ class DensityConstraint:
             newer, older = first[i], second[i]
             if newer_in_second:
                 newer, older = second[i], first[i]
-            first[i] = self.box.clamp(newer + fraction * (older - newer))
+            first[i] = self.boundaries.project(newer + fraction * (older - newer))
             self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
 
     def step_back(self, predicted, fraction: float) -> None:
         """Take back ``fraction`` of the last iteration: x* = x^{k+1} + fraction (x^k − x^{k+1}), and L
-        alike, into the first buffer (the iteration before is still in the other; box collision again,
+        alike, into the first buffer (the iteration before is still in the other; the collision again,
         as a point between two outside an obstacle may lie in it).
 
         Why (``Simulation.substep``): with an error target the count of iterations jumps by a whole one

@@ -41,9 +41,9 @@ class DivergenceCorrection:
     """The pass's kernels and scratch. Λ persists between substeps as ``State.multiplier`` = Λ/Δt² (1/s²),
     a pressure, which needs no record of the Δt it was found with."""
 
-    def __init__(self, params: DensityParams, state, box, grid, density):
+    def __init__(self, params: DensityParams, state, boundaries, grid, density):
         self.state = state
-        self.box = box
+        self.boundaries = boundaries
         self.grid = grid
         self.density = density
         self.h = params.kernel_radius_m
@@ -79,7 +79,7 @@ class DivergenceCorrection:
                 dv += (increment_i + self.increment[j]) * g
             else:
                 dv += (increment_i + self.increment[j]) * self.volume * h * kernel_gradient(xi - x[j], h)
-        wall, wall_gradient = self.box.wall_density(xi)
+        wall, wall_gradient = self.boundaries.ghost(xi, False)
         dv += increment_i * h * wall_gradient
         if ti.static(start):
             self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
@@ -104,8 +104,8 @@ class DivergenceCorrection:
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
                 rate += self.volume * h * kernel_gradient(xi - x[j], h).dot(vi - self.state.v[j])
-            _, wall_gradient = self.box.wall_density(xi)
-            rate += h * wall_gradient.dot(vi - self.box.wall_velocity(xi))
+            _, wall_gradient = self.boundaries.ghost(xi, False)
+            rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))
             carried = self.state.multiplier[i] * dt * dt
             c = dt / h * rate + self.deficit[i]
             total = ti.min(carried - self.omega * c / self.denominator[i], 0.0)

@@ -54,7 +54,7 @@ class Emitters:
             slot = first + k
             self.state.x[slot] = positions[k]
             self.state.v[slot] = velocities[k]
-            self.state.index[slot] = slot  # creation order: the next row of positions()
+            self.state.reset_new(slot)  # every other field at its initial value, the index in creation order
         self.state.active[None] = first + positions.shape[0]
 
     def emit(self, now_s: float, pouring: bool = True) -> None:

@@ -1,5 +1,5 @@
-"""Time integration: external forces, prediction and reordering by cell (Algorithm 1, lines 1-4);
-lines 20-23 are ``pbf.solver.postprocess``."""
+"""Time integration: external forces and prediction (Algorithm 1, lines 1-4); lines 20-23 are
+``pbf.solver.postprocess``."""
 import numpy as np
 import taichi as ti
 
@@ -44,24 +44,22 @@ class PredictedPositions:
 
 @ti.data_oriented
 class Integrator:
-    """Owns x* (:class:`PredictedPositions`) and the reorder scratch."""
+    """Owns x* (:class:`PredictedPositions`), which the grid's sort carries with the state."""
 
-    def __init__(self, state, box):
+    def __init__(self, state, boundaries):
         self.state = state
-        self.box = box
+        self.boundaries = boundaries
         self.predicted = PredictedPositions(state.capacity, state.active)
-        self._vec = ti.Vector.field(3, ti.f32, shape=(3, state.capacity))
-        self._int = ti.field(ti.i32, shape=state.capacity)
-        self._scalar = ti.field(ti.f32, shape=(2, state.capacity))
+        state.carry(self.predicted.first)
 
     @ti.kernel
     def advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
-        """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the box as in
+        """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the boundaries as in
         :meth:`predict`; one launch for both."""
         for i in range(self.state.active[None]):
             v = self.state.v[i] + dt * gravity
             self.state.v[i] = v
-            self.predicted.first[i] = self.box.clamp(self.state.x[i] + dt * v)
+            self.predicted.first[i] = self.boundaries.project(self.state.x[i] + dt * v)
 
     @ti.kernel
     def damp(self, factor: ti.f32):
@@ -72,10 +70,10 @@ class Integrator:
     @ti.kernel
     def _predict(self, x_pred: ti.template(), dt: ti.f32):
         for i in range(self.state.active[None]):
-            x_pred[i] = self.box.clamp(self.state.x[i] + dt * self.state.v[i])
+            x_pred[i] = self.boundaries.project(self.state.x[i] + dt * self.state.v[i])
 
     def predict(self, dt: float) -> None:
-        """x* ← x + Δt v (line 3), kept inside the box so the grid never sees a lost particle."""
+        """x* ← x + Δt v (line 3), kept inside the boundaries so the grid never sees a lost particle."""
         self._predict(self.predicted.first, dt)
 
     @ti.kernel
@@ -94,24 +92,3 @@ class Integrator:
         if speed > speed_limit_m_s:
             velocity *= speed_limit_m_s / speed
         self._push(push.point_m, velocity.tolist(), push.radius_m)
-
-    @ti.func
-    def permute(self, sorted_from: ti.template()):
-        """Apply the grid's counting-sort permutation to the state (Λ and the pressure sum included)
-        and to x*: loops for the top level of the grid's sort kernel (``NeighbourGrid.sort_and_permute``)."""
-        x_pred = ti.static(self.predicted.first)
-        for slot in range(self.state.active[None]):
-            i = sorted_from[slot]
-            self._vec[0, slot] = self.state.x[i]
-            self._vec[1, slot] = self.state.v[i]
-            self._vec[2, slot] = x_pred[i]
-            self._int[slot] = self.state.index[i]
-            self._scalar[0, slot] = self.state.multiplier[i]
-            self._scalar[1, slot] = self.state.pressure_sum[i]
-        for slot in range(self.state.active[None]):
-            self.state.x[slot] = self._vec[0, slot]
-            self.state.v[slot] = self._vec[1, slot]
-            x_pred[slot] = self._vec[2, slot]
-            self.state.index[slot] = self._int[slot]
-            self.state.multiplier[slot] = self._scalar[0, slot]
-            self.state.pressure_sum[slot] = self._scalar[1, slot]

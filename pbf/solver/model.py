@@ -1,7 +1,7 @@
 """The Model: everything the solver derives from a scene, once, before anything is allocated.
 
 A :class:`Model` is frozen. It holds the counts, the particle mass and volume, the grid, and one
-parameter object per stage of the step (:class:`GridParams`, :class:`BoxParams`,
+parameter object per stage of the step (:class:`GridParams`, :class:`BoundaryParams`,
 :class:`DensityParams`, :class:`VelocityParams`). Every field of those objects is baked into the
 stage's kernels when they compile (Taichi reads a ``data_oriented`` object's Python scalars as
 constants), so changing one means a new Model. What may change between substeps travels apart, in
@@ -77,8 +77,9 @@ class GridParams:
 
 
 @dataclass(frozen=True)
-class BoxParams:
-    """The container (``pbf.solver.boundary``): collision and the wall density."""
+class BoundaryParams:
+    """The container, its piston and the obstacles (``pbf.solver.boundary``): collision and the ghost
+    density behind them."""
 
     lower_m: Vec3
     upper_m: Vec3
@@ -89,6 +90,9 @@ class BoxParams:
     kernel_radius_m: float
     wall_density: bool
     """Whether the ghost density behind walls (and inside obstacles) is added to the constraint."""
+    wall_mirror: bool
+    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``) rather than
+    its tables."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
     piston_stroke_m: float = 0.0
@@ -120,7 +124,7 @@ class DensityParams:
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
     wall_mirror: bool = False
     """Whether the ghost fluid behind the container's walls is the fluid's mirror image (``pbf.solver.density``)
-    rather than the fixed ghost lattice of ``Box.wall_density``."""
+    rather than the fixed ghost lattice of ``Container.ghost``."""
 
 
 @dataclass(frozen=True)
@@ -209,7 +213,7 @@ class Model:
     particle_volume_m3: float
     """V = m/ρ0, the volume each particle stands for."""
     grid: GridParams
-    box: BoxParams
+    boundary: BoundaryParams
     density: DensityParams
     velocity: VelocityParams
     iteration_weights: tuple[float, ...]
@@ -236,9 +240,9 @@ class Model:
             surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
             wall_mirror=s.wall_mirror)
         return cls(scene, n, mass, volume, grid,
-                   BoxParams(lower, upper, scene.particle_radius_m, spacing, h, s.expert.wall_density,
-                             tuple((o.min_m, o.max_m) for o in scene.obstacles),
-                             scene.wave_maker.stroke_m, scene.wave_maker.period_s),
+                   BoundaryParams(lower, upper, scene.particle_radius_m, spacing, h, s.expert.wall_density,
+                                  s.wall_mirror, tuple((o.min_m, o.max_m) for o in scene.obstacles),
+                                  scene.wave_maker.stroke_m, scene.wave_maker.period_s),
                    density, VelocityParams(n, h, volume), iteration_weights(s.expert, 1.0 - omega * gain))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:

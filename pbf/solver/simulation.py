@@ -12,7 +12,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.solver.backend import start_backend
-from pbf.solver.boundary import Box
+from pbf.solver.boundary import Boundaries
 from pbf.solver.acceleration import Weights
 from pbf.solver.density import DensityConstraint
 from pbf.solver.divergence import DivergenceCorrection
@@ -64,7 +64,7 @@ class Readout:
 
 
 class Simulation:
-    """Position Based Fluids in a box.
+    """Position Based Fluids in a container, around obstacles.
 
     >>> sim = Simulation("dam_break")          # a preset name, a TOML path, a dict or a Scene
     >>> sim.step()                             # one frame: control.substeps PBF substeps (or more, CFL)
@@ -82,12 +82,13 @@ class Simulation:
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
         self.state = State(model.capacity)
-        self.box = Box(model.box)
+        self.boundaries = Boundaries(model.boundary)
+        """The container, its piston and the obstacles (``pbf.solver.boundary``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state)
         self.grid = NeighbourGrid(model.grid, self.state.active)
-        self.integrator = Integrator(self.state, self.box)
-        self.density = DensityConstraint(model.density, self.box, self.grid)
-        self.divergence = DivergenceCorrection(model.density, self.state, self.box, self.grid, self.density)
+        self.integrator = Integrator(self.state, self.boundaries)
+        self.density = DensityConstraint(model.density, self.boundaries, self.grid)
+        self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
         self.weights = Weights(model.iteration_weights)
@@ -136,7 +137,7 @@ class Simulation:
         """Positions, velocities, the divergence pressure (creation order), time and frame: what
         :meth:`restore` takes."""
         return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
-                        self.piston_time_s, self.state.in_creation_order(self.state.multiplier))
+                        self.piston_time_s, self.state.kept_fields())
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
@@ -144,20 +145,25 @@ class Simulation:
         if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
             raise ValueError(f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
                              f"{positions.shape} and {velocities.shape}")
-        multipliers = snapshot.divergence_multipliers
-        if multipliers is not None and np.shape(multipliers) != positions.shape[:1]:
-            raise ValueError(f"restore: expected divergence_multipliers of shape ({len(positions)},), got "
-                             f"{np.shape(multipliers)}")
+        kept = {spec.name: spec for spec in self.state.fields if spec.kept and spec.name not in ("x", "v")}
+        for name, values in snapshot.fields.items():
+            spec = kept.get(name)
+            if spec is None:
+                raise ValueError(f"restore: unknown particle field {name!r} in the snapshot; kept fields: "
+                                 f"{', '.join(kept)}")
+            shape = positions.shape[:1] + (() if spec.components == 1 else (spec.components,))
+            if np.shape(values) != shape:
+                raise ValueError(f"restore: expected fields[{name!r}] of shape {shape}, got {np.shape(values)}")
         if len(positions) > self.model.capacity:
             raise ValueError(f"restore: {len(positions):,} particles, more than the {self.model.capacity:,} this "
                              f"scene allocates (its blocks and emitters)")
-        self.state.load(positions, velocities, multipliers)
+        self.state.load({**snapshot.fields, "x": positions, "v": velocities})
         self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
         # The wave maker's own clock: it stops while control.wave_maker_on is off.
         self.piston_time_s = self.time_s if snapshot.piston_time_s is None else snapshot.piston_time_s
-        self.box.move_walls(self.piston_time_s)
+        self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
@@ -175,7 +181,7 @@ class Simulation:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
         time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
         t = self.scene.time
-        speed = (max(self.diagnostics.max_speed(), self.box.piston_speed_limit_m_s())
+        speed = (max(self.diagnostics.max_speed(), self.boundaries.speed_limit_m_s())
                  + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s)
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
         if needed > t.max_substeps:
@@ -186,7 +192,7 @@ class Simulation:
 
     def _sort_by_cell(self, x) -> None:
         """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
-        self.grid.sort_and_permute(x, self.state.index, self.integrator)
+        self.grid.sort_and_permute(x, self.state.index, self.state)
 
     def _outside_inputs(self, dt: float) -> None:
         """What acts on the water from outside Algorithm 1, before its prediction: new water from the
@@ -197,7 +203,7 @@ class Simulation:
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
-        self.box.move_walls(self.piston_time_s, dt)
+        self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""

@@ -1,9 +1,50 @@
-"""Particle state: what persists from one substep to the next, kept apart from the stages' scratch."""
+"""Particle state: what persists from one substep to the next, kept apart from the stages' scratch.
 
-from dataclasses import dataclass
+Every per-particle quantity is declared once, in :data:`PARTICLE_FIELDS`: the state allocates it,
+the grid's sort carries it along (:meth:`State.permute`), the emitters give new particles its initial
+value, and snapshots keep it where it says so. A stage's own per-particle array that must follow
+the sort (the predicted positions x*) is attached with :meth:`State.carry`.
+"""
+
+from dataclasses import dataclass, field
 
 import numpy as np
 import taichi as ti
+
+
+@dataclass(frozen=True)
+class ParticleField:
+    """One per-particle quantity of :class:`State`."""
+
+    name: str
+    """The attribute of State that holds it."""
+    dtype: object
+    """ti.f32 or ti.i32."""
+    components: int
+    """1 (a scalar) or 3 (a vector)."""
+    unit: str
+    doc: str
+    kept: bool
+    """Whether a :class:`Snapshot` keeps it; a field not kept starts from its initial value after a
+    restore."""
+    initial: str = "zero"
+    """A new particle's value: "zero", or "creation" (the creation index)."""
+
+
+PARTICLE_FIELDS = (
+    ParticleField("x", ti.f32, 3, "m", "position", kept=True),
+    ParticleField("v", ti.f32, 3, "m/s", "velocity", kept=True),
+    ParticleField("index", ti.i32, 1, "", "the particle's creation index (its row in positions())", kept=False,
+                  initial="creation"),
+    ParticleField("multiplier", ti.f32, 1, "1/s²", "Λ/Δt² of pbf.solver.divergence: the last substep's "
+                  "divergence pressure, which the next one starts from", kept=True),
+    ParticleField("pressure_sum", ti.f32, 1, "Pa", "the sum of each substep's pressure since the frame began "
+                  "(Simulation.pressures divides it by the count): one substep's alternates under accelerated "
+                  "weights, a frame's mean does not", kept=False),
+)
+"""The particles' quantities, in the order the sort carries them."""
+SNAPSHOT_NAMES = {"x": "positions_m", "v": "velocities_m_s"}
+"""Kept fields that a :class:`Snapshot` holds under a name of their own; the others are in its ``fields``."""
 
 
 @dataclass(frozen=True)
@@ -20,8 +61,9 @@ class Snapshot:
     """Layers each emitter had added (empty: none, as at the start)."""
     piston_time_s: float | None = None
     """How long the wave maker had run (None: as long as the scene, it was never switched off)."""
-    divergence_multipliers: np.ndarray | None = None
-    """(n,) float32 Λ, the divergence pressure the next substep starts from (None: none, as at rest)."""
+    fields: dict = field(default_factory=dict)
+    """The other kept per-particle fields by name (``PARTICLE_FIELDS``), (n,) or (n, 3) float32 each;
+    one left out starts at zero (e.g. ``multiplier``: no divergence pressure, as at rest)."""
 
 
 @ti.data_oriented
@@ -31,48 +73,74 @@ class State:
     the current sorted order: the grid re-sorts them by cell every substep, so slot i holds particle
     ``index[i]``. Emitters append particles after the live ones; the rest of the slots are never read.
 
-    * ``x``: (capacity,) vector(3, f32), positions, m
-    * ``v``: (capacity,) vector(3, f32), velocities, m/s
-    * ``index``: (capacity,) i32, the particle's creation index (its row in :meth:`positions`)
-    * ``multiplier``: (capacity,) f32, Λ of ``pbf.solver.divergence``: the last substep's divergence
-      pressure, which the next one starts from
-    * ``pressure_sum``: (capacity,) f32, Pa, the sum of each substep's pressure since the frame began
-      (``Simulation.pressures`` divides it by the count): one substep's alternates under accelerated
-      weights, a frame's mean does not
-    * ``active``: () i32, the number of live particles
+    Each entry of :data:`PARTICLE_FIELDS` is a (capacity,) field of its type here (``x``, ``v``,
+    ``index``, ``multiplier``, ``pressure_sum``); ``active`` is a () i32 field, the number of live
+    particles.
     """
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
         self.capacity = capacity
-        self.x = ti.Vector.field(3, ti.f32, shape=capacity)
-        self.v = ti.Vector.field(3, ti.f32, shape=capacity)
-        self.index = ti.field(ti.i32, shape=capacity)
+        self.fields = tuple(fields)
         self.active = ti.field(ti.i32, shape=())
-        self.multiplier = ti.field(ti.f32, shape=capacity)
-        self.pressure_sum = ti.field(ti.f32, shape=capacity)
+        self._carried = []
+        """(field, scratch) of every per-particle array the sort carries, the state's own first."""
+        for spec in self.fields:
+            setattr(self, spec.name, self._allocate(spec.dtype, spec.components))
+            self._carried.append((getattr(self, spec.name), self._allocate(spec.dtype, spec.components)))
         self._unsorted = ti.Vector.field(3, ti.f32, shape=capacity)
         self._unsorted_scalar = ti.field(ti.f32, shape=capacity)
+
+    def _allocate(self, dtype, components: int):
+        if components == 1:
+            return ti.field(dtype, shape=self.capacity)
+        return ti.Vector.field(components, dtype, shape=self.capacity)
+
+    def carry(self, values) -> None:
+        """Have the sort carry ``values``, a stage's own (capacity,) field (before the first substep)."""
+        self._carried.append((values, self._allocate(values.dtype, values.n if hasattr(values, "n") else 1)))
 
     @property
     def count(self) -> int:
         """The number of live particles (one read from the device)."""
         return int(self.active[None])
 
-    def load(self, positions: np.ndarray, velocities: np.ndarray, multipliers: np.ndarray | None = None) -> None:
-        """Make the particles of (n, 3) arrays in creation order (m, m/s) the live ones, n ≤ capacity,
-        with their (n,) Λ (zero when None)."""
-        n = len(positions)
-        padded = np.zeros((2, self.capacity, 3), np.float32)
-        padded[0, :n], padded[1, :n] = positions, velocities
-        self.x.from_numpy(padded[0])
-        self.v.from_numpy(padded[1])
-        scalars = np.zeros(self.capacity, np.float32)
-        if multipliers is not None:
-            scalars[:n] = multipliers
-        self.multiplier.from_numpy(scalars)
-        self.pressure_sum.fill(0.0)
-        self.index.from_numpy(np.arange(self.capacity, dtype=np.int32))
+    def load(self, values: dict) -> None:
+        """Make the particles of ``values`` (field name → (n,) or (n, 3) array in creation order; x is
+        required) the live ones, n ≤ capacity; a field not given starts at its initial value."""
+        n = len(values["x"])
+        for spec in self.fields:
+            shape = (self.capacity,) if spec.components == 1 else (self.capacity, spec.components)
+            if spec.initial == "creation":
+                padded = np.arange(self.capacity, dtype=np.int32)
+            else:
+                padded = np.zeros(shape, np.float32 if spec.dtype == ti.f32 else np.int32)
+            if spec.name in values and values[spec.name] is not None:
+                padded[:n] = values[spec.name]
+            getattr(self, spec.name).from_numpy(padded)
         self.active[None] = n
+
+    @ti.func
+    def permute(self, sorted_from: ti.template()):
+        """Apply the grid's counting-sort permutation (``sorted_from[slot]`` = the slot the particle
+        comes from) to every carried array: loops for the top level of the grid's sort kernel
+        (``NeighbourGrid.sort_and_permute``), one to gather into scratch and one to copy back."""
+        for slot in range(self.active[None]):
+            i = sorted_from[slot]
+            for k in ti.static(range(len(self._carried))):
+                self._carried[k][1][slot] = self._carried[k][0][i]
+        for slot in range(self.active[None]):
+            for k in ti.static(range(len(self._carried))):
+                self._carried[k][0][slot] = self._carried[k][1][slot]
+
+    @ti.func
+    def reset_new(self, slot):
+        """A new particle's fields, except position and velocity, at their initial values (the emitters)."""
+        for k in ti.static(range(len(self.fields))):
+            if ti.static(self.fields[k].name not in ("x", "v")):
+                if ti.static(self.fields[k].initial == "creation"):
+                    self._carried[k][0][slot] = slot
+                else:
+                    self._carried[k][0][slot] = ti.cast(0, self.fields[k].dtype)
 
     @ti.kernel
     def _unsort(self, values: ti.template()):
@@ -85,16 +153,23 @@ class State:
             self._unsorted_scalar[self.index[i]] = values[i]
 
     def in_creation_order(self, values) -> np.ndarray:
-        """A per-particle scalar field (in the current sorted order) as a NumPy array in creation order."""
+        """A per-particle field (in the current sorted order) as a NumPy array in creation order: (n,)
+        for a scalar field, (n, 3) for a vector field."""
+        if hasattr(values, "n"):
+            self._unsort(values)
+            return self._unsorted.to_numpy()[: self.count]
         self._unsort_scalar(values)
         return self._unsorted_scalar.to_numpy()[: self.count]
 
     def positions(self) -> np.ndarray:
         """(n, 3) float32 positions in metres of the live particles, in the order they were created."""
-        self._unsort(self.x)
-        return self._unsorted.to_numpy()[: self.count]
+        return self.in_creation_order(self.x)
 
     def velocities(self) -> np.ndarray:
         """(n, 3) float32 velocities in m/s of the live particles, in the order they were created."""
-        self._unsort(self.v)
-        return self._unsorted.to_numpy()[: self.count]
+        return self.in_creation_order(self.v)
+
+    def kept_fields(self) -> dict:
+        """Every kept field but x and v, by name, in creation order (what a Snapshot's ``fields`` holds)."""
+        return {spec.name: self.in_creation_order(getattr(self, spec.name)) for spec in self.fields
+                if spec.kept and spec.name not in SNAPSHOT_NAMES}
