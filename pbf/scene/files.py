@@ -83,6 +83,48 @@ def read_table(path: Path) -> dict:
     return _parse_toml(text.removeprefix("\ufeff"), str(path))
 
 
+MAX_EXTENDS = 8
+"""How many presets a chain of ``extends`` may pass through."""
+
+
+def _merged(base: dict, child: dict) -> dict:
+    """``child`` over ``base``: tables merged key by key, anything else (numbers, lists of tables such
+    as fluid.blocks) replaced whole."""
+    merged = dict(base)
+    for name, value in child.items():
+        if isinstance(value, dict) and isinstance(merged.get(name), dict):
+            merged[name] = _merged(merged[name], value)
+        else:
+            merged[name] = value
+    return merged
+
+
+def resolve_extends(table: dict, source: str, folder: Path | None = None, seen: tuple[str, ...] = ()) -> dict:
+    """The table with its ``extends = "preset"`` resolved: the named preset (or TOML path, relative to
+    ``folder``) is loaded, resolved the same way, and this table's keys laid over it. A preset that
+    differs from another only in size says so in data, and follows the other's changes."""
+    if "extends" not in table:
+        return table
+    name = table["extends"]
+    where = f"{source}: key 'extends'"
+    if not isinstance(name, str):
+        raise SceneError(f"{where}: expected a preset name or the path of a TOML file, got {_show(name)}", "extends")
+    if len(seen) >= MAX_EXTENDS:
+        raise SceneError(f"{where}: more than {MAX_EXTENDS} scenes extend one another ({' → '.join(seen)})",
+                         "extends")
+    candidate = Path(name)
+    if folder is not None and candidate.suffix == ".toml" and not candidate.is_absolute():
+        candidate = folder / candidate
+    try:
+        path = resolve_path(candidate if candidate.suffix == ".toml" else name)
+    except SceneError as error:
+        raise SceneError(f"{where}: {error}", "extends") from None
+    if str(path.resolve()) in seen:
+        raise SceneError(f"{where}: {name!r} extends this scene in turn; allowed: a chain without loops", "extends")
+    base = resolve_extends(read_table(path), str(path), path.parent, seen + (str(path.resolve()),))
+    return _merged(base, {k: v for k, v in table.items() if k != "extends"})
+
+
 def parse_override(assignment: str) -> tuple[list[str], object]:
     """Split ``solver.iterations=6`` into a key path and a TOML value (bare words are strings)."""
     label = f"command line --set {echo(assignment) if isinstance(assignment, str) else _show(assignment)}"
@@ -143,9 +185,11 @@ def load_scene(source: str | os.PathLike | dict | Scene, overrides: typing.Seque
         table, origin = _table_of(source), source.source
     elif isinstance(source, dict):
         table, origin = copy.deepcopy(source), "<dict>"  # the overrides must not change the caller's dict
+        table = resolve_extends(table, origin)
     elif isinstance(source, (str, os.PathLike)):
         path = resolve_path(source)
-        table, origin = read_table(path), str(path)
+        origin = str(path)
+        table = resolve_extends(read_table(path), origin, path.parent, (str(path.resolve()),))
     else:
         raise SceneError(f"{_show(source)}: expected a preset name, a TOML path, a dict or a pbf.Scene")
     overridden = {}

@@ -15,6 +15,10 @@ Every key a scene file may set, generated from the schema (`pbf keys > docs/KEYS
 when this file is stale). Units are in the names; each number's range is checked at load, and an
 error names the file (or the command line's `--set`), the key and what is allowed. Tables of
 `[[...]]` form are lists: each entry takes the keys listed under it.
+
+A scene may start from another: `extends = "dam_break"` (a preset, or a TOML path relative to the
+file) lays the file's keys over that scene's, tables merged key by key, lists such as
+`[[fluid.blocks]]` replaced whole.
 """
 
 

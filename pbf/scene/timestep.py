@@ -14,7 +14,7 @@ class Time:
     max_cfl: float = key(1.2, _between(0.01, 4.0), "most particle spacings the fastest particle may travel in one "
                          "substep; a frame takes more substeps when it would go further")
     max_substeps: int = key(64, _between(1, 1000), "cap on the substeps one frame may take (a warning when reached)")
-    settle_s: float = key(0.0, _between(0.0, 60.0), "seconds of solver steps, velocities zeroed after each, that "
+    settle_s: float = key(0.0, _between(0.0, 60.0), "seconds of solver steps, velocities damped after each, that "
                           "bring the blocks to the solver's own rest state before t = 0 (not with emitters)")
 
 

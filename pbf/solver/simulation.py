@@ -272,9 +272,9 @@ class Simulation:
         over those run since, with :meth:`substep`) of p = −ρ0 h² (L/Δt² + Λ), L the multiplier the
         position iterations moved the particle by and Λ the divergence pre-correction's
         (``DensityConstraint.lam_total``). Under accelerated weights one substep's pressure alternates
-        from substep to substep (its gradient by ±15% in the ``hydrostatic`` tank); a frame's mean
-        holds still to 2% (docs/VALIDATION.md). Zero before the first substep after a restore. Each
-        particle's value is still noisy (a few per cent of ρ0 g H): average over frames for a field."""
+        from substep to substep; a frame's mean holds still (docs/VALIDATION.md, the hydrostatic
+        tank). Zero before the first substep after a restore. Each particle's value is still noisy (a
+        few per cent of ρ0 g H): average over frames for a field."""
         total = self.state.in_creation_order(self.state.pressure_sum)
         return total / np.float32(max(self.pressure_substeps, 1))
 
