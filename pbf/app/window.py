@@ -92,6 +92,13 @@ class OrbitCamera:
         """Dolly in (drag up) or out (drag down); each window height of drag is a factor e."""
         self.distance = max(1e-3, self.distance * math.exp(-dy))
 
+    def clear_of(self, fraction: float, aspect: float) -> None:
+        """Move eye and target together to the left by half of ``fraction`` of the view's width at the
+        target, so that what was centred is centred in the part of the window right of a panel that
+        covers ``fraction`` of its width (``aspect``: width over height)."""
+        width = 2.0 * self.distance * math.tan(math.radians(self.fov_deg) / 2) * aspect
+        self.move(0.0, -0.5 * fraction * width, 0.0)
+
     def move(self, forward: float, right: float, up: float) -> None:
         """Move eye and target together, in metres, along the horizontal view direction, right and up."""
         ahead = np.array([-math.sin(self.yaw), 0.0, -math.cos(self.yaw)])
@@ -127,6 +134,8 @@ class WindowViewer:
         self.window = window
         self.render = sim.scene.render
         self.camera = OrbitCamera.from_view(View.of_scene(sim.scene))
+        width, height = window.get_window_shape()
+        self.camera.clear_of(PANEL[0] + PANEL[2], width / height)  # the scene's framing, beside the panel
         self.colours = ParticleColours(sim, self.render)
         self.edges = scene_edges(sim.scene)
         self.surface = self.render.style == "surface"
