@@ -265,7 +265,8 @@ def choose_viewer(sim, args, out, video):
             viewer = window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
                                                                  sim.scene.render.height_px))
         except window.WindowUnavailable as reason:
-            print(f"[pbf] no window ({reason}); rendering {frames} frames headless into {out}/ instead")
+            print(f"[pbf] no window ({reason}); rendering the initial state and {frames} frames headless into "
+                  f"{out}/ instead")
         else:
             if args.out is not None:
                 print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
@@ -316,8 +317,12 @@ def main(argv=None) -> int:
     except BackendError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(f"[pbf] {scene.name}: {sim.particle_count:,} particles, Δt = {sim.dt_s * 1e3:.2f} ms, "
+    more = (f" (up to {sim.model.capacity:,} with its emitters)" if sim.model.capacity > sim.particle_count else "")
+    print(f"[pbf] {scene.name}: {sim.particle_count:,} particles{more}, Δt = {sim.dt_s * 1e3:.2f} ms, "
           f"{sim.control.iterations} iterations")
+    print("[pbf] preparing the solver's kernels (compiled on a first run, loaded from Taichi's cache after) ...",
+          end=" ", flush=True)
+    print(f"ready in {loop.warm_up(sim):.1f} s")
     viewer, frames = choose_viewer(sim, args, out, video)
     loop.run(sim, viewer, frames)
     if isinstance(viewer, FrameWriter):

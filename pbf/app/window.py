@@ -116,7 +116,7 @@ centres on pixel centres, where both give the same colours; nearest saves 2.4 ms
 def open_window(title: str, width: int, height: int, vsync: bool = True):
     """A GGUI window, or WindowUnavailable with the reason in one line."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise WindowUnavailable("no display (DISPLAY is not set)")
+        raise WindowUnavailable("no display: DISPLAY is not set")
     for name, value in LAVAPIPE_SETTINGS.items():
         os.environ.setdefault(name, value)
     try:
