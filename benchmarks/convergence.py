@@ -164,8 +164,8 @@ def main(argv=None):
         seconds = statistics.median(r["seconds"] for r in rows)
         r = rows[0]
         rounds = " ".join(f"{row['seconds'] / b:.2f}" for row, b in zip(rows, bases))
-        print(f"{name:{width}s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} {r['substeps']:8.2f} "
-              f"{seconds:11.3f} {seconds / base:6.2f}  {rounds}")
+        print(f"{name:{width}s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} "
+              f"{r['substeps']:8.2f} {seconds:11.3f} {seconds / base:6.2f}  {rounds}")
     print("* iterations of each frame's last substep, averaged over the frames")
 
 

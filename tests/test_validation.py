@@ -89,7 +89,7 @@ def test_wave_maker_theory():
 def test_wave_maker_makes_the_waves_of_linear_theory():
     # The wave_tank preset (13 particles over the depth): two depths from the piston, over the first
     # two waves, the wave height is within 30% of Biésel's. Measured: 0.73 of it here (0.66 with 4
-    # iterations at least, 0.76 with the plain Jacobi iterations before issue 14); the shortfall is the
+    # iterations at least, 0.76 with plain Jacobi iterations); the shortfall is the
     # solver's numerical damping, which shrinks as the resolution rises (docs/VALIDATION.md).
     run = validate.wave_tank(end_s=2.6, gauges_in_depths=(2.0,))
     assert 0.7 < run.heights_m[0] / run.expected_height_m < 1.1
