@@ -60,6 +60,15 @@ def machine(backend: str) -> str:
             f"{platform.system()} {platform.machine()}")
 
 
+def load_average() -> float | None:
+    """The machine's load over the last minute, where the system tells it: on a shared machine the
+    time of a run moves with it."""
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return None
+
+
 def seed_second(frames: int, rounds: int) -> dict:
     """The seed scene's first ``frames`` frames, ``rounds`` times from rest."""
     sim = Simulation(SEED_SCENE, quiet=True)
@@ -75,13 +84,13 @@ def seed_second(frames: int, rounds: int) -> dict:
             maxima.append(stats["max_density_error"])
         seconds.append(elapsed)
     simulated_s = frames * sim.scene.time.frame_dt_s
-    return {"particles": sim.particle_count, "frames": frames, "simulated_s": simulated_s,
+    return {"particles": sim.particle_count, "frames": frames, "simulated_s": simulated_s, "load": load_average(),
             "seconds_per_simulated_s": statistics.median(seconds) / simulated_s,
             "mean_error": float(np.mean(means)), "max_error": max(maxima)}
 
 
-def rows(quick: bool, rounds: int) -> list[tuple[str, str]]:
-    """(measure, value) of every line of the table."""
+def rows(quick: bool, rounds: int) -> tuple[list[tuple[str, str]], float | None]:
+    """(measure, value) of every line of the table, and the load average when the timing ended."""
     seed = seed_second(3 if quick else SEED_FRAMES, 1 if quick else rounds)
     surge = validate.martin_moyce(9 if quick else MARTIN_MOYCE_DIVISOR, end_T=0.5 if quick else 3.5)
     tank = validate.hydrostatic(3 if quick else HYDROSTATIC_FRAMES, samples=2 if quick else 30,
@@ -104,7 +113,7 @@ def rows(quick: bool, rounds: int) -> list[tuple[str, str]]:
          f"{late_surface / tank.fill_height_m - 1:+.2%}"),
         (f"wave tank ({waves.particles:,} particles): wave height two depths from the piston",
          f"{wave_ratio:.2f} of linear theory (Biésel)"),
-    ]
+    ], seed["load"]
 
 
 def main(argv=None) -> None:
@@ -116,8 +125,9 @@ def main(argv=None) -> None:
     if args.rounds < 1:
         parser.error(f"--rounds: {args.rounds}; allowed: 1 or more")
     backend = start_backend(args.arch)
-    table = rows(args.quick, args.rounds)
-    print(f"\nmachine: {machine(backend)}" + (" (--quick: not figures to quote)" if args.quick else ""))
+    table, load = rows(args.quick, args.rounds)
+    print(f"\nmachine: {machine(backend)}" + ("" if load is None else f"; load average {load:.1f} after the timing")
+          + (" (--quick: not figures to quote)" if args.quick else ""))
     width = max(len(measure) for measure, _ in table)
     print(f"\n| {'measure':{width}s} | value |\n|{'-' * (width + 2)}|---|")
     for measure, value in table:
