@@ -150,7 +150,7 @@ def test_a_falling_block_falls_freely():
 
 
 def test_the_seed_preset_reaches_its_error_target():
-    # Issue 14, goal 1, measured as docs/BENCHMARKS.md does: the mean over the first second (60 frames)
+    # The seed preset, measured as docs/BENCHMARKS.md does: the mean over the first second (60 frames)
     # of stats()["mean_density_error"] after each frame, and the largest max_density_error, at the impact.
     sim = Simulation("dam_break")
     means, maxima, iterations = [], [], set()

@@ -10,7 +10,7 @@ from pbf.study import bench, sweep, validate
 def test_martin_moyce_surge_front_follows_the_experiment():
     # The column collapse at a coarse a/9 spacing (972 particles). Measured: the front runs ahead of
     # the experiment everywhere after T = 1 (frictionless walls, an instant release), by at most
-    # 0.23 a at a/9; the full-resolution figures are in docs/VALIDATION.md.
+    # about a quarter of a; the figures at every spacing are in docs/VALIDATION.md.
     run = validate.martin_moyce(9)
     assert run.Z[0] == pytest.approx(1.0, abs=1e-3)     # the column's edge at x = a
     assert np.all(np.diff(run.Z) > -0.02)               # the front never runs back
