@@ -4,11 +4,14 @@ CPU milliseconds, for the window's renderer and the levers tried on it (docs/BEN
 window"). Needs a display and Vulkan; on a machine without either:
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
-        [--variants window,before,...] [--scene dam_break]
+        [--variants window,before,...] [--scene dam_break] [--warmup 30]
+
+(Debian/Ubuntu: ``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives a virtual display and
+Mesa's software Vulkan, lavapipe.)
 
 Each variant runs in a fresh process (some levers are environment variables read when the Vulkan
 driver or Taichi starts), the variants alternate round by round, and every figure is the median over
-the rounds of a round's median over its frames, after 30 frames of warm-up (JIT, the first impact);
+the rounds of a round's median over its frames, after ``--warmup`` frames (JIT, the first impact);
 ``fps`` is the frames over the wall time they took. The frames are those of ``python run.py``: the
 seed scene from rest at 1280 × 720, the same camera, no input. ``cpu`` is the CPU time of the
 window's process per frame (every thread: Taichi's, the Vulkan driver's), ``X`` that of the X server
@@ -58,6 +61,7 @@ VARIANTS = {
 }
 DEFAULT_VARIANTS = ("window", "before", "paused", "empty-canvas", "sim-in-second-process")
 WARMUP_FRAMES = 30
+"""Frames before the measured ones by default: the kernels compile and the block reaches the floor."""
 PHASES = ("frame", "sim", "sim_own", "draw", "panel", "show")
 
 
@@ -102,8 +106,8 @@ class Clock:
         self.spent[phase] = (w + 1e3 * wall_s, c + 1e3 * cpu_s)
 
 
-def measure(name: str, frames: int, scene: str) -> dict:
-    """One variant in this process: the medians over ``frames`` frames after the warm-up."""
+def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> dict:
+    """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
     from pbf.solver import Simulation, start_backend
@@ -150,8 +154,8 @@ def measure(name: str, frames: int, scene: str) -> dict:
     rows = []
     x_start = cpu_start = None
     viewer.show()
-    for frame in range(WARMUP_FRAMES + frames):
-        if frame == WARMUP_FRAMES:
+    for frame in range(warmup + frames):
+        if frame == warmup:
             if settings.get("gc") == "freeze":
                 gc.collect()
                 gc.freeze()
@@ -163,7 +167,7 @@ def measure(name: str, frames: int, scene: str) -> dict:
             clock.timed("sim", step)()
         viewer.show()
         clock.add("frame", time.perf_counter() - wall, time.process_time() - cpu)
-        if frame >= WARMUP_FRAMES:
+        if frame >= warmup:
             rows.append(dict(clock.spent))
     elapsed = time.perf_counter() - wall_start
     x_end = x_server_cpu_s()
@@ -320,10 +324,15 @@ def main(argv=None) -> None:
     parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
                         help=f"comma-separated, from: {', '.join(VARIANTS)}")
     parser.add_argument("--scene", default="dam_break")
+    parser.add_argument("--warmup", type=int, default=WARMUP_FRAMES,
+                        help=f"frames before the measured ones (default {WARMUP_FRAMES})")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
     args = parser.parse_args(argv)
+    if args.frames < 1 or args.rounds < 1 or args.warmup < 0:
+        parser.error(f"--frames {args.frames}, --rounds {args.rounds}, --warmup {args.warmup}: allowed at least "
+                     f"1, 1 and 0")
     if args.one:
-        print(json.dumps(measure(args.one, args.frames, args.scene)), flush=True)
+        print(json.dumps(measure(args.one, args.frames, args.scene, args.warmup)), flush=True)
         return
     names = [name.strip() for name in args.variants.split(",") if name.strip()]
     unknown = [name for name in names if name not in VARIANTS]
@@ -335,7 +344,7 @@ def main(argv=None) -> None:
             # Environment variables of a variant are set before the process starts: the C library
             # and the Vulkan driver read theirs when they load.
             run = subprocess.run([sys.executable, __file__, "--one", name, "--frames", str(args.frames),
-                                  "--scene", args.scene], capture_output=True, text=True,
+                                  "--scene", args.scene, "--warmup", str(args.warmup)], capture_output=True, text=True,
                                  env={**os.environ, **VARIANTS[name].get("env", {})})
             if run.returncode != 0:
                 raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")

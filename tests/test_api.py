@@ -1,5 +1,5 @@
-"""Class 7 of issue 15: the Python API refuses what it cannot use with SceneError, whatever the way
-in: a dict, overrides, a Scene built by hand, a wrong type."""
+"""The Python API refuses what it cannot use with SceneError, whatever the way in: a dict, overrides,
+a Scene built by hand, a wrong type."""
 import dataclasses
 
 import pytest

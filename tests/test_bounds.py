@@ -1,6 +1,5 @@
-"""Class 2 of issue 15: every number has a lower and an upper bound, derived quantities are checked
-in exact arithmetic before anything is allocated, and what is allowed runs without NaN, inf or
-overflow warnings."""
+"""Every number has a lower and an upper bound, derived quantities are checked in exact arithmetic
+before anything is allocated, and what is allowed runs without NaN, inf or overflow warnings."""
 import copy
 import dataclasses
 import math

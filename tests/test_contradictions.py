@@ -1,4 +1,4 @@
-"""Class 3 of issue 15: settings that cannot hold together are refused with what to change."""
+"""Settings that cannot hold together are refused with what to change."""
 import pytest
 from command_line import refused
 from scenes import small_dam_break

@@ -1,4 +1,4 @@
-"""How the solver converges (issue 14): the iterations' weights, the divergence pre-correction, the error
+"""How the solver converges: the iterations' weights, the divergence pre-correction, the error
 target of the presets, and the rest state a settled pool reaches."""
 import math
 
@@ -151,7 +151,7 @@ def test_a_falling_block_falls_freely():
 
 
 def test_the_seed_preset_reaches_its_error_target():
-    # Issue 14, goal 1, measured as docs/BENCHMARKS.md does: the mean over the first second (60 frames)
+    # The seed preset, measured as docs/BENCHMARKS.md does: the mean over the first second (60 frames)
     # of stats()["mean_density_error"] after each frame, and the largest max_density_error, at the impact.
     sim = Simulation("dam_break")
     means, maxima, iterations = [], [], set()
@@ -208,9 +208,9 @@ def settled_pool(frames):
 def test_a_settled_pool_is_still_and_level():
     sim, surface, fill = settled_pool(240)               # 4 s
     stats = sim.stats()
-    assert stats["mean_density_error"] <= 0.002          # issue 14: ≤ 0.2% compressed in the mean
+    assert stats["mean_density_error"] <= 0.002          # ≤ 0.2% compressed in the mean
     assert stats["max_speed_m_s"] < 0.1
-    assert surface == pytest.approx(fill, rel=0.006)     # −0.43 to −0.50% (issue 14: 0.5%); −0.7% before the ghost
+    assert surface == pytest.approx(fill, rel=0.006)     # measured −0.43 to −0.50%; −0.7% without the ghost
     # The layer against a wall sits with its neighbours: top particles of wall columns and inner ones.
     x = sim.positions()
     spacing = sim.scene.fluid.spacing_m

@@ -58,7 +58,7 @@ def test_a_squeezed_layer_gets_no_ghost():
 
 @pytest.mark.slow
 def test_the_seed_pool_settles_level_and_still():
-    # Issue 14: the seed dam break after 10 s, compressed ≤ 0.2% in the mean and its free surface
+    # The seed dam break after 10 s is compressed ≤ 0.2% in the mean and its free surface lies
     # within 0.5% of the fill height (it sat 1.5% low without the ghost). The pool still rocks: its
     # fastest particle reads 0.02-0.1 m/s from frame to frame (0.05-0.07 without the ghost).
     # The surface is the mean of 11 readings over the last 2 s (8-10 s): one frame's reading swings by

@@ -1,5 +1,5 @@
-"""Class 1 of issue 15: a scene file that cannot be read is one SceneError naming the file and what
-is wrong, never a traceback (PermissionError, UnicodeDecodeError, RecursionError, ValueError)."""
+"""A scene file that cannot be read is one SceneError naming the file and what is wrong, never a
+traceback (PermissionError, UnicodeDecodeError, RecursionError, ValueError)."""
 import tempfile
 from pathlib import Path
 

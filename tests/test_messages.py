@@ -1,5 +1,5 @@
-"""Class 6 of issue 15: one short message, no traceback, no NumPy reprs, values echoed cut short,
-command-line values blamed on the command line, and the closest valid name suggested."""
+"""An error is one short message: no traceback, no NumPy reprs, values echoed cut short, command-line
+values blamed on the command line, and the closest valid name suggested."""
 import numpy as np
 import pytest
 from command_line import assert_one_error, refused, run_cli

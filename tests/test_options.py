@@ -1,5 +1,4 @@
-"""Class 5 of issue 15: no option is silently ignored; each takes effect or is refused, before
-anything starts."""
+"""No option is silently ignored: each takes effect or is refused, before anything starts."""
 import pytest
 from command_line import assert_one_error, refused, run_cli
 

@@ -1,5 +1,5 @@
-"""Class 4 of issue 15: every output path is checked before the simulation starts; a scene's name
-never steers where files go; a rerun never mixes its frames with an earlier run's."""
+"""Every output path is checked before the simulation starts; a scene's name never steers where
+files go; a rerun never mixes its frames with an earlier run's."""
 import os
 from pathlib import Path
 

@@ -116,8 +116,8 @@ def test_thin_sheet_falls_and_spreads():
 def test_ten_thousand_steps_at_rest():
     # Against slow drift and jitter: a tank at rest for 10,000 substeps (about 21 s) must hold its
     # settled level (mean height within 0.1% of H from 1 s to 21 s) and stay still (rms speed under 1%
-    # of sqrt(g H)). The solver's defaults: under Chebyshev weights and an error target (the defaults
-    # until issue 14's last round) this small deep tank sloshed at 0.9-1.1% of sqrt(g H) in the median of
+    # of sqrt(g H)). The solver's defaults: under Chebyshev weights and an error target (1 iteration at
+    # least, no step back) this small deep tank sloshed at 0.9-1.1% of sqrt(g H) in the median of
     # its last 10 s, bursts to 4%; the stable weights with the step back hold it at 0.2% (bursts 0.5%).
     height = 0.2
     tank = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, 0.3, 0.15]}

@@ -10,7 +10,7 @@ from pbf.study import bench, sweep, validate
 def test_martin_moyce_surge_front_follows_the_experiment():
     # The column collapse at a coarse a/9 spacing (972 particles). Measured: the front runs ahead of
     # the experiment everywhere after T = 1 (frictionless walls, an instant release), by at most
-    # 0.23 a at a/9; the full-resolution figures are in docs/VALIDATION.md.
+    # about a quarter of a; the figures at every spacing are in docs/VALIDATION.md.
     run = validate.martin_moyce(9)
     assert run.Z[0] == pytest.approx(1.0, abs=1e-3)     # the column's edge at x = a
     assert np.all(np.diff(run.Z) > -0.02)               # the front never runs back
@@ -89,7 +89,7 @@ def test_wave_maker_theory():
 def test_wave_maker_makes_the_waves_of_linear_theory():
     # The wave_tank preset (13 particles over the depth): two depths from the piston, over the first
     # two waves, the wave height is within 30% of Biésel's. Measured: 0.73 of it here (0.66 with 4
-    # iterations at least, 0.76 with the plain Jacobi iterations before issue 14); the shortfall is the
+    # iterations at least, 0.76 with plain Jacobi iterations); the shortfall is the
     # solver's numerical damping, which shrinks as the resolution rises (docs/VALIDATION.md).
     run = validate.wave_tank(end_s=2.6, gauges_in_depths=(2.0,))
     assert 0.7 < run.heights_m[0] / run.expected_height_m < 1.1

@@ -64,7 +64,7 @@ def back_wall_excess(wall_mirror):
 
 @pytest.mark.slow
 def test_the_layer_at_a_wall_falls_with_its_neighbours():
-    # Issue 14: against the fixed ghost lattice a particle at a wall has half a neighbourhood that
+    # Against the fixed ghost lattice a particle at a wall has half a neighbourhood that
     # moves, so its multiplier grows to twice its neighbours' to hold the same density, and that
     # doubled pressure holds the layer up (+0.54-0.57 spacings above its neighbours here). Its mirror
     # image moves with the water, and the layer falls with it (+0.21-0.22; docs/VALIDATION.md). 20 s.

@@ -1,0 +1,77 @@
+"""The benchmark scripts under benchmarks/ and the headline table run from a clone, at small sizes and
+for a few frames, and print the tables docs/BENCHMARKS.md and the README quote. Their figures are not
+checked here (a few frames mean nothing); what is checked is that each runs to its table."""
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pbf.scene import load_scene
+from pbf.study import headline
+
+BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+
+
+def script(name: str):
+    """benchmarks/NAME.py imported as a module (the folder is not a package)."""
+    spec = importlib.util.spec_from_file_location(f"benchmark_{name}", BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_convergence_variant_is_a_valid_scene():
+    # Without Taichi: a renamed or removed key fails here before anyone runs the whole benchmark.
+    convergence = script("convergence")
+    for name, (label, overrides) in convergence.VARIANTS.items():
+        assert load_scene("dam_break", overrides), (name, label)
+
+
+@pytest.mark.slow
+def test_convergence_runs_two_variants(capsys):
+    script("convergence").main(["--variants", "preset,preset-target0.15", "--frames", "2", "--rounds", "1"])
+    out = capsys.readouterr().out
+    assert "the preset: stable weights" in out and "preset, target 0.15%" in out
+    assert "1.00  1.00" in out  # the first row is the base of the ratios
+
+
+def test_convergence_refuses_an_unknown_variant(capsys):
+    with pytest.raises(SystemExit) as stop:
+        script("convergence").main(["--variants", "preset,nonsense"])
+    assert stop.value.code == 2
+    assert "unknown 'nonsense'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_surface_meshes_and_renders_a_frame(capsys):
+    script("surface").main(["--sizes", "8000", "--frames", "10", "--every", "10", "--rounds", "1"])
+    out = capsys.readouterr().out
+    assert "8,000 particles, 1 frames: mesh" in out
+    assert "surface / spheres" in out
+
+
+@pytest.mark.slow
+def test_headline_prints_its_table(capsys):
+    headline.main(["--quick"])
+    out = capsys.readouterr().out
+    assert "machine: " in out and "on cpu" in out
+    rows = [line for line in out.splitlines() if line.startswith("| ") and "measure" not in line]
+    assert len(rows) == 6
+    assert "8,000 particles" in rows[0] and "s per simulated second" in rows[0]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (apt-get install xvfb)")
+def test_window_benchmark_runs_under_a_virtual_display():
+    run = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1920x1080x24", sys.executable,
+                          str(BENCHMARKS / "window.py"), "--frames", "2", "--warmup", "1", "--rounds", "1",
+                          "--variants", "window"], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    if "no window:" in run.stderr + run.stdout:
+        pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
+    assert run.returncode == 0, run.stderr
+    assert "| window | " in run.stdout
