@@ -37,7 +37,7 @@ import taichi as ti
 from pbf.scene import SceneError, load_scene
 from pbf.solver import Simulation, start_backend
 
-CHEBYSHEV = ("solver.acceleration=chebyshev", "solver.chebyshev_rho=0.92")
+CHEBYSHEV = ("solver.expert.acceleration=chebyshev", "solver.expert.chebyshev_rho=0.92")
 """Chebyshev weights at ρ 0.92 (Wang 2015), as the seed preset ran them before the stable weights."""
 
 H_2_2 = ("solver.kernel_ratio=2.2", "solver.surface_density=false", "solver.target_density_error=0.001",
@@ -45,7 +45,7 @@ H_2_2 = ("solver.kernel_ratio=2.2", "solver.surface_density=false", "solver.targ
 """h = 2.2 s, no free-surface ghost, target 0.1%, at least 1 iteration: the seed preset before the
 ghost, but for its weights."""
 
-BEFORE = H_2_2 + ("solver.acceleration=none", "solver.divergence_iterations=0", "solver.iterations=4",
+BEFORE = H_2_2 + ("solver.expert.acceleration=none", "solver.divergence_iterations=0", "solver.iterations=4",
                   "solver.target_density_error=0", "time.max_cfl=1.2")
 """4 plain Jacobi iterations every substep, CFL 1.2, h = 2.2 s: the seed preset as first filed, run by
 the current code."""
@@ -53,14 +53,14 @@ the current code."""
 VARIANTS = {
     "before": ("before: 4 plain Jacobi iterations, CFL 1.2", BEFORE),
     "before+chebyshev": ("+ Chebyshev ρ 0.92", BEFORE + CHEBYSHEV),
-    "before+stable": ("+ stable weights", BEFORE + ("solver.acceleration=stable",)),
+    "before+stable": ("+ stable weights", BEFORE + ("solver.expert.acceleration=stable",)),
     "chebyshev-h2.2": ("Chebyshev ρ 0.92, ≥ 1 iteration, target 0.1%, h = 2.2 s", H_2_2 + CHEBYSHEV),
     "chebyshev-h2.0": ("that, h = 2.0 s + surface ghost, target 0.09%",
                        CHEBYSHEV + ("solver.min_iterations=1", "solver.target_density_error=0.0009")),
     "preset": ("the preset: stable weights, ≥ 2 iterations, step back, target 0.12%", ()),
     "preset+chebyshev": ("preset, Chebyshev ρ 0.92", CHEBYSHEV),
     "preset-min1": ("preset, ≥ 1 iteration", ("solver.min_iterations=1",)),
-    "preset-no-step-back": ("preset, no step back", ("solver.step_back=false",)),
+    "preset-no-step-back": ("preset, no step back", ("solver.expert.step_back=false",)),
     "preset-target0.09": ("preset, target 0.09%", ("solver.target_density_error=0.0009",)),
     "preset-target0.15": ("preset, target 0.15%", ("solver.target_density_error=0.0015",)),
     "preset-max8": ("preset, ≤ 8 iterations", ("solver.iterations=8",)),
