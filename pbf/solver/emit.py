@@ -35,6 +35,8 @@ class Emitters:
         self.emitters = emitters
         self.spacing = spacing_m
         self.state = state
+        self.capacity = state.capacity
+        """Slots allocated: no append writes past them."""
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
         self.emitted = [0] * len(emitters)
         """Layers each emitter has added so far."""
@@ -49,13 +51,16 @@ class Emitters:
     @ti.kernel
     def _append(self, positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
                 velocities: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
-        first = self.state.active[None]
-        for k in range(positions.shape[0]):
+        # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
+        # caller hands in (restore() also refuses emitted layers that could overflow the budget).
+        first = ti.min(ti.max(self.state.active[None], 0), self.capacity)
+        added = ti.min(positions.shape[0], self.capacity - first)
+        for k in range(added):
             slot = first + k
             self.state.x[slot] = positions[k]
             self.state.v[slot] = velocities[k]
             self.state.reset_new(slot)  # every other field at its initial value, the index in creation order
-        self.state.active[None] = first + positions.shape[0]
+        self.state.active[None] = first + added
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
