@@ -402,17 +402,37 @@ class Model:
         return np.concatenate(positions).astype(np.float32), np.concatenate(velocities).astype(np.float32)
 
 
+def _culprit(scene: Scene) -> tuple[str, str]:
+    """The key that makes a scene's particle count what it is, and what to do about it: the budget
+    when it asks for more than the blocks and emitters need, else the emitter that adds the most when
+    the emitters add more than the blocks hold, else the spacing."""
+    blocks, emitted = scene.particle_count, scene.emitted_count
+    if scene.fluid.max_particles > blocks + emitted:
+        return "fluid.max_particles", (f"lower fluid.max_particles to {blocks + emitted:,} or 0 (exactly the "
+                                       f"blocks' and emitters' particles)")
+    if emitted > blocks:
+        spacing = scene.fluid.spacing_m
+        added = [e.layers(spacing) * e.sites_per_layer(spacing) for e in scene.emitters]
+        k = added.index(max(added))
+        return f"emitters[{k}].end_s", f"emitters[{k}] adds {added[k]:,}: shorten its stream or narrow its nozzle"
+    return "fluid.spacing_m", "use a larger spacing or smaller blocks"
+
+
 def _check_memory(scene: Scene, particles: int, cells: int) -> None:
     """Refuse, before Taichi allocates anything, a scene whose particles and grid would not fit in
     memory, would outgrow the kernels' int32 indices, or whose s_corr would overflow float32. The
-    figures are exact integers (and float64), so no count can wrap before it is compared."""
+    figures are exact integers (and float64), so no count can wrap before it is compared. The message
+    names the key that makes the difference (``_culprit``)."""
     need = particles * BYTES_PER_PARTICLE + cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:
+        if particles * BYTES_PER_PARTICLE >= cells * BYTES_PER_CELL:
+            culprit, remedy = _culprit(scene)
+        else:
+            culprit, remedy = "container.max_m", "use a smaller container or a larger spacing"
         raise SceneError(
-            f"{scene.source}: key 'fluid.spacing_m': {particles:,} particles and {cells:,} grid cells need about "
-            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; "
-            f"use a larger spacing or smaller blocks"
+            f"{scene.source}: key '{culprit}': {particles:,} particles and {cells:,} grid cells need about "
+            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; {remedy}"
         )
     _check_indices(scene, particles, cells)
 
@@ -425,13 +445,13 @@ def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) ->
     """The largest arrays, the neighbour slots (``slots`` per particle: pbf.solver.grid.SLOTS, which
     imports this module) and the cell starts (cells + 1), must be indexable with int32."""
     if particles * slots > INT32_MAX:
+        culprit, remedy = _culprit(scene)
         raise SceneError(
-            f"{scene.source}: key 'fluid.spacing_m': {particles:,} particles × {slots} neighbour slots "
+            f"{scene.source}: key '{culprit}': {particles:,} particles × {slots} neighbour slots "
             f"= {particles * slots:,} entries, more than the {INT32_MAX:,} an int32 index reaches; allowed: at most "
-            f"{INT32_MAX // slots:,} particles: use a larger spacing or smaller blocks")
+            f"{INT32_MAX // slots:,} particles; {remedy}")
     if cells + 1 > INT32_MAX:
         raise SceneError(
             f"{scene.source}: key 'container.max_m': the neighbour grid (cells of h/{NEIGHBOUR_REACH}) over the "
             f"container has {cells:,} cells, more than the {INT32_MAX:,} an int32 index reaches; use a smaller "
             f"container or a larger spacing")
-
