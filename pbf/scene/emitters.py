@@ -63,7 +63,6 @@ def _check_emitters(scene, source: str) -> None:
                                                                        obstacle.max_m)):
                 raise SceneError(f"{where}.position_m': the nozzle touches obstacles[{j}]; move it at least "
                                  f"{_num(margin)} m away")
-    _check_room(scene, source)
     need = scene.particle_count + scene.emitted_count
     if scene.fluid.max_particles and scene.fluid.max_particles < need:
         raise SceneError(f"{source}: key 'fluid.max_particles' = {scene.fluid.max_particles:,} is less than the "
@@ -73,7 +72,7 @@ def _check_emitters(scene, source: str) -> None:
 
 
 
-def _check_room(scene, source: str) -> None:
+def _check_emitter_room(scene, source: str) -> None:
     """What the emitters add must fit, with the blocks, into the container's free volume (outside the
     obstacles) at the rest spacing, one particle per s³: more water than the box holds can only be
     compressed, and the solver then pushes it out at any speed. The first emitter that overflows is

@@ -109,8 +109,8 @@ class Simulation:
         self.state = State(model.capacity)
         self.boundaries = Boundaries(model.boundary)
         """The container, its piston and the obstacles (``pbf.solver.boundary``)."""
-        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state)
         self.grid = NeighbourGrid(model.grid, self.state.active)
+        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
@@ -243,7 +243,8 @@ class Simulation:
 
     def _checked_layers(self, layers, count: int) -> list[int]:
         """Emitted layers: one whole number per emitter of this scene, from 0 to its total, such that
-        the particles still to come fit the budget and those emitted are among the live ones."""
+        the particles still to come fit the budget. (Fewer particles than the layers stand for are
+        fine: layers skipped while the emitters were off or a nozzle drowned add none.)"""
         emitters, spacing = self.scene.emitters, self.scene.fluid.spacing_m
         if not isinstance(layers, (tuple, list, np.ndarray)):
             raise TypeError(f"restore: expected emitted_layers as a tuple of whole numbers, one per emitter, got "
@@ -261,15 +262,11 @@ class Simulation:
                                  f"{emitter.layers(spacing):,} layers emitters[{k}] adds in all")
         layers = [int(done) for done in layers]
         sites = [e.sites_per_layer(spacing) for e in emitters]
-        emitted = sum(done * n for done, n in zip(layers, sites))
         to_come = sum((e.layers(spacing) - done) * n for e, done, n in zip(emitters, layers, sites))
         if count + to_come > self.model.capacity:
             raise ValueError(f"restore: {count:,} particles and the {to_come:,} the emitters have still to add "
                              f"(emitted_layers = {tuple(layers)}) exceed the {self.model.capacity:,} this scene "
                              f"allocates")
-        if emitted > count:
-            raise ValueError(f"restore: emitted_layers = {tuple(layers)} stand for {emitted:,} emitted particles, "
-                             f"more than the {count:,} in the snapshot")
         return layers
 
     def _after_restore(self) -> None:
