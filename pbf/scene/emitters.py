@@ -88,7 +88,7 @@ def _check_emitter_room(scene, source: str) -> None:
         added = emitter.layers(spacing) * sites
         if used + added > room:
             fits = (room - used) // sites  # whole layers that still fit
-            allowed = (f"end_s ≤ {_num(emitter.start_s + (fits - 1) * spacing / emitter.speed_m_s)} s" if fits >= 1
+            allowed = (f"end_s < {_num(emitter.start_s + fits * spacing / emitter.speed_m_s)} s" if fits >= 1
                        else "no emitter here (the water before it fills the container)")
             raise SceneError(f"{source}: key 'emitters[{i}].end_s' = {_num(emitter.end_s)} s adds {added:,} particles "
                              f"({_num(added * spacing**3)} m³ of water) to the {used:,} already counted, more than the "

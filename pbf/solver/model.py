@@ -294,7 +294,7 @@ def _gravity(control, value) -> Vec3:
 
 def _push(control, value) -> Push | None:
     if value is not None and not isinstance(value, Push):
-        raise TypeError(f"control.push: expected a pbf.solver.model.Push or None, got {_given(value)}")
+        raise TypeError(f"control.push: expected a pbf.solver.Push or None, got {_given(value)}")
     return value
 
 

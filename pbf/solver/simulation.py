@@ -207,7 +207,8 @@ class Simulation:
         if count > self.model.capacity:
             raise ValueError(f"restore: {count:,} particles, more than the {self.model.capacity:,} this "
                              f"scene allocates (its blocks and emitters)")
-        for name, values in (("positions_m", positions), ("velocities_m_s", velocities), *fields.items()):
+        for name, values in (("positions_m", positions), ("velocities_m_s", velocities),
+                             *((f"fields[{name!r}]", values) for name, values in fields.items())):
             bad = ~np.isfinite(values)
             if bad.any():
                 row = int(np.argwhere(bad)[0][0])
