@@ -53,7 +53,8 @@ def test_the_command_line_names_the_solvers_backends():
 
 
 def test_view_options_reach_the_scene(here):
-    args = cli.parse_args(["dam_break", "--headless", "--size", "64x48", "--camera", "1,2,3", "--look-at", "0,0.1,0",
+    # No --headless: the window starts in the surface style, and key v shows the particles' colours.
+    args = cli.parse_args(["dam_break", "--size", "64x48", "--camera", "1,2,3", "--look-at", "0,0.1,0",
                            "--fov", "35", "--colour-by", "density", "--colour-map", "viridis", "--style", "surface",
                            "--set", "render.height_px=32"])
     scene = cli.load(args)

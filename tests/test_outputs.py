@@ -1,5 +1,5 @@
 """Every output path is checked before the simulation starts; a scene's name never steers where
-files go; a rerun never mixes its frames with an earlier run's."""
+files go; a rerun never mixes its frames with an earlier run's, and deletes nothing unless asked."""
 import os
 from pathlib import Path
 
@@ -61,7 +61,7 @@ def test_the_default_folder_is_the_scene_files_name_inside_out():
     assert outputs.default_folder("/a/.hidden.toml") == Path("out/hidden")
 
 
-def test_a_rerun_replaces_the_earlier_runs_files_and_the_name_steers_nothing(tmp_path, monkeypatch, capsys):
+def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     scene = (Path(cli.schema.SCENES_DIR) / "dam_break.toml").read_text().replace('name = "dam_break"',
                                                                                  'name = "../../escape"')
@@ -72,7 +72,12 @@ def test_a_rerun_replaces_the_earlier_runs_files_and_the_name_steers_nothing(tmp
         (earlier / outputs.frame_name(k)).write_bytes(b"old")
     (earlier / outputs.particles_name(3, "ply")).write_bytes(b"old")
     (earlier / "notes.txt").write_text("mine")
-    assert cli.main(["evil.toml", "--headless", "--frames", "1", *COARSE]) == 0
+    before = files_under(tmp_path)
+    # Without --overwrite nothing is deleted: one line naming the folder and the option.
+    refused(capsys, ["evil.toml", "--headless", "--frames", "1", *COARSE],
+            "'out/evil': holds 7 files of an earlier run (frame_00000.png …); add --overwrite", cwd=tmp_path)
+    assert files_under(tmp_path) == before
+    assert cli.main(["evil.toml", "--headless", "--frames", "1", "--overwrite", *COARSE]) == 0
     assert "removed 7 files of an earlier run from out/evil/" in capsys.readouterr().out
     assert sorted(p.name for p in earlier.iterdir()) == ["frame_00000.png", "frame_00001.png", "notes.txt"]
     assert (earlier / "frame_00000.png").read_bytes() != b"old"

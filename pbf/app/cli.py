@@ -70,7 +70,8 @@ def frame_count(text: str) -> int:
 
 def build_parser() -> Parser:
     # No prog: argparse names the program as it was called, run.py or the installed pbf command.
-    parser = Parser(description="Position Based Fluids in Taichi: a window, headless frames and video, "
+    # allow_abbrev=False: argparse would read a mistyped --frame as --frames, or --over as --overwrite.
+    parser = Parser(allow_abbrev=False, description="Position Based Fluids in Taichi: a window, headless frames and video, "
                                 "particle and surface files.",
                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG)
     parser.add_argument("scene", nargs="?", default=None, help="preset name or path to a TOML file (default dam_break)")
@@ -90,7 +91,11 @@ def build_parser() -> Parser:
                              f"runs until closed)")
     output.add_argument("--out", default=None,
                         help="folder for PNG frames (default out/ + the scene file's name; also where the window "
-                             "writes when none can open); frames of an earlier run there are replaced")
+                             "writes when none can open); a folder holding an earlier run's files is refused "
+                             "unless --overwrite")
+    output.add_argument("--overwrite", action="store_true",
+                        help="replace an earlier run's files in --out (only frame_*.png, particles_*.ply/.npz and "
+                             "surface_*.ply/.obj are removed) and an existing --video file")
     output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
     output.add_argument("--export", choices=export.EXPORTS, action="append", default=None,
                         help="also write per frame the particles (ply, npz: positions and velocities) or the "
@@ -150,6 +155,13 @@ def checked_args(argv=None):
     for dest in (*FILE_OPTIONS, *VIEW_OPTIONS, "out"):
         if args.stats_only and getattr(args, dest) is not None:
             raise UsageError(f"{_option(dest)}: --stats-only renders and writes nothing; drop one of the two")
+    if args.stats_only and args.overwrite:
+        raise UsageError("--overwrite: --stats-only writes nothing to replace; drop one of the two")
+    if args.headless and args.style == "surface":
+        for dest in ("colour_by", "colour_map"):
+            if getattr(args, dest) is not None:
+                raise UsageError(f"{_option(dest)}: --style surface draws the water's surface, without particle "
+                                 f"colours; drop one of the two")
     for dest in FILE_OPTIONS:
         if not (args.headless or args.stats_only) and getattr(args, dest) is not None:
             raise UsageError(f"{_option(dest)} writes files, which the window does not; add --headless")
@@ -227,24 +239,40 @@ def list_presets() -> None:
         print(f"{path.stem:18s} {count:>16} particles  {scene.description}")
 
 
+def check_view(scene, args) -> None:
+    """Colour options that the scene's own render.style = "surface" would ignore in headless frames."""
+    if args.headless and scene.render.style == "surface" and args.style is None:
+        for dest in ("colour_by", "colour_map"):
+            if getattr(args, dest) is not None:
+                raise UsageError(f"{_option(dest)}: the scene's render.style = \"surface\" draws the water's "
+                                 f"surface, without particle colours; drop it, or add --style particles")
+
+
 def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
     """The frame folder and video the run may write, both checked (OutputError) before it starts;
-    (None, None) for --stats-only, which writes nothing."""
+    (None, None) for --stats-only, which writes nothing. An earlier run's files in the folder are
+    refused unless --overwrite; a window run (which writes only if no window opens) checks the
+    folder again before that."""
+    check_view(scene, args)
     if args.stats_only:
         return None, None
+    overwrite = args.overwrite or not args.headless
     if args.out is not None:
-        out = outputs.check_folder(args.out, "--out")
+        out = outputs.check_folder(args.out, "--out", overwrite)
     else:
         default = outputs.default_folder(scene.source)
-        out = outputs.check_folder(str(default), "the default output folder (--out)")
-    video = outputs.check_video(args.video, "--video") if args.video is not None else None
+        out = outputs.check_folder(str(default), "the default output folder (--out)", overwrite)
+    video = outputs.check_video(args.video, "--video", args.overwrite) if args.video is not None else None
     return out, video
 
 
 def frame_writer(sim, args, frames, out, video):
-    """The headless viewer, after removing the files an earlier run left in ``out``."""
+    """The headless viewer, after removing the files an earlier run left in ``out`` (only with --overwrite:
+    otherwise such a folder is refused)."""
     from pbf.app.headless import FrameWriter
 
+    label = "--out" if args.out is not None else "the default output folder (--out)"
+    outputs.check_folder(str(out), label, args.overwrite)  # again: a window run that fell back to frames
     removed = outputs.clear_earlier(out)
     if removed:
         print(f"[pbf] removed {len(removed)} files of an earlier run from {out}/ ({removed[0].name} …)")
@@ -302,7 +330,7 @@ def main(argv=None) -> int:
         out, video = plan_outputs(scene, args)
     except SystemExit as done:  # --help, or a mistake parse_args reported
         return done.code
-    except (schema.SceneError, outputs.OutputError) as error:
+    except (schema.SceneError, outputs.OutputError, UsageError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     from pbf.app import loop
@@ -320,10 +348,14 @@ def main(argv=None) -> int:
     more = (f" (up to {sim.model.capacity:,} with its emitters)" if sim.model.capacity > sim.particle_count else "")
     print(f"[pbf] {scene.name}: {sim.particle_count:,} particles{more}, Δt = {sim.dt_s * 1e3:.2f} ms, "
           f"{sim.control.iterations} iterations")
+    try:
+        viewer, frames = choose_viewer(sim, args, out, video)
+    except outputs.OutputError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     print("[pbf] preparing the solver's kernels (compiled on a first run, loaded from Taichi's cache after) ...",
           end=" ", flush=True)
     print(f"ready in {loop.warm_up(sim):.1f} s")
-    viewer, frames = choose_viewer(sim, args, out, video)
     loop.run(sim, viewer, frames)
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)

@@ -4,15 +4,20 @@ A run writes ``frame_NNNNN.png`` and, when asked, ``particles_NNNNN.ply`` or ``.
 ``surface_NNNNN.ply`` or ``.obj`` into one folder, and a video where ``--video`` says. Every path is
 checked before the simulation starts, so a bad one fails with one message and leaves nothing half
 written: an empty path, the filesystem root, a file where a folder is needed (or a folder where a
-file is), a parent that is a file, a place that cannot be written. Files an earlier run left in
-the folder under these names are removed before the first frame, so that old and new frames never
-mix; nothing else in the folder is touched. Pure standard library: the command line checks its
+file is), a parent that is a file, a place that cannot be written (tried by creating and removing
+a probe file there: permissions alone do not tell, /proc and read-only mounts refuse anyway).
+
+Nothing of the user's is deleted unasked: a folder holding files under these names (an earlier
+run's) and an existing video are refused, unless ``overwrite`` is given (the command line's
+``--overwrite``); then only files under these names are removed, so that old and new frames never
+mix, and nothing else in the folder is touched. Pure standard library: the command line checks its
 outputs without starting Taichi.
 """
 from __future__ import annotations
 
 import os
 import re
+import tempfile
 from pathlib import Path
 
 MAX_FRAMES = 99_999
@@ -50,6 +55,17 @@ def _shown(text: str) -> str:
     return repr(text if len(text) <= 80 else text[:79] + "…")
 
 
+def _probe(folder: Path, label: str) -> None:
+    """Create and remove a file in the existing ``folder``: the only test that a write will succeed
+    (os.access says yes to root everywhere, and /proc or a read-only mount refuse anyway)."""
+    try:
+        handle, name = tempfile.mkstemp(prefix=".pbf-probe-", dir=folder)
+    except OSError as error:
+        raise OutputError(f"{label}: cannot write in {folder} ({error.strerror or error})") from None
+    os.close(handle)
+    os.unlink(name)
+
+
 def _writable_place(path: Path, label: str) -> None:
     """The nearest existing folder on the way to ``path`` must be a folder we may write in."""
     ancestor = path.absolute().parent
@@ -59,10 +75,15 @@ def _writable_place(path: Path, label: str) -> None:
         raise OutputError(f"{label}: {ancestor} is a file, not a folder; choose another path")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise OutputError(f"{label}: cannot create it, no permission to write in {ancestor}")
+    _probe(ancestor, label)
 
 
-def check_folder(text: str, label: str) -> Path:
-    """The folder ``text`` names, ready to hold a run's files, or OutputError; writes nothing."""
+OVERWRITE_HINT = "add --overwrite to replace them (only the frame, particle and surface files of a run are removed)"
+
+
+def check_folder(text: str, label: str, overwrite: bool = False) -> Path:
+    """The folder ``text`` names, ready to hold a run's files, or OutputError; writes nothing that
+    stays. A folder that holds an earlier run's files is refused unless ``overwrite``."""
     if not text or not text.isprintable():
         raise OutputError(f"{label} {_shown(text)}: expected the path of a folder for the frames")
     path = Path(text)
@@ -74,10 +95,15 @@ def check_folder(text: str, label: str) -> Path:
                 raise OutputError(f"{label} {_shown(text)}: is a file; expected a folder for the frames")
             if not os.access(path, os.W_OK | os.X_OK):
                 raise OutputError(f"{label} {_shown(text)}: cannot write into it (no permission)")
-            blocking = next((p for p in earlier_files(path) if p.is_dir() and not p.is_symlink()), None)
+            earlier = earlier_files(path)
+            blocking = next((p for p in earlier if p.is_dir() and not p.is_symlink()), None)
             if blocking is not None:
                 raise OutputError(f"{label} {_shown(text)}: {blocking.name} is a folder where a frame file goes; "
                                   f"move it or choose another folder")
+            if earlier and not overwrite:
+                raise OutputError(f"{label} {_shown(text)}: holds {len(earlier)} files of an earlier run "
+                                  f"({earlier[0].name} …); {OVERWRITE_HINT}, or choose another folder")
+            _probe(path, f"{label} {_shown(text)}")
         else:
             _writable_place(path, f"{label} {_shown(text)}")
     except OSError as error:
@@ -85,8 +111,9 @@ def check_folder(text: str, label: str) -> Path:
     return path
 
 
-def check_video(text: str, label: str) -> Path:
-    """The video file ``text`` names, ready to be written (an existing one is replaced), or OutputError."""
+def check_video(text: str, label: str, overwrite: bool = False) -> Path:
+    """The video file ``text`` names, ready to be written, or OutputError; an existing one is refused
+    unless ``overwrite`` (then it is replaced)."""
     if not text or not text.isprintable():
         raise OutputError(f"{label} {_shown(text)}: expected the path of a video file, e.g. out/scene.mp4")
     path = Path(text)
@@ -98,8 +125,12 @@ def check_video(text: str, label: str) -> Path:
         if path.exists():
             if not path.is_file():
                 raise OutputError(f"{label} {_shown(text)}: is not a regular file; expected a video file")
+            if not overwrite:
+                raise OutputError(f"{label} {_shown(text)}: exists; add --overwrite to replace it, or choose "
+                                  f"another name")
             if not os.access(path, os.W_OK):
                 raise OutputError(f"{label} {_shown(text)}: cannot replace it (no permission)")
+            _probe(path.parent, f"{label} {_shown(text)}")
         else:
             _writable_place(path, f"{label} {_shown(text)}")
     except OSError as error:
@@ -116,7 +147,8 @@ def earlier_files(folder: Path) -> list[Path]:
 
 def clear_earlier(folder: Path) -> list[Path]:
     """Remove an earlier run's files from ``folder`` (links themselves, never what they point to),
-    so that its frames cannot mix with the new ones; returns what was removed."""
+    so that its frames cannot mix with the new ones; returns what was removed. Only for --overwrite
+    (``check_folder`` refuses such a folder otherwise)."""
     removed = earlier_files(folder)
     for path in removed:
         path.unlink()

@@ -70,3 +70,28 @@ def _check_emitters(scene, source: str) -> None:
                          f"emitters add (rate × duration); allowed: ≥ {need:,}, or 0 for exactly that")
 
 
+
+
+def _check_emitter_room(scene, source: str) -> None:
+    """What the emitters add must fit, with the blocks, into the container's free volume (outside the
+    obstacles) at the rest spacing, one particle per s³: more water than the box holds can only be
+    compressed, and the solver then pushes it out at any speed. The first emitter that overflows is
+    named, with the end_s that would fit."""
+    spacing = scene.fluid.spacing_m
+    extent = [hi - lo for lo, hi in zip(scene.container.min_m, scene.container.max_m)]
+    free_m3 = math.prod(extent) - sum(math.prod(hi - lo for lo, hi in zip(o.min_m, o.max_m))
+                                      for o in scene.obstacles)
+    room = math.floor(free_m3 / spacing**3 * (1 + 1e-9))  # particles the free volume holds at rest
+    used = scene.particle_count
+    for i, emitter in enumerate(scene.emitters):
+        sites = emitter.sites_per_layer(spacing)
+        added = emitter.layers(spacing) * sites
+        if used + added > room:
+            fits = (room - used) // sites  # whole layers that still fit
+            allowed = (f"end_s < {_num(emitter.start_s + fits * spacing / emitter.speed_m_s)} s" if fits >= 1
+                       else "no emitter here (the water before it fills the container)")
+            raise SceneError(f"{source}: key 'emitters[{i}].end_s' = {_num(emitter.end_s)} s adds {added:,} particles "
+                             f"({_num(added * spacing**3)} m³ of water) to the {used:,} already counted, more than the "
+                             f"{room:,} ({_num(free_m3)} m³) the container holds outside the obstacles at "
+                             f"fluid.spacing_m = {_num(spacing)}; allowed: {allowed}")
+        used += added

@@ -212,7 +212,14 @@ def attribute(error: SceneError, labels: dict[str, str]) -> SceneError:
     label = next((label for dotted, label in labels.items()
                   if key is not None and re.match(re.escape(dotted) + r"($|[.\[])", key)), None)
     if label is None:
-        return error
+        # A check of what two keys must agree on names one of them; when the other came from the
+        # command line (--set obstacles=… against the file's time.max_cfl), say so, and keep the file's.
+        message = str(error)
+        mentioned = next((label for dotted, label in labels.items()
+                          if re.search(r"(?<![\w.])" + re.escape(dotted) + r"(?![\w])", message)), None)
+        if mentioned is None or message.startswith(mentioned):
+            return error
+        return SceneError(f"{mentioned}: does not agree with {message}", key)
     message = str(error)
     start = message.find(f"key '{_clip(key)}'")
     start -= len("unknown ") if message[:start].endswith("unknown ") else 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pbf.scene.emitters import Emitter, _check_emitters
+from pbf.scene.emitters import Emitter, _check_emitter_room, _check_emitters
 from pbf.scene.fluid import Fluid
 from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_container, _check_obstacles, block_counts
 from pbf.scene.schema import SceneError, Vec3, _at_most_tables, _line, _show, _table_values, key
@@ -97,6 +97,7 @@ def _check_scene(scene: Scene) -> None:
     _check_wave_maker(scene, source)
     _check_emitters(scene, source)
     _check_time(scene, source)
+    _check_emitter_room(scene, source)  # after the speeds: a stream too fast to follow is the first thing to say
     _check_solver(scene, source)
     _check_settle(scene, source)
     _check_camera(scene, source)

@@ -13,13 +13,18 @@ stores the object; its kernels read the fields as compile-time constants.
 """
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import math
+import numbers
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from pbf.scene import MAX_ITERATIONS, Scene, SceneError, block_counts
+from pbf.scene import (FLOAT32_SAFE, MAX_ITERATIONS, Expert, Scene, SceneError, Solver, Time, Viscosity, Vorticity,
+                       block_counts)
+from pbf.scene.schema import _num, _show
 from pbf.solver import acceleration, sph
 
 Vec3 = tuple[float, float, float]
@@ -146,6 +151,15 @@ class Push:
     velocity_m_s: Vec3
     radius_m: float
 
+    def __post_init__(self):
+        # Checked here, so that control.push never carries a NaN or an overflow into a kernel.
+        for name in ("point_m", "velocity_m_s"):
+            object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name),
+                                                           FLOAT32_SAFE))
+        object.__setattr__(self, "radius_m", _checked_number(f"control.push.radius_m", self.radius_m, float,
+                                                             (0.0, FLOAT32_SAFE), "radius of the hand, m",
+                                                             above_lowest=True))
+
 
 @dataclass
 class Control:
@@ -176,12 +190,138 @@ class Control:
     wave_maker_on: bool = True
     """Whether the piston moves; while off it stands still, and it resumes from where it stopped."""
 
+    def __setattr__(self, name: str, value) -> None:
+        """Every assignment checked, in __init__ too: the type, finiteness and the bounds of the field's
+        scene key (CONTROL_KEYS), or a TypeError/ValueError naming control.<field>, what is allowed and
+        what was given; a name that is no field is refused rather than silently added."""
+        if name not in CONTROL_CHECKS:
+            closest = difflib.get_close_matches(name, list(CONTROL_CHECKS), n=1)
+            hint = f"did you mean control.{closest[0]}? " if closest else ""
+            raise AttributeError(f"control.{name}: no such setting; {hint}settings: {', '.join(CONTROL_CHECKS)}")
+        object.__setattr__(self, name, CONTROL_CHECKS[name](self, value))
+
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:
         s = scene.solver
-        return cls(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps, s.target_density_error,
-                   s.expert.step_back, s.divergence_iterations, scene.viscosity.xsph, scene.vorticity.epsilon,
-                   scene.gravity_m_s2)
+        control = cls.__new__(cls)
+        # The largest |g| the scene's frames can follow (pbf.scene.timestep._check_time), before any field.
+        object.__setattr__(control, "_most_gravity_m_s2", scene.fastest_followed_m_s / scene.time.frame_dt_s)
+        control.__init__(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps,
+                         s.target_density_error, s.expert.step_back, s.divergence_iterations, scene.viscosity.xsph,
+                         scene.vorticity.epsilon, scene.gravity_m_s2)
+        return control
+
+
+def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]:
+    """The bounds and doc of a scene key, read from its declaration (``pbf.scene.schema.key``)."""
+    declared = {f.name: f for f in dataclasses.fields(table)}[name]
+    return declared.metadata["check"].bounds, f"the bounds of {dotted}"
+
+
+def _given(value) -> str:
+    """What an assignment gave, for a message: the value as the schema echoes it, and its type."""
+    return f"{_show(value)} ({type(value).__name__})"
+
+
+def _checked_number(label: str, value, kind: type, bounds: tuple[float, float], meaning: str,
+                    above_lowest: bool = False):
+    """``value`` as an int or a finite float within ``bounds`` (above the lowest, if asked), or a
+    TypeError (wrong type: a bool, a string, a float for an integer) or ValueError naming ``label``."""
+    lowest, highest = bounds
+    interval = f"{'(' if above_lowest else '['}{_num(lowest)}, {_num(highest)}]"
+    allowed = f"{'an integer' if kind is int else 'a finite number'} in {interval} ({meaning})"
+    is_bool = isinstance(value, (bool, np.bool_))
+    if kind is int:
+        if is_bool or not isinstance(value, numbers.Integral):
+            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
+        converted = int(value)
+    else:
+        if is_bool or not isinstance(value, numbers.Real):
+            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
+        try:
+            converted = float(value)
+        except OverflowError:
+            converted = math.inf
+    inside = math.isfinite(converted) and lowest <= converted <= highest and not (above_lowest and converted == lowest)
+    if not inside:
+        raise ValueError(f"{label}: expected {allowed}, got {_show(value)}")
+    return converted
+
+
+def _checked_vector(label: str, value, largest: float, meaning: str = "m or m/s") -> Vec3:
+    """Three finite numbers each within ±``largest``, as a tuple of floats, or TypeError/ValueError."""
+    allowed = f"three finite numbers [x, y, z] within ±{_num(largest)} ({meaning})"
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 3 \
+            or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value):
+        raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
+    try:
+        converted = tuple(float(c) for c in value)
+    except OverflowError:
+        converted = (math.inf,)
+    if not all(math.isfinite(c) and abs(c) <= largest for c in converted):
+        raise ValueError(f"{label}: expected {allowed}, got {_show(value)}")
+    return converted
+
+
+def _checked_bool(label: str, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{label}: expected True or False, got {_given(value)}")
+    return bool(value)
+
+
+def _setting(kind: type, table, name: str, dotted: str):
+    """The check of a Control field that mirrors scene key ``dotted`` (``table``'s field ``name``)."""
+    field_name = next(k for k, v in CONTROL_KEYS.items() if v == dotted)
+    label = f"control.{field_name}"
+    if kind is bool:
+        return lambda control, value: _checked_bool(label, value)
+    bounds, meaning = _scene_key(table, name, dotted)
+    return lambda control, value: _checked_number(label, value, kind, bounds, meaning)
+
+
+def _gravity(control, value) -> Vec3:
+    """Finite, and no stronger than the scene's frames can follow (pbf.scene.timestep._check_time)."""
+    most = getattr(control, "_most_gravity_m_s2", FLOAT32_SAFE)
+    vector = _checked_vector("control.gravity_m_s2", value, FLOAT32_SAFE, "m/s²")
+    largest = max(abs(c) for c in vector)
+    length = 0.0 if largest == 0.0 else largest * math.sqrt(sum((c / largest) ** 2 for c in vector))
+    if length > most:
+        raise ValueError(f"control.gravity_m_s2: expected |g| ≤ {_num(most)} m/s², what the scene's frames can "
+                         f"follow (time.max_substeps × time.max_cfl × fluid.spacing_m / time.frame_dt_s²), got "
+                         f"|g| = {_num(length)} m/s²")
+    return vector
+
+
+def _push(control, value) -> Push | None:
+    if value is not None and not isinstance(value, Push):
+        raise TypeError(f"control.push: expected a pbf.solver.Push or None, got {_given(value)}")
+    return value
+
+
+CONTROL_KEYS = {
+    "iterations": "solver.iterations", "min_iterations": "solver.min_iterations", "substeps": "time.substeps",
+    "target_density_error": "solver.target_density_error", "step_back": "solver.expert.step_back",
+    "divergence_iterations": "solver.divergence_iterations", "xsph": "viscosity.xsph",
+    "vorticity": "vorticity.epsilon", "gravity_m_s2": "gravity_m_s2",
+}
+"""The scene key each Control field starts from, and whose bounds it keeps."""
+CONTROL_CHECKS = {
+    "iterations": _setting(int, Solver, "iterations", "solver.iterations"),
+    "min_iterations": _setting(int, Solver, "min_iterations", "solver.min_iterations"),
+    "substeps": _setting(int, Time, "substeps", "time.substeps"),
+    "target_density_error": _setting(float, Solver, "target_density_error", "solver.target_density_error"),
+    "step_back": _setting(bool, Expert, "step_back", "solver.expert.step_back"),
+    "divergence_iterations": _setting(int, Solver, "divergence_iterations", "solver.divergence_iterations"),
+    "xsph": _setting(float, Viscosity, "xsph", "viscosity.xsph"),
+    "vorticity": _setting(float, Vorticity, "epsilon", "vorticity.epsilon"),
+    "gravity_m_s2": _gravity,
+    "push": _push,
+    "emitters_on": lambda control, value: _checked_bool("control.emitters_on", value),
+    "wave_maker_on": lambda control, value: _checked_bool("control.wave_maker_on", value),
+}
+"""How each Control field is checked on assignment."""
+
+
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
@@ -262,17 +402,37 @@ class Model:
         return np.concatenate(positions).astype(np.float32), np.concatenate(velocities).astype(np.float32)
 
 
+def _culprit(scene: Scene) -> tuple[str, str]:
+    """The key that makes a scene's particle count what it is, and what to do about it: the budget
+    when it asks for more than the blocks and emitters need, else the emitter that adds the most when
+    the emitters add more than the blocks hold, else the spacing."""
+    blocks, emitted = scene.particle_count, scene.emitted_count
+    if scene.fluid.max_particles > blocks + emitted:
+        return "fluid.max_particles", (f"lower fluid.max_particles to {blocks + emitted:,} or 0 (exactly the "
+                                       f"blocks' and emitters' particles)")
+    if emitted > blocks:
+        spacing = scene.fluid.spacing_m
+        added = [e.layers(spacing) * e.sites_per_layer(spacing) for e in scene.emitters]
+        k = added.index(max(added))
+        return f"emitters[{k}].end_s", f"emitters[{k}] adds {added[k]:,}: shorten its stream or narrow its nozzle"
+    return "fluid.spacing_m", "use a larger spacing or smaller blocks"
+
+
 def _check_memory(scene: Scene, particles: int, cells: int) -> None:
     """Refuse, before Taichi allocates anything, a scene whose particles and grid would not fit in
     memory, would outgrow the kernels' int32 indices, or whose s_corr would overflow float32. The
-    figures are exact integers (and float64), so no count can wrap before it is compared."""
+    figures are exact integers (and float64), so no count can wrap before it is compared. The message
+    names the key that makes the difference (``_culprit``)."""
     need = particles * BYTES_PER_PARTICLE + cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:
+        if particles * BYTES_PER_PARTICLE >= cells * BYTES_PER_CELL:
+            culprit, remedy = _culprit(scene)
+        else:
+            culprit, remedy = "container.max_m", "use a smaller container or a larger spacing"
         raise SceneError(
-            f"{scene.source}: key 'fluid.spacing_m': {particles:,} particles and {cells:,} grid cells need about "
-            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; "
-            f"use a larger spacing or smaller blocks"
+            f"{scene.source}: key '{culprit}': {particles:,} particles and {cells:,} grid cells need about "
+            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; {remedy}"
         )
     _check_indices(scene, particles, cells)
 
@@ -285,13 +445,13 @@ def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) ->
     """The largest arrays, the neighbour slots (``slots`` per particle: pbf.solver.grid.SLOTS, which
     imports this module) and the cell starts (cells + 1), must be indexable with int32."""
     if particles * slots > INT32_MAX:
+        culprit, remedy = _culprit(scene)
         raise SceneError(
-            f"{scene.source}: key 'fluid.spacing_m': {particles:,} particles × {slots} neighbour slots "
+            f"{scene.source}: key '{culprit}': {particles:,} particles × {slots} neighbour slots "
             f"= {particles * slots:,} entries, more than the {INT32_MAX:,} an int32 index reaches; allowed: at most "
-            f"{INT32_MAX // slots:,} particles: use a larger spacing or smaller blocks")
+            f"{INT32_MAX // slots:,} particles; {remedy}")
     if cells + 1 > INT32_MAX:
         raise SceneError(
             f"{scene.source}: key 'container.max_m': the neighbour grid (cells of h/{NEIGHBOUR_REACH}) over the "
             f"container has {cells:,} cells, more than the {INT32_MAX:,} an int32 index reaches; use a smaller "
             f"container or a larger spacing")
-

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import numbers
 import os
 import warnings
 from dataclasses import dataclass, replace
@@ -11,6 +12,7 @@ from typing import ContextManager, Protocol
 import numpy as np
 
 from pbf import scene as schema
+from pbf.scene.schema import _show
 from pbf.solver.backend import start_backend
 from pbf.solver.boundary import Boundaries
 from pbf.solver.acceleration import Weights
@@ -63,6 +65,29 @@ class Readout:
     """(n,) vector(3, f32) field, m/s."""
 
 
+def _particle_array(name: str, values) -> np.ndarray:
+    """A snapshot's per-particle array as float32 (NumPy's rounding, as snapshot() itself stores them),
+    or a TypeError for what holds no real numbers."""
+    try:
+        array = np.asarray(values)
+    except (ValueError, TypeError) as error:  # ragged lists
+        raise TypeError(f"restore: {name}: expected an array of numbers, got {type(values).__name__} ({error})") \
+            from None
+    if array.dtype.kind not in "fiu" or array.dtype == np.float16:
+        raise TypeError(f"restore: {name}: expected an array of real numbers, got dtype {array.dtype}")
+    with np.errstate(over="ignore"):  # beyond float32: inf, refused as not finite
+        return array.astype(np.float32, copy=False)
+
+
+def _clock(name: str, value) -> float:
+    """A snapshot's time: a finite number of seconds ≥ 0."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"restore: expected {name} as a number of seconds, got {_show(value)}")
+    if not (math.isfinite(float(value)) and value >= 0.0):
+        raise ValueError(f"restore: expected {name} as a finite number of seconds ≥ 0, got {float(value)!r}")
+    return float(value)
+
+
 class Simulation:
     """Position Based Fluids in a container, around obstacles.
 
@@ -84,8 +109,8 @@ class Simulation:
         self.state = State(model.capacity)
         self.boundaries = Boundaries(model.boundary)
         """The container, its piston and the obstacles (``pbf.solver.boundary``)."""
-        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state)
         self.grid = NeighbourGrid(model.grid, self.state.active)
+        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
@@ -140,29 +165,114 @@ class Simulation:
                         self.piston_time_s, self.state.kept_fields())
 
     def restore(self, snapshot: Snapshot) -> None:
-        """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
-        positions, velocities = np.asarray(snapshot.positions_m), np.asarray(snapshot.velocities_m_s)
+        """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it.
+
+        Anything else is refused before the state changes: a TypeError for what is not a Snapshot or
+        holds no numbers, a ValueError naming the part (shapes, a non-finite value, a particle outside
+        the container, a speed the scene's frames cannot follow, emitted layers that are not this
+        scene's emitters' or would overflow its particle budget, a negative time)."""
+        positions, velocities, fields, emitted = self._checked_snapshot(snapshot)
+        self.state.load({**fields, "x": positions, "v": velocities})
+        self.emitters.emitted = emitted
+        self.time_s = float(snapshot.time_s)
+        self.frame = int(snapshot.frame)
+        # The wave maker's own clock: it stops while control.wave_maker_on is off.
+        self.piston_time_s = self.time_s if snapshot.piston_time_s is None else float(snapshot.piston_time_s)
+        self._after_restore()
+
+    def _checked_snapshot(self, snapshot) -> tuple[np.ndarray, np.ndarray, dict, list[int]]:
+        """The snapshot's arrays (float32) and emitted layers, each checked against this scene."""
+        if not isinstance(snapshot, Snapshot):
+            raise TypeError(f"restore: expected a pbf.solver.Snapshot (from Simulation.snapshot(), or "
+                            f"Snapshot(positions_m, velocities_m_s, time_s, frame)), got {type(snapshot).__name__}")
+        positions = _particle_array("positions_m", snapshot.positions_m)
+        velocities = _particle_array("velocities_m_s", snapshot.velocities_m_s)
         if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
             raise ValueError(f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
                              f"{positions.shape} and {velocities.shape}")
+        if not isinstance(snapshot.fields, dict):
+            raise TypeError(f"restore: expected fields as a dict of name → array, got {type(snapshot.fields).__name__}")
         kept = {spec.name: spec for spec in self.state.fields if spec.kept and spec.name not in ("x", "v")}
+        fields = {}
         for name, values in snapshot.fields.items():
             spec = kept.get(name)
             if spec is None:
                 raise ValueError(f"restore: unknown particle field {name!r} in the snapshot; kept fields: "
                                  f"{', '.join(kept)}")
+            fields[name] = _particle_array(f"fields[{name!r}]", values)
             shape = positions.shape[:1] + (() if spec.components == 1 else (spec.components,))
-            if np.shape(values) != shape:
-                raise ValueError(f"restore: expected fields[{name!r}] of shape {shape}, got {np.shape(values)}")
-        if len(positions) > self.model.capacity:
-            raise ValueError(f"restore: {len(positions):,} particles, more than the {self.model.capacity:,} this "
+            if fields[name].shape != shape:
+                raise ValueError(f"restore: expected fields[{name!r}] of shape {shape}, got {fields[name].shape}")
+        count = len(positions)
+        if count > self.model.capacity:
+            raise ValueError(f"restore: {count:,} particles, more than the {self.model.capacity:,} this "
                              f"scene allocates (its blocks and emitters)")
-        self.state.load({**snapshot.fields, "x": positions, "v": velocities})
-        self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
-        self.time_s = snapshot.time_s
-        self.frame = snapshot.frame
-        # The wave maker's own clock: it stops while control.wave_maker_on is off.
-        self.piston_time_s = self.time_s if snapshot.piston_time_s is None else snapshot.piston_time_s
+        for name, values in (("positions_m", positions), ("velocities_m_s", velocities),
+                             *((f"fields[{name!r}]", values) for name, values in fields.items())):
+            bad = ~np.isfinite(values)
+            if bad.any():
+                row = int(np.argwhere(bad)[0][0])
+                raise ValueError(f"restore: {name} of particle {row} is {values[row].tolist()}; expected finite "
+                                 f"numbers")
+        self._check_inside(positions, velocities)
+        _clock("time_s", snapshot.time_s)
+        if snapshot.piston_time_s is not None:
+            _clock("piston_time_s", snapshot.piston_time_s)
+        frame = snapshot.frame
+        if isinstance(frame, (bool, np.bool_)) or not isinstance(frame, numbers.Integral) or frame < 0:
+            raise (ValueError if isinstance(frame, numbers.Integral) else TypeError)(
+                f"restore: expected frame as a whole number ≥ 0, got {_show(frame)}")
+        return positions, velocities, fields, self._checked_layers(snapshot.emitted_layers, count)
+
+    def _check_inside(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """Every particle inside this scene's container, and no faster than its frames can follow
+        (a snapshot of another scene is caught here, or by its count and emitted layers)."""
+        lower, upper = (np.array(c, np.float64) for c in (self.scene.container.min_m, self.scene.container.max_m))
+        slack = 1e-6 * (np.abs(lower) + np.abs(upper) + 1.0)  # float32 rounding of a particle at the wall
+        outside = np.any((positions < lower - slack) | (positions > upper + slack), axis=1)
+        if outside.any():
+            row = int(np.argmax(outside))
+            raise ValueError(f"restore: particle {row} at {positions[row].tolist()} m lies outside this scene's "
+                             f"container {lower.tolist()}–{upper.tolist()} m (a snapshot of another scene?)")
+        fastest = self.scene.fastest_followed_m_s
+        speeds = np.sqrt(np.sum(velocities.astype(np.float64) ** 2, axis=1))
+        if len(speeds) and speeds.max() > fastest:
+            row = int(np.argmax(speeds))
+            raise ValueError(f"restore: particle {row} moves at {float(speeds[row]):.6g} m/s, faster than the "
+                             f"{fastest:.6g} m/s this scene's frames can follow (time.max_substeps × time.max_cfl × "
+                             f"fluid.spacing_m / time.frame_dt_s)")
+
+    def _checked_layers(self, layers, count: int) -> list[int]:
+        """Emitted layers: one whole number per emitter of this scene, from 0 to its total, such that
+        the particles still to come fit the budget. (Fewer particles than the layers stand for are
+        fine: layers skipped while the emitters were off or a nozzle drowned add none.)"""
+        emitters, spacing = self.scene.emitters, self.scene.fluid.spacing_m
+        if not isinstance(layers, (tuple, list, np.ndarray)):
+            raise TypeError(f"restore: expected emitted_layers as a tuple of whole numbers, one per emitter, got "
+                            f"{type(layers).__name__}")
+        layers = list(layers) if len(layers) else [0] * len(emitters)
+        if len(layers) != len(emitters):
+            raise ValueError(f"restore: {len(layers)} emitted layer counts for the {len(emitters)} emitters of this "
+                             f"scene (a snapshot of another scene?)")
+        for k, (done, emitter) in enumerate(zip(layers, emitters)):
+            if isinstance(done, (bool, np.bool_)) or not isinstance(done, numbers.Integral):
+                raise TypeError(f"restore: emitted_layers[{k}]: expected a whole number, got "
+                                f"{_show(done)}")
+            if not 0 <= done <= emitter.layers(spacing):
+                raise ValueError(f"restore: emitted_layers[{k}] = {int(done)}; allowed: 0 to the "
+                                 f"{emitter.layers(spacing):,} layers emitters[{k}] adds in all")
+        layers = [int(done) for done in layers]
+        sites = [e.sites_per_layer(spacing) for e in emitters]
+        to_come = sum((e.layers(spacing) - done) * n for e, done, n in zip(emitters, layers, sites))
+        if count + to_come > self.model.capacity:
+            raise ValueError(f"restore: {count:,} particles and the {to_come:,} the emitters have still to add "
+                             f"(emitted_layers = {tuple(layers)}) exceed the {self.model.capacity:,} this scene "
+                             f"allocates")
+        return layers
+
+    def _after_restore(self) -> None:
+        """What every restore resets besides the particles: the piston, the frame's counters and the
+        neighbour lists."""
         self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
