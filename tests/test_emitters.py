@@ -61,3 +61,24 @@ def test_bad_emitters_are_refused(emitter, message):
     scene["emitters"][0].update(emitter)
     with pytest.raises(SceneError, match=message):
         from_dict(scene, "test.toml")
+
+
+@pytest.mark.slow
+def test_the_pour_stays_one_stream_down_to_the_pool():
+    # Consecutive nozzle layers (creation order) that are still falling whole (every particle within
+    # the nozzle's radius and a spacing of the layer's centre, above the pool) stand at most 1.5
+    # spacings apart: the stream has no gap from the nozzle to the pool.
+    sim = Simulation("pour", quiet=True)
+    s, emitter = sim.scene.fluid.spacing_m, sim.scene.emitters[0]
+    sites = emitter.sites_per_layer(s)
+    for _ in range(2):
+        sim.step(30)
+        x = sim.positions()
+        layers = x[: len(x) // sites * sites].reshape(-1, sites, 3)
+        centre = layers.mean(axis=1)
+        whole = np.linalg.norm(layers - centre[:, None], axis=2).max(axis=1) < emitter.radius_m + s
+        falling = np.nonzero(whole & (centre[:, 1] > 5 * s))[0]
+        assert len(falling) >= 10                                        # the stream is there
+        pairs = [(a, b) for a, b in zip(falling[:-1], falling[1:]) if b == a + 1]
+        distances = [np.linalg.norm(centre[b] - centre[a]) / s for a, b in pairs]
+        assert len(pairs) >= len(falling) - 2 and max(distances) <= 1.5, max(distances)
