@@ -53,3 +53,23 @@ def test_clearing_the_panel_moves_the_centre_right_by_half_its_width():
     camera.clear_of(0.3, 16 / 9)
     col, row = project(camera.view(), view.target, 1600, 900)
     assert col == pytest.approx(800 + 0.15 * 1600, abs=1.0) and row == pytest.approx(450, abs=1.0)
+
+
+def test_the_panel_grows_to_show_the_help_without_scrolling():
+    from pbf.app.keys import HELP
+    from pbf.app.window import PANEL_ROWS, ROW_PX, WindowViewer
+
+    class Shape:
+        def __init__(self, height):
+            self.height = height
+
+        def get_window_shape(self):
+            return (1280, self.height)
+
+    viewer = WindowViewer.__new__(WindowViewer)  # the panel's size alone: no simulation needed
+    for height in (480, 720, 1080):
+        viewer.window, viewer.help_shown = Shape(height), False
+        assert viewer.panel_rect()[3] * height == pytest.approx(PANEL_ROWS * ROW_PX)
+        viewer.help_shown = True
+        rows = viewer.panel_rect()[3] * height / ROW_PX
+        assert rows >= min(PANEL_ROWS + len(HELP), (1 - 2 * PANEL[1]) * height / ROW_PX) - 1e-9

@@ -32,9 +32,12 @@ from pbf.app.legend import legend_line
 from pbf.app.render import LIGHT_DIRECTION, ParticleColours, SphereRenderer, View, fluid_renderer, scene_edges
 
 PANEL = (0.01, 0.01, 0.3, 0.455)
-"""The panel's x, y, width and height as fractions of the window (origin top left), without the help."""
-HELP_HEIGHT = 0.30
-"""What the help lines add to the panel's height."""
+"""The panel's x, y, width and height as fractions of the window (origin top left), without the help, in
+a window 720 pixels high (``WindowViewer.panel_rect`` sizes it by its lines for the window it is in)."""
+ROW_PX = 22
+"""The height of one line of the panel at GGUI's default font (0.455 of a 720-pixel window holds its 15)."""
+PANEL_ROWS = 15
+"""The panel's lines without the help: text, sliders and the title bar."""
 STATS_INTERVAL_S = 0.1
 """The panel's statistics are recomputed at most this often while the simulation runs (a reduction
 over every particle; ten times a second is as often as figures can be read)."""
@@ -264,9 +267,11 @@ class WindowViewer:
             self.drag = (x, y)
 
     def panel_rect(self) -> tuple[float, float, float, float]:
-        """The panel's place and size now: taller while it shows the help."""
-        left, top, width, height = PANEL
-        return left, top, width, height + (HELP_HEIGHT if self.help_shown else 0.0)
+        """The panel's place and size now: taller by the help's lines while it shows them, so that
+        nothing needs scrolling (up to the window's height)."""
+        left, top, width, _ = PANEL
+        rows = PANEL_ROWS + (len(HELP) + 1 if self.help_shown else 0)
+        return left, top, width, min(1.0 - 2 * top, rows * ROW_PX / self.window.get_window_shape()[1])
 
     def panel(self, stats: dict) -> None:
         if not self.panel_shown:
