@@ -23,8 +23,9 @@ The denominator of λ̂_i is computed in a substep's first iteration and kept fo
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
 a substep, so it changes by little. Later λ passes then sum the density alone, without the
-gradients, so a later iteration costs less than the first (docs/BENCHMARKS.md, "Levers"). The price: a deep tank at 1-2 substeps with a fixed iteration count,
-already at the edge of stability, sloshes (every preset holds still as before).
+gradients, so a later iteration costs less than the first (docs/METHOD.md, "Speed on a CPU"). The
+price: a deep tank at 1-2 substeps with a fixed iteration count, already at the edge of stability,
+sloshes (every preset holds still as before).
 
 The free surface (``solver.surface_density``). A particle in the top layer of a pool has half a
 neighbourhood, reads about 0.82 ρ0 and is left free by the clamp; gravity then settles the layer into

@@ -6,7 +6,7 @@ Why. PBF's iterations start every substep from zero pressure. A pool at rest nee
 pressure, built anew each substep from the compression gravity causes, and a few Jacobi iterations
 rebuild the long waves of that pressure (the column's height) only partly: the seed pool stayed 1.25%
 compressed. Carrying the multipliers of the position iterations over instead acts as an integral
-controller on positions and left a pool at rest jittering at 0.1-0.4 m/s (docs/BENCHMARKS.md, levers).
+controller on positions and left a pool at rest jittering at 0.1-0.4 m/s (docs/METHOD.md, "Tried and not kept").
 Carried over at the velocity level, as in DFSPH's divergence solver (Bender & Koschier 2015) and in
 the warm-started velocity solvers of rigid-body contact, the pressure impulse is damped by the very
 velocities it acts on, and the position iterations are left with what the velocity pass missed.

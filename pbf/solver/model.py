@@ -32,7 +32,7 @@ Vec3 = tuple[float, float, float]
 NEIGHBOUR_REACH = 2
 """Grid cells per h. Cells h/2 wide put every neighbour within 2 cells, so a particle checks the 5×5×5
 cells around it, (5/2)³ = 15.6 h³ of space, against 27 h³ for cells h wide and 3×3×3: 42% fewer
-distance tests, the same lists, and a faster sort and neighbour search (docs/BENCHMARKS.md, "Levers")."""
+distance tests, the same lists, and a faster sort and neighbour search (docs/METHOD.md, "Grid and neighbour lists")."""
 MAX_CORRECTION = 0.1
 """Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
 SCORR_N = 8
