@@ -6,8 +6,10 @@
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
-particle-substeps per second, the mean and max density error over the timed frames, and a per-stage
-breakdown of the substeps that follow. ``terms`` times one substep of the same state, stage by stage,
+particle-substeps per second, the mean and max density error over the timed frames, a per-stage
+breakdown of the substeps that follow, and, over as many frames again, the kernel launches and the
+device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
+One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms`` times one substep of the same state, stage by stage,
 with each optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
 interleaved rounds, and reports what each costs. Stages are timed by a hook inside the step
 (``pbf.study.common.StageTimer``). Medians throughout: the machines are shared and noisy.
@@ -21,9 +23,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pbf.scene import load_scene
-from pbf.solver import Simulation, start_backend
+from pbf.solver import ARCHES, Simulation, start_backend
+from pbf.solver.backend import describe, running_device
 from pbf.study import sweep as speed_error
-from pbf.study.common import StageTimer, dam_break, stage_breakdown, timed
+from pbf.study.common import StageTimer, TransferCounter, dam_break, stage_breakdown, timed
 
 
 def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=()) -> dict:
@@ -45,6 +48,11 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
             max_errors.append(stats["max_density_error"])
             bar.update()
     stages = stage_breakdown(sim, 9)
+    substeps = 0
+    with TransferCounter() as counter:
+        for _ in range(frames):
+            sim.step()
+            substeps += sim.frame_substeps
     median_ms = statistics.median(substep_ms)
     return {
         "particles": sim.particle_count,
@@ -54,6 +62,8 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
         "particle_substeps_per_s": sim.particle_count / (median_ms / 1e3),
         "mean_density_error": statistics.fmean(mean_errors),
         "max_density_error": max(max_errors),
+        "reads_per_substep": counter.reads / substeps,
+        "launches_per_substep": counter.launches / substeps,
         "stages_ms": stages,
         "backend": sim.backend,
     }
@@ -61,11 +71,13 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
 
 def sizes(args) -> list[dict]:
     rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set) for n in args.sizes]
-    print(f"{'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
-          f"{'mean err':>9} {'max err':>8}")
+    print(f"{'backend':>7} {'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
+          f"{'mean err':>9} {'max err':>8} {'reads/substep':>13} {'launches/substep':>16}")
     for r in rows:
-        print(f"{r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} {r['median_ms_per_substep']:>11.2f} "
-              f"{r['particle_substeps_per_s']:>20,.0f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%}")
+        print(f"{r['backend']:>7} {r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} "
+              f"{r['median_ms_per_substep']:>11.2f} {r['particle_substeps_per_s']:>20,.0f} "
+              f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
+              f"{r['launches_per_substep']:>16.1f}")
     print("\nstage breakdown, median ms per substep:")
     for r in rows:
         print(f"  {r['particles']:,}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stages_ms"].items()))
@@ -159,14 +171,16 @@ def main(argv=None):
     parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)")
-    parser.add_argument("--arch", default=None)
+    parser.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
     parser.add_argument("--csv", type=Path, default=None, help="write the table as CSV "
                         "(sweep default: docs/speed_vs_error.csv)")
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
-    args.backend = start_backend(args.arch)
-    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend}")
+    args.backend = start_backend(args.arch, quiet=True)
+    device = describe(running_device())
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} "
+          f"({device})")
     if args.mode == "sweep":
         args.sizes = args.sizes or [8000, 64000]
         args.iterations = args.iterations or list(speed_error.ITERATIONS)
