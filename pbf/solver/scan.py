@@ -1,17 +1,16 @@
 """Prefix sums and reductions over Taichi fields: parallel, in float32, bit-identical on any thread count.
 
-Both walk a tree of blocks. Level 0 cuts the values into blocks of ``first_block`` consecutive
-entries; every level above cuts the block results of the one below into blocks of FAN_IN, up to a
-level of at most FAN_IN entries. A block is one thread's loop in index order, a level one parallel
+Both walk a tree of blocks. Level 0 cuts the values into blocks of consecutive entries; every level
+above cuts the block results of the one below into blocks, up to a level that is one block. A block is one thread's loop in index order, a level one parallel
 loop at the top level of the calling kernel: no serialised pass, no atomic, no host round trip, and
 the order of every addition depends on the indices alone, so the results are the same bits on any
 thread count, run after run. Everything is a ``ti.func`` for the top level of the caller's kernel,
 so a scan or a sum adds loops to a launch, never a launch of its own.
 
-The first block is the one choice per backend (:func:`first_block`). On the CPU it is about n/1024
-entries (64 at least): a thread walks a long stretch of memory in order, two cores see ~1,000
-blocks, and the upper levels are two loops of 32 threads. On a GPU it is 32: tens of thousands of
-threads at level 0, a few more levels (a million cells: 32,768, 1,024, 32).
+The block sizes are the one choice per backend (:func:`block_sizes`). On the CPU level 0 has about
+1,024 blocks of n/1024 entries (64 at least): a thread walks a long stretch of memory in order, and
+one thread adds up the block results, two levels in all. On a GPU every block has 32 entries: tens of
+thousands of threads at level 0, a few levels more (a million cells: 32,768, 1,024, 32).
 
 Sums of floats are compensated: each block keeps its sum as a float32 pair (high, low), Knuth's
 TwoSum carrying the rounding error of every addition into the low part, so a sum comes out as exact
@@ -26,17 +25,23 @@ import taichi as ti
 
 from pbf.solver.backend import on_gpu
 
-FAN_IN = 32
-"""Entries per block above level 0."""
-GPU_FIRST_BLOCK = 32
-"""Entries per level-0 block on a GPU backend."""
+GPU_BLOCK = 32
+"""Entries per block on a GPU backend, at every level."""
 CPU_BLOCKS = 1024
-"""About this many level-0 blocks on the CPU (each of at least 64 entries)."""
+"""On the CPU: about this many level-0 blocks (of 64 entries at least), and up to this many entries in a
+block above level 0, so that the tree has two levels."""
 
 
-def first_block(length: int) -> int:
-    """Entries per level-0 block for ``length`` values on the running backend."""
-    return GPU_FIRST_BLOCK if on_gpu() else max(64, math.ceil(length / CPU_BLOCKS))
+def block_sizes(length: int) -> tuple[int, int]:
+    """Entries per block at level 0 and above it, for ``length`` values on the running backend.
+
+    On the CPU a level costs a task: a dispatch to the thread pool, 20-100 µs when two cores are busy,
+    measured as a 5% longer substep at 8,000 particles with levels of 32; one thread walks 1,024 block
+    sums in about a microsecond. On a GPU a level costs a few microseconds and a long block idles
+    thousands of threads."""
+    if on_gpu():
+        return GPU_BLOCK, GPU_BLOCK
+    return max(64, math.ceil(length / CPU_BLOCKS)), CPU_BLOCKS
 
 
 class Tree:
@@ -47,18 +52,22 @@ class Tree:
 
     def __init__(self, length: int, block: int | None = None):
         self.length = max(int(length), 1)
-        self.blocks = [block or first_block(self.length)]
+        first, above = block_sizes(self.length) if block is None else (block, block)
+        self.blocks = [first]
         self.lengths = [self.length]
         while self.lengths[-1] > self.blocks[-1]:
             self.lengths.append(math.ceil(self.lengths[-1] / self.blocks[-1]))
-            self.blocks.append(FAN_IN)
+            self.blocks.append(above)
         self.top = len(self.lengths) - 1
-        """The top level: at most ``blocks[top]`` entries (0: the values themselves are the top)."""
+        """The top level: one block (0: the values themselves are the top)."""
         self.offsets = [0, 0]
         for level_length in self.lengths[1:]:
             self.offsets.append(self.offsets[-1] + level_length)
         self.scratch = max(self.offsets[-1], 1)
         """Entries of levels 1 … top, back to back (level j at ``offsets[j]``)."""
+        self.fused_top = self.blocks[self.top] <= GPU_BLOCK
+        """Whether the scan's first pass down finds each top entry's start by adding the (few) entries
+        before it, rather than in a pass of its own over the top block."""
 
 
 @ti.func
@@ -92,7 +101,7 @@ class ExclusiveScan:
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
         self.starts = ti.field(ti.i32, shape=self.tree.scratch)
-        """Exclusive block offsets of levels 1 … top − 1."""
+        """Exclusive block starts of levels 1 … top (the top only when it has a pass of its own)."""
 
     @ti.func
     def _entry(self, values: ti.template(), level: ti.template(), k):
@@ -106,9 +115,10 @@ class ExclusiveScan:
     @ti.func
     def scan(self, values: ti.template(), starts: ti.template(), count):
         """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total). Called at
-        a kernel's top level. Up the tree each block sums its entries; down it each block writes the
-        running sums of its entries from its own offset, which at the top a block finds by adding the
-        (at most FAN_IN) block sums before it."""
+        a kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
+        running sums of the top block (or, for a top of few entries, each block below adds up the
+        entries before its own); down the tree each block writes the running sums of its entries from
+        its own start."""
         starts[count] = 0  # the total when count is 0; otherwise the last block overwrites it
         for level in ti.static(range(self.tree.top)):  # up: the sums of each level's blocks
             block = ti.static(self.tree.blocks[level])
@@ -120,6 +130,16 @@ class ExclusiveScan:
                 for k in range(b * block, ti.min((b + 1) * block, live)):
                     total += self._entry(values, level, k)
                 self.sums[self.tree.offsets[level + 1] + b] = total
+        if ti.static(self.tree.top > 0 and not self.tree.fused_top):  # the top block: one thread walks it
+            top = ti.static(self.tree.top)
+            live = count
+            for j in ti.static(range(top)):
+                live = _live(live, self.tree.blocks[j])
+            for _ in range(_live(live, self.tree.blocks[top])):
+                running = 0
+                for k in range(live):
+                    self.starts[self.tree.offsets[top] + k] = running
+                    running += self.sums[self.tree.offsets[top] + k]
         for down in ti.static(range(self.tree.top)):  # down: each level's starts from its blocks' starts
             level = ti.static(self.tree.top - 1 - down)
             block = ti.static(self.tree.blocks[level])
@@ -128,8 +148,8 @@ class ExclusiveScan:
                 live = _live(live, self.tree.blocks[j])
             for b in range(_live(live, block)):
                 running = 0
-                if ti.static(level + 1 == self.tree.top):
-                    for k in range(b):  # the top level's sums before this block (fewer than FAN_IN)
+                if ti.static(level + 1 == self.tree.top and self.tree.fused_top):
+                    for k in range(b):  # the top level's sums before this block (fewer than GPU_BLOCK)
                         running += self.sums[self.tree.offsets[self.tree.top] + k]
                 else:
                     running = self.starts[self.tree.offsets[level + 1] + b]
