@@ -11,6 +11,12 @@ Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
    particle has more than SLOTS neighbours, the counts are prefix-summed into a compact list (grown
    as needed) and filled by a second visit. No capacity can overflow: 8,000 particles in one cell
    still give exact neighbours, only a little slower.
+
+On the CPU the host reads after the first visit whether a second is needed. On a GPU backend the
+substep's build leaves that to the device (both visits in one launch, the second over no particles
+unless needed) and the host learns once a frame how full the compact list got
+(``build_neighbours``, ``settle_frame``). No step uses an atomic into one address: the overflow is a
+flag that only overflowing particles set, the counts per cell are atomics into many addresses.
 """
 import math
 import warnings
