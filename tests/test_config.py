@@ -97,10 +97,10 @@ def test_override_and_preset_load(tmp_path):
 
 
 def test_unknown_backend(monkeypatch):
-    with pytest.raises(BackendError, match="unknown backend; allowed: auto, cpu, cuda"):
-        start_backend("metal")
-    monkeypatch.setenv(ENV_VAR, "vulkan")
-    with pytest.raises(BackendError, match="PBF_ARCH='vulkan'"):
+    with pytest.raises(BackendError, match="unknown backend; allowed: auto, cpu, gpu, cuda, vulkan, metal"):
+        start_backend("opengl")
+    monkeypatch.setenv(ENV_VAR, "tpu")
+    with pytest.raises(BackendError, match="PBF_ARCH='tpu'"):
         start_backend()
 
 

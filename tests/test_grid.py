@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from pbf.solver.grid import NeighbourGrid
+from pbf.solver.backend import decisions_on_device
+from pbf.solver.grid import SLOTS, NeighbourGrid
 from pbf.solver.model import GridParams
-from pbf.solver.scan import ExclusiveScan
+from pbf.solver.scan import ExclusiveScan, TreeSum
 
 
 def brute_force(points, h):
@@ -21,9 +22,10 @@ def make_grid(n, lower, upper, h, reach):
     return NeighbourGrid(GridParams.covering(n, lower, upper, h, reach), active)
 
 
-def grid_neighbours(points, lower, upper, h, reach=1):
+def grid_neighbours(points, lower, upper, h, reach=1, checked=True):
     n = len(points)
-    grid = make_grid(n, lower, upper, h, reach)
+    with decisions_on_device(not checked):
+        grid = make_grid(n, lower, upper, h, reach)
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
     keys = np.random.default_rng(n).permutation(n).astype(np.int32)
@@ -34,7 +36,7 @@ def grid_neighbours(points, lower, upper, h, reach=1):
     assert sorted(order) == list(range(n)), "the sort must be a permutation"
     sorted_points = points[order]
     x.from_numpy(sorted_points.astype(np.float32))
-    grid.build_neighbours(x)
+    grid.build_neighbours(x, checked=checked)
     lists = grid.neighbour_lists()
     assert np.array_equal([len(l) for l in lists], grid.neighbour_count.to_numpy())
     # Back to original indices; also check the sort put cells in ascending order.
@@ -50,8 +52,8 @@ def float32_brute_force(points, h):
     return brute_force(points.astype(np.float32), np.float32(h))
 
 
-def check(points, lower, upper, h, reach=1):
-    got, order = grid_neighbours(points, lower, upper, h, reach)
+def check(points, lower, upper, h, reach=1, checked=True):
+    got, order = grid_neighbours(points, lower, upper, h, reach, checked)
     expected = float32_brute_force(points, h)
     by_original = [None] * len(points)
     for slot, original in enumerate(order):
@@ -129,3 +131,86 @@ def test_exclusive_scan(length):
     expected = np.concatenate([[0], np.cumsum(values)])
     assert total == expected[-1]
     assert np.array_equal(starts.to_numpy(), expected)
+
+
+@pytest.mark.parametrize("length", [1, 33, 1025, 40_000])
+@pytest.mark.parametrize("count", ["all", "some", "none"])
+def test_exclusive_scan_in_gpu_blocks_of_some_entries(length, count):
+    # The GPU backends' block of 32 entries (several levels of blocks) over the first `count` entries.
+    live = {"all": length, "some": length * 2 // 3, "none": 0}[count]
+    values = np.random.default_rng(length).integers(0, 50, size=length).astype(np.int32)
+    source = ti.field(ti.i32, shape=length)
+    starts = ti.field(ti.i32, shape=length + 1)
+    source.from_numpy(values)
+    scan = ExclusiveScan(length, block=32)
+
+    @ti.kernel
+    def run(count: ti.i32):
+        scan.scan(source, starts, count)
+
+    run(live)
+    assert len(scan.tree.lengths) >= min(3, 1 + (length > 32) + (length > 1024))
+    assert np.array_equal(starts.to_numpy()[: live + 1], np.concatenate([[0], np.cumsum(values[:live])]))
+
+
+@pytest.mark.parametrize("block", [None, 32])
+def test_tree_sums_are_compensated_and_independent_of_the_count_of_blocks(block):
+    # 100,003 values spanning eight decades: a float32 running sum loses ~1e-4 of it, the pair keeps it
+    # to float64's accuracy; the largest value is exact.
+    n = 100_003
+    values = (np.random.default_rng(5).random(n) ** 8).astype(np.float32)
+    values[17] = 3.0e4
+    field = ti.field(ti.f32, shape=n)
+    field.from_numpy(values)
+    sums = TreeSum(n, 2, block=block)
+
+    @ti.kernel
+    def run():
+        sums.sum(field, 0, n)
+        sums.maximum(field, 1, n)
+
+    run()
+    high, low = sums.high.to_numpy(), sums.low.to_numpy()
+    assert float(high[0]) + float(low[0]) == pytest.approx(values.astype(np.float64).sum(), rel=1e-11)
+    assert high[1] == values.max() and low[1] == 0.0
+
+
+@REACHES
+def test_unchecked_builds_on_the_device_match_brute_force(reach):
+    # Random points and a pile of 100 in one cell: the pile's particles have more than SLOTS neighbours,
+    # so the device runs the prefix sum and the second visit itself (the compact list fits).
+    rng = np.random.default_rng(6)
+    points = np.concatenate([rng.uniform(0.0, 1.0, size=(3000, 3)), rng.uniform(0.5, 0.5 + 0.07 / 3, size=(100, 3))])
+    expected = check(points, (0, 0, 0), (1, 1, 1), 0.07, reach, checked=False)
+    assert max(map(len, expected)) > SLOTS
+
+
+def test_a_list_cut_short_is_reported_grown_and_exact_after():
+    # 300 particles in one cell: 89,700 entries, more than the SLOTS per particle (19,200) an
+    # unchecked build can hold. The frame's record says so; the list grows and the next build is exact.
+    rng = np.random.default_rng(8)
+    n, h = 300, 0.1
+    points = rng.uniform(0.45, 0.45 + h / 3, size=(n, 3)).astype(np.float32)
+    with decisions_on_device():
+        grid = make_grid(n, (0, 0, 0), (1, 1, 1), h, 1)
+    x = ti.Vector.field(3, ti.f32, shape=n)
+    x.from_numpy(points)
+    grid.sort(x, ti.field(ti.i32, shape=n))
+
+    @ti.kernel
+    def take() -> ti.types.vector(2, ti.i32):
+        return grid.take_status()
+
+    grid.build_neighbours(x, checked=False)
+    most_entries, truncated = take()
+    assert (most_entries, truncated) == (n * (n - 1), 1)
+    with pytest.warns(RuntimeWarning, match="needed 89,700 entries"):
+        grid.settle_frame(most_entries, bool(truncated))
+    assert grid.neighbours.shape[0] == n * (n - 1) * 3 // 2
+    grid.build_neighbours(x, checked=False)
+    assert np.array_equal(grid.neighbour_count.to_numpy(), np.full(n, n - 1))
+    assert all(len(set(entries.tolist())) == n - 1 for entries in grid.neighbour_lists())
+    most_entries, truncated = take()
+    assert (most_entries, truncated) == (n * (n - 1), 0)
+    grid.settle_frame(most_entries, False)  # two thirds full: unchecked builds go on
+    assert not grid.checking

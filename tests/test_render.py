@@ -152,3 +152,24 @@ def test_legend_shows_the_colour_map_and_its_range():
         colour = np.round(np.array(matplotlib.colormaps["viridis"](end)[:3]) * 255)
         assert np.any(np.all(np.abs(column - colour) <= 2, axis=1))
     assert legend_line(sim.scene.render) == "colour: speed, viridis from 0 m/s to 3 m/s"
+
+
+def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
+    # GPU backends splat a thread per (particle, pixel) (pbf.app.splat); here on the CPU against the
+    # per-particle loops, with particles near and far and some behind the eye, in both orders.
+    rng = np.random.default_rng(11)
+    view = View(np.array([0.0, 0.2, 1.2]), np.array([0.0, 0.0, 0.0]), 60.0)
+    centres = rng.uniform(-0.6, 0.6, size=(2000, 3)) * [1.0, 1.0, 2.0]
+    colours = rng.uniform(0.0, 1.0, size=(2000, 3))
+    x, c = ti.Vector.field(3, ti.f32, shape=2000), ti.Vector.field(3, ti.f32, shape=2000)
+    x.from_numpy(centres.astype(np.float32))
+    c.from_numpy(colours.astype(np.float32))
+    edges = np.array([[-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]], np.float32)
+    for front_to_back in (True, False):
+        images = []
+        for per_item in (False, True):
+            renderer = SphereRenderer(W, H, WHITE, segments=edges)
+            renderer.per_item, renderer.front_to_back = per_item, front_to_back
+            images.append(renderer.render(view, x, c, 2000, 0.02))
+        assert np.array_equal(*images)
+        assert 0.05 < covered(images[0]).mean() < 0.95

@@ -22,7 +22,7 @@ from pbf import scene as schema
 from pbf.app import export, outputs
 from pbf.app.keys import HELP
 
-ARCHES = ("auto", "cpu", "cuda")
+ARCHES = ("auto", "cpu", "gpu", "cuda", "vulkan", "metal")
 """``pbf.solver.ARCHES`` (tests/test_options.py checks that they agree), named here so that ``--help``
 and a bad backend are answered without importing the solver."""
 ARCH_VARIABLE = "PBF_ARCH"
@@ -78,7 +78,8 @@ def build_parser() -> Parser:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")
     parser.add_argument("--arch", choices=ARCHES, default=None,
-                        help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto)")
+                        help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto: CUDA, else a hardware Vulkan or "
+                             f"Metal GPU, else the CPU; gpu: the best GPU backend found)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
     parser.add_argument("--keys", action="store_true",
                         help="print the reference of every scene key (Markdown, as docs/KEYS.md) and exit")

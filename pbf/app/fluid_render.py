@@ -38,6 +38,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.pinhole import to_pixel
+from pbf.app.splat import Footprints, per_item
 
 vec3 = ti.types.vector(3, ti.f32)
 
@@ -111,7 +112,12 @@ class FluidRenderer:
         self.image_depth = ti.field(ti.f32, shape=full)
         self.image = ti.Vector.field(3, ti.u8, shape=full)
         self.packed = None
-        """``image`` for the window (``draw_packed``), allocated on first use."""
+        """``image`` for the window (``draw_packed``), allocated on first use: a NumPy array, which the
+        one kernel that writes it fills whole (so that Vulkan and Metal, which copy it back after the
+        launch but up only where a kernel reads it, return every pixel)."""
+        self.per_item = per_item()
+        """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
+        self.footprints = None
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_count = len(points) // 2
         self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
@@ -193,6 +199,37 @@ class FluidRenderer:
                             ti.atomic_min(self.depth[r, c], (b - root) / a)
                             steps = 2.0 * root / ti.sqrt(a) * self.chord_scale / self.quantum
                             ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
+
+    @ti.kernel
+    def _splat_items(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3,
+                     focal: ti.f32):
+        """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
+        (``pbf.app.splat``): the same tests and integer sums, so the same image."""
+        radius = self.radius
+        width, height = self.coarse_width, self.coarse_height
+        for i in range(count):
+            centre = x[i] - eye
+            depth = centre.dot(forward)
+            c0, c1, r0, r1 = 0, 0, 0, 0
+            if depth > radius * 1.01:
+                col = 0.5 * width + focal * centre.dot(right) / depth
+                row = 0.5 * height - focal * centre.dot(up) / depth
+                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
+                r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
+                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(width, ti.cast(col + extent, ti.i32) + 1)
+            self.footprints.set(i, c0, c1, r0, r1)
+        self.footprints.scan(count)
+        for w in range(self.footprints.total(count)):
+            i, c, r = self.footprints.item(w, count)
+            centre = x[i] - eye
+            ray = self._ray(r, c, right, up, forward, focal, width, height)
+            a, b = ray.norm_sqr(), ray.dot(centre)
+            disc = b * b - a * (centre.norm_sqr() - radius * radius)
+            if disc > 0.0:
+                root = ti.sqrt(disc)
+                ti.atomic_min(self.depth[r, c], (b - root) / a)
+                steps = 2.0 * root / ti.sqrt(a) * self.chord_scale / self.quantum
+                ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
     def _filter(self, depth_in: ti.template(), depth_out: ti.template(), step_row: ti.i32, step_col: ti.i32,
@@ -384,7 +421,11 @@ class FluidRenderer:
             self._environment_image(eye, right, up, forward, focal)
             self.background_view = key
         self._clear()
-        if count:
+        if count and self.per_item:
+            if self.footprints is None or self.footprints.capacity < positions.shape[0]:
+                self.footprints = Footprints(positions.shape[0])
+            self._splat_items(positions, count, eye, right, up, forward, coarse_focal)
+        elif count:
             self._splat(positions, count, eye, right, up, forward, coarse_focal)
         # The thickness is smoothed in the first round only: it needs no edges kept, and one round of
         # σ/√rounds is smooth enough for a tint.

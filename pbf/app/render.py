@@ -19,6 +19,7 @@ import taichi as ti
 from pbf.app.fluid_render import FluidRenderer
 from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
+from pbf.app.splat import Footprints, per_item
 from pbf.scene import Render, Scene
 
 EMPTY = np.iinfo(np.int64).max
@@ -159,7 +160,15 @@ class SphereRenderer:
         """(view depth bits << 32) | particle id of the nearest hit per pixel, EMPTY where none; indexed
         [x, y] with y up like ``packed``, so that shading reads and writes both in memory order."""
         self.packed = np.zeros((self.width, self.height), np.uint32)
-        """The image: packed RGBA words, (W, H), y up (GGUI's canvas layout)."""
+        """The image: packed RGBA words, (W, H), y up (GGUI's canvas layout), in host memory, where GGUI
+        (Taichi 1.7.4) takes it from."""
+        on_cpu = ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
+        self.image = self.packed if on_cpu else ti.ndarray(ti.u32, shape=(self.width, self.height))
+        """What the kernels draw into: ``packed`` itself on the CPU, a device ndarray on a GPU, copied
+        into ``packed`` by one kernel that writes every pixel. A NumPy array given to a kernel is copied
+        to the device and back around the launch (by Vulkan and Metal up only where the kernel reads
+        it, back whole), so the lines pass, which writes a few pixels of it, brought back stale memory
+        everywhere else on Vulkan; and on CUDA each frame cost four copies of it."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_count = len(points) // 2
         self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
@@ -173,11 +182,15 @@ class SphereRenderer:
         """Per particle: its depth slab, its rank in the slab, and the particles in slab order."""
         self.front_to_back = True
         """Splat in depth order (False: in the simulation's order, for benchmarks/window.py)."""
+        self.per_item = per_item()
+        """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
+        self.footprints = None
 
     def _allocate(self, capacity: int) -> None:
         if capacity > self.capacity:
             self.capacity = capacity
             self.slab, self.rank, self.order = (ti.field(ti.i32, shape=capacity) for _ in range(3))
+            self.footprints = Footprints(capacity) if self.per_item else None
 
     @ti.func
     def _ray(self, row, col, right, up, forward, focal):
@@ -271,6 +284,42 @@ class SphereRenderer:
                                     ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
+    def _splat_items(self, x: ti.template(), count: ti.i32, radius: ti.f32, eye: vec3, right: vec3, up: vec3,
+                     forward: vec3, focal: ti.f32):
+        """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
+        (``pbf.app.splat``): the same tests, so the same image."""
+        for k in range(count):
+            centre = x[self.order[k]] - eye
+            depth = centre.dot(forward)
+            c0, c1, r0, r1 = 0, 0, 0, 0
+            if depth > radius * 1.01:
+                col = 0.5 * self.width + focal * centre.dot(right) / depth
+                row = 0.5 * self.height - focal * centre.dot(up) / depth
+                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
+                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
+                r0 = ti.max(0, ti.cast(row - extent, ti.i32))
+                r1 = ti.min(self.height, ti.cast(row + extent, ti.i32) + 1)
+            self.footprints.set(k, c0, c1, r0, r1)
+        self.footprints.scan(count)
+        for w in range(self.footprints.total(count)):
+            k, c, r = self.footprints.item(w, count)
+            i = self.order[k]
+            centre = x[i] - eye
+            depth = centre.dot(forward)
+            nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
+            y = self.height - 1 - r
+            if self.keys[c, y] > nearest:
+                ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward + up * (
+                    (0.5 * self.height - r - 0.5) / focal)
+                a, b = ray.norm_sqr(), ray.dot(centre)
+                disc = b * b - a * (centre.norm_sqr() - radius * radius)
+                if disc >= 0.0:
+                    t = (b - ti.sqrt(disc)) / a
+                    key = (ti.cast(ti.bit_cast(t, ti.i32), ti.i64) << 32) | ti.cast(i, ti.i64)
+                    if key < self.keys[c, y]:
+                        ti.atomic_min(self.keys[c, y], key)
+
+    @ti.kernel
     def _shade(self, x: ti.template(), colours: ti.template(), radius: ti.f32, eye: vec3, right: vec3, up: vec3,
                forward: vec3, focal: ti.f32, light: vec3, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
         for col, y in self.keys:
@@ -307,6 +356,11 @@ class SphereRenderer:
                     if key == ti.i64(EMPTY) or depth < hit:
                         out[col, self.height - 1 - row] = pack_rgba(self.line_colour)
 
+    @ti.kernel
+    def _copy(self, image: ti.types.ndarray(dtype=ti.u32, ndim=2), out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
+        for col, y in ti.ndrange(self.width, self.height):
+            out[col, y] = image[col, y]
+
     def draw(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:
         """Render ``count`` spheres of ``radius_m`` (Taichi fields) and the segments into ``packed``
         and return it: (W, H) RGBA words, y up, as GGUI's canvas takes them."""
@@ -320,11 +374,16 @@ class SphereRenderer:
                 self._order(positions, count, eye, forward)
             else:
                 self._identity(count)
-            self._splat(positions, count, radius_m, eye, right, up, forward, focal)
+            if self.per_item:
+                self._splat_items(positions, count, radius_m, eye, right, up, forward, focal)
+            else:
+                self._splat(positions, count, radius_m, eye, right, up, forward, focal)
         self._shade(positions, colours, radius_m, eye, right, up, forward, focal,
-                    ti.Vector(LIGHT_DIRECTION.astype(np.float32)), self.packed)
+                    ti.Vector(LIGHT_DIRECTION.astype(np.float32)), self.image)
         if self.segment_count:
-            self._lines(eye, right, up, forward, focal, self.packed)
+            self._lines(eye, right, up, forward, focal, self.image)
+        if self.image is not self.packed:
+            self._copy(self.image, self.packed)
         return self.packed
 
     def render(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:

@@ -1,22 +1,38 @@
-"""Choosing and starting Taichi's backend, once per process.
+"""Choosing and starting Taichi's backend, once per process, and what the host knows of its device.
 
-``arch="auto"`` takes CUDA when an NVIDIA GPU answers and Taichi's CPU backend otherwise. The choice
-can also come from the ``PBF_ARCH`` environment variable. Asking for CUDA where there is none is an
-error, never a silent fallback. The chosen backend is printed once, in one line that names the
-Taichi version: ``[pbf] Starting on cpu (x64, no CUDA GPU found), Taichi 1.7.4``. Taichi's own
-lines stay silent: its banner (``[Taichi] version …``, printed when Taichi is imported) is switched
-off by ``pbf/__init__.py``, and the ``[Taichi] Starting on arch=…`` that ``ti.init`` prints is
-caught here (``_init``).
+``arch`` (or the ``PBF_ARCH`` environment variable) is one of ARCHES:
+
+- ``auto`` (the default): CUDA when an NVIDIA GPU answers, else a hardware Vulkan device (or Metal on
+  macOS), else Taichi's CPU backend. A software Vulkan driver (Mesa's lavapipe, device name
+  "llvmpipe") is never taken over the CPU backend: it runs the same kernels 5-18 times slower.
+- ``gpu``: the best GPU backend that starts, in the order CUDA, Metal, Vulkan (a software Vulkan
+  device included, named as such in the start line); an error when none does.
+- ``cpu``, ``cuda``, ``vulkan``, ``metal``: that backend, or an error saying why it cannot start.
+  Taichi itself falls back to the CPU when a GPU backend fails; that is caught and reported.
+
+The choice is printed once, in one line that names the device and Taichi's version:
+``[pbf] Starting on vulkan (llvmpipe (LLVM 15.0.6, 256 bits), a software Vulkan driver, requested),
+Taichi 1.7.4``. Taichi's own lines stay silent: its banner (``[Taichi] version …``, printed when
+Taichi is imported) is switched off by ``pbf/__init__.py``, and the ``[Taichi] Starting on arch=…``
+that ``ti.init`` prints is caught here (``_init``).
+
+On a GPU backend the substep keeps its decisions on the device (:func:`keeps_decisions_on_device`):
+the Jacobi iterations' stopping test, the neighbour lists' overflow; the CPU backend decides on the
+host, where reading a result costs nothing and skipping a launch saves one.
 """
 import contextlib
+import ctypes
 import ctypes.util
 import io
 import os
+import struct
 import sys
+from dataclasses import dataclass
 
 import taichi as ti
 
-ARCHES = ("auto", "cpu", "cuda")
+ARCHES = ("auto", "cpu", "gpu", "cuda", "vulkan", "metal")
+GPU_ARCHES = ("cuda", "vulkan", "metal")
 ENV_VAR = "PBF_ARCH"
 
 
@@ -24,12 +40,30 @@ class BackendError(RuntimeError):
     """The requested backend cannot be started."""
 
 
-_started: str | None = None
+@dataclass(frozen=True)
+class Device:
+    """What runs the kernels: the backend, the device's name and whether it is a software rasterizer."""
+
+    arch: str
+    """One of "cpu", "cuda", "vulkan", "metal"."""
+    name: str
+    software: bool = False
+    """A CPU posing as a GPU (Mesa's lavapipe/llvmpipe): correct, and slower than the CPU backend."""
+    memory_bytes: int | None = None
+    """The device's own memory where the host can tell (CUDA, a hardware Vulkan device); None where the
+    kernels use the host's memory (CPU, Metal's unified memory, a software Vulkan driver)."""
+
+
+_started: Device | None = None
 _options: dict = {}
 """The ``ti.init`` options of the running backend, for ``restart_backend``."""
+_decisions_on_device_on_cpu = False
+"""Tests run the GPU backends' device-resident substep on the CPU (:func:`decisions_on_device`)."""
 
 TAICHI_START_LINE = "[Taichi] Starting on arch="
 """The line ``ti.init`` prints (``taichi/lang/misc.py``, a plain ``print``) on every start."""
+SOFTWARE_VULKAN = ("llvmpipe", "lavapipe", "swiftshader")
+"""Names of software Vulkan devices (Mesa's lavapipe reports "llvmpipe (LLVM …)")."""
 
 
 def taichi_version() -> str:
@@ -47,33 +81,180 @@ def _init(**options) -> None:
         sys.stdout.write("".join(rest))
 
 
-def _cuda_present() -> bool:
-    """Whether Taichi can start CUDA here. Without NVIDIA's driver library there is nothing to try;
-    with it, Taichi initialises CUDA once to find out (and, where that fails, says it started on the
+# ---------------------------------------------------------------------------------------------- devices
+
+
+def _cuda_device() -> Device | None:
+    """The first CUDA device (the one Taichi uses), from NVIDIA's driver library; None without one.
+    Taichi is then started once to be sure it can use it (where that fails, it says it started on the
     CPU: a second such line next to the real start)."""
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
-        return False
+        return None
+    name, memory = "CUDA GPU", None
+    try:
+        cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
+        device, total = ctypes.c_int(), ctypes.c_size_t()
+        buffer = ctypes.create_string_buffer(256)
+        if cuda.cuInit(0) == 0 and cuda.cuDeviceGet(ctypes.byref(device), 0) == 0:
+            if cuda.cuDeviceGetName(buffer, 256, device) == 0:
+                name = buffer.value.decode(errors="replace")
+            if cuda.cuDeviceTotalMem_v2(ctypes.byref(total), device) == 0:
+                memory = total.value
+    except (OSError, AttributeError):
+        pass
     try:
         _init(arch=ti.cuda, log_level=ti.ERROR)
         found = ti.lang.impl.current_cfg().arch == ti.cuda
     except Exception:  # Taichi raises several types when the driver is missing
         found = False
     ti.reset()
-    return found
+    return Device("cuda", name, False, memory) if found else None
+
+
+class _VkApplicationInfo(ctypes.Structure):
+    _fields_ = [("sType", ctypes.c_int), ("pNext", ctypes.c_void_p), ("pApplicationName", ctypes.c_char_p),
+                ("applicationVersion", ctypes.c_uint32), ("pEngineName", ctypes.c_char_p),
+                ("engineVersion", ctypes.c_uint32), ("apiVersion", ctypes.c_uint32)]
+
+
+class _VkInstanceCreateInfo(ctypes.Structure):
+    _fields_ = [("sType", ctypes.c_int), ("pNext", ctypes.c_void_p), ("flags", ctypes.c_uint32),
+                ("pApplicationInfo", ctypes.POINTER(_VkApplicationInfo)), ("enabledLayerCount", ctypes.c_uint32),
+                ("ppEnabledLayerNames", ctypes.c_void_p), ("enabledExtensionCount", ctypes.c_uint32),
+                ("ppEnabledExtensionNames", ctypes.c_void_p)]
+
+
+VK_PHYSICAL_DEVICE_TYPE = {1: "integrated", 2: "discrete", 3: "virtual", 4: "cpu"}
+"""VkPhysicalDeviceType values; 0 is "other"."""
+
+
+def vulkan_devices() -> list[dict]:
+    """Every Vulkan device the loader lists, in its order: name, type (VK_PHYSICAL_DEVICE_TYPE), API
+    minor version and largest device-local heap (bytes). Empty without a Vulkan loader or driver. Read
+    through ctypes from libvulkan, without starting Taichi (which keeps its device to itself)."""
+    try:
+        vulkan = ctypes.CDLL(ctypes.util.find_library("vulkan") or "libvulkan.so.1")
+    except OSError:
+        return []
+    application = _VkApplicationInfo(0, None, b"pbf", 1, b"pbf", 1, 1 << 22)  # Vulkan 1.0 asks the least
+    create = _VkInstanceCreateInfo(1, None, 0, ctypes.pointer(application), 0, None, 0, None)
+    instance = ctypes.c_void_p()
+    vulkan.vkCreateInstance.restype = ctypes.c_int
+    if vulkan.vkCreateInstance(ctypes.byref(create), None, ctypes.byref(instance)) != 0:
+        return []
+    devices = []
+    try:
+        count = ctypes.c_uint32()
+        vulkan.vkEnumeratePhysicalDevices(instance, ctypes.byref(count), None)
+        handles = (ctypes.c_void_p * count.value)()
+        vulkan.vkEnumeratePhysicalDevices(instance, ctypes.byref(count), handles)
+        for handle in handles:
+            # VkPhysicalDeviceProperties: apiVersion, driverVersion, vendorID, deviceID, deviceType (uint32
+            # each), then deviceName[256]; the limits after them take under 1 kB. The buffers are larger.
+            properties = ctypes.create_string_buffer(4096)
+            vulkan.vkGetPhysicalDeviceProperties(ctypes.c_void_p(handle), properties)
+            api, _, _, _, kind = struct.unpack_from("<5I", properties.raw, 0)
+            name = properties.raw[20:276].split(b"\0")[0].decode(errors="replace")
+            # VkPhysicalDeviceMemoryProperties: memoryTypeCount, 32 types of 8 bytes, memoryHeapCount at
+            # 260, then 16 heaps of (VkDeviceSize size, flags) from 264, 16 bytes each.
+            memory = ctypes.create_string_buffer(1024)
+            vulkan.vkGetPhysicalDeviceMemoryProperties(ctypes.c_void_p(handle), memory)
+            heaps = [struct.unpack_from("<QI", memory.raw, 264 + 16 * k) for k in
+                     range(min(struct.unpack_from("<I", memory.raw, 260)[0], 16))]
+            local = max((size for size, flags in heaps if flags & 1), default=0)  # VK_MEMORY_HEAP_DEVICE_LOCAL_BIT
+            devices.append({"name": name, "type": VK_PHYSICAL_DEVICE_TYPE.get(kind, "other"),
+                            "api_minor": (api >> 12) & 0x3FF, "memory_bytes": local})
+    finally:
+        vulkan.vkDestroyInstance(instance, None)
+    return devices
+
+
+def _is_software(device: dict) -> bool:
+    return device["type"] == "cpu" or any(word in device["name"].lower() for word in SOFTWARE_VULKAN)
+
+
+def _taichi_vulkan_choice(devices: list[dict]) -> dict | None:
+    """The device Taichi 1.7's Vulkan backend picks (``VulkanDeviceCreator::pick_physical_device``):
+    TI_VISIBLE_DEVICE's, else the highest score, discrete (1000) over integrated (500) over the rest,
+    plus 100 per API minor version."""
+    if not devices:
+        return None
+    visible = os.environ.get("TI_VISIBLE_DEVICE", "")
+    if visible.isdigit() and int(visible) < len(devices):
+        return devices[int(visible)]
+    return max(devices, key=lambda d: {"discrete": 1000, "integrated": 500}.get(d["type"], 0) + 100 * d["api_minor"])
+
+
+def _vulkan_device() -> Device | None:
+    choice = _taichi_vulkan_choice(vulkan_devices())
+    if choice is None:
+        return None
+    software = _is_software(choice)
+    return Device("vulkan", choice["name"], software, None if software else choice["memory_bytes"] or None)
+
+
+def _metal_device() -> Device | None:
+    return Device("metal", "Apple GPU") if sys.platform == "darwin" else None
+
+
+# ---------------------------------------------------------------------------------------------- starting
+
+
+def _choose(requested: str) -> tuple[Device, str]:
+    """The device to start for ``requested`` and why; BackendError when a named backend has none."""
+    if requested == "cpu":
+        return _cpu_device(), "requested"
+    if requested == "cuda":
+        device = _cuda_device()
+        if device is None:
+            raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
+        return device, "requested"
+    if requested == "vulkan":
+        device = _vulkan_device()
+        if device is None:
+            raise BackendError("arch='vulkan' was requested but no Vulkan device is available (no Vulkan loader or "
+                               "driver; on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' gives a "
+                               "software one); use arch='cpu' or 'auto'")
+        return device, "requested"
+    if requested == "metal":
+        device = _metal_device()
+        if device is None:
+            raise BackendError("arch='metal' was requested but Metal exists only on macOS; use arch='cpu' or 'auto'")
+        return device, "requested"
+    cuda = _cuda_device()
+    if cuda is not None:
+        return cuda, "CUDA GPU found" if requested == "auto" else "the best GPU backend found"
+    other = _metal_device() or _vulkan_device()
+    if requested == "gpu":
+        if other is None:
+            raise BackendError("arch='gpu' was requested but no GPU backend can start here (no CUDA GPU, no Metal, "
+                               "no Vulkan device); use arch='cpu' or 'auto'")
+        return other, "the best GPU backend found"
+    if other is not None and not other.software:
+        return other, f"no CUDA GPU, a {other.arch} device found"
+    if other is not None:
+        return _cpu_device(), f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than the CPU backend"
+    return _cpu_device(), "no GPU found"
+
+
+def _cpu_device() -> Device:
+    return Device("cpu", "")
 
 
 def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None,
                   fast_compile: bool = False) -> str:
-    """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto") and return "cpu" or "cuda".
-    ``cpu_threads`` caps the CPU backend's threads (default: one per core). ``fast_compile`` turns
-    off Taichi's advanced IR optimisation: a Simulation compiles in 1.6 s instead of 6.2 s on 2 cores
-    but may step a few per cent slower; the test suite, which builds many short-lived Simulations,
-    uses it. The arithmetic is the same up to rounding, not bit for bit: the seed scene's positions
-    differ by 3e-8 m after one frame and, the splash being chaotic, by up to 0.8 m after 60. Each
-    mode is deterministic by itself.
+    """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto"; see the module docstring) and
+    return the backend's name: "cpu", "cuda", "vulkan" or "metal". ``cpu_threads`` caps the CPU
+    backend's threads (default: one per core). ``fast_compile`` turns off Taichi's advanced IR
+    optimisation: a Simulation compiles in 1.6 s instead of 6.2 s on 2 cores but may step a few per
+    cent slower; the test suite, which builds many short-lived Simulations, uses it. The arithmetic
+    is the same up to rounding, not bit for bit: the seed scene's positions differ by 3e-8 m after
+    one frame and, the splash being chaotic, by up to 0.8 m after 60. Each mode is deterministic by
+    itself.
 
     Taichi can only run one backend per process: a second call with a different explicit request
-    raises BackendError; a matching or "auto" request returns the backend already running.
+    raises BackendError; a matching, "auto" or (on a GPU backend) "gpu" request returns the backend
+    already running.
     """
     global _started
     requested = (arch or os.environ.get(ENV_VAR) or "auto").lower()
@@ -81,28 +262,102 @@ def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int
         source = "arch" if arch else ENV_VAR
         raise BackendError(f"{source}={requested!r}: unknown backend; allowed: {', '.join(ARCHES)}")
     if _started is not None:
-        if requested not in ("auto", _started):
-            raise BackendError(f"Taichi already runs on {_started} in this process; cannot switch to {requested}")
-        return _started
-    if requested == "cpu":
-        chosen = "cpu"
-    elif _cuda_present():
-        chosen = "cuda"
-    elif requested == "cuda":
-        raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
-    else:
-        chosen = "cpu"
+        if requested not in ("auto", _started.arch) and not (requested == "gpu" and _started.arch in GPU_ARCHES):
+            raise BackendError(f"Taichi already runs on {_started.arch} in this process; cannot switch to {requested}")
+        return _started.arch
+    device, reason = _choose(requested)
     threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
     _options.clear()
-    _options.update(arch=ti.cuda if chosen == "cuda" else ti.cpu, default_fp=ti.f32, log_level=ti.WARN,
+    _options.update(arch=getattr(ti, device.arch), default_fp=ti.f32, log_level=ti.WARN,
                     advanced_optimization=not fast_compile, **threads)
-    _init(**_options)
-    _started = chosen
+    try:
+        _init(**_options)
+        running = ti.lang.impl.current_cfg().arch
+    except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
+        raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
+    if device.arch != "cpu" and running != getattr(ti, device.arch):
+        # Taichi falls back to the CPU by itself when a GPU backend fails to start.
+        ti.reset()
+        raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
+                           f"back to the CPU); use arch='cpu' or 'auto'")
+    _started = device
     if not quiet:
-        reason = "CUDA GPU found" if chosen == "cuda" else ("requested" if requested == "cpu" else "no CUDA GPU found")
-        arch_name = ti.lang.impl.current_cfg().arch.name  # x64, arm64 or cuda
-        print(f"[pbf] Starting on {chosen} ({arch_name}, {reason}), Taichi {taichi_version()}", flush=True)
-    return chosen
+        print(f"[pbf] Starting on {device.arch} ({describe(device, running.name)}, {reason}), "
+              f"Taichi {taichi_version()}", flush=True)
+    return device.arch
+
+
+def describe(device: Device, arch_name: str | None = None) -> str:
+    """The start line's device: x64 or arm64 for the CPU backend (Taichi's name for its arch, once
+    started), else the device's name."""
+    if device.arch == "cpu":
+        return arch_name or ti.lang.impl.current_cfg().arch.name
+    memory = f", {device.memory_bytes / 2**30:.1f} GiB" if device.memory_bytes else ""
+    return f"{device.name}{memory}{', a software Vulkan driver' if device.software else ''}"
+
+
+def running_device() -> Device:
+    """The device of the running backend."""
+    if _started is None:
+        raise BackendError("no backend has been started in this process")
+    return _started
+
+
+def on_gpu() -> bool:
+    """Whether the running backend is a GPU one (CUDA, Vulkan, Metal), lavapipe included."""
+    return _started is not None and _started.arch in GPU_ARCHES
+
+
+def keeps_decisions_on_device() -> bool:
+    """Whether a Simulation built now keeps the substep's decisions on the device (the iterations'
+    stopping test, the neighbour lists' overflow) and reads the device once per frame: on a GPU
+    backend, and on the CPU inside :func:`decisions_on_device` (tests compare the two paths)."""
+    return on_gpu() or _decisions_on_device_on_cpu
+
+
+@contextlib.contextmanager
+def decisions_on_device(enabled: bool = True):
+    """Simulations built inside take the GPU backends' device-resident path on any backend."""
+    global _decisions_on_device_on_cpu
+    before, _decisions_on_device_on_cpu = _decisions_on_device_on_cpu, enabled
+    try:
+        yield
+    finally:
+        _decisions_on_device_on_cpu = before
+
+
+def host_available_bytes() -> int:
+    """Physical memory that is free now (Linux/macOS), falling back to 8 GiB where it cannot be read."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 8 << 30
+
+
+def _cuda_free_bytes() -> int | None:
+    """Free memory of the CUDA device in the calling thread's context (Taichi's, once started)."""
+    try:
+        cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
+        context, free, total = ctypes.c_void_p(), ctypes.c_size_t(), ctypes.c_size_t()
+        if cuda.cuCtxGetCurrent(ctypes.byref(context)) == 0 and context.value:
+            if cuda.cuMemGetInfo_v2(ctypes.byref(free), ctypes.byref(total)) == 0:
+                return free.value
+    except (OSError, AttributeError):
+        pass
+    return None
+
+
+def device_memory_bytes() -> int:
+    """Memory the running backend can still give a Simulation's fields, bytes: the CUDA device's free
+    memory (else its total), a hardware Vulkan device's largest device-local heap, and the host's free
+    memory on the CPU backend, on Metal (unified memory) and on a software Vulkan driver. The memory
+    check before allocation (``pbf.solver.model``) compares a scene's need against it."""
+    device = running_device()
+    if device.arch == "cuda":
+        return _cuda_free_bytes() or device.memory_bytes or host_available_bytes()
+    if device.memory_bytes:
+        return device.memory_bytes
+    return host_available_bytes()
 
 
 def restart_backend() -> None:

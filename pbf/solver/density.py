@@ -64,7 +64,7 @@ import taichi as ti
 
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import SCORR_N, DensityParams
-from pbf.solver.scan import BlockSum
+from pbf.solver.scan import TreeSum
 from pbf.solver.sph import kernel, kernel_and_gradient
 
 
@@ -110,8 +110,8 @@ class DensityConstraint:
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
         self.error = ti.field(ti.f32, shape=particle_count)
         """max(C_i, 0) of the last λ pass that measured it."""
-        self.error_sum = BlockSum(particle_count)
-        """Σ_i max(C_i, 0), summed the same way on any thread count (it decides when to stop)."""
+        self.error_sum = TreeSum(particle_count)
+        """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
         impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
@@ -367,13 +367,36 @@ class DensityConstraint:
         else:
             second[i] = moved
 
+    @ti.func
+    def multiplier_pass(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
+                        measure: ti.template(), first_iteration, weight):
+        """C_i and λ̂_i of particle i; with the surface ghost, in the first iteration only C_i (λ̂ waits
+        for the ghost, which needs every ĝ_j: :meth:`surface_pass`)."""
+        c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
+        if ti.static(self.surface_density):
+            if first_iteration:
+                self.plain_error[i] = c
+            else:
+                self.lagrange_multiplier(i, c + self.surface[i], measure, first_iteration, weight)
+        else:
+            self.lagrange_multiplier(i, c, measure, first_iteration, weight)
+
+    @ti.func
+    def surface_pass(self, first: ti.template(), i, neighbours: ti.template(), measure: ti.template(),
+                     first_iteration, weight):
+        """ψ_i and λ̂_i in a substep's first iteration, which always starts from the first buffer."""
+        self.surface[i] = self.surface_ghost(first, i, neighbours)
+        self.lagrange_multiplier(i, self.plain_error[i] + self.surface[i], measure, first_iteration, weight)
+
     @ti.kernel
     def iterate(self, first: ti.template(), second: ti.template(), from_second: ti.i32, neighbours: NeighbourList,
-                measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> ti.f64:
-        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions,
-        weighted against the other buffer (which holds the positions of the iteration before) and
-        collided with the boundaries (Algorithm 1, line 15), into that buffer; x is ``second`` when
-        ``from_second``, else ``first``. With ``measure`` returns the mean error (else 0).
+                measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> tuple[ti.f32, ti.f32, ti.i32]:
+        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions, weighted
+        against the other buffer (which holds the positions of the iteration before) and collided with
+        the boundaries (Algorithm 1, line 15), into that buffer; x is ``second`` when ``from_second``, else
+        ``first``. With ``measure`` returns Σ max(C_i, 0) as a float32 pair (high, low) and the particle
+        count, from which the host forms the mean (:meth:`project`); else zeros. On a GPU backend
+        ``pbf.solver.iterations`` runs the same passes in a kernel of its own.
 
         The buffers come in a fixed order and the direction as a flag, branched on around the neighbour
         sums only (the same way for every particle, so predicted), so that the kernel compiles once
@@ -381,35 +404,32 @@ class DensityConstraint:
         it. One launch, and the error comes back as its return value: a launch costs 30-100 µs on a
         2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
-            c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
-            if ti.static(self.surface_density):
-                if first_iteration:
-                    self.plain_error[i] = c  # λ̂ waits for the ghost, which needs every ĝ_j
-                else:
-                    self.lagrange_multiplier(i, c + self.surface[i], measure, first_iteration, weight)
-            else:
-                self.lagrange_multiplier(i, c, measure, first_iteration, weight)
+            self.multiplier_pass(first, second, from_second, i, neighbours, measure, first_iteration, weight)
         if ti.static(self.surface_density):
             for i in range(self.grid.active[None] * first_iteration):  # an empty loop after the first
-                # A substep's first iteration always starts from the first buffer (project()).
-                self.surface[i] = self.surface_ghost(first, i, neighbours)
-                self.lagrange_multiplier(i, self.plain_error[i] + self.surface[i], measure, first_iteration, weight)
+                self.surface_pass(first, i, neighbours, measure, first_iteration, weight)
         for i in range(self.grid.active[None]):
             self.jacobi_step(first, second, from_second, i, neighbours, weight)
-        mean_error = ti.cast(0.0, ti.f64)
+        high, low = 0.0, 0.0
         if ti.static(measure):
             self.error_sum.sum(self.error, 0, self.grid.active[None])
-            mean_error = self.error_sum.total[0] / ti.max(self.grid.active[None], 1)
-        return mean_error
+            high, low = self.error_sum.high[0], self.error_sum.low[0]
+        return high, low, self.grid.active[None]
+
+    @ti.func
+    def between(self, first: ti.template(), second: ti.template(), newer_in_second, fraction, i):
+        """x*_i = newer + fraction (older − newer), collided, into the first buffer, and L_i alike
+        (:meth:`step_back`)."""
+        newer, older = first[i], second[i]
+        if newer_in_second:
+            newer, older = second[i], first[i]
+        first[i] = self.boundaries.project(newer + fraction * (older - newer))
+        self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
 
     @ti.kernel
     def _between(self, first: ti.template(), second: ti.template(), newer_in_second: ti.i32, fraction: ti.f32):
         for i in range(self.grid.active[None]):
-            newer, older = first[i], second[i]
-            if newer_in_second:
-                newer, older = second[i], first[i]
-            first[i] = self.boundaries.project(newer + fraction * (older - newer))
-            self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
+            self.between(first, second, newer_in_second, fraction, i)
 
     def step_back(self, predicted, fraction: float) -> None:
         """Take back ``fraction`` of the last iteration: x* = x^{k+1} + fraction (x^k − x^{k+1}), and L
@@ -441,8 +461,9 @@ class DensityConstraint:
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
         assert not (first and predicted.in_second), "a substep's x* starts in the first buffer"
-        mean_error = self.iterate(predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure),
-                                  first, weight)
+        high, low, count = self.iterate(predicted.first, predicted.second, predicted.in_second, neighbours,
+                                        bool(measure), first, weight)
         predicted.swap()
-        return mean_error if measure else None
+        # The pair's sum in float64 on the host: the same mean as a float64 sum of the errors to ~1e-13.
+        return (float(high) + float(low)) / max(count, 1) if measure else None
 

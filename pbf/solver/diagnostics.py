@@ -1,8 +1,9 @@
-"""Statistics of the current state, reduced inside a kernel (no Python loop over particles)."""
+"""Statistics of the current state, reduced inside a kernel (no Python loop over particles, no atomic
+into one address: tree reductions of ``pbf.solver.scan``, the same bits on any thread count)."""
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
-from pbf.solver.scan import BlockSum
+from pbf.solver.scan import TreeSum
 
 
 @ti.data_oriented
@@ -16,28 +17,29 @@ class Diagnostics:
         self.mass = particle_mass_kg
         self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]
         """max(ρ/ρ0 − 1, 0), |v|² and the neighbour count of each particle."""
-        self.sums = BlockSum(state.capacity, 3)
-        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours, the same bits on any thread count."""
-        self.maxima = ti.field(ti.f32, shape=3)
-        """max max(ρ/ρ0 − 1, 0), max |v|, max neighbours."""
+        self.speed = ti.field(ti.f32, shape=state.capacity)
+        """|v| of each particle, for the maximum."""
+        self.sums = TreeSum(state.capacity, 6)
+        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours (slots 0-2), then the maxima of max(ρ/ρ0 − 1, 0), |v|
+        and the neighbour count (slots 3-5)."""
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
-        for k in ti.static(range(3)):
-            self.maxima[k] = 0.0
-        for i in range(self.state.active[None]):
+        count = self.state.active[None]
+        for i in range(count):
             ratio = self.density.density_ratio(self.state.x, i, neighbours)
-            error = ti.max(ratio - 1.0, 0.0)
             speed2 = self.state.v[i].norm_sqr()
-            count = ti.cast(self.grid.neighbour_end[i] - self.grid.neighbour_start[i], ti.f32)
-            self.terms[0][i], self.terms[1][i], self.terms[2][i] = error, speed2, count
-            ti.atomic_max(self.maxima[0], error)  # a maximum is the same in any order
-            ti.atomic_max(self.maxima[1], ti.sqrt(speed2))
-            ti.atomic_max(self.maxima[2], count)
+            self.terms[0][i] = ti.max(ratio - 1.0, 0.0)
+            self.terms[1][i] = speed2
+            self.terms[2][i] = ti.cast(self.grid.neighbour_end[i] - self.grid.neighbour_start[i], ti.f32)
+            self.speed[i] = ti.sqrt(speed2)
         for k in ti.static(range(3)):
-            self.sums.sum(self.terms[k], k, self.state.active[None])
+            self.sums.sum(self.terms[k], k, count)
+        self.sums.maximum(self.terms[0], 3, count)
+        self.sums.maximum(self.speed, 4, count)
+        self.sums.maximum(self.terms[2], 5, count)
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
@@ -52,15 +54,21 @@ class Diagnostics:
         return self.density_ratio
 
     @ti.kernel
-    def _max_speed(self) -> ti.f32:
-        fastest = 0.0
-        for i in range(self.state.active[None]):
-            ti.atomic_max(fastest, self.state.v[i].norm())
-        return fastest
+    def _max_speed(self) -> tuple[ti.f32, ti.i32, ti.i32]:
+        count = self.state.active[None]
+        for i in range(count):
+            self.speed[i] = self.state.v[i].norm()
+        self.sums.maximum(self.speed, 4, count)
+        status = self.grid.take_status()
+        return self.sums.high[4], status[0], status[1]
 
     def max_speed(self) -> float:
-        """The largest particle speed, m/s (one reduction, no neighbour pass)."""
-        return float(self._max_speed())
+        """The largest particle speed, m/s (one reduction, no neighbour pass), read once a frame for the
+        CFL limit. The same transfer brings the grid's record of the frame's neighbour lists
+        (``NeighbourGrid.settle_frame``), so that a frame reads the device once."""
+        speed, most_entries, truncated = self._max_speed()
+        self.grid.settle_frame(most_entries, bool(truncated))
+        return float(speed)
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts.
@@ -69,13 +77,14 @@ class Diagnostics:
         solver's final iteration did.
         """
         self._reduce(neighbours)
-        sums, maxima = self.sums.total.to_numpy(), self.maxima.to_numpy()
+        high, low = self.sums.high.to_numpy(), self.sums.low.to_numpy()
+        sums = [float(h) + float(lo) for h, lo in zip(high, low)]
         n = max(self.state.count, 1)  # an empty box (before an emitter starts) has zero means
         return {
-            "mean_density_error": float(sums[0] / n),
-            "max_density_error": float(maxima[0]),
-            "max_speed_m_s": float(maxima[1]),
-            "kinetic_energy_j": float(0.5 * self.mass * sums[1]),
-            "mean_neighbours": float(sums[2] / n),
-            "max_neighbours": int(maxima[2]),
+            "mean_density_error": sums[0] / n,
+            "max_density_error": sums[3],
+            "max_speed_m_s": sums[4],
+            "kinetic_energy_j": 0.5 * self.mass * sums[1],
+            "mean_neighbours": sums[2] / n,
+            "max_neighbours": int(sums[5]),
         }

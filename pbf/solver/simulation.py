@@ -13,7 +13,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.scene.schema import _show
-from pbf.solver.backend import start_backend
+from pbf.solver.backend import keeps_decisions_on_device, start_backend
 from pbf.solver.boundary import Boundaries
 from pbf.solver.acceleration import Weights
 from pbf.solver.density import DensityConstraint
@@ -22,6 +22,7 @@ from pbf.solver.diagnostics import Diagnostics
 from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
 from pbf.solver.integrate import Integrator
+from pbf.solver.iterations import JacobiIterations
 from pbf.solver.model import Control, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
@@ -118,6 +119,8 @@ class Simulation:
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
         self.weights = Weights(model.iteration_weights)
         """The iterations' weights (solver.expert.acceleration), restarted at each substep."""
+        self.iterations = JacobiIterations(self.density, self.weights, self.state.active, keeps_decisions_on_device())
+        """The substep's Jacobi iterations, steered by the host (CPU) or on the device (GPU backends)."""
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
         resets restore it instead of settling again: 2 s of substeps at 64,000 particles)."""
@@ -283,6 +286,15 @@ class Simulation:
         self.grid.build_neighbours(self.state.x)
 
     @property
+    def iterations_used(self) -> int:
+        """Jacobi iterations the last substep ran (read from the device on a GPU backend)."""
+        return self.iterations.used
+
+    @iterations_used.setter
+    def iterations_used(self, count: int) -> None:
+        self.iterations.used = count
+
+    @property
     def dt_s(self) -> float:
         """Δt of the last substep, s (less than frame_dt_s / substeps when the CFL limit added some)."""
         return self.last_dt_s
@@ -319,7 +331,6 @@ class Simulation:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""
         control, hook = self.control, self.hook
         dt = dt or self.scene.time.frame_dt_s / control.substeps
-        target = control.target_density_error
         x_star = self.integrator.predicted
         self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
         with hook.stage("predict"):
@@ -327,27 +338,13 @@ class Simulation:
         with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
             self._sort_by_cell(x_star.first)
         with hook.stage("neighbour lists"):
-            self.grid.build_neighbours(x_star.first)
+            self.grid.build_neighbours(x_star.first, checked=False)
         with hook.stage("divergence pre-correction"):            # ours: v made divergence-free (at x,
             if control.divergence_iterations > 0:                # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
-        with hook.stage("solver iterations"):
-            weights, last_error = self.weights, math.inf
-            weights.restart()
-            for k in range(control.iterations):                  # lines 8-19: λ, Δx, collision, x* += Δx
-                error = self.density.project(x_star, self.grid.neighbours,  # Jacobi, into the other buffer
-                                             measure=target > 0.0, first=k == 0, weight=weights.next())
-                self.iterations_used = k + 1
-                if target > 0.0 and error < target and k + 1 >= control.min_iterations:
-                    if control.step_back and k + 1 > control.min_iterations and last_error >= target:
-                        # The target fell between the last two errors: take back the share of the last
-                        # iteration it did not need, a count in between (DensityConstraint.step_back).
-                        self.density.step_back(x_star, (target - error) / (last_error - error))
-                    break                                        # the error this iteration started from
-                if target > 0.0 and error > last_error:          # the acceleration overshot: plain again
-                    weights.restart()
-                last_error = error
+        with hook.stage("solver iterations"):                    # lines 8-19, until the error target
+            self.iterations.run(x_star, self.grid.neighbours, control)
             x_star.gather()                                      # x* back in the first buffer
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             self.postprocess.run(x_star.first, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,

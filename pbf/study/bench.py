@@ -3,14 +3,24 @@
     python -m pbf.study.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
     python -m pbf.study.bench sweep   (see pbf.study.sweep: iterations × substeps × sizes, CSV and plot)
     python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
+    python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
+    python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
-particle-substeps per second, the mean and max density error over the timed frames, and a per-stage
-breakdown of the substeps that follow. ``terms`` times one substep of the same state, stage by stage,
+particle-substeps per second, the mean and max density error over the timed frames, a per-stage
+breakdown of the substeps that follow, and, over as many frames again, the kernel launches and the
+device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
+One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms`` times one substep of the same state, stage by stage,
 with each optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
 interleaved rounds, and reports what each costs. Stages are timed by a hook inside the step
 (``pbf.study.common.StageTimer``). Medians throughout: the machines are shared and noisy.
+
+``presets`` runs every preset from its start on this backend and prints the means of its statistics
+over the second half of the frames, with reads and launches per substep; ``compare`` reads such
+tables from several runs (backends, or the CPU with ``--fast-compile`` or ``--device-decisions``, which
+differ from it only in rounding) and says, per preset and statistic, whether each non-CPU run lies
+within the CPU runs' own spread, widened by as much again on either side.
 """
 import argparse
 import csv
@@ -20,14 +30,17 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pbf.scene import load_scene
-from pbf.solver import Simulation, start_backend
+from pbf.scene import SCENES_DIR, load_scene
+from pbf.solver import ARCHES, Simulation, start_backend
+from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study import sweep as speed_error
-from pbf.study.common import StageTimer, dam_break, stage_breakdown, timed
+from pbf.study.common import StageTimer, TransferCounter, dam_break, stage_breakdown, timed
 
 
-def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=()) -> dict:
-    sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
+def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(),
+             device_decisions: bool = False) -> dict:
+    with decisions_on_device(device_decisions):
+        sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
     substep_ms, mean_errors, max_errors = [], [], []
     dt_ms = []
     # On stderr, so that the table on stdout stays clean; the first frames compile the kernels.
@@ -45,6 +58,11 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
             max_errors.append(stats["max_density_error"])
             bar.update()
     stages = stage_breakdown(sim, 9)
+    substeps = 0
+    with TransferCounter() as counter:
+        for _ in range(frames):
+            sim.step()
+            substeps += sim.frame_substeps
     median_ms = statistics.median(substep_ms)
     return {
         "particles": sim.particle_count,
@@ -54,18 +72,22 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
         "particle_substeps_per_s": sim.particle_count / (median_ms / 1e3),
         "mean_density_error": statistics.fmean(mean_errors),
         "max_density_error": max(max_errors),
+        "reads_per_substep": counter.reads / substeps,
+        "launches_per_substep": counter.launches / substeps,
         "stages_ms": stages,
         "backend": sim.backend,
     }
 
 
 def sizes(args) -> list[dict]:
-    rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set) for n in args.sizes]
-    print(f"{'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
-          f"{'mean err':>9} {'max err':>8}")
+    rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set, args.device_decisions) for n in args.sizes]
+    print(f"{'backend':>7} {'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
+          f"{'mean err':>9} {'max err':>8} {'reads/substep':>13} {'launches/substep':>16}")
     for r in rows:
-        print(f"{r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} {r['median_ms_per_substep']:>11.2f} "
-              f"{r['particle_substeps_per_s']:>20,.0f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%}")
+        print(f"{r['backend']:>7} {r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} "
+              f"{r['median_ms_per_substep']:>11.2f} {r['particle_substeps_per_s']:>20,.0f} "
+              f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
+              f"{r['launches_per_substep']:>16.1f}")
     print("\nstage breakdown, median ms per substep:")
     for r in rows:
         print(f"  {r['particles']:,}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stages_ms"].items()))
@@ -122,6 +144,68 @@ def terms(args) -> list[dict]:
     return rows
 
 
+PRESET_STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j",
+                     "mean_neighbours", "iterations")
+
+
+def presets(args) -> list[dict]:
+    """Each preset for ``--frames`` frames from its start: statistics averaged over the second half."""
+    rows = []
+    for name in args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml")):
+        with decisions_on_device(args.device_decisions):
+            sim = Simulation(load_scene(name, args.set), quiet=True)
+        samples, reads, launches, substeps, seconds = [], 0, 0, 0, 0.0
+        for frame in tqdm(range(args.frames), desc=f"{name}, {sim.particle_count:,} particles", unit="frame"):
+            with TransferCounter() as counter:
+                seconds += timed(sim.step)
+            reads, launches, substeps = reads + counter.reads, launches + counter.launches, substeps + sim.frame_substeps
+            if frame >= args.frames // 2:
+                samples.append(sim.stats())
+        rows.append({"preset": name, "backend": args.backend, "variant": args.variant, "particles": sim.particle_count,
+                     "frames": args.frames, "s_per_frame": seconds / args.frames, "reads_per_substep": reads / substeps,
+                     "launches_per_substep": launches / substeps,
+                     **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS}})
+    print(f"{'preset':<20} {'particles':>9} {'s/frame':>8} {'reads/substep':>13} {'launches/substep':>16} "
+          f"{'mean err':>9} {'max err':>8} {'max v':>6} {'KE J':>9} {'neighbours':>10} {'iters':>5}")
+    for r in rows:
+        print(f"{r['preset']:<20} {r['particles']:>9,} {r['s_per_frame']:>8.2f} {r['reads_per_substep']:>13.2f} "
+              f"{r['launches_per_substep']:>16.1f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} "
+              f"{r['max_speed_m_s']:>6.2f} {r['kinetic_energy_j']:>9.4g} {r['mean_neighbours']:>10.2f} "
+              f"{r['iterations']:>5.2f}")
+    if args.csv:
+        args.csv.parent.mkdir(parents=True, exist_ok=True)
+        with args.csv.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    return rows
+
+
+def compare(paths: list[Path]) -> list[dict]:
+    """Per preset and statistic: the CPU runs' range, and whether each other run lies inside it widened
+    by its own width on either side. Returns the verdicts."""
+    rows = [row for path in paths for row in csv.DictReader(path.open())]
+    verdicts = []
+    for name in sorted({row["preset"] for row in rows}):
+        cpu = [row for row in rows if row["preset"] == name and row["backend"] == "cpu"]
+        others = [row for row in rows if row["preset"] == name and row["backend"] != "cpu"]
+        if not cpu or not others:
+            continue
+        for key in PRESET_STATISTICS:
+            values = [float(row[key]) for row in cpu]
+            low, high = min(values), max(values)
+            spread = high - low
+            for row in others:
+                value = float(row[key])
+                inside = low - spread <= value <= high + spread
+                verdicts.append({"preset": name, "statistic": key, "backend": row["backend"], "value": value,
+                                 "cpu_low": low, "cpu_high": high, "inside": inside})
+                print(f"{name:<20} {key:<20} {row['backend']:>7} {value:>12.5g}   cpu {low:>12.5g} … {high:<12.5g}"
+                      f"  {'inside' if inside else 'OUTSIDE'}")
+    print(f"{sum(v['inside'] for v in verdicts)} of {len(verdicts)} inside the CPU's own spread")
+    return verdicts
+
+
 def _overrides(scene) -> list[str]:
     return [f"fluid.spacing_m={scene.fluid.spacing_m!r}", f"solver.iterations={scene.solver.iterations}",
             f"time.substeps={scene.time.substeps}"]
@@ -143,7 +227,12 @@ def sweep(args):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms"), default="sizes")
+    parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms", "presets", "compare"), default="sizes")
+    parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
+    parser.add_argument("--presets", nargs="+", default=None, help="presets: which (default: all)")
+    parser.add_argument("--device-decisions", action="store_true",
+                        help="keep the substep's decisions on the device, as GPU backends do, on any backend")
+    parser.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
     parser.add_argument("--sizes", type=int, nargs="+", default=None,
                         help="particle counts (default: 8000 64000; terms: 8000)")
     parser.add_argument("--iterations", type=int, nargs="+", default=None,
@@ -159,14 +248,19 @@ def main(argv=None):
     parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)")
-    parser.add_argument("--arch", default=None)
+    parser.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
     parser.add_argument("--csv", type=Path, default=None, help="write the table as CSV "
                         "(sweep default: docs/speed_vs_error.csv)")
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
-    args.backend = start_backend(args.arch)
-    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend}")
+    if args.mode == "compare":
+        return compare(args.tables)
+    args.backend = start_backend(args.arch, quiet=True, fast_compile=args.fast_compile)
+    args.variant = "+".join(["fast compile"] * args.fast_compile + ["device decisions"] * args.device_decisions)
+    device = describe(running_device())
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} "
+          f"({device})")
     if args.mode == "sweep":
         args.sizes = args.sizes or [8000, 64000]
         args.iterations = args.iterations or list(speed_error.ITERATIONS)
@@ -179,6 +273,8 @@ def main(argv=None):
     if args.mode == "terms":
         args.sizes = args.sizes or [8000]
         return terms(args)
+    if args.mode == "presets":
+        return presets(args)
     args.sizes = args.sizes or [8000, 64000]
     return sizes(args)
 

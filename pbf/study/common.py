@@ -47,6 +47,70 @@ def timed(function, *args):
     return time.perf_counter() - start
 
 
+class TransferCounter:
+    """Counts Taichi's kernel launches and device-to-host reads while active (a context manager).
+
+    A device-to-host read is anything that makes the host wait for a result from the device:
+    - a kernel launch that returns a value (``-> ti.i32``, a tuple, ...);
+    - a kernel launch given a NumPy array (Taichi copies the array to the device and, on GPU backends,
+      the whole of it back after the launch; ``to_numpy`` and ``from_numpy`` are such launches);
+    - reading an element of a field or ndarray from Python (``field[None]``, ``field[i]``).
+    A launch is every call of a ``@ti.kernel``, Taichi's own (``to_numpy``, ``fill``...) included;
+    writing an element from Python (``field[None] = v``) launches a small writer kernel and is counted
+    with the launches, not with the reads. ``ti.sync()`` is neither. Counted by wrapping Taichi's
+    ``Kernel.launch_kernel`` and its classes' ``__getitem__``/``__setitem__`` (Taichi 1.7.4, pinned)."""
+
+    def __init__(self):
+        self.launches = 0
+        self.reads = 0
+        self._saved = []
+        self._depth = 0
+
+    def __enter__(self):
+        from taichi.lang import kernel_impl
+        from taichi.lang._ndarray import ScalarNdarray
+        from taichi.lang.field import ScalarField
+        from taichi.lang.matrix import MatrixField, MatrixNdarray, VectorNdarray
+
+        counter = self
+
+        def launch(original):
+            def wrapped(kernel, t_kernel, *args):
+                counter.launches += 1
+                if counter._depth == 0 and (kernel.return_type is not None
+                                            or any(isinstance(a, np.ndarray) for a in args)):
+                    counter.reads += 1
+                return original(kernel, t_kernel, *args)
+            return wrapped
+
+        def access(original, is_read):
+            def wrapped(obj, *args):
+                if counter._depth == 0:
+                    counter.reads += is_read
+                    counter.launches += 1
+                counter._depth += 1
+                try:
+                    return original(obj, *args)
+                finally:
+                    counter._depth -= 1
+            return wrapped
+
+        targets = [(kernel_impl.Kernel, "launch_kernel", launch)]
+        for cls in (ScalarField, MatrixField, ScalarNdarray, VectorNdarray, MatrixNdarray):
+            targets += [(cls, "__getitem__", lambda f: access(f, 1)), (cls, "__setitem__", lambda f: access(f, 0))]
+        for cls, name, wrap in targets:
+            original = cls.__dict__[name]
+            self._saved.append((cls, name, original))
+            setattr(cls, name, wrap(original))
+        return self
+
+    def __exit__(self, *exc):
+        for cls, name, original in reversed(self._saved):
+            setattr(cls, name, original)
+        self._saved.clear()
+        return False
+
+
 class StageTimer:
     """A stage hook for ``Simulation.hook``: times every stage of every substep it sees, with the device
     synchronised around each (so stages add up to a little more than an untimed substep)."""

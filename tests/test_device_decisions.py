@@ -1,0 +1,50 @@
+"""The substep of the GPU backends, whose decisions stay on the device (the iterations' stopping test, the
+neighbour lists' overflow), run here on the CPU (``pbf.solver.backend.decisions_on_device``): it takes
+the host path's decisions and reads the device at most once per substep."""
+import numpy as np
+import pytest
+from scenes import small_dam_break
+
+from pbf import Simulation
+from pbf.solver.backend import decisions_on_device
+from pbf.study.common import TransferCounter
+
+
+def frames(sim, count):
+    """Iterations of the last substep of each of ``count`` frames, and the reads and launches per substep."""
+    used, substeps, reads, launches = [], 0, 0, 0
+    for _ in range(count):
+        with TransferCounter() as counter:
+            sim.step()
+        substeps, reads, launches = substeps + sim.frame_substeps, reads + counter.reads, launches + counter.launches
+        used.append(sim.iterations_used)  # on the device path a read, outside the count
+    return used, reads / substeps, launches / substeps
+
+
+@pytest.mark.parametrize("step_back", [True, False])
+def test_the_device_takes_the_hosts_decisions(step_back):
+    scene = small_dam_break(iterations=10)
+    scene["solver"].update(target_density_error=0.002, step_back=step_back)
+    host = Simulation(scene)
+    with decisions_on_device():
+        device = Simulation(scene)
+    assert device.iterations.on_device and device.grid.on_device and not host.iterations.on_device
+    host_used, host_reads, _ = frames(host, 12)
+    device_used, device_reads, device_launches = frames(device, 12)
+    # The same mean errors, formed in float32 on the device and float64 on the host, stop the same
+    # iterations; positions then differ only by rounding (a splash amplifies it, before impact it stays small).
+    assert device_used == host_used and max(host_used) > 2  # the target stopped some substep early
+    assert np.abs(device.positions() - host.positions()).max() < 1e-4
+    assert device.stats()["mean_density_error"] == pytest.approx(host.stats()["mean_density_error"], rel=0.02)
+    assert device_reads <= 1.0 < host_reads
+    assert device_launches <= 10 + 8  # every iteration is launched (past the target over no particles)
+
+
+def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
+    scene = small_dam_break(iterations=3)
+    scene["solver"].update(target_density_error=0.0, step_back=True, min_iterations=1)
+    with decisions_on_device():
+        sim = Simulation(scene)
+    used, reads, _ = frames(sim, 3)
+    assert used == [3, 3, 3]
+    assert reads == pytest.approx(1.0 / sim.frame_substeps)  # the frame's one read: the CFL limit's speed

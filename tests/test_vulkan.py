@@ -1,0 +1,142 @@
+"""The Vulkan subset: the solver's physics and the headless frames on Taichi's Vulkan backend against the
+CPU backend. CI (.ci/run) runs it on Mesa's software Vulkan driver (lavapipe) with
+``python -m pytest -m vulkan -n 0``; it is marked slow too, so that the default run leaves it out.
+
+Taichi runs one backend per process, so the work happens in subprocesses (tests/vulkan_run.py): one on
+Vulkan, three on the CPU that differ only in rounding (Taichi's full optimisation or its fast compile;
+the host's or the device's decisions in the substep). What the CPU runs spread over is the CPU's own
+spread: the seed scene on Vulkan must stay inside it, widened by as much again on either side.
+"""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_grid import float32_brute_force
+from vulkan_run import GRID_CASES, RENDER_SNAPSHOT, SCAN_LENGTHS, STATISTICS, grid_points
+
+from pbf.solver.backend import vulkan_devices
+from pbf.solver.sph import kernel_grad_np, kernel_np
+
+pytestmark = [pytest.mark.vulkan, pytest.mark.slow]
+HERE = Path(__file__).parent
+WORKER_TIMEOUT_S = 420
+CPU_VARIANTS = {"cpu, optimised": [], "cpu, fast compile": ["--fast-compile"],
+                "cpu, device decisions": ["--fast-compile", "--device-decisions"]}
+SNAPSHOT_FRAMES = 20
+"""The rendered state: the seed scene after this many frames, mid-splash."""
+PIXEL_TOLERANCE = 8
+"""A pixel differs where a channel differs by more than this (of 255): shading rounds differently."""
+
+
+def run_worker(out: Path, arch: str, flags, tasks, env) -> dict:
+    result = subprocess.run([sys.executable, str(HERE / "vulkan_run.py"), str(out), arch, *flags, *tasks],
+                            capture_output=True, text=True, timeout=WORKER_TIMEOUT_S, env=env)
+    assert result.returncode == 0, f"{arch} {flags}: {result.stderr[-3000:]}"
+    return {"stdout": result.stdout, **dict(np.load(out))}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    if not vulkan_devices():
+        pytest.skip("no Vulkan device here (Debian/Ubuntu: apt-get install mesa-vulkan-drivers libvulkan1)")
+    from pbf import Simulation
+
+    folder = tmp_path_factory.mktemp("vulkan")
+    sim = Simulation("dam_break", quiet=True)
+    sim.step(SNAPSHOT_FRAMES)
+    np.savez(folder / "snapshot.npz", positions=sim.positions(), velocities=sim.velocities())
+    env = {**os.environ, RENDER_SNAPSHOT: str(folder / "snapshot.npz")}
+    env.pop("PBF_ARCH", None)
+    results = {"vulkan": run_worker(folder / "vulkan.npz", "vulkan", [],
+                                    ["kernel", "scan", "grid", "rest", "seed", "render"], env)}
+    for name, flags in CPU_VARIANTS.items():
+        tasks = ["seed", "render"] if name == "cpu, optimised" else ["seed"]
+        results[name] = run_worker(folder / f"{name}.npz".replace(", ", "_"), "cpu", flags, tasks, env)
+    return results
+
+
+def test_vulkan_starts_and_names_its_device(runs):
+    vulkan = runs["vulkan"]
+    assert str(vulkan["arch"]) == "vulkan"
+    starting = [line for line in vulkan["stdout"].splitlines() if "Starting on" in line]
+    assert len(starting) == 1 and starting[0].startswith(f"[pbf] Starting on vulkan ({vulkan['device']}"), starting
+
+
+def test_kernel_and_gradient_match_numpy(runs):
+    vulkan = runs["vulkan"]
+    h = 0.1
+    assert np.allclose(vulkan["kernel_w"], kernel_np(vulkan["kernel_r"], h), rtol=1e-5, atol=1e-3)
+    expected = kernel_grad_np(vulkan["kernel_offsets"].astype(np.float64), h)
+    assert np.allclose(vulkan["kernel_grad"], expected, rtol=1e-5, atol=1e-2)
+    assert np.count_nonzero(vulkan["kernel_w"]) > 50  # not vacuous: most samples lie within h
+
+
+def test_prefix_sums_are_exact_and_sums_compensated(runs):
+    vulkan = runs["vulkan"]
+    for length in SCAN_LENGTHS:
+        counts = vulkan[f"scan_{length}_counts"]
+        assert np.array_equal(vulkan[f"scan_{length}_starts"], np.concatenate([[0], np.cumsum(counts)]))
+        values = vulkan[f"scan_{length}_values"].astype(np.float64)
+        (high_sum, high_max), (low_sum, _) = vulkan[f"scan_{length}_sums"]
+        assert float(high_sum) + float(low_sum) == pytest.approx(values.sum(), rel=1e-11)
+        assert high_max == np.float32(values.max())
+
+
+@pytest.mark.parametrize("case, reach", GRID_CASES)
+@pytest.mark.parametrize("checked", ["checked", "unchecked"])
+def test_grid_matches_brute_force(runs, case, reach, checked):
+    vulkan = runs["vulkan"]
+    points, h = grid_points(case)
+    name = f"grid_{case}_{reach}_{checked}"
+    order, counts, flat = vulkan[name + "_order"], vulkan[name + "_counts"], vulkan[name + "_flat"]
+    assert sorted(order) == list(range(len(points)))
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    got = [None] * len(points)
+    for slot, original in enumerate(order):
+        got[original] = set(order[flat[starts[slot]:starts[slot + 1]]].tolist())
+    expected = float32_brute_force(points, h)
+    wrong = [i for i in range(len(points)) if got[i] != expected[i]]
+    assert not wrong, f"{len(wrong)} particles with wrong neighbours, e.g. {wrong[:5]}"
+    assert sum(map(len, expected)) > len(points)
+
+
+def test_a_column_at_rest_stays_at_rest(runs):
+    # The thresholds of tests/test_physics.py's column, after half its settling time.
+    vulkan = runs["vulkan"]
+    stats = dict(zip(STATISTICS, vulkan["rest_statistics"]))
+    wave_speed = np.sqrt(9.81 * 0.4)
+    assert stats["mean_density_error"] < 0.01 and stats["max_density_error"] < 0.05
+    assert np.percentile(vulkan["rest_speeds"], 99) < 0.05 * wave_speed
+    assert stats["max_speed_m_s"] < 0.1 * wave_speed
+
+
+def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):
+    cpu = np.stack([runs[name]["seed_statistics"] for name in CPU_VARIANTS])  # (variants, frames, statistics)
+    vulkan = runs["vulkan"]["seed_statistics"]
+    # Means over the second half of the run, when the water has hit the far wall: single frames of a
+    # splash are chaotic, their means are not.
+    half = cpu.shape[1] // 2
+    cpu_means, vulkan_means = cpu[:, half:].mean(axis=1), vulkan[half:].mean(axis=0)
+    low, high = cpu_means.min(axis=0), cpu_means.max(axis=0)
+    spread = high - low
+    for k, name in enumerate(STATISTICS):
+        assert low[k] - spread[k] <= vulkan_means[k] <= high[k] + spread[k], (
+            f"{name}: vulkan {vulkan_means[k]:.6g}, the CPU runs {cpu_means[:, k]}")
+
+
+def test_the_substep_reads_the_device_at_most_once(runs):
+    reads_per_substep, launches_per_substep = runs["vulkan"]["seed_transfers"]
+    assert reads_per_substep <= 1.0
+    assert launches_per_substep < 30  # iterations past the target are launched, but do no work
+
+
+def test_headless_frames_match_the_cpus(runs):
+    for style in ("particles", "surface"):
+        cpu, vulkan = runs["cpu, optimised"][f"render_{style}"], runs["vulkan"][f"render_{style}"]
+        assert cpu.shape == vulkan.shape
+        different = np.any(np.abs(cpu.astype(int) - vulkan.astype(int)) > PIXEL_TOLERANCE, axis=2)
+        assert different.mean() < 0.01, f"{style}: {different.mean():.2%} of the pixels differ"
+        assert np.any(vulkan != vulkan[0, 0]), f"{style}: a blank frame"

@@ -1,0 +1,186 @@
+"""The work of tests/test_vulkan.py on one backend, in a process of its own (Taichi runs one backend per
+process): ``python tests/vulkan_run.py OUT.npz ARCH [--fast-compile] [--device-decisions] TASK...``.
+
+Tasks: ``kernel`` (the SPH kernel and its gradient at sample distances), ``scan`` (prefix sums and
+compensated sums of random data), ``grid`` (neighbour lists of random points and of a pile in one cell,
+checked and unchecked), ``rest`` (a column of water at rest), ``seed`` (the seed scene's statistics
+frame by frame, with reads and launches per substep), ``render`` (the headless frames of the snapshot in
+RENDER_SNAPSHOT, particles and surface). Everything lands in OUT.npz for the test to judge.
+"""
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(__file__))
+
+from scenes import column_scene  # noqa: E402  (tests/ on the path first)
+
+GRID_CASES = (("random", 1), ("random", 2), ("pile", 1))
+SCAN_LENGTHS = (1, 33, 1025, 100_003)
+SEED_FRAMES = 30
+REST_FRAMES = 45
+RENDER_SIZE = (320, 180)
+RENDER_SNAPSHOT = "RENDER_SNAPSHOT"
+"""Environment variable: the npz (positions, velocities) of the state the ``render`` task draws."""
+
+
+def grid_points(case: str) -> tuple[np.ndarray, float]:
+    rng = np.random.default_rng(7)
+    if case == "random":
+        return rng.uniform(0.0, 1.0, size=(3000, 3)), 0.07
+    return rng.uniform(0.45, 0.45 + 0.1 / 3, size=(300, 3)), 0.1  # every point in one cell: 299 neighbours each
+
+
+def kernel_task(out: dict) -> None:
+    import taichi as ti
+
+    from pbf.solver.sph import kernel, kernel_and_gradient
+
+    h = 0.1
+    r = np.linspace(0.0, 1.2 * h, 97)
+    offsets = np.stack([r * 0.6, r * 0.0, r * 0.8], axis=1).astype(np.float32)
+    points = ti.Vector.field(3, ti.f32, shape=len(r))
+    values = ti.field(ti.f32, shape=len(r))
+    gradients = ti.Vector.field(3, ti.f32, shape=len(r))
+    points.from_numpy(offsets)
+
+    @ti.kernel
+    def evaluate():
+        for i in points:
+            values[i] = kernel(points[i].norm_sqr(), h)
+            _, gradients[i] = kernel_and_gradient(points[i], h)
+
+    evaluate()
+    out.update(kernel_r=r, kernel_offsets=offsets, kernel_w=values.to_numpy(), kernel_grad=gradients.to_numpy())
+
+
+def scan_task(out: dict) -> None:
+    import taichi as ti
+
+    from pbf.solver.scan import ExclusiveScan, TreeSum
+
+    for length in SCAN_LENGTHS:
+        rng = np.random.default_rng(length)
+        counts = rng.integers(0, 50, size=length).astype(np.int32)
+        values = (rng.random(length) ** 3).astype(np.float32)
+        source, starts = ti.field(ti.i32, shape=length), ti.field(ti.i32, shape=length + 1)
+        floats = ti.field(ti.f32, shape=length)
+        source.from_numpy(counts)
+        floats.from_numpy(values)
+        scan, sums = ExclusiveScan(length), TreeSum(length, 2)
+
+        @ti.kernel
+        def reduce():
+            sums.sum(floats, 0, length)
+            sums.maximum(floats, 1, length)
+
+        scan.run(source, starts)
+        reduce()
+        out[f"scan_{length}_counts"], out[f"scan_{length}_starts"] = counts, starts.to_numpy()
+        out[f"scan_{length}_values"] = values
+        out[f"scan_{length}_sums"] = np.stack([sums.high.to_numpy(), sums.low.to_numpy()])
+
+
+def grid_task(out: dict) -> None:
+    import taichi as ti
+
+    from pbf.solver.grid import NeighbourGrid
+    from pbf.solver.model import GridParams
+
+    for case, reach in GRID_CASES:
+        points, h = grid_points(case)
+        n = len(points)
+        active = ti.field(ti.i32, shape=())
+        active[None] = n
+        grid = NeighbourGrid(GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, reach), active)
+        x = ti.Vector.field(3, ti.f32, shape=n)
+        key = ti.field(ti.i32, shape=n)
+        x.from_numpy(points.astype(np.float32))
+        key.from_numpy(np.arange(n, dtype=np.int32))
+        grid.sort(x, key)
+        order = grid.sorted_from.to_numpy()
+        x.from_numpy(points[order].astype(np.float32))
+        for checked in (True, False):
+            grid.build_neighbours(x, checked=checked)
+            lists = grid.neighbour_lists()
+            name = f"grid_{case}_{reach}_{'checked' if checked else 'unchecked'}"
+            out[name + "_order"] = order
+            out[name + "_counts"] = np.array([len(entries) for entries in lists])
+            out[name + "_flat"] = np.concatenate(lists) if lists else np.zeros(0, np.int32)
+
+
+def statistics_row(sim) -> list[float]:
+    stats = sim.stats()
+    return [stats["mean_density_error"], stats["max_density_error"], stats["max_speed_m_s"], stats["kinetic_energy_j"],
+            stats["mean_neighbours"], stats["iterations"], stats["substeps"]]
+
+
+STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j", "mean_neighbours",
+              "iterations", "substeps")
+
+
+def rest_task(out: dict) -> None:
+    from pbf import Simulation
+
+    sim = Simulation(column_scene(0.025, substeps=8, iterations=4, height_m=0.4), quiet=True)
+    sim.step(REST_FRAMES)
+    out["rest_statistics"] = np.array(statistics_row(sim))
+    out["rest_speeds"] = np.linalg.norm(sim.velocities(), axis=1)
+
+
+def seed_task(out: dict) -> None:
+    from pbf import Simulation
+    from pbf.study.common import TransferCounter
+
+    sim = Simulation("dam_break", quiet=True)
+    rows, reads, launches, substeps = [], 0, 0, 0
+    for _ in range(SEED_FRAMES):
+        with TransferCounter() as counter:
+            sim.step()
+        reads, launches, substeps = reads + counter.reads, launches + counter.launches, substeps + sim.frame_substeps
+        rows.append(statistics_row(sim))
+    out["seed_statistics"] = np.array(rows)
+    out["seed_transfers"] = np.array([reads / substeps, launches / substeps])
+
+
+def render_task(out: dict) -> None:
+    from pbf import Simulation
+    from pbf.app.render import SceneRenderer
+    from pbf.solver import Snapshot
+
+    state = np.load(os.environ[RENDER_SNAPSHOT])
+    sim = Simulation("dam_break", quiet=True)
+    sim.restore(Snapshot(state["positions"], state["velocities"], 0.0, 0))
+    for style in ("particles", "surface"):
+        out[f"render_{style}"] = SceneRenderer(sim, *RENDER_SIZE, style=style).frame()
+
+
+TASKS = {"kernel": kernel_task, "scan": scan_task, "grid": grid_task, "rest": rest_task, "seed": seed_task,
+         "render": render_task}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("out")
+    parser.add_argument("arch")
+    parser.add_argument("--fast-compile", action="store_true")
+    parser.add_argument("--device-decisions", action="store_true")
+    parser.add_argument("tasks", nargs="+", choices=TASKS)
+    args = parser.parse_args()
+    from pbf.solver.backend import decisions_on_device, running_device, start_backend
+
+    start_backend(args.arch, fast_compile=args.fast_compile)
+    out = {"device": np.array(running_device().name), "arch": np.array(running_device().arch)}
+    with decisions_on_device(args.device_decisions):
+        for task in args.tasks:
+            start = time.perf_counter()
+            TASKS[task](out)
+            out[f"seconds_{task}"] = np.array(time.perf_counter() - start)
+    np.savez(args.out, **out)
+
+
+if __name__ == "__main__":
+    main()
