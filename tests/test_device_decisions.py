@@ -24,7 +24,7 @@ def frames(sim, count):
 @pytest.mark.parametrize("step_back", [True, False])
 def test_the_device_takes_the_hosts_decisions(step_back):
     scene = small_dam_break(iterations=10)
-    scene["solver"].update(target_density_error=0.002, step_back=step_back)
+    scene["solver"].update(target_density_error=0.002, expert={"step_back": step_back})
     host = Simulation(scene)
     with decisions_on_device():
         device = Simulation(scene)
@@ -42,7 +42,7 @@ def test_the_device_takes_the_hosts_decisions(step_back):
 
 def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
     scene = small_dam_break(iterations=3)
-    scene["solver"].update(target_density_error=0.0, step_back=True, min_iterations=1)
+    scene["solver"].update(target_density_error=0.0, min_iterations=1)
     with decisions_on_device():
         sim = Simulation(scene)
     used, reads, _ = frames(sim, 3)
