@@ -5,12 +5,11 @@ import math
 
 import numpy as np
 import pytest
-from scenes import small_dam_break
 
 from pbf import SceneError
 from pbf.scene import Solver, Time, from_dict, load_scene
-from pbf.solver import Control, Model, Push
-from pbf.solver import model
+from pbf.solver import Control, Model, Push, model
+from scenes import small_dam_break
 
 NAN, INF = math.nan, math.inf
 
@@ -25,23 +24,23 @@ def bounds(table, name):
 
 
 @pytest.mark.parametrize("field, value, error, words", [
-    ("iterations", -1, ValueError, "control.iterations: expected an integer in [1, 100] (the bounds of "
-                                   "solver.iterations), got -1"),
+    ("iterations", -1, ValueError, ("control.iterations: expected an integer in [1, 100] (the bounds of "
+                                   "solver.iterations), got -1")),
     ("iterations", 0, ValueError, "control.iterations: expected an integer in [1, 100]"),
     ("iterations", 10**9, ValueError, "got 1000000000"),
-    ("iterations", 1e9, TypeError, "control.iterations: expected an integer in [1, 100] (the bounds of "
-                                   "solver.iterations), got 1000000000.0 (float)"),
+    ("iterations", 1e9, TypeError, ("control.iterations: expected an integer in [1, 100] (the bounds of "
+                                   "solver.iterations), got 1000000000.0 (float)")),
     ("iterations", NAN, TypeError, "got nan (float)"),
     ("iterations", "5", TypeError, "got '5' (str)"),
     ("iterations", True, TypeError, "got true (bool)"),
     ("min_iterations", 101, ValueError, "control.min_iterations: expected an integer in [1, 100]"),
     ("substeps", 0, ValueError, "control.substeps: expected an integer in [1, 1000] (the bounds of time.substeps)"),
     ("substeps", -3, ValueError, "control.substeps"),
-    ("xsph", NAN, ValueError, "control.xsph: expected a finite number in [0, 1] (the bounds of viscosity.xsph), "
-                              "got nan"),
+    ("xsph", NAN, ValueError, ("control.xsph: expected a finite number in [0, 1] (the bounds of viscosity.xsph), "
+                              "got nan")),
     ("xsph", 2.0, ValueError, "control.xsph"),
-    ("vorticity", INF, ValueError, "control.vorticity: expected a finite number in [0, 1] (the bounds of "
-                                   "vorticity.epsilon), got inf"),
+    ("vorticity", INF, ValueError, ("control.vorticity: expected a finite number in [0, 1] (the bounds of "
+                                   "vorticity.epsilon), got inf")),
     ("target_density_error", NAN, ValueError, "control.target_density_error: expected a finite number in [0, 1]"),
     ("target_density_error", "0.01", TypeError, "control.target_density_error"),
     ("divergence_iterations", -1, ValueError, "control.divergence_iterations: expected an integer in [0, 100]"),

@@ -9,7 +9,6 @@ import pytest
 
 from pbf import SceneError, Simulation
 from pbf.scene import from_dict
-from pbf.solver import Snapshot
 
 SPACING = 0.02
 
@@ -48,12 +47,12 @@ def changed(snapshot, **changes):
 
 
 @pytest.mark.parametrize("change, error, words", [
-    (lambda s: changed(s, emitted_layers=(0,)), ValueError, "the emitters have still to add (emitted_layers = (0,)) "
-                                                            "exceed the 189 this scene allocates"),
+    (lambda s: changed(s, emitted_layers=(0,)), ValueError, ("the emitters have still to add (emitted_layers = (0,)) "
+                                                            "exceed the 189 this scene allocates")),
     (lambda s: changed(s, emitted_layers=(-5,)), ValueError, "emitted_layers[0] = -5; allowed: 0 to the 21 layers"),
     (lambda s: changed(s, emitted_layers=(22,)), ValueError, "emitted_layers[0] = 22"),
-    (lambda s: changed(s, emitted_layers=(1, 2)), ValueError, "2 emitted layer counts for the 1 emitters of this "
-                                                              "scene (a snapshot of another scene?)"),
+    (lambda s: changed(s, emitted_layers=(1, 2)), ValueError, ("2 emitted layer counts for the 1 emitters of this "
+                                                              "scene (a snapshot of another scene?)")),
     (lambda s: changed(s, emitted_layers=(1.5,)), TypeError, "emitted_layers[0]: expected a whole number"),
     (lambda s: changed(s, emitted_layers=None), TypeError, "expected emitted_layers as a tuple"),
     (lambda s: changed(s, positions_m=np.full_like(s.positions_m, np.nan)), ValueError,

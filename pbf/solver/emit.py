@@ -11,6 +11,7 @@ A drowned nozzle pauses: a layer whose sites the water already occupies (a live 
 half a spacing of a site, where the density constraint would push the pair apart at once) is
 skipped, as while the emitters are switched off, and the stream resumes once the water has gone.
 """
+import itertools
 import math
 
 import numpy as np
@@ -98,7 +99,7 @@ class Emitters:
         occupied = np.zeros(len(sites), np.int32)
         self._occupied(sites, occupied, 0.5 * self.spacing)
         bounds = np.cumsum([0] + [len(layer) for layer in layers])
-        return [bool(occupied[a:b].any()) for a, b in zip(bounds[:-1], bounds[1:])]
+        return [bool(occupied[a:b].any()) for a, b in itertools.pairwise(bounds)]
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its

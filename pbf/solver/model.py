@@ -22,8 +22,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pbf.scene import (FLOAT32_SAFE, MAX_ITERATIONS, Expert, Scene, SceneError, Solver, Time, Viscosity, Vorticity,
-                       block_counts)
+from pbf.scene import (
+    FLOAT32_SAFE,
+    MAX_ITERATIONS,
+    Expert,
+    Scene,
+    SceneError,
+    Solver,
+    Time,
+    Viscosity,
+    Vorticity,
+    block_counts,
+)
 from pbf.scene.schema import _num, _show
 from pbf.solver import acceleration, sph
 
@@ -156,7 +166,7 @@ class Push:
         for name in ("point_m", "velocity_m_s"):
             object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name),
                                                            FLOAT32_SAFE))
-        object.__setattr__(self, "radius_m", _checked_number(f"control.push.radius_m", self.radius_m, float,
+        object.__setattr__(self, "radius_m", _checked_number("control.push.radius_m", self.radius_m, float,
                                                              (0.0, FLOAT32_SAFE), "radius of the hand, m",
                                                              above_lowest=True))
 
