@@ -146,3 +146,26 @@ def test_a_conflict_with_a_key_the_command_line_set_names_the_command_line():
     message = str(refused.value)
     assert message.startswith("command line --set obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not "
                               "agree with ") and "key 'time.max_cfl' = 2" in message
+
+
+@pytest.fixture(scope="module")
+def shared_simulation():
+    from pbf.solver import Simulation
+
+    return Simulation(small_dam_break(), quiet=True)
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda sim: sim.step(1.5), TypeError, "step: frames: expected a whole number of frames, got 1.5"),
+    (lambda sim: sim.step(True), TypeError, "step: frames: expected a whole number"),
+    (lambda sim: sim.step(-1), ValueError, "step: frames: expected 0 or more, got -1"),
+    (lambda sim: sim.substep(float("nan")), ValueError, r"substep: dt: expected a value in \(0, "),
+    (lambda sim: sim.substep(1.0), ValueError, r"substep: dt: expected a value in \(0, 0.0166667\] s"),
+    (lambda sim: sim.substep("0.01"), TypeError, "substep: dt: expected a number of seconds"),
+])
+def test_step_and_substep_refuse_bad_arguments(shared_simulation, call, error, message):
+    sim = shared_simulation
+    before = sim.positions()
+    with pytest.raises(error, match=message):
+        call(sim)
+    assert np.array_equal(sim.positions(), before)

@@ -328,8 +328,16 @@ class Simulation:
         self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
-        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps."""
+        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
+        most frame_dt_s."""
         control, hook = self.control, self.hook
+        if dt is not None:
+            frame_dt = self.scene.time.frame_dt_s
+            if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
+                raise TypeError(f"substep: dt: expected a number of seconds, got {_show(dt)}")
+            if not 0.0 < dt <= frame_dt:
+                raise ValueError(f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), "
+                                 f"got {_show(dt)}")
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         x_star = self.integrator.predicted
         self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
@@ -358,6 +366,10 @@ class Simulation:
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
+        if isinstance(frames, bool) or not isinstance(frames, numbers.Integral):
+            raise TypeError(f"step: frames: expected a whole number of frames, got {_show(frames)}")
+        if frames < 0:
+            raise ValueError(f"step: frames: expected 0 or more, got {_show(frames)}")
         for _ in range(frames):
             self.frame_substeps = self.substeps_needed()
             self.pressure_substeps = 0                           # pressures(): this frame's mean
