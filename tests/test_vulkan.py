@@ -3,9 +3,12 @@ CPU backend. CI (.ci/run) runs it on Mesa's software Vulkan driver (lavapipe) wi
 ``python -m pytest -m vulkan -n 0``; it is marked slow too, so that the default run leaves it out.
 
 Taichi runs one backend per process, so the work happens in subprocesses (tests/vulkan_run.py): one on
-Vulkan, three on the CPU that differ only in rounding (Taichi's full optimisation or its fast compile;
-the host's or the device's decisions in the substep). What the CPU runs spread over is the CPU's own
-spread: the seed scene on Vulkan must stay inside it, widened by as much again on either side.
+Vulkan, five on the CPU that differ from each other only as roundings do (Taichi's full optimisation
+or its fast compile; the host's or the device's decisions in the substep; positions moved by 1e-7 m).
+What the CPU runs spread over is the CPU's own spread: the seed scene's splash is chaotic, and two runs
+that differ in the last bit take different iteration counts a dozen frames in (three CPU runs that
+happened to agree on theirs put Vulkan's mean density error 3.6% outside their range). The seed scene
+on Vulkan must stay inside that spread, widened by as much again on either side.
 """
 import os
 import subprocess
@@ -15,16 +18,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_grid import float32_brute_force
-from vulkan_run import GRID_CASES, RENDER_SNAPSHOT, SCAN_LENGTHS, STATISTICS, grid_points
+from vulkan_run import RENDER_SNAPSHOT, SCAN_LENGTHS, STATISTICS, grid_points
 
 from pbf.solver.backend import vulkan_devices
-from pbf.solver.sph import kernel_grad_np, kernel_np
+from pbf.solver.sph import kernel_gradient_np, kernel_np
 
 pytestmark = [pytest.mark.vulkan, pytest.mark.slow]
 HERE = Path(__file__).parent
 WORKER_TIMEOUT_S = 420
 CPU_VARIANTS = {"cpu, optimised": [], "cpu, fast compile": ["--fast-compile"],
-                "cpu, device decisions": ["--fast-compile", "--device-decisions"]}
+                "cpu, device decisions": ["--fast-compile", "--device-decisions"],
+                "cpu, perturbed 1": ["--fast-compile", "--perturb", "1"],
+                "cpu, perturbed 2": ["--fast-compile", "--perturb", "2"]}
+REST_TOLERANCE = 0.05
+"""The pool at rest on Vulkan against the CPU: its statistics within 5% (0.7% apart, measured)."""
 SNAPSHOT_FRAMES = 20
 """The rendered state: the seed scene after this many frames, mid-splash."""
 PIXEL_TOLERANCE = 8
@@ -51,10 +58,10 @@ def runs(tmp_path_factory):
     env = {**os.environ, RENDER_SNAPSHOT: str(folder / "snapshot.npz")}
     env.pop("PBF_ARCH", None)
     results = {"vulkan": run_worker(folder / "vulkan.npz", "vulkan", [],
-                                    ["kernel", "scan", "grid", "rest", "seed", "render"], env)}
+                                    ["kernel", "scan", "grid", "seed", "rest", "render"], env)}
     for name, flags in CPU_VARIANTS.items():
-        tasks = ["seed", "render"] if name == "cpu, optimised" else ["seed"]
-        results[name] = run_worker(folder / f"{name}.npz".replace(", ", "_"), "cpu", flags, tasks, env)
+        tasks = ["seed", "rest", "render"] if name == "cpu, optimised" else ["seed"]
+        results[name] = run_worker(folder / f"{name.replace(', ', '_').replace(' ', '_')}.npz", "cpu", flags, tasks, env)
     return results
 
 
@@ -69,7 +76,7 @@ def test_kernel_and_gradient_match_numpy(runs):
     vulkan = runs["vulkan"]
     h = 0.1
     assert np.allclose(vulkan["kernel_w"], kernel_np(vulkan["kernel_r"], h), rtol=1e-5, atol=1e-3)
-    expected = kernel_grad_np(vulkan["kernel_offsets"].astype(np.float64), h)
+    expected = kernel_gradient_np(vulkan["kernel_offsets"].astype(np.float64), h)
     assert np.allclose(vulkan["kernel_grad"], expected, rtol=1e-5, atol=1e-2)
     assert np.count_nonzero(vulkan["kernel_w"]) > 50  # not vacuous: most samples lie within h
 
@@ -85,13 +92,13 @@ def test_prefix_sums_are_exact_and_sums_compensated(runs):
         assert high_max == np.float32(values.max())
 
 
-@pytest.mark.parametrize("case, reach", GRID_CASES)
 @pytest.mark.parametrize("checked", ["checked", "unchecked"])
-def test_grid_matches_brute_force(runs, case, reach, checked):
+def test_grid_matches_brute_force(runs, checked):
+    # Random points around a pile whose points have more than SLOTS neighbours: the second visit,
+    # read back by the host (checked) or run by the device on its own (unchecked, as in a substep).
     vulkan = runs["vulkan"]
-    points, h = grid_points(case)
-    name = f"grid_{case}_{reach}_{checked}"
-    order, counts, flat = vulkan[name + "_order"], vulkan[name + "_counts"], vulkan[name + "_flat"]
+    points, h = grid_points()
+    order, counts, flat = vulkan["grid_order"], vulkan[f"grid_{checked}_counts"], vulkan[f"grid_{checked}_flat"]
     assert sorted(order) == list(range(len(points)))
     starts = np.concatenate([[0], np.cumsum(counts)])
     got = [None] * len(points)
@@ -100,17 +107,21 @@ def test_grid_matches_brute_force(runs, case, reach, checked):
     expected = float32_brute_force(points, h)
     wrong = [i for i in range(len(points)) if got[i] != expected[i]]
     assert not wrong, f"{len(wrong)} particles with wrong neighbours, e.g. {wrong[:5]}"
-    assert sum(map(len, expected)) > len(points)
+    assert max(map(len, expected)) > 64  # not vacuous: some lists overflow their slots
 
 
-def test_a_column_at_rest_stays_at_rest(runs):
-    # The thresholds of tests/test_physics.py's column, after half its settling time.
-    vulkan = runs["vulkan"]
+def test_a_pool_at_rest_stays_at_rest(runs):
+    # A lattice over the seed scene's floor, touching every wall, after a third of a second: it settles
+    # by less than a tenth of its wave speed, and as on the CPU (a calm flow is not chaotic).
+    vulkan, cpu = runs["vulkan"], runs["cpu, optimised"]
     stats = dict(zip(STATISTICS, vulkan["rest_statistics"]))
-    wave_speed = np.sqrt(9.81 * 0.4)
+    wave_speed = np.sqrt(9.81 * float(vulkan["rest_depth_m"]))
     assert stats["mean_density_error"] < 0.01 and stats["max_density_error"] < 0.05
-    assert np.percentile(vulkan["rest_speeds"], 99) < 0.05 * wave_speed
     assert stats["max_speed_m_s"] < 0.1 * wave_speed
+    for name, value, expected in zip(STATISTICS, vulkan["rest_statistics"], cpu["rest_statistics"]):
+        assert value == pytest.approx(expected, rel=REST_TOLERANCE), name
+    assert np.percentile(vulkan["rest_speeds"], 99) == pytest.approx(np.percentile(cpu["rest_speeds"], 99),
+                                                                      rel=REST_TOLERANCE)
 
 
 def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):
@@ -130,7 +141,7 @@ def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):
 def test_the_substep_reads_the_device_at_most_once(runs):
     reads_per_substep, launches_per_substep = runs["vulkan"]["seed_transfers"]
     assert reads_per_substep <= 1.0
-    assert launches_per_substep < 30  # iterations past the target are launched, but do no work
+    assert launches_per_substep < 20  # iterations past the target are launched, but do no work
 
 
 def test_headless_frames_match_the_cpus(runs):
