@@ -11,16 +11,17 @@ up (JIT and the first impact), then times whole frames with a device sync: media
 particle-substeps per second, the mean and max density error over the timed frames, a per-stage
 breakdown of the substeps that follow, and, over as many frames again, the kernel launches and the
 device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
-One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms`` times one substep of the same state, stage by stage,
-with each optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
-interleaved rounds, and reports what each costs. Stages are timed by a hook inside the step
-(``pbf.study.common.StageTimer``). Medians throughout: the machines are shared and noisy.
+One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms``
+times one substep of the same state, stage by stage, with each optional term (vorticity confinement,
+XSPH, s_corr, wall density) switched off in turn, in interleaved rounds, and reports what each
+costs. Stages are timed by a hook inside the step (``pbf.study.common.StageTimer``). Medians
+throughout: the machines are shared and noisy.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
 tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions`` or
-``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether each non-CPU run lies
-within the CPU runs' own spread, widened by as much again on either side.
+``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
+each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
 import argparse
 import csv
@@ -167,7 +168,8 @@ def presets(args) -> list[dict]:
         for frame in tqdm(range(args.frames), desc=f"{name}, {sim.particle_count:,} particles", unit="frame"):
             with TransferCounter() as counter:
                 seconds += timed(sim.step)
-            reads, launches, substeps = reads + counter.reads, launches + counter.launches, substeps + sim.frame_substeps
+            reads, launches = reads + counter.reads, launches + counter.launches
+            substeps += sim.frame_substeps
             if frame >= args.frames // 2:
                 samples.append(sim.stats())
         rows.append({"preset": name, "backend": args.backend, "variant": args.variant, "particles": sim.particle_count,
