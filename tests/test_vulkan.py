@@ -61,7 +61,8 @@ def runs(tmp_path_factory):
                                     ["kernel", "scan", "grid", "seed", "rest", "render"], env)}
     for name, flags in CPU_VARIANTS.items():
         tasks = ["seed", "rest", "render"] if name == "cpu, optimised" else ["seed"]
-        results[name] = run_worker(folder / f"{name.replace(', ', '_').replace(' ', '_')}.npz", "cpu", flags, tasks, env)
+        out = folder / f"{name.replace(', ', '_').replace(' ', '_')}.npz"
+        results[name] = run_worker(out, "cpu", flags, tasks, env)
     return results
 
 

@@ -233,7 +233,8 @@ def _choose(requested: str) -> tuple[Device, str]:
     if other is not None and not other.software:
         return other, f"no CUDA GPU, a {other.arch} device found"
     if other is not None:
-        return _cpu_device(), f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than the CPU backend"
+        return _cpu_device(), (f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than "
+                               f"the CPU backend")
     return _cpu_device(), "no GPU found"
 
 

@@ -73,7 +73,8 @@ class NeighbourGrid:
         """What unchecked builds saw since the host last asked (:meth:`take_status`)."""
         self.on_device = keeps_decisions_on_device()
         self.checking = False
-        """Whether unchecked builds read the overflow flag anyway (after a frame with an overflow)."""
+        """Whether unchecked builds read the overflow flag anyway (the last frame's compact list was over
+        CHECK_ABOVE full)."""
         self.most_entries_in_frame = 0
         """The longest compact list of the checked builds since the last :meth:`settle_frame`."""
         self.neighbour_scan = ExclusiveScan(particle_count)

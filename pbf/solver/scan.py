@@ -1,11 +1,12 @@
 """Prefix sums and reductions over Taichi fields: parallel, in float32, bit-identical on any thread count.
 
 Both walk a tree of blocks. Level 0 cuts the values into blocks of consecutive entries; every level
-above cuts the block results of the one below into blocks, up to a level that is one block. A block is one thread's loop in index order, a level one parallel
-loop at the top level of the calling kernel: no serialised pass, no atomic, no host round trip, and
-the order of every addition depends on the indices alone, so the results are the same bits on any
-thread count, run after run. Everything is a ``ti.func`` for the top level of the caller's kernel,
-so a scan or a sum adds loops to a launch, never a launch of its own.
+above cuts the block results of the one below into blocks, up to a level that is one block. A block
+is one thread's loop in index order, a level one parallel loop at the top level of the calling
+kernel: no serialised pass, no atomic, no host round trip, and the order of every addition depends
+on the indices alone, so the results are the same bits on any thread count, run after run.
+Everything is a ``ti.func`` for the top level of the caller's kernel, so a scan or a sum adds loops
+to a launch, never a launch of its own.
 
 The block sizes are the one choice per backend (:func:`block_sizes`). On the CPU level 0 has about
 1,024 blocks of n/1024 entries (64 at least): a thread walks a long stretch of memory in order, and

@@ -11,22 +11,26 @@ up (JIT and the first impact), then times whole frames with a device sync: media
 particle-substeps per second, the mean and max density error over the timed frames, a per-stage
 breakdown of the substeps that follow, and, over as many frames again, the kernel launches and the
 device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
-One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms`` times one substep of the same state, stage by stage,
-with each optional term (vorticity confinement, XSPH, s_corr, wall density) switched off in turn, in
-interleaved rounds, and reports what each costs. Stages are timed by a hook inside the step
-(``pbf.study.common.StageTimer``). Medians throughout: the machines are shared and noisy.
+One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms``
+times one substep of the same state, stage by stage, with each optional term (vorticity confinement,
+XSPH, s_corr, wall density) switched off in turn, in interleaved rounds, and reports what each
+costs. Stages are timed by a hook inside the step (``pbf.study.common.StageTimer``). Medians
+throughout: the machines are shared and noisy.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
-tables from several runs (backends, or the CPU with ``--fast-compile`` or ``--device-decisions``, which
-differ from it only in rounding) and says, per preset and statistic, whether each non-CPU run lies
-within the CPU runs' own spread, widened by as much again on either side.
+tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions`` or
+``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
+each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
 import argparse
 import csv
 import platform
 import statistics
+from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from tqdm import tqdm
 
@@ -144,6 +148,8 @@ def terms(args) -> list[dict]:
     return rows
 
 
+PERTURBATION_M = 1e-7
+"""``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
 PRESET_STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j",
                      "mean_neighbours", "iterations")
 
@@ -154,11 +160,16 @@ def presets(args) -> list[dict]:
     for name in args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml")):
         with decisions_on_device(args.device_decisions):
             sim = Simulation(load_scene(name, args.set), quiet=True)
+        if args.perturb is not None:  # rounding-sized noise: a run that differs as a rounding does
+            start = sim.snapshot()
+            noise = np.random.default_rng(args.perturb).normal(0.0, PERTURBATION_M, start.positions_m.shape)
+            sim.restore(replace(start, positions_m=(start.positions_m + noise).astype(np.float32)))
         samples, reads, launches, substeps, seconds = [], 0, 0, 0, 0.0
         for frame in tqdm(range(args.frames), desc=f"{name}, {sim.particle_count:,} particles", unit="frame"):
             with TransferCounter() as counter:
                 seconds += timed(sim.step)
-            reads, launches, substeps = reads + counter.reads, launches + counter.launches, substeps + sim.frame_substeps
+            reads, launches = reads + counter.reads, launches + counter.launches
+            substeps += sim.frame_substeps
             if frame >= args.frames // 2:
                 samples.append(sim.stats())
         rows.append({"preset": name, "backend": args.backend, "variant": args.variant, "particles": sim.particle_count,
@@ -233,6 +244,8 @@ def main(argv=None):
     parser.add_argument("--device-decisions", action="store_true",
                         help="keep the substep's decisions on the device, as GPU backends do, on any backend")
     parser.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
+    parser.add_argument("--perturb", type=int, default=None, metavar="SEED",
+                        help="presets: start from positions moved by 1e-7 m (rounding-sized noise) drawn from SEED")
     parser.add_argument("--sizes", type=int, nargs="+", default=None,
                         help="particle counts (default: 8000 64000; terms: 8000)")
     parser.add_argument("--iterations", type=int, nargs="+", default=None,
@@ -257,7 +270,8 @@ def main(argv=None):
     if args.mode == "compare":
         return compare(args.tables)
     args.backend = start_backend(args.arch, quiet=True, fast_compile=args.fast_compile)
-    args.variant = "+".join(["fast compile"] * args.fast_compile + ["device decisions"] * args.device_decisions)
+    args.variant = "+".join(["fast compile"] * args.fast_compile + ["device decisions"] * args.device_decisions
+                            + [f"perturbed {args.perturb}"] * (args.perturb is not None))
     device = describe(running_device())
     print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} "
           f"({device})")
