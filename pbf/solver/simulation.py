@@ -12,6 +12,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.solver.backend import start_backend
+from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
 from pbf.solver.acceleration import Weights
 from pbf.solver.density import DensityConstraint
@@ -82,8 +83,10 @@ class Simulation:
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
         self.state = State(model.capacity)
-        self.boundaries = Boundaries(model.boundary)
-        """The container, its piston and the obstacles (``pbf.solver.boundary``)."""
+        self.boundaries = Boundaries(model.boundary, model.capacity)
+        """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
+        self.bodies = self.boundaries.bodies
+        """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state)
         self.grid = NeighbourGrid(model.grid, self.state.active)
         self.integrator = Integrator(self.state, self.boundaries)
@@ -126,18 +129,23 @@ class Simulation:
         instead of sagging into it (docs/VALIDATION.md)."""
         dt = self.scene.time.frame_dt_s / self.control.substeps
         self.control.wave_maker_on = False
+        if self.bodies is not None:
+            self.bodies.held = True  # the water settles around the bodies where the scene puts them
         for _ in range(math.ceil(seconds / dt - 1e-9)):
             self.substep(dt)
             self.integrator.damp(SETTLE_DAMPING)
+        if self.bodies is not None:
+            self.bodies.held = False
         self.control.wave_maker_on = True
         settled = self.snapshot()
         self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
-        """Positions, velocities, the divergence pressure (creation order), time and frame: what
-        :meth:`restore` takes."""
+        """Positions, velocities, the divergence pressure (creation order), time and frame, the bodies:
+        what :meth:`restore` takes."""
         return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
-                        self.piston_time_s, self.state.kept_fields())
+                        self.piston_time_s, self.state.kept_fields(),
+                        None if self.bodies is None else self.bodies.state())
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it."""
@@ -157,7 +165,17 @@ class Simulation:
         if len(positions) > self.model.capacity:
             raise ValueError(f"restore: {len(positions):,} particles, more than the {self.model.capacity:,} this "
                              f"scene allocates (its blocks and emitters)")
+        bodies = None
+        if self.bodies is not None:
+            bodies = self.bodies.initial_state() if snapshot.bodies is None else np.asarray(snapshot.bodies)
+            if bodies.shape != (self.bodies.count, STATE_WIDTH):
+                raise ValueError(f"restore: expected bodies of shape ({self.bodies.count}, {STATE_WIDTH}) "
+                                 f"(pbf.solver.bodies.STATE_LAYOUT), got {bodies.shape}")
+        elif snapshot.bodies is not None and len(snapshot.bodies):
+            raise ValueError(f"restore: the snapshot holds {len(snapshot.bodies)} bodies; this scene has none")
         self.state.load({**snapshot.fields, "x": positions, "v": velocities})
+        if bodies is not None:
+            self.bodies.load(bodies)
         self.emitters.emitted = list(snapshot.emitted_layers or [0] * len(self.scene.emitters))
         self.time_s = snapshot.time_s
         self.frame = snapshot.frame
@@ -203,6 +221,8 @@ class Simulation:
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
+        if self.bodies is not None:                              # the rigid step, with the water's last reaction
+            self.bodies.advance(dt, control.gravity_m_s2)
         self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
@@ -245,6 +265,8 @@ class Simulation:
                                  self.density.lam_total,                    # and the pressure, summed
                                  self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
                                  self.pressure_substeps == 0)
+        if self.bodies is not None:                              # the water's reaction on the bodies
+            self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1
         self.time_s += dt
         self.last_dt_s = dt
