@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pbf.scene.schema import SceneError, Vec3, _between, _num, _one_of, _vec, _vec_between, key
+from pbf.scene.schema import SceneError, Vec3, _between, _length, _num, _one_of, _vec, _vec_between, key
 
 MAX_BODIES = 16
 """Most [[bodies]]: each body is one more boundary every particle looks at in every iteration, and
@@ -129,6 +129,14 @@ def _check_bodies(scene, source: str) -> None:
                 raise SceneError(f"{where}.position_m' is within reach of bodies[{j}] ({_num(gap)} m between "
                                  f"centres, less than their bounding radii {_num(body.bounding_radius())} + "
                                  f"{_num(other.bounding_radius())} m); bodies must start apart")
+        followed = scene.fastest_followed_m_s
+        fall = _length(scene.gravity_m_s2) * scene.time.frame_dt_s
+        speed = _length(body.velocity_m_s) + _length(body.angular_velocity_rad_s) * body.bounding_radius()
+        if not speed + fall <= followed:
+            raise SceneError(f"{where}.velocity_m_s': its fastest point moves at {_num(speed)} m/s (|v| + |ω| r, plus "
+                             f"{_num(fall)} m/s of gravity in the first frame), faster than the {_num(followed)} m/s "
+                             f"a frame's substeps can follow (time.max_substeps × time.max_cfl × fluid.spacing_m / "
+                             f"time.frame_dt_s); allowed: ≤ {_num(followed - fall)} m/s, or raise time.max_substeps")
     if scene.bodies and scene.time.max_cfl > BODY_MAX_CFL:
         raise SceneError(f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross a body "
                          f"in one substep; with [[bodies]] it must be ≤ {_num(BODY_MAX_CFL)}")

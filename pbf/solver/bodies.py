@@ -51,7 +51,7 @@ fluid's reaction of the last substep (the next step starts from it)."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
 FRICTION = 0.4
 """Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
-COLLISION_FRACTION = 0.5
+COLLISION_FRACTION = 0.2
 """The collision keeps particle centres this fraction of the particle radius outside a body (experiment)."""
 CONTACT_SWEEPS = 2
 """Passes over all contacts per substep: a second pass settles what the first one's corrections moved."""
