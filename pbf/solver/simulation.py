@@ -304,6 +304,12 @@ class Simulation:
         """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""
         return self.state.in_creation_order(self.grid.neighbour_count).astype(np.int32)
 
+    def body_states(self) -> np.ndarray:
+        """(bodies, 19) float32 copy of the rigid bodies' state, in the scene's order
+        (``pbf.solver.bodies.STATE_LAYOUT``: position, quaternion (w, x, y, z), velocity, angular
+        velocity, the water's last force and torque on each); (0, 19) without bodies."""
+        return np.zeros((0, STATE_WIDTH), np.float32) if self.bodies is None else self.bodies.state()
+
     def readout(self) -> Readout:
         """The particles' device fields, for renderers (no copy to the host)."""
         return Readout(self.particle_count, self.scene.particle_radius_m, self.state.x, self.state.v)
