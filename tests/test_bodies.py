@@ -162,3 +162,15 @@ def test_a_body_at_rest_on_a_pool_at_rest_stays_at_rest():
         pool_fastest.append(np.linalg.norm(sim.velocities(), axis=1).max())
     assert max(body) < 0.06
     assert np.median(body) < 0.5 * np.median(pool_fastest)
+
+
+def test_the_hand_carries_a_body_it_touches():
+    from pbf.solver import Push
+
+    sim = Simulation(pool([box((0.06, 0.05, 0.06), 500, [0.2, 0.3, 0.2])], depth=0.1), quiet=True)
+    sim.control.push = Push((0.2, 0.36, 0.2), (1.0, 0.0, 0.0), 0.05)
+    sim.substep()
+    assert sim.body_states()[0, 7] > 0.5  # dragged along x, nearly at the hand's velocity
+    sim.control.push = None
+    sim.step(2)
+    assert sim.body_states()[0, 7] > 0.4  # thrown: it flies on

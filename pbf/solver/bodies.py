@@ -179,6 +179,33 @@ class Bodies:
         if not self.held:
             self._advance(dt, gravity)
 
+    @ti.kernel
+    def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
+        for b in range(self.count):
+            centre = self.position[b]
+            gap = 0.0
+            if self.sphere[b]:
+                gap = ti.max((point - centre).norm() - self.half[b][0], 0.0)
+            else:
+                local = self.rotation[b].transpose() @ (point - centre)
+                gap = ti.max(ti.abs(local) - self.half[b], 0.0).norm()
+            q2 = gap * gap / (radius * radius)
+            if q2 < 1.0:
+                w = (1.0 - q2) ** 3
+                self.velocity[b] += w * (hand - self.velocity[b])
+                self.angular_velocity[b] *= 1.0 - w
+
+    def grab(self, push, speed_limit_m_s: float) -> None:
+        """The hand in the water (``model.Push``) carries the bodies it touches as it does the water: each
+        body's velocity blended toward the hand's by w = (1 − (d/R)²)³, d the hand's distance from its
+        surface, and its spin damped alike, so that a body follows the dragged hand and flies on at the
+        hand's velocity when let go. The hand's speed is capped at ``speed_limit_m_s``, as for the water."""
+        velocity = np.asarray(push.velocity_m_s, np.float64)
+        speed = float(np.linalg.norm(velocity))
+        if speed > speed_limit_m_s:
+            velocity *= speed_limit_m_s / speed
+        self._grab(push.point_m, velocity.tolist(), push.radius_m)
+
     # ------------------------------------------------------------------ the rigid step
 
     @ti.kernel

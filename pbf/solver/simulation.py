@@ -220,6 +220,8 @@ class Simulation:
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
+            if self.bodies is not None:                          # and the bodies it touches
+                self.bodies.grab(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:                              # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
