@@ -35,7 +35,7 @@ def main(frames: int = 20) -> None:
         gap = np.linalg.norm(np.maximum(np.abs(local) - body.half_extents(), 0.0), axis=1)
         near += int(np.sum(gap < h))
     a, b = np.median(times["4 bodies"]), np.median(times["no bodies"])
-    print(f"| scene | particles | median ms/substep |\n|---|---|---|")
+    print("| scene | particles | median ms/substep |\n|---|---|---|")
     print(f"| floating_boxes, no bodies | {sims['no bodies'].particle_count:,} | {1e3 * b:.2f} |")
     print(f"| floating_boxes, 4 bodies | {sim.particle_count:,} | {1e3 * a:.2f} |")
     print(f"\nper body: {1e3 * (a - b) / 4:.3f} ms/substep; particles within h of a body: {near:,} "

@@ -358,6 +358,7 @@ class BodyPoints:
 
     def __init__(self, sim):
         self.sim = sim
+        self.colour = ti.Vector(list(BODY_RGB))
         pitch = sim.scene.particle_radius_m
         local, owner = [], []
         for k, body in enumerate(sim.scene.bodies):
@@ -385,7 +386,7 @@ class BodyPoints:
         for k in range(self.count):
             b = self.owner[k]
             self.positions[count + k] = self.centre[b] + self.rotation[b] @ self.local[k]
-            self.colours[count + k] = ti.Vector(list(BODY_RGB))
+            self.colours[count + k] = self.colour
 
     def combine(self, positions, colours, count: int):
         """The particles and the bodies' points as one positions field, one colours field and a count."""
