@@ -38,19 +38,22 @@ _collect(Scene)
 NUMBERS = {k: v for k, v in FIELDS.items() if v[0] in (int, float)}
 DERIVED = {"gravity_m_s2", "container.min_m", "container.max_m", "fluid.blocks[0].min_m", "fluid.blocks[0].max_m",
            "fluid.blocks[0].velocity_m_s", "obstacles[0].min_m", "obstacles[0].max_m", "emitters[0].position_m",
-           "emitters[0].direction", "camera.position_m", "camera.look_at_m"}
+           "emitters[0].direction", "camera.position_m", "camera.look_at_m", "bodies[0].size_m", "bodies[0].position_m",
+           "bodies[0].velocity_m_s"}
 """The three-number keys bounded by what they must agree with (container and spacing, the substeps
 a frame can take, the camera's distance from the box; a direction is normalised whatever its length)
 rather than by a fixed range."""
 
 
 NOZZLE = {"position_m": [0.6, 0.6, 0.2], "direction": [0.0, -1.0, 0.0], "radius_m": 0.05, "end_s": 0.5}
+BODY = {"size_m": [0.05, 0.05, 0.05], "density_kg_m3": 500.0, "position_m": [0.6, 0.2, 0.2]}
 
 
 def base_scene():
-    """The small dam break with a nozzle pouring in, so that every kind of key has a table to go in."""
+    """The small dam break with a nozzle pouring in and a floating box, so that every kind of key has a table to go in."""
     scene = small_dam_break()
     scene["emitters"] = [dict(NOZZLE)]
+    scene["bodies"] = [dict(BODY)]
     return scene
 
 

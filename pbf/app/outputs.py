@@ -1,7 +1,7 @@
 """Where a run writes, checked before it starts: the frame folder, the video and the files in them.
 
 A run writes ``frame_NNNNN.png`` and, when asked, ``particles_NNNNN.ply`` or ``.npz`` and
-``surface_NNNNN.ply`` or ``.obj`` into one folder, and a video where ``--video`` says. Every path is
+``surface_NNNNN.ply`` or ``.obj`` (and ``bodies_NNNNN`` beside it, the rigid bodies' meshes) into one folder, and a video where ``--video`` says. Every path is
 checked before the simulation starts, so a bad one fails with one message and leaves nothing half
 written: an empty path, the filesystem root, a file where a folder is needed (or a folder where a
 file is), a parent that is a file, a place that cannot be written (tried by creating and removing
@@ -23,7 +23,7 @@ from pathlib import Path
 MAX_FRAMES = 99_999
 """Frame numbers have five digits (frame_00000.png …), so that the files sort in order."""
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
-OWN_FILE = re.compile(r"(frame_\d{5}\.png|particles_\d{5}\.(ply|npz)|surface_\d{5}\.(ply|obj))")
+OWN_FILE = re.compile(r"(frame_\d{5}\.png|particles_\d{5}\.(ply|npz)|(surface|bodies)_\d{5}\.(ply|obj))")
 """The names a run writes into its folder (``pbf.app.headless.FrameWriter``), and the only files an
 earlier run's clean-up removes."""
 
@@ -42,6 +42,11 @@ def particles_name(number: int, suffix: str) -> str:
 
 def surface_name(number: int, suffix: str) -> str:
     return f"surface_{number:05d}.{suffix}"
+
+
+def bodies_name(number: int, suffix: str) -> str:
+    """The rigid bodies' meshes of a frame, beside the water's surface (scenes with [[bodies]])."""
+    return f"bodies_{number:05d}.{suffix}"
 
 
 def default_folder(scene_path: str) -> Path:

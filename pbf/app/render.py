@@ -21,6 +21,7 @@ from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
 from pbf.scene import Render, Scene
+from pbf.solver import quaternion_matrix_np
 
 EMPTY = np.iinfo(np.int64).max
 LIGHT_DIRECTION = np.array([0.35, 0.8, 0.5]) / np.linalg.norm([0.35, 0.8, 0.5])
@@ -404,6 +405,80 @@ def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
                          segments=scene_edges(scene))
 
 
+BODY_RGB = (0.85, 0.55, 0.25)
+"""The colour of rigid bodies in particle frames (wood)."""
+
+
+@ti.data_oriented
+class BodyPoints:
+    """The rigid bodies drawn as solids by the sphere renderer: each body's surface covered with points a
+    particle radius apart, placed at its pose each frame and appended to the particles (with the body
+    colour), so that water in front hides a body and a body in front hides water."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.colour = ti.Vector(list(BODY_RGB))
+        pitch = sim.scene.particle_radius_m
+        local, owner = [], []
+        for k, body in enumerate(sim.scene.bodies):
+            points = _surface_points(body.shape, body.half_extents(), pitch)
+            local.append(points)
+            owner.append(np.full(len(points), k, np.int32))
+        self.count = int(sum(len(p) for p in local))
+        capacity = sim.model.capacity + self.count
+        self.local = ti.Vector.field(3, ti.f32, shape=max(1, self.count))
+        self.owner = ti.field(ti.i32, shape=max(1, self.count))
+        if self.count:
+            self.local.from_numpy(np.concatenate(local).astype(np.float32))
+            self.owner.from_numpy(np.concatenate(owner))
+        bodies = max(1, len(sim.scene.bodies))
+        self.centre = ti.Vector.field(3, ti.f32, shape=bodies)
+        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=bodies)
+        self.positions = ti.Vector.field(3, ti.f32, shape=capacity)
+        self.colours = ti.Vector.field(3, ti.f32, shape=capacity)
+
+    @ti.kernel
+    def _combine(self, positions: ti.template(), colours: ti.template(), count: ti.i32):
+        for i in range(count):
+            self.positions[i] = positions[i]
+            self.colours[i] = colours[i]
+        for k in range(self.count):
+            b = self.owner[k]
+            self.positions[count + k] = self.centre[b] + self.rotation[b] @ self.local[k]
+            self.colours[count + k] = self.colour
+
+    def combine(self, positions, colours, count: int):
+        """The particles and the bodies' points as one positions field, one colours field and a count."""
+        states = self.sim.body_states()
+        self.centre.from_numpy(states[:, 0:3].copy())
+        self.rotation.from_numpy(np.stack([quaternion_matrix_np(q) for q in states[:, 3:7]]).astype(np.float32))
+        self._combine(positions, colours, count)
+        return self.positions, self.colours, count + self.count
+
+
+def _surface_points(shape: str, half: np.ndarray, pitch: float) -> np.ndarray:
+    """Points covering a body's surface (its own frame) about ``pitch`` apart."""
+    if shape == "sphere":
+        radius = float(half[0])
+        n = max(8, int(4 * math.pi * radius**2 / pitch**2))
+        k = np.arange(n) + 0.5  # a Fibonacci lattice on the sphere
+        y = 1 - 2 * k / n
+        phi = math.pi * (3 - math.sqrt(5)) * k
+        ring = np.sqrt(1 - y * y)
+        return radius * np.stack([ring * np.cos(phi), y, ring * np.sin(phi)], axis=1)
+    faces = []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        us = np.linspace(-half[u], half[u], max(2, int(2 * half[u] / pitch) + 1))
+        vs = np.linspace(-half[v], half[v], max(2, int(2 * half[v] / pitch) + 1))
+        grid_u, grid_v = np.meshgrid(us, vs, indexing="ij")
+        for side in (-1.0, 1.0):
+            face = np.zeros((grid_u.size, 3))
+            face[:, u], face[:, v], face[:, axis] = grid_u.ravel(), grid_v.ravel(), side * half[axis]
+            faces.append(face)
+    return np.concatenate(faces)
+
+
 class SceneRenderer:
     """A Simulation's frames as images: its camera, container and obstacle edges, and the particles as
     coloured spheres or (``render.style = "surface"``) the water's surface, rendered headless."""
@@ -424,6 +499,7 @@ class SceneRenderer:
             self.colours = ParticleColours(sim, render)
             self.spheres = SphereRenderer(width, height, render.background_rgb, render.container_rgb,
                                           scene_edges(scene))
+        self.bodies = BodyPoints(sim) if scene.bodies and self.spheres is not None else None
 
     def frame(self) -> np.ndarray:
         """The current state as an (H, W, 3) uint8 image."""
@@ -431,5 +507,8 @@ class SceneRenderer:
         if self.fluid is not None:
             return self.fluid.render(self.view, particles.positions, particles.count, LIGHT_DIRECTION)
         colours = self.colours.update()
-        image = self.spheres.render(self.view, particles.positions, colours, particles.count, particles.radius_m)
+        positions, count = particles.positions, particles.count
+        if self.bodies is not None:
+            positions, colours, count = self.bodies.combine(positions, colours, count)
+        image = self.spheres.render(self.view, positions, colours, count, particles.radius_m)
         return draw_legend(image, self.sim.scene.render) if self.sim.scene.render.legend else image

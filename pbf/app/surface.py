@@ -18,6 +18,7 @@ import pysplashsurf
 from plyfile import PlyData, PlyElement
 
 from pbf.scene import Scene
+from pbf.solver import quaternion_matrix_np
 
 MESH_FORMATS = ("ply", "obj")
 
@@ -74,6 +75,52 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
     # keeps every triangle, so the mesh stays closed.
     vertices = np.clip(vertices, scene.container.min_m, scene.container.max_m).astype(np.float32)
     return Mesh(vertices, surface.mesh.triangles.astype(np.int32))
+
+
+BODY_SPHERE_RINGS = 12
+"""Latitude rings of a sphere body's mesh (twice as many meridians)."""
+
+
+def body_mesh(shapes, half_extents_m, states) -> Mesh:
+    """The rigid bodies' surfaces as one closed triangle mesh (outward normals): a box's 12 triangles,
+    a sphere's latitude–longitude grid, each placed at its pose (``Simulation.body_states``' rows)."""
+    vertices, triangles = [], []
+    for shape, half, row in zip(shapes, half_extents_m, states):
+        local, faces = _box_mesh(np.asarray(half)) if shape == "box" else _sphere_mesh(float(half[0]))
+        rotation = quaternion_matrix_np(row[3:7])
+        triangles.append(faces + sum(len(v) for v in vertices))
+        vertices.append(local @ rotation.T + row[0:3])
+    if not vertices:
+        return Mesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
+    return Mesh(np.concatenate(vertices).astype(np.float32), np.concatenate(triangles).astype(np.int32))
+
+
+def _box_mesh(half: np.ndarray):
+    corners = np.array([[(-1, 1)[k >> a & 1] * half[a] for a in range(3)] for k in range(8)], np.float64)
+    # Two triangles per face, counter-clockwise seen from outside (corner k has bit a set for +half on axis a).
+    faces = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]], np.int32)
+    return corners, faces
+
+
+def _sphere_mesh(radius: float):
+    rings, sectors = BODY_SPHERE_RINGS, 2 * BODY_SPHERE_RINGS
+    theta = np.linspace(0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0, 2 * np.pi, sectors, endpoint=False)
+    ring = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.repeat(np.cos(theta)[:, None], sectors, 1),
+                     np.outer(np.sin(theta), np.sin(phi))], axis=-1).reshape(-1, 3)
+    points = np.concatenate([[[0, 1, 0]], ring, [[0, -1, 0]]]) * radius
+    top, bottom = 0, len(points) - 1
+    faces = []
+    for s in range(sectors):
+        t = (s + 1) % sectors
+        faces.append([top, 1 + t, 1 + s])
+        for r in range(rings - 2):
+            a, b = 1 + r * sectors, 1 + (r + 1) * sectors
+            faces += [[a + s, a + t, b + s], [a + t, b + t, b + s]]
+        last = 1 + (rings - 2) * sectors
+        faces.append([bottom, last + s, last + t])
+    return points, np.array(faces, np.int32)
 
 
 def write_mesh(path: Path, mesh: Mesh, time_s: float) -> Path:

@@ -29,7 +29,7 @@ from taichi.ui.utils import get_field_info
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
-from pbf.app.render import LIGHT_DIRECTION, ParticleColours, SphereRenderer, View, fluid_renderer, scene_edges
+from pbf.app.render import LIGHT_DIRECTION, BodyPoints, ParticleColours, SphereRenderer, View, fluid_renderer, scene_edges
 
 PANEL = (0.01, 0.01, 0.3, 0.455)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help, in
@@ -146,6 +146,8 @@ class WindowViewer:
         self.sphere_renderer = None
         self.surface_renderer = None
         """Made on first use, and again when the window's size changes."""
+        self.body_points = BodyPoints(sim) if sim.scene.bodies else None
+        """The rigid bodies' surface points, drawn with the particles (``pbf.app.render.BodyPoints``)."""
         self.paused = False
         self.step_once = False
         self.panel_shown = True
@@ -318,8 +320,10 @@ class WindowViewer:
             if renderer is None or (renderer.width, renderer.height) != (width, height):
                 self.sphere_renderer = renderer = SphereRenderer(width, height, self.render.background_rgb,
                                                                  self.render.container_rgb, self.edges)
-            packed = renderer.draw(view, particles.positions, self.colours.update(), particles.count,
-                                   particles.radius_m)
+            positions, colours, count = particles.positions, self.colours.update(), particles.count
+            if self.body_points is not None:
+                positions, colours, count = self.body_points.combine(positions, colours, count)
+            packed = renderer.draw(view, positions, colours, count, particles.radius_m)
         show_packed(self.window.get_canvas(), packed)
 
 

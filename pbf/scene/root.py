@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from pbf.scene.bodies import MAX_BODIES, Body, _check_bodies
 from pbf.scene.emitters import Emitter, _check_emitter_room, _check_emitters
 from pbf.scene.fluid import Fluid
 from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_container, _check_obstacles, block_counts
@@ -31,6 +32,8 @@ class Scene:
                                           "([[obstacles]] tables)")
     emitters: tuple[Emitter, ...] = key((), _at_most_tables(MAX_OBSTACLES), "nozzles that add water while the "
                                         "scene runs ([[emitters]] tables)")
+    bodies: tuple[Body, ...] = key((), _at_most_tables(MAX_BODIES), "rigid boxes and spheres two-way coupled with "
+                                   "the water ([[bodies]] tables)")
     time: Time = key(Time())
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
@@ -98,6 +101,7 @@ def _check_scene(scene: Scene) -> None:
     _check_emitters(scene, source)
     _check_time(scene, source)
     _check_emitter_room(scene, source)  # after the speeds: a stream too fast to follow is the first thing to say
+    _check_bodies(scene, source)
     _check_solver(scene, source)
     _check_settle(scene, source)
     _check_camera(scene, source)

@@ -30,6 +30,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import sph
+from pbf.solver.bodies import Bodies
 from pbf.solver.model import BoundaryParams
 
 TABLE_SAMPLES = 512
@@ -123,6 +124,53 @@ class GhostTables:
         else:
             value, slope = self.octant(d)
         return value, slope
+
+    @ti.func
+    def box(self, p, lower, upper):
+        """Ghost density ρ/ρ0 of the axis-aligned box lower–upper at p, and its gradient (1/m): the
+        27-term expansion of the module docstring (obstacles; bodies in their own frame)."""
+        h = self.kernel_radius
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
+        if nearest.norm() < h:
+            outside = ti.Vector([0, 0, 0])
+            far = ti.Vector([0.0, 0.0, 0.0])  # outside: distance to the slab; its derivative's sign
+            far_sign = ti.Vector([0.0, 0.0, 0.0])
+            for a in ti.static(range(3)):
+                if p[a] < lower[a]:
+                    outside[a], far[a], far_sign[a] = 1, lower[a] - p[a], -1.0
+                elif p[a] > upper[a]:
+                    outside[a], far[a], far_sign[a] = 1, p[a] - upper[a], 1.0
+            for term in range(27):
+                # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
+                # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
+                sign = 1.0
+                valid = True
+                active = ti.Vector([0, 0, 0])
+                d = ti.Vector([0.0, 0.0, 0.0])
+                d_sign = ti.Vector([0.0, 0.0, 0.0])
+                for a in ti.static(range(3)):
+                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
+                    if choice == 0:
+                        if outside[a]:
+                            active[a], d[a], d_sign[a] = 1, far[a], far_sign[a]
+                    elif outside[a]:
+                        valid = False
+                    else:
+                        sign = -sign
+                        active[a] = 1
+                        if choice == 1:
+                            d[a], d_sign[a] = p[a] - lower[a], 1.0
+                        else:
+                            d[a], d_sign[a] = upper[a] - p[a], -1.0
+                    if active[a] and d[a] >= h:
+                        valid = False
+                if valid:
+                    value, slope = self.half_spaces(active, d)
+                    density += sign * value
+                    gradient += sign * d_sign * slope
+        return density, gradient
 
 
 @ti.data_oriented
@@ -327,49 +375,7 @@ class Obstacles:
     @ti.func
     def _ghost_of(self, p, o):
         """Ghost density of obstacle o and its gradient: the 27-term expansion of the module docstring."""
-        lower, upper = self.lower[o], self.upper[o]
-        h = self.kernel_radius
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
-        if nearest.norm() < h:
-            outside = ti.Vector([0, 0, 0])
-            far = ti.Vector([0.0, 0.0, 0.0])  # outside: distance to the slab; its derivative's sign
-            far_sign = ti.Vector([0.0, 0.0, 0.0])
-            for a in ti.static(range(3)):
-                if p[a] < lower[a]:
-                    outside[a], far[a], far_sign[a] = 1, lower[a] - p[a], -1.0
-                elif p[a] > upper[a]:
-                    outside[a], far[a], far_sign[a] = 1, p[a] - upper[a], 1.0
-            for term in range(27):
-                # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
-                # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
-                sign = 1.0
-                valid = True
-                active = ti.Vector([0, 0, 0])
-                d = ti.Vector([0.0, 0.0, 0.0])
-                d_sign = ti.Vector([0.0, 0.0, 0.0])
-                for a in ti.static(range(3)):
-                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
-                    if choice == 0:
-                        if outside[a]:
-                            active[a], d[a], d_sign[a] = 1, far[a], far_sign[a]
-                    elif outside[a]:
-                        valid = False
-                    else:
-                        sign = -sign
-                        active[a] = 1
-                        if choice == 1:
-                            d[a], d_sign[a] = p[a] - lower[a], 1.0
-                        else:
-                            d[a], d_sign[a] = upper[a] - p[a], -1.0
-                    if active[a] and d[a] >= h:
-                        valid = False
-                if valid:
-                    value, slope = self.tables.half_spaces(active, d)
-                    density += sign * value
-                    gradient += sign * d_sign * slope
-        return density, gradient
+        return self.tables.box(p, self.lower[o], self.upper[o])
 
 
 @ti.data_oriented
@@ -377,11 +383,18 @@ class Boundaries:
     """Every boundary of the fluid in a fixed order (the container, then the obstacles): what the
     stages call. Each call visits the parts in that order, so sums come out the same bit for bit."""
 
-    def __init__(self, params: BoundaryParams):
+    def __init__(self, params: BoundaryParams, capacity: int = 1):
         self.tables = GhostTables(params.spacing_m, params.kernel_radius_m, params.wall_density)
         self.container = Container(params, self.tables)
         self.obstacles = Obstacles(params, self.tables)
         self.parts = (self.container, self.obstacles)
+        self.bodies = None
+        self.with_bodies = params.bodies.count > 0
+        """The rigid bodies (``pbf.solver.bodies``), the last part; None in a scene without them, whose
+        kernels then hold no code of theirs."""
+        if params.bodies.count:
+            self.bodies = Bodies(params, self.tables, self.obstacles, capacity)
+            self.parts += (self.bodies,)
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Place moving boundaries where they stand at the end of the coming substep of ``dt``
@@ -399,6 +412,8 @@ class Boundaries:
         q = p
         for k in ti.static(range(len(self.parts))):
             q = self.parts[k].project(q)
+        if ti.static(self.with_bodies):
+            q = self.container.project(q)  # a body at a wall may have pushed p through it
         return q
 
     @ti.func

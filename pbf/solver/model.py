@@ -92,6 +92,49 @@ class GridParams:
 
 
 @dataclass(frozen=True)
+class BodyParams:
+    """The rigid bodies (``pbf.solver.bodies``): per body, in the scene's order; all SI."""
+
+    shapes: tuple[str, ...] = ()
+    """"box" or "sphere"."""
+    half_extents_m: tuple[Vec3, ...] = ()
+    """A box's half extents along its own axes; a sphere's radius on every axis."""
+    masses_kg: tuple[float, ...] = ()
+    inertia_kg_m2: tuple[Vec3, ...] = ()
+    """The principal moments of inertia about the centre of mass, along the body's own axes."""
+    initial: tuple[tuple[float, ...], ...] = ()
+    """Each body's state at the start: position (3), quaternion (w, x, y, z), velocity (3), angular
+    velocity (3): 13 numbers (``pbf.solver.bodies.STATE_LAYOUT``)."""
+    rest_density_kg_m3: float = 1000.0
+    particle_volume_m3: float = 0.0
+    """V = m/ρ0 of a fluid particle: the reaction is −Σ_i V p_i ∇ψ_b(x_i) (``pbf.solver.bodies``)."""
+
+    @property
+    def count(self) -> int:
+        return len(self.shapes)
+
+    @classmethod
+    def from_scene(cls, scene: Scene, particle_volume_m3: float) -> BodyParams:
+        shapes, halves, masses, inertias, initial = [], [], [], [], []
+        for body in scene.bodies:
+            half = body.half_extents()
+            mass = body.mass_kg()
+            if body.shape == "sphere":
+                inertia = np.full(3, 0.4 * mass * half[0] ** 2)
+            else:  # a box of edges 2a, 2b, 2c: I_x = m (b² + c²) / 3
+                inertia = mass / 3.0 * np.array([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2,
+                                                 half[0] ** 2 + half[1] ** 2])
+            shapes.append(body.shape)
+            halves.append(tuple(map(float, half)))
+            masses.append(float(mass))
+            inertias.append(tuple(map(float, inertia)))
+            initial.append(tuple(map(float, (*body.position_m, *body.quaternion(), *body.velocity_m_s,
+                                             *body.angular_velocity_rad_s))))
+        return cls(tuple(shapes), tuple(halves), tuple(masses), tuple(inertias), tuple(initial),
+                   scene.fluid.rest_density_kg_m3, particle_volume_m3)
+
+
+@dataclass(frozen=True)
 class BoundaryParams:
     """The container, its piston and the obstacles (``pbf.solver.boundary``): collision and the ghost
     density behind them."""
@@ -113,6 +156,8 @@ class BoundaryParams:
     piston_stroke_m: float = 0.0
     """Stroke S of the piston wave maker that moves the lower-x wall (0: the wall stands still)."""
     piston_period_s: float = 1.0
+    bodies: BodyParams = BodyParams()
+    """The rigid bodies, one more moving boundary (none: compiled out)."""
 
 
 @dataclass(frozen=True)
@@ -392,7 +437,8 @@ class Model:
         return cls(scene, n, mass, volume, grid,
                    BoundaryParams(lower, upper, scene.particle_radius_m, spacing, h, s.expert.wall_density,
                                   s.wall_mirror, tuple((o.min_m, o.max_m) for o in scene.obstacles),
-                                  scene.wave_maker.stroke_m, scene.wave_maker.period_s),
+                                  scene.wave_maker.stroke_m, scene.wave_maker.period_s,
+                                  BodyParams.from_scene(scene, volume)),
                    density, VelocityParams(n, h, volume), iteration_weights(s.expert, 1.0 - omega * gain))
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
@@ -407,6 +453,11 @@ class Model:
             counts = block_counts(block, spacing)
             axes = [lo + (np.arange(n) + 0.5) * spacing for lo, n in zip(block.min_m, counts)]
             lattice = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+            if self.scene.bodies:  # the water a body stands in is removed (a half spacing from its surface)
+                inside = np.zeros(len(lattice), bool)
+                for body in self.scene.bodies:
+                    inside |= body.contains(lattice, 0.499 * spacing)
+                lattice = lattice[~inside]
             positions.append(lattice)
             velocities.append(np.broadcast_to(np.array(block.velocity_m_s), lattice.shape))
         return np.concatenate(positions).astype(np.float32), np.concatenate(velocities).astype(np.float32)

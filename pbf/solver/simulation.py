@@ -14,6 +14,7 @@ import numpy as np
 from pbf import scene as schema
 from pbf.scene.schema import _show
 from pbf.solver.backend import keeps_decisions_on_device, start_backend
+from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
 from pbf.solver.acceleration import Weights
 from pbf.solver.density import DensityConstraint
@@ -108,8 +109,10 @@ class Simulation:
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
         self.state = State(model.capacity)
-        self.boundaries = Boundaries(model.boundary)
-        """The container, its piston and the obstacles (``pbf.solver.boundary``)."""
+        self.boundaries = Boundaries(model.boundary, model.capacity)
+        """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
+        self.bodies = self.boundaries.bodies
+        """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
         self.grid = NeighbourGrid(model.grid, self.state.active)
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid)
         self.integrator = Integrator(self.state, self.boundaries)
@@ -154,18 +157,23 @@ class Simulation:
         instead of sagging into it (docs/VALIDATION.md)."""
         dt = self.scene.time.frame_dt_s / self.control.substeps
         self.control.wave_maker_on = False
+        if self.bodies is not None:
+            self.bodies.held = True  # the water settles around the bodies where the scene puts them
         for _ in range(math.ceil(seconds / dt - 1e-9)):
             self.substep(dt)
             self.integrator.damp(SETTLE_DAMPING)
+        if self.bodies is not None:
+            self.bodies.held = False
         self.control.wave_maker_on = True
         settled = self.snapshot()
         self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
-        """Positions, velocities, the divergence pressure (creation order), time and frame: what
-        :meth:`restore` takes."""
+        """Positions, velocities, the divergence pressure (creation order), time and frame, the bodies:
+        what :meth:`restore` takes."""
         return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
-                        self.piston_time_s, self.state.kept_fields())
+                        self.piston_time_s, self.state.kept_fields(),
+                        None if self.bodies is None else self.bodies.state())
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it.
@@ -175,7 +183,10 @@ class Simulation:
         the container, a speed the scene's frames cannot follow, emitted layers that are not this
         scene's emitters' or would overflow its particle budget, a negative time)."""
         positions, velocities, fields, emitted = self._checked_snapshot(snapshot)
+        bodies = self._checked_bodies(snapshot)
         self.state.load({**fields, "x": positions, "v": velocities})
+        if bodies is not None:
+            self.bodies.load(bodies)
         self.emitters.emitted = emitted
         self.time_s = float(snapshot.time_s)
         self.frame = int(snapshot.frame)
@@ -226,6 +237,22 @@ class Simulation:
             raise (ValueError if isinstance(frame, numbers.Integral) else TypeError)(
                 f"restore: expected frame as a whole number ≥ 0, got {_show(frame)}")
         return positions, velocities, fields, self._checked_layers(snapshot.emitted_layers, count)
+
+    def _checked_bodies(self, snapshot) -> np.ndarray | None:
+        """The bodies' states of the snapshot (their start when it holds none), checked against this scene's."""
+        if self.bodies is None:
+            if snapshot.bodies is not None and len(snapshot.bodies):
+                raise ValueError(f"restore: the snapshot holds {len(snapshot.bodies)} bodies; this scene has none")
+            return None
+        if snapshot.bodies is None:
+            return self.bodies.initial_state()
+        bodies = _particle_array("bodies", snapshot.bodies)
+        if bodies.shape != (self.bodies.count, STATE_WIDTH):
+            raise ValueError(f"restore: expected bodies of shape ({self.bodies.count}, {STATE_WIDTH}) "
+                             f"(pbf.solver.bodies.STATE_LAYOUT), got {bodies.shape}")
+        if not np.isfinite(bodies).all():
+            raise ValueError("restore: the bodies' states hold a value that is not finite")
+        return bodies
 
     def _check_inside(self, positions: np.ndarray, velocities: np.ndarray) -> None:
         """Every particle inside this scene's container, and no faster than its frames can follow
@@ -324,7 +351,11 @@ class Simulation:
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
+            if self.bodies is not None:                          # and the bodies it touches
+                self.bodies.grab(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
+        if self.bodies is not None:                              # the rigid step, with the water's last reaction
+            self.bodies.advance(dt, control.gravity_m_s2)
         self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
@@ -360,6 +391,8 @@ class Simulation:
                                  self.density.lam_total,                    # and the pressure, summed
                                  self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
                                  self.pressure_substeps == 0)
+        if self.bodies is not None:                              # the water's reaction on the bodies
+            self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1
         self.time_s += dt
         self.last_dt_s = dt
@@ -400,6 +433,12 @@ class Simulation:
     def neighbour_counts(self) -> np.ndarray:
         """(n,) neighbours within h of each particle at the last neighbour search, in creation order."""
         return self.state.in_creation_order(self.grid.neighbour_count).astype(np.int32)
+
+    def body_states(self) -> np.ndarray:
+        """(bodies, 19) float32 copy of the rigid bodies' state, in the scene's order
+        (``pbf.solver.bodies.STATE_LAYOUT``: position, quaternion (w, x, y, z), velocity, angular
+        velocity, the water's last force and torque on each); (0, 19) without bodies."""
+        return np.zeros((0, STATE_WIDTH), np.float32) if self.bodies is None else self.bodies.state()
 
     def readout(self) -> Readout:
         """The particles' device fields, for renderers (no copy to the host)."""

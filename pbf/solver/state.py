@@ -64,6 +64,9 @@ class Snapshot:
     fields: dict = field(default_factory=dict)
     """The other kept per-particle fields by name (``PARTICLE_FIELDS``), (n,) or (n, 3) float32 each;
     one left out starts at zero (e.g. ``multiplier``: no divergence pressure, as at rest)."""
+    bodies: np.ndarray | None = None
+    """(bodies, 19) float32, one row per rigid body (``pbf.solver.bodies.STATE_LAYOUT``: position,
+    quaternion, velocity, angular velocity, the fluid's last force and torque); None: as the scene sets them."""
 
 
 @ti.data_oriented

@@ -1,0 +1,545 @@
+"""Rigid bodies two-way coupled with the water: boxes and spheres as moving boundaries with ghost density.
+
+Method. A body is one more boundary of ``pbf.solver.boundary`` (``Boundaries.parts``): the fluid sees
+the ghost fluid inside it, ρ/ρ0 and its gradient ∇ψ_b, exactly as it sees the container's walls and
+the obstacles, and the divergence pre-correction sees its velocity v + ω × (p − c). A box's ghost is
+the obstacles' 27-term ghost of an axis-aligned box (``GhostTables.box``) in the body's frame, its
+gradient rotated back; a sphere's is the half-space table at d = |p − c| − R along the radius. The
+collision (Algorithm 1, line 15) pushes a particle out of the body grown by the particle radius.
+
+The reaction. The ghost moves particle i by h² λ̂_i ∇ψ_b(x_i) in each iteration and the divergence
+pass changes its velocity by h² Δt Λ_i ∇ψ_b; over a substep that is the force −V p_i ∇ψ_b(x_i) on
+the particle, with p_i = −ρ0 h² (L_i/Δt² + Λ_i) the pressure of ``Simulation.pressures`` (L_i the
+multiplier the iterations moved it by, combined with their weights). The body takes the opposite,
+
+    F_b = Σ_i V p_i ∇ψ_b(x_i),   τ_b = Σ_i (x_i − c_b) × V p_i ∇ψ_b(x_i),
+
+so buoyancy and impact come out of the pressure, and momentum passes between water and body through
+the same term that moves the water. The pair terms of the constraint are antisymmetric, so at rest
+the sum over the particles of every boundary's term balances the water's weight: a floating body
+carries exactly what its ghost pushes. The sum runs over fixed blocks of particles in index order,
+then over the blocks in order (no float atomics), so it is the same bit for bit on every run.
+
+The step. Each substep, before the water's prediction, each body is advanced with symplectic Euler
+under gravity and the reaction of the substep before (v += Δt (g + F/M), ω += Δt I⁻¹ (τ − ω × Iω) in
+the body frame, c += Δt v, q += Δt/2 (0, ω) q, normalised), then its contacts with the container,
+the obstacles and the other bodies are resolved (``_contacts``). The water is then solved around it
+where it stands at the end of the substep, moving at its new velocity, as the piston is. The
+reaction comes one substep late: an explicit (partitioned) coupling. Bodies lighter than water are
+where such couplings can go unstable (added mass); at the densities of the presets (300-900 kg/m³)
+and the CFL-limited substeps it is stable (docs/drafts/bodies.md).
+
+Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
+sphere point that lies inside a wall, an obstacle or another body, with the penetration removed by
+moving the bodies apart (in inverse proportion to their masses); one serial pass over the few bodies,
+so the order, and the bits, are fixed. Boxes meet boxes corner-on-face only: an edge crossing an edge
+with no corner inside is missed. A body moves at most time.max_cfl spacings a substep (its speed
+counts in the CFL limit, ``speed_limit_m_s``) and is at least two spacings thick, so it cannot pass
+through a wall or another body in one substep.
+"""
+import math
+
+import numpy as np
+import taichi as ti
+
+from pbf.solver.model import BoundaryParams
+
+STATE_LAYOUT = (("position_m", 3), ("quaternion", 4), ("velocity_m_s", 3), ("angular_velocity_rad_s", 3),
+                ("force_n", 3), ("torque_n_m", 3))
+"""A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``): the pose, the velocities and the
+fluid's reaction of the last substep (the next step starts from it)."""
+STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
+FRICTION = 0.4
+"""Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
+COLLISION_FRACTION = 0.2
+"""The collision keeps particle centres this fraction of the particle radius outside a body, less than at
+the walls: only the ghost's pressure reaches the body, so the water should lean on the ghost, not on
+the collision. A box held half in a pool felt 71% of its buoyancy with the full radius, 85% with half,
+90% with 0.2 (docs/drafts/bodies.md)."""
+CONTACT_SWEEPS = 8
+"""Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
+corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
+
+
+@ti.func
+def quaternion_multiply(a, b):
+    """The Hamilton product a b of quaternions (w, x, y, z)."""
+    return ti.Vector([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                      a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                      a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                      a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+
+
+@ti.func
+def quaternion_matrix(q):
+    """The rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ti.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def quaternion_matrix_np(q) -> np.ndarray:
+    """NumPy twin of :func:`quaternion_matrix` (renderers, exports, tests)."""
+    w, x, y, z = (float(c) for c in q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@ti.data_oriented
+class Bodies:
+    """The rigid bodies: their state on the device, the boundary interface the fluid sees (``ghost``,
+    ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`)."""
+
+    mirrored = False
+
+    def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
+        bodies = params.bodies
+        self.params = bodies
+        self.tables = tables
+        self.obstacles = obstacles
+        self.count = bodies.count
+        self.radius = params.particle_radius_m * COLLISION_FRACTION
+        self.kernel_radius = params.kernel_radius_m
+        self.with_wall_density = params.wall_density
+        self.lower = ti.Vector(list(params.lower_m))
+        self.upper = ti.Vector(list(params.upper_m))
+        self.volume = bodies.particle_volume_m3
+        slots = max(1, self.count)
+        self.sphere = ti.field(ti.i32, shape=slots)
+        self.half = ti.Vector.field(3, ti.f32, shape=slots)
+        """Half extents along the body's axes (a sphere: its radius on each), m."""
+        self.inverse_mass = ti.field(ti.f32, shape=slots)
+        self.inertia = ti.Vector.field(3, ti.f32, shape=slots)
+        """Principal moments of inertia along the body's axes, kg m²."""
+        self.position = ti.Vector.field(3, ti.f32, shape=slots)
+        self.quaternion = ti.Vector.field(4, ti.f32, shape=slots)
+        self.velocity = ti.Vector.field(3, ti.f32, shape=slots)
+        self.angular_velocity = ti.Vector.field(3, ti.f32, shape=slots)
+        self.force = ti.Vector.field(3, ti.f32, shape=slots)
+        """The fluid's reaction on the body over the last substep, N."""
+        self.torque = ti.Vector.field(3, ti.f32, shape=slots)
+        """Its torque about the centre of mass, N m."""
+        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)
+        """The rotation matrix of the quaternion, kept beside it for the fluid's kernels."""
+        self.block = max(64, math.ceil(capacity / 1024))
+        self.blocks = math.ceil(capacity / self.block)
+        self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        for b in range(self.count):
+            self.sphere[b] = int(bodies.shapes[b] == "sphere")
+            self.half[b] = bodies.half_extents_m[b]
+            self.inverse_mass[b] = 1.0 / bodies.masses_kg[b]
+            self.inertia[b] = bodies.inertia_kg_m2[b]
+        self._bounding = np.array([np.linalg.norm(h) if s == "box" else h[0]
+                                   for s, h in zip(bodies.shapes, bodies.half_extents_m)], np.float64)
+        self.held = False
+        """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
+
+    # ------------------------------------------------------------------ host side
+
+    def initial_state(self) -> np.ndarray:
+        """(count, STATE_WIDTH) float32: the scene's poses and velocities, no reaction yet."""
+        state = np.zeros((self.count, STATE_WIDTH), np.float32)
+        state[:, :13] = np.array(self.params.initial, np.float32).reshape(self.count, 13)
+        return state
+
+    def load(self, state) -> None:
+        """Set every body from a (count, STATE_WIDTH) array (:meth:`state`'s layout)."""
+        state = np.asarray(state, np.float32)
+        self.position.from_numpy(_padded(state[:, 0:3]))
+        quaternion = state[:, 3:7] / np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
+        self.quaternion.from_numpy(_padded(quaternion.astype(np.float32), fill=(1.0, 0.0, 0.0, 0.0)))
+        self.velocity.from_numpy(_padded(state[:, 7:10]))
+        self.angular_velocity.from_numpy(_padded(state[:, 10:13]))
+        self.force.from_numpy(_padded(state[:, 13:16]))
+        self.torque.from_numpy(_padded(state[:, 16:19]))
+        self._update_rotation()
+
+    def state(self) -> np.ndarray:
+        """(count, STATE_WIDTH) float32 copy of every body's state (STATE_LAYOUT)."""
+        n = self.count
+        return np.concatenate([self.position.to_numpy()[:n], self.quaternion.to_numpy()[:n],
+                               self.velocity.to_numpy()[:n], self.angular_velocity.to_numpy()[:n],
+                               self.force.to_numpy()[:n], self.torque.to_numpy()[:n]], axis=1).astype(np.float32)
+
+    def move(self, clock_s: float, dt: float = 0.0) -> None:
+        """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
+
+    def speed_limit_m_s(self) -> float:
+        """The fastest any point of a body moves, |v| + |ω| r_bound (one small read from the device,
+        once a frame): the CFL limit counts it, so no body crosses more than time.max_cfl spacings."""
+        v = np.linalg.norm(self.velocity.to_numpy()[: self.count], axis=1)
+        w = np.linalg.norm(self.angular_velocity.to_numpy()[: self.count], axis=1)
+        return float(np.max(v + w * self._bounding)) if self.count else 0.0
+
+    def advance(self, dt: float, gravity) -> None:
+        """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
+        if not self.held:
+            self._advance(dt, gravity)
+
+    @ti.kernel
+    def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
+        for b in range(self.count):
+            centre = self.position[b]
+            gap = 0.0
+            if self.sphere[b]:
+                gap = ti.max((point - centre).norm() - self.half[b][0], 0.0)
+            else:
+                local = self.rotation[b].transpose() @ (point - centre)
+                gap = ti.max(ti.abs(local) - self.half[b], 0.0).norm()
+            q2 = gap * gap / (radius * radius)
+            if q2 < 1.0:
+                w = (1.0 - q2) ** 3
+                self.velocity[b] += w * (hand - self.velocity[b])
+                self.angular_velocity[b] *= 1.0 - w
+
+    def grab(self, push, speed_limit_m_s: float) -> None:
+        """The hand in the water (``model.Push``) carries the bodies it touches as it does the water: each
+        body's velocity blended toward the hand's by w = (1 − (d/R)²)³, d the hand's distance from its
+        surface, and its spin damped alike, so that a body follows the dragged hand and flies on at the
+        hand's velocity when let go. The hand's speed is capped at ``speed_limit_m_s``, as for the water."""
+        velocity = np.asarray(push.velocity_m_s, np.float64)
+        speed = float(np.linalg.norm(velocity))
+        if speed > speed_limit_m_s:
+            velocity *= speed_limit_m_s / speed
+        self._grab(push.point_m, velocity.tolist(), push.radius_m)
+
+    # ------------------------------------------------------------------ the rigid step
+
+    @ti.kernel
+    def _update_rotation(self):
+        for b in range(self.count):
+            self.rotation[b] = quaternion_matrix(self.quaternion[b])
+
+    @ti.func
+    def _inverse_inertia(self, b, vector):
+        """I_b⁻¹ vector in world axes: R diag(1/I) Rᵀ vector."""
+        r = self.rotation[b]
+        return r @ ((r.transpose() @ vector) / self.inertia[b])
+
+    @ti.kernel
+    def _advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
+        for b in range(self.count):
+            r = quaternion_matrix(self.quaternion[b])
+            v = self.velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
+            inertia = self.inertia[b]
+            w_body = r.transpose() @ self.angular_velocity[b]
+            torque_body = r.transpose() @ self.torque[b]
+            w_body += dt * (torque_body - w_body.cross(inertia * w_body)) / inertia  # Euler's equations
+            w = r @ w_body
+            self.velocity[b] = v
+            self.angular_velocity[b] = w
+            self.position[b] += dt * v
+            q = self.quaternion[b]
+            q += 0.5 * dt * quaternion_multiply(ti.Vector([0.0, w[0], w[1], w[2]]), q)
+            q = q.normalized()
+            self.quaternion[b] = q
+            self.rotation[b] = quaternion_matrix(q)
+        ti.loop_config(serialize=True)
+        for _ in range(1):  # one thread: the contacts in a fixed order
+            self._contacts()
+
+    @ti.func
+    def _contacts(self):
+        for _sweep in range(CONTACT_SWEEPS):
+            for b in range(self.count):
+                self._container_contacts(b)
+                if ti.static(self.obstacles.count > 0):
+                    for o in range(self.obstacles.count):
+                        self._obstacle_contacts(b, o)
+            for a in range(self.count):
+                for b in range(a + 1, self.count):
+                    self._pair_contacts(a, b)
+
+    @ti.func
+    def _corner(self, b, k):
+        """Corner k (0-7) of box b in world coordinates."""
+        signs = ti.Vector([ti.select(k & 1, 1.0, -1.0), ti.select(k & 2, 1.0, -1.0), ti.select(k & 4, 1.0, -1.0)])
+        return self.position[b] + self.rotation[b] @ (signs * self.half[b])
+
+    @ti.func
+    def _container_contacts(self, b):
+        if self.sphere[b]:
+            radius = self.half[b][0]
+            for a in ti.static(range(3)):
+                normal = ti.Vector([1.0 if i == a else 0.0 for i in range(3)])
+                below = self.lower[a] - (self.position[b][a] - radius)
+                if below > 0.0:
+                    self._static_contact(b, self.position[b] - radius * normal, normal, below)
+                above = self.position[b][a] + radius - self.upper[a]
+                if above > 0.0:
+                    self._static_contact(b, self.position[b] + radius * normal, -normal, above)
+        else:
+            for k in range(8):
+                for a in ti.static(range(3)):
+                    normal = ti.Vector([1.0 if i == a else 0.0 for i in range(3)])
+                    corner = self._corner(b, k)
+                    below = self.lower[a] - corner[a]
+                    if below > 0.0:
+                        self._static_contact(b, corner, normal, below)
+                    corner = self._corner(b, k)
+                    above = corner[a] - self.upper[a]
+                    if above > 0.0:
+                        self._static_contact(b, corner, -normal, above)
+
+    @ti.func
+    def _box_exit(self, local, half):
+        """For a point at ``local`` inside a box of half extents ``half`` (its own frame): the outward
+        normal of the nearest face and the depth below it."""
+        best, axis = 1e30, 0
+        for a in ti.static(range(3)):
+            gap = half[a] - ti.abs(local[a])
+            if gap < best:
+                best, axis = gap, a
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        normal[axis] = 1.0 if local[axis] >= 0.0 else -1.0
+        return normal, best
+
+    @ti.func
+    def _obstacle_contacts(self, b, o):
+        lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
+        centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+        if self.sphere[b]:
+            radius = self.half[b][0]
+            c = self.position[b]
+            closest = ti.max(lower, ti.min(c, upper))
+            gap = c - closest
+            distance = gap.norm()
+            if distance < radius:
+                normal = ti.Vector([0.0, 1.0, 0.0])
+                depth = radius - distance
+                if distance > 1e-9:
+                    normal = gap / distance
+                else:
+                    normal, inside = self._box_exit(c - centre, half)
+                    depth = radius + inside
+                self._static_contact(b, c - radius * normal, normal, depth)
+        else:
+            for k in range(8):
+                corner = self._corner(b, k)
+                local = corner - centre
+                if (ti.abs(local) < half).all():
+                    normal, depth = self._box_exit(local, half)
+                    self._static_contact(b, corner, normal, depth)
+
+    @ti.func
+    def _apply(self, b, impulse, arm):
+        self.velocity[b] += self.inverse_mass[b] * impulse
+        self.angular_velocity[b] += self._inverse_inertia(b, arm.cross(impulse))
+
+    @ti.func
+    def _static_contact(self, b, point, normal, depth):
+        """Body b's ``point`` lies ``depth`` inside a fixed wall of outward ``normal``: move it out, and
+        take away the velocity into the wall (no bounce) and, within Coulomb's cone, the sliding."""
+        self.position[b] += depth * normal
+        arm = point + depth * normal - self.position[b]  # the point moved with the body
+        approach = (self.velocity[b] + self.angular_velocity[b].cross(arm)).dot(normal)
+        if approach < 0.0:
+            rn = arm.cross(normal)
+            j = -approach / (self.inverse_mass[b] + rn.dot(self._inverse_inertia(b, rn)))
+            self._apply(b, j * normal, arm)
+            slide = self.velocity[b] + self.angular_velocity[b].cross(arm)
+            slide -= slide.dot(normal) * normal
+            speed = slide.norm()
+            if speed > 1e-9:
+                t = slide / speed
+                rt = arm.cross(t)
+                jt = ti.min(speed / (self.inverse_mass[b] + rt.dot(self._inverse_inertia(b, rt))), FRICTION * j)
+                self._apply(b, -jt * t, arm)
+
+    @ti.func
+    def _pair_contact(self, a, b, point, normal, depth):
+        """Body a's and b's surfaces overlap by ``depth`` at ``point``; ``normal`` points from b to a."""
+        ma, mb = self.inverse_mass[a], self.inverse_mass[b]
+        self.position[a] += depth * ma / (ma + mb) * normal
+        self.position[b] -= depth * mb / (ma + mb) * normal
+        ra, rb = point - self.position[a], point - self.position[b]
+        relative = (self.velocity[a] + self.angular_velocity[a].cross(ra)
+                    - self.velocity[b] - self.angular_velocity[b].cross(rb))
+        approach = relative.dot(normal)
+        if approach < 0.0:
+            na, nb = ra.cross(normal), rb.cross(normal)
+            k = ma + mb + na.dot(self._inverse_inertia(a, na)) + nb.dot(self._inverse_inertia(b, nb))
+            j = -approach / k
+            self._apply(a, j * normal, ra)
+            self._apply(b, -j * normal, rb)
+            relative = (self.velocity[a] + self.angular_velocity[a].cross(ra)
+                        - self.velocity[b] - self.angular_velocity[b].cross(rb))
+            slide = relative - relative.dot(normal) * normal
+            speed = slide.norm()
+            if speed > 1e-9:
+                t = slide / speed
+                ta, tb = ra.cross(t), rb.cross(t)
+                kt = ma + mb + ta.dot(self._inverse_inertia(a, ta)) + tb.dot(self._inverse_inertia(b, tb))
+                jt = ti.min(speed / kt, FRICTION * j)
+                self._apply(a, -jt * t, ra)
+                self._apply(b, jt * t, rb)
+
+    @ti.func
+    def _pair_contacts(self, a, b):
+        if self.sphere[a] and self.sphere[b]:
+            gap = self.position[a] - self.position[b]
+            distance = gap.norm()
+            reach = self.half[a][0] + self.half[b][0]
+            if distance < reach:
+                normal = ti.Vector([0.0, 1.0, 0.0])
+                if distance > 1e-9:
+                    normal = gap / distance
+                self._pair_contact(a, b, self.position[b] + self.half[b][0] * normal, normal, reach - distance)
+        elif self.sphere[a] or self.sphere[b]:
+            s, box = a, b
+            if self.sphere[b]:
+                s, box = b, a
+            r = self.rotation[box]
+            local = r.transpose() @ (self.position[s] - self.position[box])
+            half = self.half[box]
+            closest = ti.max(-half, ti.min(local, half))
+            gap = local - closest
+            distance = gap.norm()
+            radius = self.half[s][0]
+            if distance < radius:
+                normal_local = ti.Vector([0.0, 1.0, 0.0])
+                depth = radius - distance
+                if distance > 1e-9:
+                    normal_local = gap / distance
+                else:
+                    n, inside = self._box_exit(local, half)
+                    normal_local, depth = n, radius + inside
+                point = self.position[box] + r @ closest
+                self._pair_contact(s, box, point, r @ normal_local, depth)
+        else:
+            for k in range(16):  # the corners of a inside b, then those of b inside a
+                inner, outer = a, b
+                if k >= 8:
+                    inner, outer = b, a
+                corner = self._corner(inner, k % 8)
+                r = self.rotation[outer]
+                local = r.transpose() @ (corner - self.position[outer])
+                if (ti.abs(local) < self.half[outer]).all():
+                    n, depth = self._box_exit(local, self.half[outer])
+                    self._pair_contact(inner, outer, corner, r @ n, depth)
+
+    # ------------------------------------------------------------------ the boundary the fluid sees
+
+    @ti.func
+    def _ghost_of(self, p, b):
+        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        centre = self.position[b]
+        if self.sphere[b]:
+            offset = p - centre
+            distance = offset.norm()
+            surface = distance - self.half[b][0]
+            if surface < self.kernel_radius:
+                value, slope = self.tables.wall(surface)
+                density = value
+                gradient = slope * offset / ti.max(distance, 1e-12)
+        else:
+            r = self.rotation[b]
+            half = self.half[b]
+            value, slope = self.tables.box(r.transpose() @ (p - centre), -half, half)
+            density = value
+            gradient = r @ slope
+        return density, gradient
+
+    @ti.func
+    def ghost(self, p):
+        """The bodies' ghost density ρ/ρ0 at p and its gradient (1/m)."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_wall_density):
+            for b in range(self.count):
+                d, g = self._ghost_of(p, b)
+                density += d
+                gradient += g
+        return density, gradient
+
+    @ti.func
+    def project(self, p):
+        """p moved out of every body grown by the particle radius, through the nearest face (a box) or
+        along the radius (a sphere)."""
+        q = p
+        for b in range(self.count):
+            centre = self.position[b]
+            if self.sphere[b]:
+                offset = q - centre
+                distance = offset.norm()
+                reach = self.half[b][0] + self.radius
+                if distance < reach:
+                    direction = ti.Vector([0.0, 1.0, 0.0])
+                    if distance > 1e-12:
+                        direction = offset / distance
+                    q = centre + reach * direction
+            else:
+                r = self.rotation[b]
+                local = r.transpose() @ (q - centre)
+                grown = self.half[b] + self.radius
+                if (ti.abs(local) < grown).all():
+                    normal, _depth = self._box_exit(local, grown)
+                    for a in ti.static(range(3)):
+                        if normal[a] != 0.0:
+                            local[a] = normal[a] * grown[a]
+                    q = centre + r @ local
+        return q
+
+    @ti.func
+    def velocity(self, p):
+        """The velocity v + ω × (p − c) of the body whose ghost p sees (within h of its surface)."""
+        v = ti.Vector([0.0, 0.0, 0.0])
+        for b in range(self.count):
+            centre = self.position[b]
+            near = False
+            if self.sphere[b]:
+                near = (p - centre).norm() - self.half[b][0] < self.kernel_radius
+            else:
+                local = self.rotation[b].transpose() @ (p - centre)
+                near = ti.max(ti.abs(local) - self.half[b], 0.0).norm() < self.kernel_radius
+            if near:
+                v += self.velocity[b] + self.angular_velocity[b].cross(p - centre)
+        return v
+
+    # ------------------------------------------------------------------ the reaction
+
+    @ti.kernel
+    def _gather(self, x: ti.template(), lam_total: ti.template(), multiplier: ti.template(), active: ti.template(),
+                position_scale: ti.f32, velocity_scale: ti.f32):
+        for b, k in ti.ndrange(self.count, self.blocks):
+            force = ti.Vector([0.0, 0.0, 0.0])
+            torque = ti.Vector([0.0, 0.0, 0.0])
+            centre = self.position[b]
+            for i in range(k * self.block, ti.min((k + 1) * self.block, active[None])):
+                _density, gradient = self._ghost_of(x[i], b)
+                if gradient.norm_sqr() > 0.0:
+                    pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
+                    f = self.volume * pressure * gradient
+                    force += f
+                    torque += (x[i] - centre).cross(f)
+            self.partial_force[b, k] = force
+            self.partial_torque[b, k] = torque
+        for b in range(self.count):
+            force = ti.Vector([0.0, 0.0, 0.0])
+            torque = ti.Vector([0.0, 0.0, 0.0])
+            for k in range(self.blocks):  # in order: the same sum on any thread count
+                force += self.partial_force[b, k]
+                torque += self.partial_torque[b, k]
+            self.force[b] = force
+            self.torque[b] = torque
+
+    def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
+        """The fluid's reaction on every body over the substep just solved, F_b = Σ_i V p_i ∇ψ_b(x_i)
+        and its torque (module docstring), p_i = −ρ0 h² (L_i/Δt² + Λ_i); the next :meth:`advance` applies it."""
+        scale = -self.params.rest_density_kg_m3 * self.kernel_radius ** 2
+        self._gather(x, lam_total, multiplier, active, scale / dt**2, scale)
+
+
+def _padded(values: np.ndarray, fill=None) -> np.ndarray:
+    """``values`` with at least one row (the fields have a slot even without bodies)."""
+    if len(values):
+        return np.ascontiguousarray(values, np.float32)
+    row = np.zeros((1, values.shape[1]), np.float32)
+    if fill is not None:
+        row[0] = fill
+    return row
