@@ -222,10 +222,18 @@ class FluidRenderer:
         for w in range(self.footprints.total(count)):
             i, c, r = self.footprints.item(w, count)
             centre = x[i] - eye
+            # The per-particle loops visit only the disc of the bounding square; so does this.
+            depth = centre.dot(forward)
+            col = 0.5 * width + focal * centre.dot(right) / depth
+            row = 0.5 * height - focal * centre.dot(up) / depth
+            extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
+            offset = r + 0.5 - row
+            half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
+            in_disc = ti.max(0, ti.cast(col - half, ti.i32)) <= c < ti.min(width, ti.cast(col + half, ti.i32) + 1)
             ray = self._ray(r, c, right, up, forward, focal, width, height)
             a, b = ray.norm_sqr(), ray.dot(centre)
             disc = b * b - a * (centre.norm_sqr() - radius * radius)
-            if disc > 0.0:
+            if in_disc and disc > 0.0:
                 root = ti.sqrt(disc)
                 ti.atomic_min(self.depth[r, c], (b - root) / a)
                 steps = 2.0 * root / ti.sqrt(a) * self.chord_scale / self.quantum

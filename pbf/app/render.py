@@ -309,7 +309,14 @@ class SphereRenderer:
             depth = centre.dot(forward)
             nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
             y = self.height - 1 - r
-            if self.keys[c, y] > nearest:
+            # The per-particle loops visit only the disc of the bounding square; so does this.
+            col = 0.5 * self.width + focal * centre.dot(right) / depth
+            row = 0.5 * self.height - focal * centre.dot(up) / depth
+            extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
+            offset = c + 0.5 - col
+            half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
+            in_disc = ti.max(0, ti.cast(row - half, ti.i32)) <= r < ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
+            if in_disc and self.keys[c, y] > nearest:
                 ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward + up * (
                     (0.5 * self.height - r - 0.5) / focal)
                 a, b = ray.norm_sqr(), ray.dot(centre)
