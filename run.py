@@ -1,4 +1,5 @@
 """Entry point: ``python run.py [SCENE] [options]``; see ``python run.py --help``."""
+
 import sys
 
 from pbf.app.cli import main

@@ -6,6 +6,7 @@ wall within reach (tests/test_bodies.py's scene). Prints a table.
     PYTHONPATH=$PWD python benchmarks/bodies.py [frames]
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum
 """
+
 import sys
 import time
 from dataclasses import replace
@@ -40,17 +41,29 @@ def main(frames: int = 20) -> None:
     print("| scene | particles | median ms/substep |\n|---|---|---|")
     print(f"| floating_boxes, no bodies | {sims['no bodies'].particle_count:,} | {1e3 * b:.2f} |")
     print(f"| floating_boxes, 4 bodies | {sim.particle_count:,} | {1e3 * a:.2f} |")
-    print(f"\nper body: {1e3 * (a - b) / 4:.3f} ms/substep; particles within h of a body: {near:,} "
-          f"({1e6 * (a - b) / max(near, 1):.2f} µs per coupled particle per substep)")
+    print(
+        f"\nper body: {1e3 * (a - b) / 4:.3f} ms/substep; particles within h of a body: {near:,} "
+        f"({1e6 * (a - b) / max(near, 1):.2f} µs per coupled particle per substep)"
+    )
 
 
 def momentum(frames: int = 24) -> None:
     spacing = 0.025
-    scene = {"name": "push", "gravity_m_s2": [0, 0, 0], "container": {"max_m": [1.0, 0.5, 0.5]},
-             "fluid": {"spacing_m": spacing, "blocks": [{"min_m": [0.35, 0.1, 0.1], "max_m": [0.65, 0.4, 0.4]}]},
-             "bodies": [{"size_m": [0.05, 0.06, 0.06], "density_kg_m3": 1000, "position_m": [0.25, 0.25, 0.25],
-                         "velocity_m_s": [0.5, 0, 0]}],
-             "solver": {"iterations": 10, "target_density_error": 0.001}}
+    scene = {
+        "name": "push",
+        "gravity_m_s2": [0, 0, 0],
+        "container": {"max_m": [1.0, 0.5, 0.5]},
+        "fluid": {"spacing_m": spacing, "blocks": [{"min_m": [0.35, 0.1, 0.1], "max_m": [0.65, 0.4, 0.4]}]},
+        "bodies": [
+            {
+                "size_m": [0.05, 0.06, 0.06],
+                "density_kg_m3": 1000,
+                "position_m": [0.25, 0.25, 0.25],
+                "velocity_m_s": [0.5, 0, 0],
+            }
+        ],
+        "solver": {"iterations": 10, "target_density_error": 0.001},
+    }
     sim = Simulation(scene, quiet=True)
     mass, body_mass = sim.model.particle_mass_kg, 1000 * 0.1 * 0.12 * 0.12
     start = body_mass * 0.5
@@ -60,8 +73,10 @@ def momentum(frames: int = 24) -> None:
         if frame % 3 == 2:
             vx = sim.body_states()[0, 7]
             water = mass * float(sim.velocities()[:, 0].sum())
-            print(f"| {sim.time_s:.2f} | {vx:.3f} | {water / start:.3f} | {body_mass * vx / start:.3f} | "
-                  f"{(water + body_mass * vx) / start:.3f} |")
+            print(
+                f"| {sim.time_s:.2f} | {vx:.3f} | {water / start:.3f} | {body_mass * vx / start:.3f} | "
+                f"{(water + body_mass * vx) / start:.3f} |"
+            )
 
 
 def _rotation(q):

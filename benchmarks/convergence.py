@@ -21,6 +21,7 @@ history, and a commit whose package is flat (``pbf/*.py``); docs/BENCHMARKS.md's
 with ``--as-filed 31d5946``, the seed preset of 2 substeps × 4 plain Jacobi iterations as first
 filed. Without it the ratios are to the first of ``--variants``.
 """
+
 import argparse
 import importlib
 import re
@@ -40,13 +41,22 @@ from pbf.solver import Simulation, start_backend
 CHEBYSHEV = ("solver.expert.acceleration=chebyshev", "solver.expert.chebyshev_rho=0.92")
 """Chebyshev weights at ρ 0.92 (Wang 2015), as the seed preset ran them before the stable weights."""
 
-H_2_2 = ("solver.kernel_ratio=2.2", "solver.surface_density=false", "solver.target_density_error=0.001",
-         "solver.min_iterations=1")
+H_2_2 = (
+    "solver.kernel_ratio=2.2",
+    "solver.surface_density=false",
+    "solver.target_density_error=0.001",
+    "solver.min_iterations=1",
+)
 """h = 2.2 s, no free-surface ghost, target 0.1%, at least 1 iteration: the seed preset before the
 ghost, but for its weights."""
 
-BEFORE = H_2_2 + ("solver.expert.acceleration=none", "solver.divergence_iterations=0", "solver.iterations=4",
-                  "solver.target_density_error=0", "time.max_cfl=1.2")
+BEFORE = H_2_2 + (
+    "solver.expert.acceleration=none",
+    "solver.divergence_iterations=0",
+    "solver.iterations=4",
+    "solver.target_density_error=0",
+    "time.max_cfl=1.2",
+)
 """4 plain Jacobi iterations every substep, CFL 1.2, h = 2.2 s: the seed preset as first filed, run by
 the current code."""
 
@@ -55,8 +65,10 @@ VARIANTS = {
     "before+chebyshev": ("+ Chebyshev ρ 0.92", BEFORE + CHEBYSHEV),
     "before+stable": ("+ stable weights", BEFORE + ("solver.expert.acceleration=stable",)),
     "chebyshev-h2.2": ("Chebyshev ρ 0.92, ≥ 1 iteration, target 0.1%, h = 2.2 s", H_2_2 + CHEBYSHEV),
-    "chebyshev-h2.0": ("that, h = 2.0 s + surface ghost, target 0.09%",
-                       CHEBYSHEV + ("solver.min_iterations=1", "solver.target_density_error=0.0009")),
+    "chebyshev-h2.0": (
+        "that, h = 2.0 s + surface ghost, target 0.09%",
+        CHEBYSHEV + ("solver.min_iterations=1", "solver.target_density_error=0.0009"),
+    ),
     "preset": ("the preset: stable weights, ≥ 2 iterations, step back, target 0.12%", ()),
     "preset+chebyshev": ("preset, Chebyshev ρ 0.92", CHEBYSHEV),
     "preset-min1": ("preset, ≥ 1 iteration", ("solver.min_iterations=1",)),
@@ -75,15 +87,19 @@ def as_filed(commit: str, scene: str, workdir: Path):
     repository = Path(__file__).resolve().parent.parent
     archive = subprocess.run(["git", "-C", str(repository), "archive", commit, "pbf", "scenes"], capture_output=True)
     if archive.returncode != 0:
-        print(f"note: --as-filed {commit}: no such row ({archive.stderr.decode().strip() or 'git archive failed'}); "
-              f"it needs a git clone with that commit's history", file=sys.stderr)
+        print(
+            f"note: --as-filed {commit}: no such row ({archive.stderr.decode().strip() or 'git archive failed'}); "
+            f"it needs a git clone with that commit's history",
+            file=sys.stderr,
+        )
         return None
     subprocess.run(["tar", "-x", "-C", str(workdir)], input=archive.stdout, check=True)
     package = workdir / "pbf_as_filed"
     (workdir / "pbf").rename(package)
     if not (package / "simulation.py").is_file():
-        print(f"note: --as-filed {commit}: its package is not flat (no pbf/simulation.py); no such row",
-              file=sys.stderr)
+        print(
+            f"note: --as-filed {commit}: its package is not flat (no pbf/simulation.py); no such row", file=sys.stderr
+        )
         return None
     for module in package.glob("*.py"):  # such a commit's package is flat: pbf/*.py
         text = module.read_text()
@@ -113,10 +129,16 @@ def run(sims: dict, frames: int) -> dict:
             tally["maxima"].append(stats["max_density_error"])
             tally["iterations"].append(stats["iterations"])
             tally["substeps"].append(stats["substeps"])
-    return {name: {"seconds": t["seconds"] / (frames * sims[name].scene.time.frame_dt_s),
-                   "mean": float(np.mean(t["means"])), "max": max(t["maxima"]),
-                   "iterations": float(np.mean(t["iterations"])), "substeps": float(np.mean(t["substeps"]))}
-            for name, t in tallies.items()}
+    return {
+        name: {
+            "seconds": t["seconds"] / (frames * sims[name].scene.time.frame_dt_s),
+            "mean": float(np.mean(t["means"])),
+            "max": max(t["maxima"]),
+            "iterations": float(np.mean(t["iterations"])),
+            "substeps": float(np.mean(t["substeps"])),
+        }
+        for name, t in tallies.items()
+    }
 
 
 def main(argv=None):
@@ -125,10 +147,17 @@ def main(argv=None):
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--threads", type=int, default=None, help="Taichi CPU threads (default: all cores)")
-    parser.add_argument("--variants", default=",".join(VARIANTS),
-                        help=f"comma-separated short names, the first the base of the ratios: {', '.join(VARIANTS)}")
-    parser.add_argument("--as-filed", default="", metavar="COMMIT",
-                        help="a first row run by this commit's own code (needs git history; see above)")
+    parser.add_argument(
+        "--variants",
+        default=",".join(VARIANTS),
+        help=f"comma-separated short names, the first the base of the ratios: {', '.join(VARIANTS)}",
+    )
+    parser.add_argument(
+        "--as-filed",
+        default="",
+        metavar="COMMIT",
+        help="a first row run by this commit's own code (needs git history; see above)",
+    )
     args = parser.parse_args(argv)
     names = [name.strip() for name in args.variants.split(",") if name.strip()]
     unknown = [name for name in names if name not in VARIANTS]
@@ -158,14 +187,18 @@ def main(argv=None):
     base = statistics.median(bases)
     print(f"{args.scene}, first {args.frames} frames, {args.rounds} rounds interleaved frame by frame (median time)")
     width = max(map(len, results))
-    print(f"{'variant':{width}s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
-          f"{'s per sim s':>11s} {'ratio':>6s}  each round")
+    print(
+        f"{'variant':{width}s} {'mean err %':>10s} {'max err %':>9s} {'its/substep*':>12s} {'substeps':>8s} "
+        f"{'s per sim s':>11s} {'ratio':>6s}  each round"
+    )
     for name, rows in results.items():
         seconds = statistics.median(r["seconds"] for r in rows)
         r = rows[0]
         rounds = " ".join(f"{row['seconds'] / b:.2f}" for row, b in zip(rows, bases))
-        print(f"{name:{width}s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} "
-              f"{r['substeps']:8.2f} {seconds:11.3f} {seconds / base:6.2f}  {rounds}")
+        print(
+            f"{name:{width}s} {100 * r['mean']:10.3f} {100 * r['max']:9.2f} {r['iterations']:12.1f} "
+            f"{r['substeps']:8.2f} {seconds:11.3f} {seconds / base:6.2f}  {rounds}"
+        )
     print("* iterations of each frame's last substep, averaged over the frames")
 
 

@@ -43,7 +43,8 @@ Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8
   0.001 = 0.1%), ``kernel_ratio`` (solver.kernel_ratio), ``xsph`` (viscosity.xsph), ``divergence``
   (solver.divergence_iterations, our divergence pre-correction) or any dotted key; a spec without a
   target runs a fixed count (the preset's target is set to 0), and ``preset`` keeps the preset's own
-  solver settings (its target included). Vorticity confinement is off (``vorticity.epsilon`` = 0), as in SPlisHSPlasH, and ``time.max_cfl``
+  solver settings (its target included). Vorticity confinement is off (``vorticity.epsilon`` = 0), as in
+  SPlisHSPlasH, and ``time.max_cfl``
   is raised to the most the scene allows (solver.kernel_ratio) so that the CFL limit does not add
   substeps to the steps asked (at substeps = 4 both simulators take the same 240 steps); the steps
   actually taken are printed. Time is ``step()`` alone per frame, synchronised, the statistics taken
@@ -60,6 +61,7 @@ Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8
   SPlisHSPlasH's mean errors to 1%, its max errors to a fifth, and its PBF loses 5 to 13 particles
   out of the box, as its OpenMP sums fall). Take timings on a quiet machine.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -88,22 +90,40 @@ PRESET = "dam_break"
 
 SPLASH_METHODS = {
     # name: (simulationMethod, the scene file's block and log counter prefix, its defaults as shipped)
-    "dfsph": (4, "DFSPH", {"minIterations": 2, "maxIterations": 100, "maxError": 0.01,
-                           "enableDivergenceSolver": True, "maxIterationsV": 100, "maxErrorV": 0.1}),
+    "dfsph": (
+        4,
+        "DFSPH",
+        {
+            "minIterations": 2,
+            "maxIterations": 100,
+            "maxError": 0.01,
+            "enableDivergenceSolver": True,
+            "maxIterationsV": 100,
+            "maxErrorV": 0.1,
+        },
+    ),
     "pbf": (2, "PBF", {"minIterations": 2, "maxIterations": 100, "maxError": 0.01, "velocityUpdateMethod": 0}),
 }
 SPLASH_PARAMETER_IDS = {  # the static parameter ids of its TimeStep classes, and their getters
-    "minIterations": ("MIN_ITERATIONS", "UInt"), "maxIterations": ("MAX_ITERATIONS", "UInt"),
-    "maxError": ("MAX_ERROR", "Float"), "maxIterationsV": ("MAX_ITERATIONS_V", "UInt"),
-    "maxErrorV": ("MAX_ERROR_V", "Float"), "enableDivergenceSolver": ("USE_DIVERGENCE_SOLVER", "Bool"),
+    "minIterations": ("MIN_ITERATIONS", "UInt"),
+    "maxIterations": ("MAX_ITERATIONS", "UInt"),
+    "maxError": ("MAX_ERROR", "Float"),
+    "maxIterationsV": ("MAX_ITERATIONS_V", "UInt"),
+    "maxErrorV": ("MAX_ERROR_V", "Float"),
+    "enableDivergenceSolver": ("USE_DIVERGENCE_SOLVER", "Bool"),
     "velocityUpdateMethod": ("VELOCITY_UPDATE_METHOD", "Int"),
 }
 SPLASH_KERNELS = {0: "cubic spline", 2: "Poly6 (gradients: Spiky)", 4: "cubic spline, tabulated"}
 
-OUR_SHORT_KEYS = {"substeps": "time.substeps", "iterations": "solver.iterations",
-                  "max_iterations": "solver.iterations", "target": "solver.target_density_error",
-                  "kernel_ratio": "solver.kernel_ratio", "xsph": "viscosity.xsph",
-                  "divergence": "solver.divergence_iterations"}
+OUR_SHORT_KEYS = {
+    "substeps": "time.substeps",
+    "iterations": "solver.iterations",
+    "max_iterations": "solver.iterations",
+    "target": "solver.target_density_error",
+    "kernel_ratio": "solver.kernel_ratio",
+    "xsph": "viscosity.xsph",
+    "divergence": "solver.divergence_iterations",
+}
 
 # Run inside SPlisHSPlasH's own environment on the run's scene file: builds the scene (and its
 # boundary particles) with one step, and writes what the density check needs and the parameters it
@@ -154,21 +174,42 @@ def splash_scene(method: str, params: dict, dt_s: float, seconds: float, box_obj
     simulation_method, block_name, _ = SPLASH_METHODS[method]
     return {
         "Configuration": {
-            "particleRadius": spacing / 2, "simulationMethod": simulation_method,
-            "gravitation": list(scene.gravity_m_s2), "timeStepSize": dt_s, "cflMethod": 0,
-            "boundaryHandlingMethod": 0, "stopAt": seconds, "enableVTKExport": True,
-            "dataExportFPS": round(1 / scene.time.frame_dt_s), "particleAttributes": "density",
+            "particleRadius": spacing / 2,
+            "simulationMethod": simulation_method,
+            "gravitation": list(scene.gravity_m_s2),
+            "timeStepSize": dt_s,
+            "cflMethod": 0,
+            "boundaryHandlingMethod": 0,
+            "stopAt": seconds,
+            "enableVTKExport": True,
+            "dataExportFPS": round(1 / scene.time.frame_dt_s),
+            "particleAttributes": "density",
             block_name: params,
         },
-        "Materials": [{"id": "Fluid", "density0": scene.fluid.rest_density_kg_m3, "viscosityMethod": 0,
-                       "vorticityMethod": 0, "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0}}],
-        "RigidBodies": [{"geometryFile": str(box_obj), "translation": list((lower + upper) / 2),
-                         "scale": list(upper - lower), "isDynamic": False, "isWall": True, "mapInvert": True,
-                         "mapThickness": 0.0, "mapResolution": [20, 20, 20]}],
+        "Materials": [
+            {
+                "id": "Fluid",
+                "density0": scene.fluid.rest_density_kg_m3,
+                "viscosityMethod": 0,
+                "vorticityMethod": 0,
+                "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0},
+            }
+        ],
+        "RigidBodies": [
+            {
+                "geometryFile": str(box_obj),
+                "translation": list((lower + upper) / 2),
+                "scale": list(upper - lower),
+                "isDynamic": False,
+                "isWall": True,
+                "mapInvert": True,
+                "mapThickness": 0.0,
+                "mapResolution": [20, 20, 20],
+            }
+        ],
         # Its particles start one diameter (one spacing) inside `start` and fill round((end − start)/s) − 1
         # per axis: `end` one spacing past the block gives the preset's 20 per axis.
-        "FluidBlocks": [{"denseMode": 0, "start": list(block.min_m),
-                         "end": list(np.array(block.max_m) + spacing)}],
+        "FluidBlocks": [{"denseMode": 0, "start": list(block.min_m), "end": list(np.array(block.max_m) + spacing)}],
     }
 
 
@@ -181,9 +222,11 @@ def read_vtk(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not (points and ids and density):
         raise ValueError(f"{path}: expected float POINTS, ids and a density field")
     n = int(points.group(1))
-    return (np.frombuffer(data, ">f4", 3 * n, points.end()).reshape(n, 3).astype(np.float64),
-            np.frombuffer(data, ">u4", n, ids.end()).astype(np.int64),
-            np.frombuffer(data, ">f4", n, density.end()).astype(np.float64))
+    return (
+        np.frombuffer(data, ">f4", 3 * n, points.end()).reshape(n, 3).astype(np.float64),
+        np.frombuffer(data, ">u4", n, ids.end()).astype(np.int64),
+        np.frombuffer(data, ">f4", n, density.end()).astype(np.float64),
+    )
 
 
 def splash_kernel(kernel: int, support: float):
@@ -195,6 +238,7 @@ def splash_kernel(kernel: int, support: float):
         def cubic(r):
             q = r / h
             return np.where(q <= 0.5, k * (6 * q**3 - 6 * q**2 + 1), np.where(q <= 1.0, 2 * k * (1 - q) ** 3, 0.0))
+
         return cubic
     if kernel == 2:  # Poly6Kernel
         k = 315.0 / (64.0 * math.pi * h**9)
@@ -211,6 +255,7 @@ def neighbour_pairs(points: np.ndarray, sources: np.ndarray, h: float) -> tuple[
 
     def key(cells):
         return (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+
     source_keys = key(source_cells)
     order = np.argsort(source_keys, kind="stable")
     source_keys = source_keys[order]
@@ -233,19 +278,23 @@ def kernel_sum(pairs: tuple[np.ndarray, ...], weights: np.ndarray, kernel, n: in
     return np.bincount(i, weights=kernel(r) * weights[j], minlength=n)
 
 
-def splash_density(x: np.ndarray, fluid_volume: float, boundary: np.ndarray, boundary_volume: np.ndarray,
-                   h: float, kernels: list) -> list[np.ndarray]:
+def splash_density(
+    x: np.ndarray, fluid_volume: float, boundary: np.ndarray, boundary_volume: np.ndarray, h: float, kernels: list
+) -> list[np.ndarray]:
     """ρ/ρ0 of every particle at positions x for each of ``kernels``, as SPlisHSPlasH sums it with
     Akinci boundary particles: V_f Σ_fluid W (itself included) + Σ_boundary V_b W."""
     fluid_pairs, wall_pairs = neighbour_pairs(x, x, h), neighbour_pairs(x, boundary, h)
     volumes = np.full(len(x), fluid_volume)
-    return [kernel_sum(fluid_pairs, volumes, kernel, len(x)) + kernel_sum(wall_pairs, boundary_volume, kernel, len(x))
-            for kernel in kernels]
+    return [
+        kernel_sum(fluid_pairs, volumes, kernel, len(x)) + kernel_sum(wall_pairs, boundary_volume, kernel, len(x))
+        for kernel in kernels
+    ]
 
 
 @dataclass
 class Row:
     """One run's figures."""
+
     label: str
     dt_ms: float
     steps: int
@@ -281,15 +330,30 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
     with tempfile.TemporaryDirectory() as tmp:
         scene_path = Path(tmp) / "dam_break.json"
         scene_path.write_text(json.dumps(splash_scene(method, params, dt_s, seconds, box_obj), indent=1))
-        probe = subprocess.run([splash_interpreter(splash), "-c", SPLASH_PROBE, str(scene_path), str(Path(tmp) / "probe"),
-                                str(Path(tmp) / "probe.npz"), json.dumps(SPLASH_PARAMETER_IDS)],
-                               env=env, capture_output=True, text=True)
+        probe = subprocess.run(
+            [
+                splash_interpreter(splash),
+                "-c",
+                SPLASH_PROBE,
+                str(scene_path),
+                str(Path(tmp) / "probe"),
+                str(Path(tmp) / "probe.npz"),
+                json.dumps(SPLASH_PARAMETER_IDS),
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if probe.returncode:
             sys.exit(f"SPlisHSPlasH probe failed ({probe.returncode}):\n{probe.stdout[-2000:]}{probe.stderr[-2000:]}")
         meta = np.load(Path(tmp) / "probe.npz")
         out = Path(tmp) / "out"
-        result = subprocess.run([str(splash), "--no-gui", "--no-initial-pause", "--output-dir", str(out), str(scene_path)],
-                                env=env, capture_output=True, text=True)
+        result = subprocess.run(
+            [str(splash), "--no-gui", "--no-initial-pause", "--output-dir", str(out), str(scene_path)],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if result.returncode:
             sys.exit(f"{splash} failed ({result.returncode}):\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
         log = result.stdout
@@ -297,14 +361,17 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
         def number(pattern):
             found = re.search(pattern + r": ([-+\d.eE]+)", log)
             return float(found.group(1)) if found else None
+
         step_ms, sum_ms = number(r"Average time: SimStep"), number(r"Time sum: SimStep")
         mean_dt, total_time = number(r"Average number: Time step size"), number(r"Total number: Time step size")
         iterations = number(rf"Average number: {block_name} - iterations")
         divergence = number(rf"Average number: {block_name} - iterationsV")
         frames = sorted((out / "vtk").glob("ParticleData_Fluid_*.vtk"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
         if len(frames) < 2 or None in (step_ms, sum_ms, mean_dt, total_time, iterations):
-            sys.exit(f"{splash}: {len(frames)} exported frames, or its log lacks SimStep, time step or iteration "
-                     f"figures:\n{log[-2000:]}")
+            sys.exit(
+                f"{splash}: {len(frames)} exported frames, or its log lacks SimStep, time step or iteration "
+                f"figures:\n{log[-2000:]}"
+            )
 
         # Its own kernel, checked against its Simulation.W; its fluid volume; its boundary particles.
         applied = json.loads(str(meta["applied"]))
@@ -332,8 +399,10 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
             error = np.maximum(rho / rho0 - 1.0, 0.0)
             ratios = splash_density(x, fluid_volume, boundary, boundary_volume, h, kernels)
             error_again = np.maximum(ratios[0] - 1.0, 0.0)
-            means.append(error.mean()); maxima.append(error.max())
-            re_means.append(error_again.mean()); re_maxima.append(error_again.max())
+            means.append(error.mean())
+            maxima.append(error.max())
+            re_means.append(error_again.mean())
+            re_maxima.append(error_again.max())
             gaps.append(np.abs(ratios[0] * rho0 - rho).max() / rho0)
             if len(ratios) > 1:
                 cubic_gaps.append(np.abs(ratios[1] * rho0 - rho).max() / rho0)
@@ -343,26 +412,41 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
         print(f"warning: SPlisHSPlasH exported {len(means)} frames after the first step, not {wanted}")
     defaults = SPLASH_METHODS[method][2]
     shown = ",".join(f"{k}={_num(v)}" for k, v in params.items() if k == "maxError" or v != defaults[k])
-    row = Row(f"SPlisHSPlasH {block_name} {shown}",
-              dt_s * 1e3, round(total_time / mean_dt), iterations, step_ms, sum_ms / 1e3 / total_time,
-              float(np.mean(means)), float(max(maxima)), len(means), divergence,
-              float(np.mean(re_means)), float(max(re_maxima)), len(left))
+    row = Row(
+        f"SPlisHSPlasH {block_name} {shown}",
+        dt_s * 1e3,
+        round(total_time / mean_dt),
+        iterations,
+        step_ms,
+        sum_ms / 1e3 / total_time,
+        float(np.mean(means)),
+        float(max(maxima)),
+        len(means),
+        divergence,
+        float(np.mean(re_means)),
+        float(max(re_maxima)),
+        len(left),
+    )
     mm = 1e3
     names = ("x = min", "y = min (floor)", "z = min", "x = max", "y = max", "z = max")
     distances = lambda x: np.concatenate([x.min(0) - lower, upper - x.max(0)]) * mm  # noqa: E731
     timers = re.findall(r"Average time: ([^:\n]+): ([\d.eE+-]+) ms", log)
     row.notes += [
-        "its timers, mean ms per call: " + ", ".join(f"{name} {float(ms):.2f}" for name, ms in timers
-                                                     if "sampling" not in name),
+        "its timers, mean ms per call: "
+        + ", ".join(f"{name} {float(ms):.2f}" for name, ms in timers if "sampling" not in name),
         "applied by SPlisHSPlasH: " + ", ".join(f"{k} {_num(v)}" for k, v in applied.items()),
         f"kernel: {SPLASH_KERNELS.get(applied['kernel'], applied['kernel'])}, support {h * mm:.1f} mm "
         f"= {h / spacing:.1f} spacings; largest gap to its Simulation.W {kernel_gap:.1e} of W(0); fluid volume "
         f"{fluid_volume / spacing**3:.3f} s³; {len(boundary):,} boundary particles",
         f"placement: {len(x0):,} particles; nearest to each wall at the start, mm: "
         + ", ".join(f"{n} {d:.1f}" for n, d in zip(names, distances(x0)))
-        + ("; first layer one spacing from the wall particles: yes" if distances(x0).min() >= 0.75 * spacing * mm
-           else f"; WARNING: closer than one spacing ({spacing * mm:.1f} mm) to its wall particles"),
-        "  in exported frame 1 (after its first step): " + ", ".join(f"{n} {d:.1f}" for n, d in zip(names, distances(first_x)))
+        + (
+            "; first layer one spacing from the wall particles: yes"
+            if distances(x0).min() >= 0.75 * spacing * mm
+            else f"; WARNING: closer than one spacing ({spacing * mm:.1f} mm) to its wall particles"
+        ),
+        "  in exported frame 1 (after its first step): "
+        + ", ".join(f"{n} {d:.1f}" for n, d in zip(names, distances(first_x)))
         + f"; nearest boundary particle {_nearest(first_x, boundary, h) * mm:.1f} mm",
         f"  initial density ρ/ρ0 by its kernel: bulk {np.median(initial):.4f}, largest {initial.max():.4f} "
         f"(the layer against its wall particles)",
@@ -370,8 +454,12 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
         f"exported density vs recomputed from the exported positions: mean error {row.mean_error:.3%} vs "
         f"{row.recomputed_mean:.3%}, max {row.max_error:.2%} vs {row.recomputed_max:.2%}, largest particle "
         f"difference {max(gaps):.2%} of ρ0"
-        + (f"; its exported density is the cubic spline's (with the boundary volumes of its kernel): recomputed "
-           f"so, the largest particle difference is {max(cubic_gaps):.2%} of ρ0" if cubic_gaps else ""),
+        + (
+            f"; its exported density is the cubic spline's (with the boundary volumes of its kernel): recomputed "
+            f"so, the largest particle difference is {max(cubic_gaps):.2%} of ρ0"
+            if cubic_gaps
+            else ""
+        ),
     ]
     return row
 
@@ -382,7 +470,7 @@ def _nearest(points: np.ndarray, others: np.ndarray, reach: float) -> float:
     near = points[np.any((points < others.min(0) + reach) | (points > others.max(0) - reach), axis=1)]
     best = np.inf
     for start in range(0, len(near), 100):
-        chunk = near[start:start + 100]
+        chunk = near[start : start + 100]
         best = min(best, float(np.sqrt(((chunk[:, None, :] - others[None, :, :]) ** 2).sum(-1)).min()))
     return best
 
@@ -462,15 +550,26 @@ def run_ours(spec: str, seconds: float, kernel_ratio: float | None = None, label
         means.append(stats["mean_density_error"])
         maxima.append(stats["max_density_error"])
     simulated = len(frame_s) * scene.time.frame_dt_s
-    settings = f"substeps={scene.time.substeps},iterations={scene.solver.iterations}" + (
-        f",target={scene.solver.target_density_error:g}" if scene.solver.target_density_error else "") + (
-        f",divergence={scene.solver.divergence_iterations}" if scene.solver.divergence_iterations else "")
+    settings = (
+        f"substeps={scene.time.substeps},iterations={scene.solver.iterations}"
+        + (f",target={scene.solver.target_density_error:g}" if scene.solver.target_density_error else "")
+        + (f",divergence={scene.solver.divergence_iterations}" if scene.solver.divergence_iterations else "")
+    )
     divergence = scene.solver.divergence_iterations or None  # fixed per substep when on
-    return Row(label or f"pbf {spec} (h {scene.solver.kernel_ratio:g} s)",
-               scene.time.frame_dt_s / scene.time.substeps * 1e3, counter.substeps,
-               counter.iterations / max(counter.substeps, 1), sum(frame_s) / max(counter.substeps, 1) * 1e3,
-               sum(frame_s) / simulated, statistics.fmean(means), max(maxima), len(means), divergence,
-               settings=f"{settings} (h {scene.solver.kernel_ratio:g} s)", spec=spec)
+    return Row(
+        label or f"pbf {spec} (h {scene.solver.kernel_ratio:g} s)",
+        scene.time.frame_dt_s / scene.time.substeps * 1e3,
+        counter.substeps,
+        counter.iterations / max(counter.substeps, 1),
+        sum(frame_s) / max(counter.substeps, 1) * 1e3,
+        sum(frame_s) / simulated,
+        statistics.fmean(means),
+        max(maxima),
+        len(means),
+        divergence,
+        settings=f"{settings} (h {scene.solver.kernel_ratio:g} s)",
+        spec=spec,
+    )
 
 
 def medians(runs: list[Row]) -> Row:
@@ -490,19 +589,31 @@ def medians(runs: list[Row]) -> Row:
 
 
 def meets(ours: Row, theirs: Row, recomputed: bool = False) -> bool:
-    mean, worst = ((theirs.recomputed_mean, theirs.recomputed_max) if recomputed
-                   else (theirs.mean_error, theirs.max_error))
+    mean, worst = (
+        (theirs.recomputed_mean, theirs.recomputed_max) if recomputed else (theirs.mean_error, theirs.max_error)
+    )
     return ours.mean_error <= mean and ours.max_error <= worst
 
 
-def match(theirs: list[Row], seconds: float, kernel_ratio: float, substeps: list[int], iterations: list[int],
-          targets: list[float], target_cap: int, log) -> tuple[dict[int, Row | None], list[Row]]:
+def match(
+    theirs: list[Row],
+    seconds: float,
+    kernel_ratio: float,
+    substeps: list[int],
+    iterations: list[int],
+    targets: list[float],
+    target_cap: int,
+    log,
+) -> tuple[dict[int, Row | None], list[Row]]:
     """The cheapest of our grid meeting each of ``theirs`` (index → row, None if none does)."""
     best: dict[int, Row | None] = {k: None for k in range(len(theirs))}
     tried: list[Row] = []
     ladders = [[f"substeps={s},iterations={i}" for i in iterations] for s in substeps]
-    ladders += [[f"substeps={s},target={t!r},max_iterations={target_cap}" for t in sorted(targets, reverse=True)]
-                for s in substeps if targets]
+    ladders += [
+        [f"substeps={s},target={t!r},max_iterations={target_cap}" for t in sorted(targets, reverse=True)]
+        for s in substeps
+        if targets
+    ]
     for ladder in ladders:
         for spec in ladder:
             run = run_ours(spec, seconds, kernel_ratio)
@@ -521,28 +632,36 @@ def match(theirs: list[Row], seconds: float, kernel_ratio: float, substeps: list
 
 # ----------------------------------------------------------------------------- output
 
-HEADER = (f"{'run':<58} {'Δt ms':>5} {'steps':>5} {'iter/step':>9} {'div/step':>8} {'ms/step':>8} "
-          f"{'s/sim s':>7} {'mean err':>8} {'max err':>7}  {'recomputed':>16} {'left box':>8}")
+HEADER = (
+    f"{'run':<58} {'Δt ms':>5} {'steps':>5} {'iter/step':>9} {'div/step':>8} {'ms/step':>8} "
+    f"{'s/sim s':>7} {'mean err':>8} {'max err':>7}  {'recomputed':>16} {'left box':>8}"
+)
 
 
 def line(r: Row) -> str:
     divergence = f"{r.divergence_iterations:.2f}" if r.divergence_iterations is not None else "-"
-    again = (f"{r.recomputed_mean:.3%} / {r.recomputed_max:.1%}" if r.recomputed_mean is not None else "-")
+    again = f"{r.recomputed_mean:.3%} / {r.recomputed_max:.1%}" if r.recomputed_mean is not None else "-"
     left = str(r.left_box) if r.left_box is not None else "-"
-    return (f"{r.label:<58.58} {r.dt_ms:>5.2f} {r.steps:>5} {r.iterations:>9.2f} {divergence:>8} {r.ms_per_step:>8.2f} "
-            f"{r.compute_s_per_s:>7.2f} {r.mean_error:>8.3%} {r.max_error:>7.2%}  {again:>16} {left:>8}")
+    return (
+        f"{r.label:<58.58} {r.dt_ms:>5.2f} {r.steps:>5} {r.iterations:>9.2f} {divergence:>8} {r.ms_per_step:>8.2f} "
+        f"{r.compute_s_per_s:>7.2f} {r.mean_error:>8.3%} {r.max_error:>7.2%}  {again:>16} {left:>8}"
+    )
 
 
 def verdict(theirs: Row, ours: Row | None, was: Row | None = None) -> str:
     """One line of the --match summary."""
     if ours is None:
         return f"  {theirs.label}: none of the grid meets {theirs.mean_error:.3%} / {theirs.max_error:.2%}"
-    head = (f"  {theirs.label} ({theirs.mean_error:.3%} / {theirs.max_error:.2%}, {theirs.compute_s_per_s:.2f} s/s): "
-            f"ours {ours.settings}, {ours.mean_error:.3%} / {ours.max_error:.2%}, {ours.compute_s_per_s:.2f} s/s "
-            f"-> SPlisHSPlasH / ours = {theirs.compute_s_per_s / ours.compute_s_per_s:.2f}x")
+    head = (
+        f"  {theirs.label} ({theirs.mean_error:.3%} / {theirs.max_error:.2%}, {theirs.compute_s_per_s:.2f} s/s): "
+        f"ours {ours.settings}, {ours.mean_error:.3%} / {ours.max_error:.2%}, {ours.compute_s_per_s:.2f} s/s "
+        f"-> SPlisHSPlasH / ours = {theirs.compute_s_per_s / ours.compute_s_per_s:.2f}x"
+    )
     if was is not None:
-        return head + (f" (was {theirs.compute_s_per_s / was.compute_s_per_s:.2f}x; meets its error: "
-                       f"{'yes' if meets(ours, theirs) else 'no'})")
+        return head + (
+            f" (was {theirs.compute_s_per_s / was.compute_s_per_s:.2f}x; meets its error: "
+            f"{'yes' if meets(ours, theirs) else 'no'})"
+        )
     return head + f" (also meets its recomputed density: {'yes' if meets(ours, theirs, recomputed=True) else 'no'})"
 
 
@@ -587,42 +706,87 @@ def parse_param_sets(values: list[str] | None, methods: list[str]) -> list[dict]
             key, sep, value = item.partition("=")
             key = key.strip()
             if not sep or key not in known:
-                raise ValueError(f"--param {text!r}: {item!r}; expected KEY=VALUE with KEY one of {', '.join(sorted(known))}")
-            variant[key] = json.loads(value.strip().lower()) if value.strip().lower() in ("true", "false") else (
-                int(value) if re.fullmatch(r"[-+]?\d+", value.strip()) else float(value))
+                raise ValueError(
+                    f"--param {text!r}: {item!r}; expected KEY=VALUE with KEY one of {', '.join(sorted(known))}"
+                )
+            variant[key] = (
+                json.loads(value.strip().lower())
+                if value.strip().lower() in ("true", "false")
+                else (int(value) if re.fullmatch(r"[-+]?\d+", value.strip()) else float(value))
+            )
         sets.append(variant)
     return sets
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[1:6]))
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="\n".join(__doc__.splitlines()[1:6]),
+    )
     parser.add_argument("--splash", type=Path, required=True, help="the splash script of a pysplishsplash 2.19 install")
-    parser.add_argument("--methods", nargs="+", choices=sorted(SPLASH_METHODS), default=["dfsph", "pbf"],
-                        help="SPlisHSPlasH's solvers to run (default: dfsph pbf)")
-    parser.add_argument("--param", action="append", metavar="KEY=VALUE[,KEY=VALUE]",
-                        help="one SPlisHSPlasH variant per --param, set in its method's block over the shipped "
-                             "defaults (default: --param maxError=0.01 --param maxError=0.1; maxError is in percent)")
-    parser.add_argument("--ours", nargs="*", default=["substeps=4,iterations=4", "substeps=2,iterations=4", "preset"],
-                        help="our settings, each a comma-separated list of overrides of the preset (fixed "
-                             "iterations unless a target is given), or 'preset' for the preset's own solver settings")
+    parser.add_argument(
+        "--methods",
+        nargs="+",
+        choices=sorted(SPLASH_METHODS),
+        default=["dfsph", "pbf"],
+        help="SPlisHSPlasH's solvers to run (default: dfsph pbf)",
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        metavar="KEY=VALUE[,KEY=VALUE]",
+        help="one SPlisHSPlasH variant per --param, set in its method's block over the shipped "
+        "defaults (default: --param maxError=0.01 --param maxError=0.1; maxError is in percent)",
+    )
+    parser.add_argument(
+        "--ours",
+        nargs="*",
+        default=["substeps=4,iterations=4", "substeps=2,iterations=4", "preset"],
+        help="our settings, each a comma-separated list of overrides of the preset (fixed "
+        "iterations unless a target is given), or 'preset' for the preset's own solver settings",
+    )
     parser.add_argument("--dt-ms", type=float, default=4.1667, help="SPlisHSPlasH's fixed step (default 4.1667)")
     parser.add_argument("--seconds", type=float, default=1.0, help="simulated time of every run (default 1)")
     parser.add_argument("--threads", type=int, default=2, help="CPU threads for both simulators (default 2)")
-    parser.add_argument("--repeats", type=int, default=1, help="runs of each SPlisHSPlasH and --ours row, alternating; "
-                        "medians are reported (default 1; the --match grid runs once)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        help="runs of each SPlisHSPlasH and --ours row, alternating; "
+        "medians are reported (default 1; the --match grid runs once)",
+    )
     parser.add_argument("--match", action="store_true", help="find our cheapest grid setting at equal or lower error")
-    parser.add_argument("--match-kernel-ratios", type=float, nargs="+", default=[load_scene(PRESET).solver.kernel_ratio],
-                        help="kernel supports h/s to run the whole search at (default: the preset's, 2.2)")
-    parser.add_argument("--match-same-at", type=float, nargs="*", default=[2.0],
-                        help="kernel supports to run the settings found at again (default 2.0, SPlisHSPlasH's 4 "
-                             "particle radii): how much the support alone moves the ratio")
-    parser.add_argument("--match-substeps", type=int, nargs="+", default=[2, 4],
-                        help="substep counts of the grid (default 2 4; at 1, Δt = 16.7 ms, the dam break blows up)")
+    parser.add_argument(
+        "--match-kernel-ratios",
+        type=float,
+        nargs="+",
+        default=[load_scene(PRESET).solver.kernel_ratio],
+        help="kernel supports h/s to run the whole search at (default: the preset's, 2.2)",
+    )
+    parser.add_argument(
+        "--match-same-at",
+        type=float,
+        nargs="*",
+        default=[2.0],
+        help="kernel supports to run the settings found at again (default 2.0, SPlisHSPlasH's 4 "
+        "particle radii): how much the support alone moves the ratio",
+    )
+    parser.add_argument(
+        "--match-substeps",
+        type=int,
+        nargs="+",
+        default=[2, 4],
+        help="substep counts of the grid (default 2 4; at 1, Δt = 16.7 ms, the dam break blows up)",
+    )
     parser.add_argument("--match-iterations", type=int, nargs="+", default=[2, 3, 4, 6, 8, 12, 16, 24, 32])
-    parser.add_argument("--match-targets", type=float, nargs="*", default=[0.002, 0.001, 0.0005],
-                        help="error targets (fractions) tried at each substep count, with --match-target-cap iterations at most")
+    parser.add_argument(
+        "--match-targets",
+        type=float,
+        nargs="*",
+        default=[0.002, 0.001, 0.0005],
+        help="error targets (fractions) tried at each substep count, with --match-target-cap iterations at most",
+    )
     parser.add_argument("--match-target-cap", type=int, default=30)
     args = parser.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)  # progress shows as it comes when written to a file
@@ -648,8 +812,14 @@ def main(argv=None):
             ignored = [k for k in variant if k not in block_defaults]
             if ignored:
                 print(f"note: {SPLASH_METHODS[method][1]} has no {', '.join(ignored)}; left out of its runs")
-            jobs.append(("theirs", lambda m=method, p=params: run_splishsplash(args.splash, m, p, args.dt_ms / 1e3,
-                                                                           args.seconds, args.threads)))
+            jobs.append(
+                (
+                    "theirs",
+                    lambda m=method, p=params: run_splishsplash(
+                        args.splash, m, p, args.dt_ms / 1e3, args.seconds, args.threads
+                    ),
+                )
+            )
     for spec in args.ours:
         jobs.append(("ours", lambda s=spec: run_ours(s, args.seconds)))
     results = [[] for _ in jobs]
@@ -657,8 +827,10 @@ def main(argv=None):
         for k, (_, job) in enumerate(jobs):
             began, load = time.perf_counter(), os.getloadavg()[0]
             results[k].append(job())
-            print(f"  ran {results[k][-1].label} ({time.perf_counter() - began:.0f} s; load average "
-                  f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)")
+            print(
+                f"  ran {results[k][-1].label} ({time.perf_counter() - began:.0f} s; load average "
+                f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)"
+            )
     rows = [medians(runs) for runs in results]
     theirs = [r for (kind, _), r in zip(jobs, rows) if kind == "theirs"]
 
@@ -666,8 +838,10 @@ def main(argv=None):
     print(HEADER)
     for r in rows:
         print(line(r))
-    print("(s/sim s: seconds of compute per simulated second; recomputed: SPlisHSPlasH's density recomputed from its "
-          "exported positions, mean / max error; left box: its particles that ever left the box)")
+    print(
+        "(s/sim s: seconds of compute per simulated second; recomputed: SPlisHSPlasH's density recomputed from its "
+        "exported positions, mean / max error; left box: its particles that ever left the box)"
+    )
     for r in theirs:
         print(f"\n{r.label}:")
         for note in r.notes:
@@ -677,8 +851,16 @@ def main(argv=None):
         for ratio in args.match_kernel_ratios:
             print(f"\n--match at h = {ratio:g} s: our grid, cheapest first per substep count")
             print(HEADER)
-            best, _ = match(theirs, args.seconds, ratio, args.match_substeps, args.match_iterations,
-                            args.match_targets, args.match_target_cap, lambda run: print(line(run), flush=True))
+            best, _ = match(
+                theirs,
+                args.seconds,
+                ratio,
+                args.match_substeps,
+                args.match_iterations,
+                args.match_targets,
+                args.match_target_cap,
+                lambda run: print(line(run), flush=True),
+            )
             print(f"\nCheapest of ours at equal or lower mean error and no worse max error (h = {ratio:g} s):")
             for k, t in enumerate(theirs):
                 print(verdict(t, best[k]))

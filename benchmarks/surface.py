@@ -16,6 +16,7 @@ included, as the headless writer uses it); the ratio is the median of the per-fr
 steps the simulation and shows each frame twice, as particles and as the surface (key v): the frame
 rate of each is 1 / (median step + median show), the show including the panel and the present.
 """
+
 import argparse
 import dataclasses
 import statistics
@@ -60,20 +61,25 @@ def measure(particles: int, frames: int, every: int, rounds: int) -> None:
                 surface_ms.append(b)
                 ratios.append(b / a)
     median = statistics.median
-    print(f"{sim.particle_count:>9,} particles, {len(mesh_ms)} frames: mesh {median(mesh_ms):7.1f} ms "
-          f"(deterministic; {min(mesh_ms):.1f}-{max(mesh_ms):.1f}), {median(parallel_ms):7.1f} ms parallel "
-          f"subdomains, {median(triangles):,.0f} triangles")
+    print(
+        f"{sim.particle_count:>9,} particles, {len(mesh_ms)} frames: mesh {median(mesh_ms):7.1f} ms "
+        f"(deterministic; {min(mesh_ms):.1f}-{max(mesh_ms):.1f}), {median(parallel_ms):7.1f} ms parallel "
+        f"subdomains, {median(triangles):,.0f} triangles"
+    )
     if rendering:
-        print(f"{'':>9}  1280×720 frame: spheres {median(sphere_ms):6.1f} ms, surface {median(surface_ms):6.1f} ms, "
-              f"surface / spheres {median(ratios):.2f} (per-frame ratios {min(ratios):.2f}-{max(ratios):.2f})")
+        print(
+            f"{'':>9}  1280×720 frame: spheres {median(sphere_ms):6.1f} ms, surface {median(surface_ms):6.1f} ms, "
+            f"surface / spheres {median(ratios):.2f} (per-frame ratios {min(ratios):.2f}-{max(ratios):.2f})"
+        )
 
 
 def measure_window(frames: int) -> None:
     from pbf.app import window
 
     sim = Simulation("dam_break", quiet=True)
-    viewer = window.WindowViewer(sim, window.open_window("pbf benchmark", sim.scene.render.width_px,
-                                                         sim.scene.render.height_px))
+    viewer = window.WindowViewer(
+        sim, window.open_window("pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px)
+    )
     shows = {False: [], True: []}
     for surface in shows:  # compiles both renderers
         viewer.surface = surface
@@ -88,8 +94,10 @@ def measure_window(frames: int) -> None:
     step = statistics.median(steps)
     for surface, times in shows.items():
         show = statistics.median(times)
-        print(f"window, {'surface' if surface else 'particles'}: show {show:.0f} ms + step {step:.0f} ms = "
-              f"{1e3 / (show + step):.1f} fps")
+        print(
+            f"window, {'surface' if surface else 'particles'}: show {show:.0f} ms + step {step:.0f} ms = "
+            f"{1e3 / (show + step):.1f} fps"
+        )
 
 
 def main(argv=None) -> None:

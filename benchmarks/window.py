@@ -20,6 +20,7 @@ process of its own; "sim" is then the wait for it, "sim in its process" its own 
 cpu`` that of the other process: on a 2-core machine the frame rate cannot exceed 2000 / (their sum),
 whatever overlaps.
 """
+
 import argparse
 import gc
 import json
@@ -54,8 +55,9 @@ VARIANTS = {
     "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
     "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}},
     "gc-freeze": {"gc": "freeze"},
-    "malloc-keeps-memory": {"env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:"
-                                                      "glibc.malloc.trim_threshold=268435456"}},
+    "malloc-keeps-memory": {
+        "env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=268435456"}
+    },
     "sim-in-second-process": {"sim_process": True},
     "sim-in-second-process-renderer-1-thread": {"sim_process": True, "cpu_threads": 1},
 }
@@ -99,6 +101,7 @@ class Clock:
                 return function(*args, **kwargs)
             finally:
                 self.add(phase, time.perf_counter() - wall, time.process_time() - cpu)
+
         return run
 
     def add(self, phase, wall_s, cpu_s):
@@ -109,16 +112,17 @@ class Clock:
 def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> dict:
     """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
+    import taichi as ti
+
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
     from pbf.solver import Simulation, start_backend
-
-    import taichi as ti
 
     start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
     sim = Simulation(scene, quiet=True)
     try:
-        gui_window = window.open_window("pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px,
-                                        vsync=settings.get("vsync", True))
+        gui_window = window.open_window(
+            "pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px, vsync=settings.get("vsync", True)
+        )
     except window.WindowUnavailable as reason:
         raise SystemExit(f"no window: {reason}") from None
     viewer = window.WindowViewer(sim, gui_window)
@@ -173,13 +177,17 @@ def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> 
     x_end = x_server_cpu_s()
     other_end = process_cpu_s(other.process.pid) if other else None
     if other:
-        for row, step_ms in zip(rows, other.step_ms[-len(rows):]):
+        for row, step_ms in zip(rows, other.step_ms[-len(rows) :]):
             row["sim_own"] = (step_ms, 0.0)
         other.close()
-    result = {"variant": name, "fps": frames / elapsed, "load": os.getloadavg()[0],
-              "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
-              "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
-              "sim_process_cpu": None if other_end is None else 1e3 * (other_end - other_start) / frames}
+    result = {
+        "variant": name,
+        "fps": frames / elapsed,
+        "load": os.getloadavg()[0],
+        "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
+        "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
+        "sim_process_cpu": None if other_end is None else 1e3 * (other_end - other_start) / frames,
+    }
     for phase in PHASES:
         present = any(phase in row for row in rows)
         result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows) if present else None
@@ -221,9 +229,9 @@ class SimulationProcess:
 
 def simulate(scene: str, connection) -> None:
     """The other process of ``SimulationProcess``: steps a frame whenever asked and sends its particles."""
-    from pbf.solver import Simulation, start_backend
-
     import taichi as ti
+
+    from pbf.solver import Simulation, start_backend
 
     start_backend(quiet=True)
     sim = Simulation(scene, quiet=True)
@@ -261,8 +269,9 @@ def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
     width, height = viewer.window.get_window_shape()
     particles = viewer.sim.readout()
     colour = {"per_vertex_color": viewer.colours.update()} if per_vertex_colour else {"color": (0.3, 0.5, 0.9)}
-    scene.particles(particles.positions, radius=particles.radius_m * height / width, index_count=particles.count,
-                    **colour)
+    scene.particles(
+        particles.positions, radius=particles.radius_m * height / width, index_count=particles.count, **colour
+    )
     if lines:
         scene.lines(viewer.ggui_edges, width=1.5, color=tuple(viewer.render.container_rgb))
     canvas = viewer.window.get_canvas()
@@ -303,34 +312,42 @@ def table(results: dict[str, list[dict]]) -> str:
         values = [r[key] for r in rows if r[key] is not None]
         return f"{statistics.median(values):.1f}" if values else "-"
 
-    header = ("| variant | fps | frame ms | sim ms | sim in its process ms | draw ms | panel ms | show ms | "
-              "cpu ms/frame | sim process cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |")
+    header = (
+        "| variant | fps | frame ms | sim ms | sim in its process ms | draw ms | panel ms | show ms | "
+        "cpu ms/frame | sim process cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |"
+    )
     lines = [header, "|---|" + "---:|" * (header.count("|") - 2)]
     for name, rows in results.items():
-        lines.append(f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
-                     f"{cell(rows, 'sim_own')} | "
-                     f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
-                     f"{cell(rows, 'sim_process_cpu')} | "
-                     f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
-                     f"{cell(rows, 'show_cpu')} | {cell(rows, 'load')} |")
+        lines.append(
+            f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
+            f"{cell(rows, 'sim_own')} | "
+            f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
+            f"{cell(rows, 'sim_process_cpu')} | "
+            f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
+            f"{cell(rows, 'show_cpu')} | {cell(rows, 'load')} |"
+        )
     return "\n".join(lines)
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--frames", type=int, default=150, help="measured frames per run (default 150)")
     parser.add_argument("--rounds", type=int, default=3, help="runs of each variant, alternated (default 3)")
-    parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
-                        help=f"comma-separated, from: {', '.join(VARIANTS)}")
+    parser.add_argument(
+        "--variants", default=",".join(DEFAULT_VARIANTS), help=f"comma-separated, from: {', '.join(VARIANTS)}"
+    )
     parser.add_argument("--scene", default="dam_break")
-    parser.add_argument("--warmup", type=int, default=WARMUP_FRAMES,
-                        help=f"frames before the measured ones (default {WARMUP_FRAMES})")
+    parser.add_argument(
+        "--warmup", type=int, default=WARMUP_FRAMES, help=f"frames before the measured ones (default {WARMUP_FRAMES})"
+    )
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
     args = parser.parse_args(argv)
     if args.frames < 1 or args.rounds < 1 or args.warmup < 0:
-        parser.error(f"--frames {args.frames}, --rounds {args.rounds}, --warmup {args.warmup}: allowed at least "
-                     f"1, 1 and 0")
+        parser.error(
+            f"--frames {args.frames}, --rounds {args.rounds}, --warmup {args.warmup}: allowed at least 1, 1 and 0"
+        )
     if args.one:
         print(json.dumps(measure(args.one, args.frames, args.scene, args.warmup)), flush=True)
         return
@@ -343,17 +360,38 @@ def main(argv=None) -> None:
         for name in names:
             # Environment variables of a variant are set before the process starts: the C library
             # and the Vulkan driver read theirs when they load.
-            run = subprocess.run([sys.executable, __file__, "--one", name, "--frames", str(args.frames),
-                                  "--scene", args.scene, "--warmup", str(args.warmup)], capture_output=True, text=True,
-                                 env={**os.environ, **VARIANTS[name].get("env", {})})
+            run = subprocess.run(
+                [
+                    sys.executable,
+                    __file__,
+                    "--one",
+                    name,
+                    "--frames",
+                    str(args.frames),
+                    "--scene",
+                    args.scene,
+                    "--warmup",
+                    str(args.warmup),
+                ],
+                capture_output=True,
+                text=True,
+                env={**os.environ, **VARIANTS[name].get("env", {})},
+            )
             if run.returncode != 0:
                 raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
             result = json.loads(run.stdout.strip().splitlines()[-1])
             results[name].append(result)
-            phases = " + ".join(f"{phase} {result[phase]:.1f}" for phase in ("sim", "draw", "panel", "show")
-                                if result[phase] is not None)
-            print(f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps, "
-                  f"{phases} ms", file=sys.stderr, flush=True)
+            phases = " + ".join(
+                f"{phase} {result[phase]:.1f}"
+                for phase in ("sim", "draw", "panel", "show")
+                if result[phase] is not None
+            )
+            print(
+                f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps, "
+                f"{phases} ms",
+                file=sys.stderr,
+                flush=True,
+            )
     print(f"{args.scene}, {args.frames} frames × {args.rounds} rounds, medians (ms per frame; cpu: all threads)")
     print(table(results))
 

@@ -9,6 +9,7 @@ renderer, export) and ``pbf.study`` (benchmarks, sweeps, validation), around the
 ``pbf.scene``. ``Simulation`` is imported on first use, so that ``import pbf`` and the scene schema
 load without Taichi.
 """
+
 import os
 
 # Taichi prints a banner ("[Taichi] version 1.7.4, llvm …, commit …") when it is first imported,

@@ -1,4 +1,5 @@
 """Running the command line as a user does, and what every refusal must look like."""
+
 import subprocess
 import sys
 from pathlib import Path
@@ -10,8 +11,9 @@ RUN = Path(__file__).resolve().parent.parent / "run.py"
 
 def run_cli(*args, cwd, env=None) -> subprocess.CompletedProcess:
     """``python run.py ARGS`` in a fresh process, in ``cwd`` (where a default out/ would appear)."""
-    return subprocess.run([sys.executable, str(RUN), *map(str, args)], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, str(RUN), *map(str, args)], cwd=cwd, env=env, capture_output=True, text=True, timeout=120
+    )
 
 
 def files_under(folder: Path) -> set[Path]:

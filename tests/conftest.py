@@ -4,6 +4,7 @@ addopts), one per core of the 2-core machine the suite is sized for; a later ``-
 (CONTRIBUTING.md). Each worker runs one Taichi CPU runtime compiled for speed of compiling: each
 Simulation compiles its kernels anew, and without Taichi's advanced optimisation that is several
 times quicker, with the same results up to rounding (see pbf.solver.backend.start_backend)."""
+
 import os
 
 import pytest

@@ -1,5 +1,6 @@
 """The Python API is held to the rules of scene files: every Control assignment is checked against
 the bounds of its scene key, and memory refusals name the key that makes the difference."""
+
 import dataclasses
 import math
 
@@ -23,37 +24,59 @@ def bounds(table, name):
     return {f.name: f for f in dataclasses.fields(table)}[name].metadata["check"].bounds
 
 
-@pytest.mark.parametrize("field, value, error, words", [
-    ("iterations", -1, ValueError, ("control.iterations: expected an integer in [1, 100] (the bounds of "
-                                   "solver.iterations), got -1")),
-    ("iterations", 0, ValueError, "control.iterations: expected an integer in [1, 100]"),
-    ("iterations", 10**9, ValueError, "got 1000000000"),
-    ("iterations", 1e9, TypeError, ("control.iterations: expected an integer in [1, 100] (the bounds of "
-                                   "solver.iterations), got 1000000000.0 (float)")),
-    ("iterations", NAN, TypeError, "got nan (float)"),
-    ("iterations", "5", TypeError, "got '5' (str)"),
-    ("iterations", True, TypeError, "got true (bool)"),
-    ("min_iterations", 101, ValueError, "control.min_iterations: expected an integer in [1, 100]"),
-    ("substeps", 0, ValueError, "control.substeps: expected an integer in [1, 1000] (the bounds of time.substeps)"),
-    ("substeps", -3, ValueError, "control.substeps"),
-    ("xsph", NAN, ValueError, ("control.xsph: expected a finite number in [0, 1] (the bounds of viscosity.xsph), "
-                              "got nan")),
-    ("xsph", 2.0, ValueError, "control.xsph"),
-    ("vorticity", INF, ValueError, ("control.vorticity: expected a finite number in [0, 1] (the bounds of "
-                                   "vorticity.epsilon), got inf")),
-    ("target_density_error", NAN, ValueError, "control.target_density_error: expected a finite number in [0, 1]"),
-    ("target_density_error", "0.01", TypeError, "control.target_density_error"),
-    ("divergence_iterations", -1, ValueError, "control.divergence_iterations: expected an integer in [0, 100]"),
-    ("step_back", 1, TypeError, "control.step_back: expected True or False, got 1 (int)"),
-    ("emitters_on", "yes", TypeError, "control.emitters_on: expected True or False"),
-    ("wave_maker_on", None, TypeError, "control.wave_maker_on"),
-    ("gravity_m_s2", (0.0, NAN, 0.0), ValueError, "control.gravity_m_s2: expected three finite numbers"),
-    ("gravity_m_s2", (0.0, -1e6, 0.0), ValueError, "control.gravity_m_s2: expected |g| ≤"),
-    ("gravity_m_s2", 9.81, TypeError, "control.gravity_m_s2: expected three finite numbers"),
-    ("gravity_m_s2", "down", TypeError, "control.gravity_m_s2"),
-    ("push", 3, TypeError, "control.push: expected a pbf.solver.Push or None, got 3 (int)"),
-    ("iteration", 3, AttributeError, "control.iteration: no such setting; did you mean control.iterations?"),
-])
+@pytest.mark.parametrize(
+    "field, value, error, words",
+    [
+        (
+            "iterations",
+            -1,
+            ValueError,
+            ("control.iterations: expected an integer in [1, 100] (the bounds of solver.iterations), got -1"),
+        ),
+        ("iterations", 0, ValueError, "control.iterations: expected an integer in [1, 100]"),
+        ("iterations", 10**9, ValueError, "got 1000000000"),
+        (
+            "iterations",
+            1e9,
+            TypeError,
+            (
+                "control.iterations: expected an integer in [1, 100] (the bounds of "
+                "solver.iterations), got 1000000000.0 (float)"
+            ),
+        ),
+        ("iterations", NAN, TypeError, "got nan (float)"),
+        ("iterations", "5", TypeError, "got '5' (str)"),
+        ("iterations", True, TypeError, "got true (bool)"),
+        ("min_iterations", 101, ValueError, "control.min_iterations: expected an integer in [1, 100]"),
+        ("substeps", 0, ValueError, "control.substeps: expected an integer in [1, 1000] (the bounds of time.substeps)"),
+        ("substeps", -3, ValueError, "control.substeps"),
+        (
+            "xsph",
+            NAN,
+            ValueError,
+            ("control.xsph: expected a finite number in [0, 1] (the bounds of viscosity.xsph), got nan"),
+        ),
+        ("xsph", 2.0, ValueError, "control.xsph"),
+        (
+            "vorticity",
+            INF,
+            ValueError,
+            ("control.vorticity: expected a finite number in [0, 1] (the bounds of vorticity.epsilon), got inf"),
+        ),
+        ("target_density_error", NAN, ValueError, "control.target_density_error: expected a finite number in [0, 1]"),
+        ("target_density_error", "0.01", TypeError, "control.target_density_error"),
+        ("divergence_iterations", -1, ValueError, "control.divergence_iterations: expected an integer in [0, 100]"),
+        ("step_back", 1, TypeError, "control.step_back: expected True or False, got 1 (int)"),
+        ("emitters_on", "yes", TypeError, "control.emitters_on: expected True or False"),
+        ("wave_maker_on", None, TypeError, "control.wave_maker_on"),
+        ("gravity_m_s2", (0.0, NAN, 0.0), ValueError, "control.gravity_m_s2: expected three finite numbers"),
+        ("gravity_m_s2", (0.0, -1e6, 0.0), ValueError, "control.gravity_m_s2: expected |g| ≤"),
+        ("gravity_m_s2", 9.81, TypeError, "control.gravity_m_s2: expected three finite numbers"),
+        ("gravity_m_s2", "down", TypeError, "control.gravity_m_s2"),
+        ("push", 3, TypeError, "control.push: expected a pbf.solver.Push or None, got 3 (int)"),
+        ("iteration", 3, AttributeError, "control.iteration: no such setting; did you mean control.iterations?"),
+    ],
+)
 def test_a_bad_assignment_is_refused_at_once_naming_the_setting(control, field, value, error, words):
     before = dataclasses.asdict(control)
     with pytest.raises(error) as refused:
@@ -65,8 +88,11 @@ def test_a_bad_assignment_is_refused_at_once_naming_the_setting(control, field, 
 
 def test_the_bounds_are_the_scene_keys(control):
     # Read from the keys' declarations, not copied: the ends are allowed, one step beyond is not.
-    for field, (table, name) in {"iterations": (Solver, "iterations"), "substeps": (Time, "substeps"),
-                                 "divergence_iterations": (Solver, "divergence_iterations")}.items():
+    for field, (table, name) in {
+        "iterations": (Solver, "iterations"),
+        "substeps": (Time, "substeps"),
+        "divergence_iterations": (Solver, "divergence_iterations"),
+    }.items():
         lowest, highest = bounds(table, name)
         for allowed in (lowest, highest):
             setattr(control, field, np.int64(allowed))
@@ -88,12 +114,15 @@ def test_good_assignments_keep_working(control):
     control.push = None
 
 
-@pytest.mark.parametrize("point, velocity, radius, words", [
-    ((0.0, NAN, 0.0), (0.0, 0.0, 0.0), 0.1, "control.push.point_m: expected three finite numbers"),
-    ((0.0, 0.0, 0.0), (INF, 0.0, 0.0), 0.1, "control.push.velocity_m_s"),
-    ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, "control.push.radius_m: expected a finite number in (0,"),
-    ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), NAN, "control.push.radius_m"),
-])
+@pytest.mark.parametrize(
+    "point, velocity, radius, words",
+    [
+        ((0.0, NAN, 0.0), (0.0, 0.0, 0.0), 0.1, "control.push.point_m: expected three finite numbers"),
+        ((0.0, 0.0, 0.0), (INF, 0.0, 0.0), 0.1, "control.push.velocity_m_s"),
+        ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, "control.push.radius_m: expected a finite number in (0,"),
+        ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), NAN, "control.push.radius_m"),
+    ],
+)
 def test_a_bad_push_is_refused(point, velocity, radius, words):
     with pytest.raises(ValueError, match=words.replace("(", r"\(")):
         Push(point, velocity, radius)
@@ -104,10 +133,13 @@ def plenty_of_memory(monkeypatch):
     monkeypatch.setattr(model, "available_memory_bytes", lambda: 8 << 30)
 
 
-@pytest.mark.parametrize("overrides, words", [
-    (["fluid.max_particles=1000000000"], "key 'fluid.max_particles': 1,000,000,000 particles"),
-    (["fluid.max_particles=2147483647"], "key 'fluid.max_particles': 2,147,483,647 particles"),
-])
+@pytest.mark.parametrize(
+    "overrides, words",
+    [
+        (["fluid.max_particles=1000000000"], "key 'fluid.max_particles': 1,000,000,000 particles"),
+        (["fluid.max_particles=2147483647"], "key 'fluid.max_particles': 2,147,483,647 particles"),
+    ],
+)
 def test_a_memory_refusal_names_the_budget_when_it_is_the_budget(plenty_of_memory, overrides, words):
     with pytest.raises(SceneError, match=words) as refused:
         Model.from_scene(load_scene(small_dam_break(), overrides))
@@ -117,12 +149,15 @@ def test_a_memory_refusal_names_the_budget_when_it_is_the_budget(plenty_of_memor
 
 def test_a_memory_refusal_names_the_emitter_that_adds_the_most(plenty_of_memory):
     # A tall box so that the water fits its volume; the stream then decides the memory.
-    scene = {"container": {"max_m": [40.0, 40.0, 40.0]}, "fluid": {"spacing_m": 0.02},
-             "time": {"max_substeps": 1000},
-             "emitters": [{"position_m": [20.0, 39.0, 20.0], "direction": [0, -1, 0], "radius_m": 0.05,
-                           "end_s": 1.0},
-                          {"position_m": [10.0, 38.0, 10.0], "direction": [0, -1, 0], "radius_m": 1.0,
-                           "end_s": 1000.0}]}
+    scene = {
+        "container": {"max_m": [40.0, 40.0, 40.0]},
+        "fluid": {"spacing_m": 0.02},
+        "time": {"max_substeps": 1000},
+        "emitters": [
+            {"position_m": [20.0, 39.0, 20.0], "direction": [0, -1, 0], "radius_m": 0.05, "end_s": 1.0},
+            {"position_m": [10.0, 38.0, 10.0], "direction": [0, -1, 0], "radius_m": 1.0, "end_s": 1000.0},
+        ],
+    }
     with pytest.raises(SceneError, match=r"key 'emitters\[1\].end_s': [\d,]+ particles .* GiB") as refused:
         Model.from_scene(from_dict(scene))
     assert "emitters[1] adds" in str(refused.value)
@@ -144,8 +179,10 @@ def test_a_conflict_with_a_key_the_command_line_set_names_the_command_line():
     with pytest.raises(SceneError) as refused:
         load_scene("dam_break", ["obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]"])
     message = str(refused.value)
-    assert message.startswith("command line --set obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not "
-                              "agree with ") and "key 'time.max_cfl' = 2" in message
+    assert (
+        message.startswith("command line --set obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not agree with ")
+        and "key 'time.max_cfl' = 2" in message
+    )
 
 
 @pytest.fixture(scope="module")
@@ -155,14 +192,17 @@ def shared_simulation():
     return Simulation(small_dam_break(), quiet=True)
 
 
-@pytest.mark.parametrize("call, error, message", [
-    (lambda sim: sim.step(1.5), TypeError, "step: frames: expected a whole number of frames, got 1.5"),
-    (lambda sim: sim.step(True), TypeError, "step: frames: expected a whole number"),
-    (lambda sim: sim.step(-1), ValueError, "step: frames: expected 0 or more, got -1"),
-    (lambda sim: sim.substep(float("nan")), ValueError, r"substep: dt: expected a value in \(0, "),
-    (lambda sim: sim.substep(1.0), ValueError, r"substep: dt: expected a value in \(0, 0.0166667\] s"),
-    (lambda sim: sim.substep("0.01"), TypeError, "substep: dt: expected a number of seconds"),
-])
+@pytest.mark.parametrize(
+    "call, error, message",
+    [
+        (lambda sim: sim.step(1.5), TypeError, "step: frames: expected a whole number of frames, got 1.5"),
+        (lambda sim: sim.step(True), TypeError, "step: frames: expected a whole number"),
+        (lambda sim: sim.step(-1), ValueError, "step: frames: expected 0 or more, got -1"),
+        (lambda sim: sim.substep(float("nan")), ValueError, r"substep: dt: expected a value in \(0, "),
+        (lambda sim: sim.substep(1.0), ValueError, r"substep: dt: expected a value in \(0, 0.0166667\] s"),
+        (lambda sim: sim.substep("0.01"), TypeError, "substep: dt: expected a number of seconds"),
+    ],
+)
 def test_step_and_substep_refuse_bad_arguments(shared_simulation, call, error, message):
     sim = shared_simulation
     before = sim.positions()

@@ -1,5 +1,6 @@
 """Choosing the backend (auto, gpu, a named one), naming its device, its memory; and the solver's source
 free of what GPUs lack or serialise (float64, serialised loops)."""
+
 import os
 import re
 import subprocess
@@ -21,20 +22,25 @@ METAL = Device("metal", "Apple GPU")
 @pytest.fixture
 def found(monkeypatch):
     """Stand-ins for the device probes: ``found(cuda=..., vulkan=..., metal=...)``."""
+
     def install(cuda=None, vulkan=None, metal=None):
         monkeypatch.setattr(backend, "_cuda_device", lambda: cuda)
         monkeypatch.setattr(backend, "_vulkan_device", lambda: vulkan)
         monkeypatch.setattr(backend, "_metal_device", lambda: metal)
+
     return install
 
 
-@pytest.mark.parametrize("devices, chosen", [
-    ({"cuda": CUDA, "vulkan": HARDWARE_VULKAN}, "cuda"),
-    ({"vulkan": HARDWARE_VULKAN}, "vulkan"),
-    ({"metal": METAL, "vulkan": LAVAPIPE}, "metal"),
-    ({"vulkan": LAVAPIPE}, "cpu"),  # never a software rasterizer over the CPU backend
-    ({}, "cpu"),
-])
+@pytest.mark.parametrize(
+    "devices, chosen",
+    [
+        ({"cuda": CUDA, "vulkan": HARDWARE_VULKAN}, "cuda"),
+        ({"vulkan": HARDWARE_VULKAN}, "vulkan"),
+        ({"metal": METAL, "vulkan": LAVAPIPE}, "metal"),
+        ({"vulkan": LAVAPIPE}, "cpu"),  # never a software rasterizer over the CPU backend
+        ({}, "cpu"),
+    ],
+)
 def test_auto_prefers_cuda_then_a_hardware_gpu_then_the_cpu(found, devices, chosen):
     found(**devices)
     device, reason = backend._choose("auto")
@@ -43,11 +49,14 @@ def test_auto_prefers_cuda_then_a_hardware_gpu_then_the_cpu(found, devices, chos
         assert "llvmpipe" in reason and "software" in reason
 
 
-@pytest.mark.parametrize("devices, chosen", [
-    ({"cuda": CUDA, "vulkan": LAVAPIPE}, "cuda"),
-    ({"metal": METAL, "vulkan": HARDWARE_VULKAN}, "metal"),
-    ({"vulkan": LAVAPIPE}, "vulkan"),  # asked for a GPU backend: the software one is the one there is
-])
+@pytest.mark.parametrize(
+    "devices, chosen",
+    [
+        ({"cuda": CUDA, "vulkan": LAVAPIPE}, "cuda"),
+        ({"metal": METAL, "vulkan": HARDWARE_VULKAN}, "metal"),
+        ({"vulkan": LAVAPIPE}, "vulkan"),  # asked for a GPU backend: the software one is the one there is
+    ],
+)
 def test_gpu_takes_the_best_gpu_backend(found, devices, chosen):
     found(**devices)
     assert backend._choose("gpu")[0].arch == chosen
@@ -67,8 +76,10 @@ def test_a_named_backend_is_taken_when_present(found):
 
 
 def test_taichi_picks_the_discrete_gpu_over_lavapipe_unless_told(monkeypatch):
-    devices = [{"name": "llvmpipe (LLVM 15.0.6, 256 bits)", "type": "cpu", "api_minor": 3, "memory_bytes": 2 << 30},
-               {"name": "Test Radeon", "type": "discrete", "api_minor": 2, "memory_bytes": 8 << 30}]
+    devices = [
+        {"name": "llvmpipe (LLVM 15.0.6, 256 bits)", "type": "cpu", "api_minor": 3, "memory_bytes": 2 << 30},
+        {"name": "Test Radeon", "type": "discrete", "api_minor": 2, "memory_bytes": 8 << 30},
+    ]
     monkeypatch.delenv("TI_VISIBLE_DEVICE", raising=False)
     assert backend._taichi_vulkan_choice(devices)["name"] == "Test Radeon"
     monkeypatch.setenv("TI_VISIBLE_DEVICE", "0")
@@ -105,9 +116,13 @@ def test_device_memory_of_a_gpu_is_its_own(monkeypatch):
     assert backend.device_memory_bytes() == 3 << 30
 
 
-@pytest.mark.parametrize("arch, expected", [
-    ("auto", r"\[pbf\] Starting on cpu \((x64|arm64), no GPU found.*\), Taichi .+"),
-    ("vulkan", r"\[pbf\] Starting on vulkan \(.+, requested\), Taichi .+")])
+@pytest.mark.parametrize(
+    "arch, expected",
+    [
+        ("auto", r"\[pbf\] Starting on cpu \((x64|arm64), no GPU found.*\), Taichi .+"),
+        ("vulkan", r"\[pbf\] Starting on vulkan \(.+, requested\), Taichi .+"),
+    ],
+)
 def test_a_fresh_process_starts_and_says_on_what(arch, expected):
     devices = backend.vulkan_devices()
     if arch == "vulkan" and not devices:
@@ -115,8 +130,9 @@ def test_a_fresh_process_starts_and_says_on_what(arch, expected):
     if arch == "auto" and any(not backend._is_software(d) for d in devices):
         pytest.skip("a hardware Vulkan device is present here")
     code = f"from pbf.solver import start_backend; print(start_backend({arch!r}))"
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                            env={**os.environ, "PBF_ARCH": ""})
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env={**os.environ, "PBF_ARCH": ""}
+    )
     if arch == "auto" and "Starting on cuda" in result.stdout:
         pytest.skip("a CUDA GPU is present here")
     assert result.returncode == 0, result.stderr

@@ -1,6 +1,7 @@
 """Taichi's banner never shows: a run prints pbf's one "Starting on" line, which names Taichi's version,
 and neither "[Taichi] version …" (printed when Taichi is imported) nor "[Taichi] Starting on …"
 (printed by ti.init)."""
+
 import os
 import re
 import subprocess
@@ -11,7 +12,9 @@ import taichi as ti
 from command_line import run_cli
 
 BANNER = "[Taichi] version"
-STARTING = re.compile(r"\[pbf\] Starting on cpu \((x64|arm64), requested\), Taichi " + re.escape(".".join(map(str, ti.__version__))))
+STARTING = re.compile(
+    r"\[pbf\] Starting on cpu \((x64|arm64), requested\), Taichi " + re.escape(".".join(map(str, ti.__version__)))
+)
 SWITCH = "ENABLE_TAICHI_HEADER_PRINT"
 """Taichi's own switch for its banner, which ``pbf/__init__.py`` sets; the pytest process inherits
 it, so the subprocesses below run without it, as a user's shell would."""
@@ -26,8 +29,9 @@ def user_env():
 
 def test_without_pbf_taichi_prints_its_banner(user_env):
     # What the tests below guard against: a bare import of Taichi in a user's environment.
-    result = subprocess.run([sys.executable, "-c", "import taichi"], env=user_env, capture_output=True, text=True,
-                            timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-c", "import taichi"], env=user_env, capture_output=True, text=True, timeout=120
+    )
     assert result.returncode == 0 and BANNER in result.stdout
 
 
@@ -40,8 +44,11 @@ def test_a_run_prints_one_starting_line_and_no_taichi_banner(tmp_path, user_env)
     assert len(starting) == 1 and STARTING.fullmatch(starting[0]), output
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["--list"], ["no_such_scene"], ["dam_break", "--arch", "cuda", "--stats-only", "--frames", "1"]],
-                         ids=["help", "list", "bad-scene", "backend-error"])
+@pytest.mark.parametrize(
+    "argv",
+    [["--help"], ["--list"], ["no_such_scene"], ["dam_break", "--arch", "cuda", "--stats-only", "--frames", "1"]],
+    ids=["help", "list", "bad-scene", "backend-error"],
+)
 def test_help_list_and_errors_print_no_taichi_banner(tmp_path, user_env, argv):
     result = run_cli(*argv, cwd=tmp_path, env=user_env)
     output = result.stdout + result.stderr

@@ -1,6 +1,7 @@
 """The benchmark scripts under benchmarks/ and the headline table run from a clone, at small sizes and
 for a few frames, and print the tables docs/BENCHMARKS.md and the README quote. Their figures are not
 checked here (a few frames mean nothing); what is checked is that each runs to its table."""
+
 import importlib.util
 import os
 import shutil
@@ -67,10 +68,28 @@ def test_headline_prints_its_table(capsys):
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="needs xvfb-run (apt-get install xvfb)")
 def test_window_benchmark_runs_under_a_virtual_display():
-    run = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1920x1080x24", sys.executable,
-                          str(BENCHMARKS / "window.py"), "--frames", "2", "--warmup", "1", "--rounds", "1",
-                          "--variants", "window"], capture_output=True, text=True, timeout=300,
-                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    run = subprocess.run(
+        [
+            "xvfb-run",
+            "-a",
+            "-s",
+            "-screen 0 1920x1080x24",
+            sys.executable,
+            str(BENCHMARKS / "window.py"),
+            "--frames",
+            "2",
+            "--warmup",
+            "1",
+            "--rounds",
+            "1",
+            "--variants",
+            "window",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
     if "no window:" in run.stderr + run.stdout:
         pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
     assert run.returncode == 0, run.stderr

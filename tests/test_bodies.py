@@ -1,6 +1,7 @@
 """Rigid bodies two-way coupled with the water (pbf.solver.bodies): the schema's checks, Archimedes,
 a heavy box on the floor, no water inside a body, momentum passed between water and body, a body at
 rest staying at rest, and snapshots that replay the bodies bit for bit."""
+
 import numpy as np
 import pytest
 
@@ -13,9 +14,13 @@ DEPTH = 0.2
 
 def pool(bodies, size=0.4, depth=DEPTH, spacing=SPACING, **extra):
     """A pool ``depth`` deep in a square container ``size`` wide, with ``bodies``."""
-    scene = {"name": "pool", "container": {"max_m": [size, 0.4, size]},
-             "fluid": {"spacing_m": spacing, "blocks": [{"min_m": [0, 0, 0], "max_m": [size, depth, size]}]},
-             "bodies": bodies, "solver": {"iterations": 10, "target_density_error": 0.001}}
+    scene = {
+        "name": "pool",
+        "container": {"max_m": [size, 0.4, size]},
+        "fluid": {"spacing_m": spacing, "blocks": [{"min_m": [0, 0, 0], "max_m": [size, depth, size]}]},
+        "bodies": bodies,
+        "solver": {"iterations": 10, "target_density_error": 0.001},
+    }
     scene.update(extra)
     return scene
 
@@ -40,11 +45,14 @@ def hydrostatic_level(sim, away_from, reach):
     return -intercept / slope
 
 
-@pytest.mark.parametrize("body, message", [
-    (box([0.01, 0.05, 0.05], 500, [0.2, 0.3, 0.2]), "at least 2 spacings"),
-    (box([0.05, 0.05, 0.05], 500, [0.38, 0.3, 0.2]), "outside the container"),
-    (box([0.05, 0.05, 0.05], 500, [0.2, 0.3, 0.2], orientation_deg=[0, 45, 0], shape="ball"), "one of 'box'"),
-])
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        (box([0.01, 0.05, 0.05], 500, [0.2, 0.3, 0.2]), "at least 2 spacings"),
+        (box([0.05, 0.05, 0.05], 500, [0.38, 0.3, 0.2]), "outside the container"),
+        (box([0.05, 0.05, 0.05], 500, [0.2, 0.3, 0.2], orientation_deg=[0, 45, 0], shape="ball"), "one of 'box'"),
+    ],
+)
 def test_scene_checks_refuse_bad_bodies(body, message):
     with pytest.raises(SceneError, match=message):
         load_scene(pool([body]))
@@ -66,9 +74,15 @@ def test_water_inside_a_body_at_the_start_is_removed():
 
 
 def test_snapshot_and_restore_replay_the_bodies_bit_for_bit():
-    sim = Simulation(pool([box((0.06, 0.05, 0.06), 600, [0.2, 0.3, 0.2], orientation_deg=[10, 20, 0]),
-                           {"shape": "sphere", "size_m": [0.04, 0, 0], "density_kg_m3": 400,
-                            "position_m": [0.08, 0.3, 0.08]}]), quiet=True)
+    sim = Simulation(
+        pool(
+            [
+                box((0.06, 0.05, 0.06), 600, [0.2, 0.3, 0.2], orientation_deg=[10, 20, 0]),
+                {"shape": "sphere", "size_m": [0.04, 0, 0], "density_kg_m3": 400, "position_m": [0.08, 0.3, 0.08]},
+            ]
+        ),
+        quiet=True,
+    )
     sim.step(8)
     snapshot = sim.snapshot()
     assert snapshot.bodies.shape == (2, STATE_WIDTH)
@@ -108,8 +122,10 @@ def test_archimedes_a_floating_box_settles_at_its_draft():
     # settled pool. Its draft below the level where the water's own pressure is zero, averaged over the
     # last two thirds of a second, is ρb/ρ0 of its height: buoyancy out of the pressure, not a formula.
     half, density = (0.1, 0.06, 0.1), 500.0
-    sim = Simulation(pool([box(half, density, [0.2, DEPTH + half[1] * (1 - 2 * density / 1000), 0.2])],
-                          time={"settle_s": 0.3}), quiet=True)
+    sim = Simulation(
+        pool([box(half, density, [0.2, DEPTH + half[1] * (1 - 2 * density / 1000), 0.2])], time={"settle_s": 0.3}),
+        quiet=True,
+    )
     drafts = []
     for frame in range(60):
         sim.step()
@@ -128,10 +144,14 @@ layer of water under a body leans partly on the collision, whose push the body d
 def test_momentum_passes_between_a_box_and_the_water():
     # No gravity, no wall within reach: a box moving at 0.5 m/s runs into a block of water at rest. The
     # water's momentum plus the box's must stay what the box had (the walls never act).
-    scene = {"name": "push", "gravity_m_s2": [0, 0, 0], "container": {"max_m": [1.0, 0.5, 0.5]},
-             "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0.35, 0.1, 0.1], "max_m": [0.65, 0.4, 0.4]}]},
-             "bodies": [box((0.05, 0.06, 0.06), 1000, [0.25, 0.25, 0.25], velocity_m_s=[0.5, 0, 0])],
-             "solver": {"iterations": 10, "target_density_error": 0.001}}
+    scene = {
+        "name": "push",
+        "gravity_m_s2": [0, 0, 0],
+        "container": {"max_m": [1.0, 0.5, 0.5]},
+        "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0.35, 0.1, 0.1], "max_m": [0.65, 0.4, 0.4]}]},
+        "bodies": [box((0.05, 0.06, 0.06), 1000, [0.25, 0.25, 0.25], velocity_m_s=[0.5, 0, 0])],
+        "solver": {"iterations": 10, "target_density_error": 0.001},
+    }
     sim = Simulation(scene, quiet=True)
     mass = sim.model.particle_mass_kg
     body_mass = 1000 * 0.1 * 0.12 * 0.12
@@ -153,8 +173,10 @@ box's way without a reaction on it (docs/drafts/bodies.md has the measured figur
 @pytest.mark.slow
 def test_a_body_at_rest_on_a_pool_at_rest_stays_at_rest():
     half, density = (0.1, 0.06, 0.1), 500.0
-    sim = Simulation(pool([box(half, density, [0.2, DEPTH + half[1] * (1 - 2 * density / 1000), 0.2])],
-                          time={"settle_s": 0.3}), quiet=True)
+    sim = Simulation(
+        pool([box(half, density, [0.2, DEPTH + half[1] * (1 - 2 * density / 1000), 0.2])], time={"settle_s": 0.3}),
+        quiet=True,
+    )
     # "At rest" as the pool is: the body moves no faster than the pool's own fastest particles do.
     body, pool_fastest = [], []
     for _ in range(30):

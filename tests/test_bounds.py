@@ -1,5 +1,6 @@
 """Every number has a lower and an upper bound, derived quantities are checked in exact arithmetic
 before anything is allocated, and what is allowed runs without NaN, inf or overflow warnings."""
+
 import copy
 import dataclasses
 import math
@@ -11,11 +12,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scenes import small_dam_break
 
 from pbf import Scene, SceneError, Simulation
-from pbf.scene import (FLOAT32_SAFE, MAX_TABLES, POSITION_REACH_SPACINGS, Fluid, Solver, Time, Vec3, from_dict)
+from pbf.scene import FLOAT32_SAFE, MAX_TABLES, POSITION_REACH_SPACINGS, Fluid, Solver, Time, Vec3, from_dict
 from pbf.solver import Model, grid, model
+from scenes import small_dam_break
 
 FIELDS = {}
 """Every key of the schema: dotted name → (annotation, its check)."""
@@ -36,10 +37,23 @@ def _collect(cls, prefix=""):
 
 _collect(Scene)
 NUMBERS = {k: v for k, v in FIELDS.items() if v[0] in (int, float)}
-DERIVED = {"gravity_m_s2", "container.min_m", "container.max_m", "fluid.blocks[0].min_m", "fluid.blocks[0].max_m",
-           "fluid.blocks[0].velocity_m_s", "obstacles[0].min_m", "obstacles[0].max_m", "emitters[0].position_m",
-           "emitters[0].direction", "camera.position_m", "camera.look_at_m", "bodies[0].size_m", "bodies[0].position_m",
-           "bodies[0].velocity_m_s"}
+DERIVED = {
+    "gravity_m_s2",
+    "container.min_m",
+    "container.max_m",
+    "fluid.blocks[0].min_m",
+    "fluid.blocks[0].max_m",
+    "fluid.blocks[0].velocity_m_s",
+    "obstacles[0].min_m",
+    "obstacles[0].max_m",
+    "emitters[0].position_m",
+    "emitters[0].direction",
+    "camera.position_m",
+    "camera.look_at_m",
+    "bodies[0].size_m",
+    "bodies[0].position_m",
+    "bodies[0].velocity_m_s",
+}
 """The three-number keys bounded by what they must agree with (container and spacing, the substeps
 a frame can take, the camera's distance from the box; a direction is normalised whatever its length)
 rather than by a fixed range."""
@@ -50,7 +64,8 @@ BODY = {"size_m": [0.05, 0.05, 0.05], "density_kg_m3": 500.0, "position_m": [0.6
 
 
 def base_scene():
-    """The small dam break with a nozzle pouring in and a floating box, so that every kind of key has a table to go in."""
+    """The small dam break with a nozzle pouring in and a floating box, so that every kind of key has a table to go
+    in."""
     scene = small_dam_break()
     scene["emitters"] = [dict(NOZZLE)]
     scene["bodies"] = [dict(BODY)]
@@ -75,14 +90,17 @@ def set_key(dotted, value, scene=None):
 def test_every_number_has_both_bounds():
     unbounded = [k for k, (_, check) in NUMBERS.items() if not hasattr(check, "bounds")]
     assert not unbounded, f"numeric keys without a lower and an upper bound: {unbounded}"
-    vectors = {k for k, (annotation, check) in FIELDS.items()
-               if annotation in (Vec3, Vec3 | None) and not hasattr(check, "bounds")}
+    vectors = {
+        k
+        for k, (annotation, check) in FIELDS.items()
+        if annotation in (Vec3, Vec3 | None) and not hasattr(check, "bounds")
+    }
     assert vectors == DERIVED
 
 
 @pytest.mark.parametrize("dotted", sorted(NUMBERS))
 @settings(max_examples=20, deadline=None)
-@given(value=st.floats() | st.integers(-10**40, 10**40) | st.integers(-10, 10))
+@given(value=st.floats() | st.integers(-(10**40), 10**40) | st.integers(-10, 10))
 def test_each_number_is_refused_outside_its_bounds_only(dotted, value):
     annotation, check = NUMBERS[dotted]
     lowest, highest = check.bounds
@@ -118,19 +136,22 @@ def test_derived_float32_figures_stay_in_range():
     assert FLOAT32_SAFE < float(np.finfo(np.float32).max) / 1e6
 
 
-@pytest.mark.parametrize("dotted, value, message", [
-    ("container.max_m", [1e6, 1e6, 1e6], "key 'container.max_m': a wall at 1e+06 m lies 3.00003e+07 spacings"),
-    ("container.min_m", [-1e308, 0.0, 0.0], "key 'container.min_m': a wall at 1e+308 m"),
-    ("fluid.spacing_m", 1e-300, "key 'fluid.spacing_m': expected a value in [0.0001, 100]"),
-    ("gravity_m_s2", [0.0, -1e300, 0.0], "key 'gravity_m_s2': |g| = 1e+300 m/s²"),
-    ("gravity_m_s2", [1e308, 1e308, 1e308], "key 'gravity_m_s2': |g| = 1.73205e+308 m/s²"),
-    ("fluid.blocks[0].velocity_m_s", [1e308, 0.0, 0.0], "key 'fluid.blocks[0].velocity_m_s': 1e+308 m/s"),
-    ("time.frame_dt_s", 1e-300, "key 'time.frame_dt_s': expected a value in [0.0001, 1]"),
-    ("solver.iterations", 10**9, "key 'solver.iterations': expected a value in [1, 100]"),
-    ("time.substeps", 10**9, "key 'time.substeps': expected a value in [1, 1000]"),
-    ("time.max_substeps", 10**9, "key 'time.max_substeps': expected a value in [1, 1000]"),
-    ("fluid.rest_density_kg_m3", 10**400, "expected a finite number, got ~1e400"),
-])
+@pytest.mark.parametrize(
+    "dotted, value, message",
+    [
+        ("container.max_m", [1e6, 1e6, 1e6], "key 'container.max_m': a wall at 1e+06 m lies 3.00003e+07 spacings"),
+        ("container.min_m", [-1e308, 0.0, 0.0], "key 'container.min_m': a wall at 1e+308 m"),
+        ("fluid.spacing_m", 1e-300, "key 'fluid.spacing_m': expected a value in [0.0001, 100]"),
+        ("gravity_m_s2", [0.0, -1e300, 0.0], "key 'gravity_m_s2': |g| = 1e+300 m/s²"),
+        ("gravity_m_s2", [1e308, 1e308, 1e308], "key 'gravity_m_s2': |g| = 1.73205e+308 m/s²"),
+        ("fluid.blocks[0].velocity_m_s", [1e308, 0.0, 0.0], "key 'fluid.blocks[0].velocity_m_s': 1e+308 m/s"),
+        ("time.frame_dt_s", 1e-300, "key 'time.frame_dt_s': expected a value in [0.0001, 1]"),
+        ("solver.iterations", 10**9, "key 'solver.iterations': expected a value in [1, 100]"),
+        ("time.substeps", 10**9, "key 'time.substeps': expected a value in [1, 1000]"),
+        ("time.max_substeps", 10**9, "key 'time.max_substeps': expected a value in [1, 1000]"),
+        ("fluid.rest_density_kg_m3", 10**400, "expected a finite number, got ~1e400"),
+    ],
+)
 def test_values_past_what_the_machine_holds(dotted, value, message):
     with pytest.raises(SceneError) as error:
         from_dict(set_key(dotted, value), "test.toml")
@@ -141,8 +162,9 @@ def test_initial_speed_is_bounded_by_what_a_frame_can_follow():
     scene = from_dict(small_dam_break())
     fall = 9.81 * scene.time.frame_dt_s
     limit = scene.fastest_followed_m_s - fall
-    at_limit = set_key("fluid.blocks", [{"min_m": [0, 0, 0], "max_m": [0.4, 0.4, 0.4],
-                                         "velocity_m_s": [0.999 * limit, 0, 0]}])
+    at_limit = set_key(
+        "fluid.blocks", [{"min_m": [0, 0, 0], "max_m": [0.4, 0.4, 0.4], "velocity_m_s": [0.999 * limit, 0, 0]}]
+    )
     from_dict(at_limit)
     at_limit["fluid"]["blocks"][0]["velocity_m_s"] = [1e308, 0, 0]
     with pytest.raises(SceneError, match=r"'fluid.blocks\[0\].velocity_m_s': 1e\+308 m/s .* raise time.max_substeps"):
@@ -174,8 +196,10 @@ def test_particles_times_neighbour_slots_must_fit_int32(plenty_of_memory):
     with pytest.raises(SceneError, match=f"{most + 1:,} particles × {grid.SLOTS} neighbour slots .* at most {most:,}"):
         model._check_indices(scene, most + 1, 1000)
     # 2²⁵ particles (a 256 × 256 × 512 lattice) through the Model, which allocates nothing.
-    big = {"container": {"max_m": [3.0, 3.0, 6.0]}, "fluid": {"spacing_m": 0.01, "blocks": [
-        {"min_m": [0.0, 0.0, 0.0], "max_m": [2.56, 2.56, 5.12]}]}}
+    big = {
+        "container": {"max_m": [3.0, 3.0, 6.0]},
+        "fluid": {"spacing_m": 0.01, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [2.56, 2.56, 5.12]}]},
+    }
     assert from_dict(big).particle_count == 2**25
     with pytest.raises(SceneError, match="key 'fluid.spacing_m': 33,554,432 particles"):
         Model.from_scene(from_dict(big))
@@ -183,8 +207,11 @@ def test_particles_times_neighbour_slots_must_fit_int32(plenty_of_memory):
 
 def test_a_container_of_a_million_metres_is_refused_for_its_cell_count(plenty_of_memory):
     # At 100 m spacing the walls are within float32's reach; the grid of h/2 cells is not int32's.
-    scene = {"container": {"max_m": [1e6, 1e6, 1e6]}, "fluid": {"spacing_m": 100.0, "blocks": [
-        {"min_m": [0.0, 0.0, 0.0], "max_m": [1000.0, 1000.0, 1000.0]}]}, "time": {"frame_dt_s": 1.0}}
+    scene = {
+        "container": {"max_m": [1e6, 1e6, 1e6]},
+        "fluid": {"spacing_m": 100.0, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [1000.0, 1000.0, 1000.0]}]},
+        "time": {"frame_dt_s": 1.0},
+    }
     with pytest.raises(SceneError, match=r"key 'container.max_m': the neighbour grid .* has [\d,]+ cells, more than"):
         Model.from_scene(from_dict(scene))
 
@@ -215,26 +242,47 @@ def test_the_fastest_allowed_start_runs_cleanly():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("scene", [
-    # The finest spacing at the edge of float32's reach, with the softest λ and the strongest terms.
-    {"container": {"min_m": [6.5512] * 3, "max_m": [6.5536] * 3},
-     "fluid": {"spacing_m": 1e-4, "blocks": [{"min_m": [6.5512] * 3, "max_m": [6.552] * 3}]},
-     "solver": {"scorr_k": 1.0, "kernel_ratio": 4.0, "expert": {"relaxation": 1e-6}}, "vorticity": {"epsilon": 1.0}, "viscosity": {"xsph": 1.0}},
-    # The coarsest spacing, far from the origin, densest and stiffest.
-    {"container": {"min_m": [-6553600.0] * 3, "max_m": [-6551600.0] * 3},
-     "fluid": {"spacing_m": 100.0, "rest_density_kg_m3": 1e5,
-               "blocks": [{"min_m": [-6553600.0] * 3, "max_m": [-6552600.0] * 3}]},
-     "solver": {"kernel_ratio": 1.5, "scorr_k": 1.0, "expert": {"relaxation": 100.0}},
-     "time": {"frame_dt_s": 1.0, "max_substeps": 1000}},
-])
+@pytest.mark.parametrize(
+    "scene",
+    [
+        # The finest spacing at the edge of float32's reach, with the softest λ and the strongest terms.
+        {
+            "container": {"min_m": [6.5512] * 3, "max_m": [6.5536] * 3},
+            "fluid": {"spacing_m": 1e-4, "blocks": [{"min_m": [6.5512] * 3, "max_m": [6.552] * 3}]},
+            "solver": {"scorr_k": 1.0, "kernel_ratio": 4.0, "expert": {"relaxation": 1e-6}},
+            "vorticity": {"epsilon": 1.0},
+            "viscosity": {"xsph": 1.0},
+        },
+        # The coarsest spacing, far from the origin, densest and stiffest.
+        {
+            "container": {"min_m": [-6553600.0] * 3, "max_m": [-6551600.0] * 3},
+            "fluid": {
+                "spacing_m": 100.0,
+                "rest_density_kg_m3": 1e5,
+                "blocks": [{"min_m": [-6553600.0] * 3, "max_m": [-6552600.0] * 3}],
+            },
+            "solver": {"kernel_ratio": 1.5, "scorr_k": 1.0, "expert": {"relaxation": 100.0}},
+            "time": {"frame_dt_s": 1.0, "max_substeps": 1000},
+        },
+    ],
+)
 def test_extreme_allowed_scales_run_cleanly(scene):
     assert_runs_cleanly(scene, frames=1)
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.dictionaries(st.sampled_from(sorted(k for k in FIELDS if not k.startswith("obstacles"))),
-                       st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8)
-                       | st.lists(st.floats() | st.integers(), max_size=4), max_size=4))
+@given(
+    st.dictionaries(
+        st.sampled_from(sorted(k for k in FIELDS if not k.startswith("obstacles"))),
+        st.none()
+        | st.booleans()
+        | st.integers()
+        | st.floats()
+        | st.text(max_size=8)
+        | st.lists(st.floats() | st.integers(), max_size=4),
+        max_size=4,
+    )
+)
 def test_any_values_give_a_scene_or_a_scene_error(changes):
     scene = base_scene()
     for dotted, value in changes.items():

@@ -1,15 +1,16 @@
 """Bad scenes fail at load with one clear error naming the file, the key and what is allowed."""
+
 import copy
 import math
 import subprocess
 import sys
 
 import pytest
-from scenes import small_dam_break
 
-from pbf import Simulation, SceneError, load_scene
+from pbf import SceneError, Simulation, load_scene
 from pbf.scene import from_dict
 from pbf.solver import ENV_VAR, BackendError, start_backend
+from scenes import small_dam_break
 
 
 def with_change(path, value):
@@ -35,8 +36,11 @@ def with_change(path, value):
         (("time", "frame_dt_s"), math.inf, "key 'time.frame_dt_s': expected a finite number"),
         (("viscosity", "xsph"), 1.5, "key 'viscosity.xsph': expected a value in [0, 1]"),
         (("gravity_m_s2",), [0, -9.81], "key 'gravity_m_s2': expected three numbers"),
-        (("solver", "iteratons"), 4,
-         "unknown key 'solver.iteratons'; did you mean 'solver.iterations'? allowed keys here:"),
+        (
+            ("solver", "iteratons"),
+            4,
+            "unknown key 'solver.iteratons'; did you mean 'solver.iterations'? allowed keys here:",
+        ),
         (("colour",), "blue", "unknown key 'colour'"),
         (("fluid", "blocks", 0, "max_m"), [0.4, 0.4, 0.9], "'fluid.blocks[0]': block"),
         (("fluid", "blocks"), [], "at least one [[fluid.blocks]]"),
@@ -87,8 +91,11 @@ def test_override_and_preset_load(tmp_path):
     scene = load_scene("dam_break", ["solver.iterations=6", "fluid.spacing_m=0.05"])
     assert scene.solver.iterations == 6 and scene.fluid.spacing_m == 0.05
     assert load_scene("dam_break").particle_count == 8000
-    with pytest.raises(SceneError, match=r"command line --set solver.iterations=0: key 'solver.iterations': "
-                                         r"expected a value in \[1, 100\]"):
+    with pytest.raises(
+        SceneError,
+        match=r"command line --set solver.iterations=0: key 'solver.iterations': "
+        r"expected a value in \[1, 100\]",
+    ):
         load_scene("dam_break", ["solver.iterations=0"])
     broken = tmp_path / "broken.toml"
     broken.write_text("[solver\niterations = 3")
@@ -116,19 +123,21 @@ def test_cuda_without_gpu_is_a_clear_error():
 def test_restart_frees_the_runtime_and_keeps_the_backend():
     # A fresh process: restarting before any start is an error; after a start, a restart gives back
     # the memory of what was built (a 200 MB field here) and runs the same backend again.
-    code = ("from pbf.solver.backend import BackendError, restart_backend, start_backend\n"
-            "import taichi as ti\n"
-            "def rss_mb():\n"
-            "    return int(next(l for l in open('/proc/self/status') if l.startswith('VmRSS')).split()[1]) // 1024\n"
-            "try:\n    restart_backend()\nexcept BackendError as error:\n    print('refused:', error)\n"
-            "start_backend('cpu', quiet=True)\n"
-            "big = ti.field(ti.f32, shape=50_000_000)\n"
-            "big.fill(1.0)\n"
-            "held = rss_mb()\n"
-            "restart_backend()\n"
-            "after = ti.field(ti.f32, shape=4)\n"
-            "after.fill(2.0)\n"
-            "print('arch', ti.lang.impl.current_cfg().arch.name, 'sum', after.to_numpy().sum(), 'freed', held - rss_mb())\n")
+    code = (
+        "from pbf.solver.backend import BackendError, restart_backend, start_backend\n"
+        "import taichi as ti\n"
+        "def rss_mb():\n"
+        "    return int(next(l for l in open('/proc/self/status') if l.startswith('VmRSS')).split()[1]) // 1024\n"
+        "try:\n    restart_backend()\nexcept BackendError as error:\n    print('refused:', error)\n"
+        "start_backend('cpu', quiet=True)\n"
+        "big = ti.field(ti.f32, shape=50_000_000)\n"
+        "big.fill(1.0)\n"
+        "held = rss_mb()\n"
+        "restart_backend()\n"
+        "after = ti.field(ti.f32, shape=4)\n"
+        "after.fill(2.0)\n"
+        "print('arch', ti.lang.impl.current_cfg().arch.name, 'sum', after.to_numpy().sum(), 'freed', held - rss_mb())\n"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "refused: restart_backend(): no backend has been started in this process" in result.stdout

@@ -1,14 +1,15 @@
 """How the solver converges: the iterations' weights, the divergence pre-correction, the error
 target of the presets, and the rest state a settled pool reaches."""
+
 import math
 
 import numpy as np
 import pytest
-from scenes import column_scene, small_dam_break
 
 from pbf import Simulation
 from pbf.solver.acceleration import REVERSAL, Weights, chebyshev_weights, stable_weights
 from pbf.study.common import colour_surface_height, fill_height_m
+from scenes import column_scene, small_dam_break
 
 
 def dam_break_errors(overrides, frames=20):
@@ -52,7 +53,7 @@ def test_stable_weights_reverse_no_mode_by_more_than_a_quarter():
     weights = stable_weights(-0.8, 100)
     assert weights[0] == 1.0 and all(1.0 <= w <= 1.9 for w in weights)
     polynomials = residual_polynomials(weights, lam)
-    for p in polynomials[1:]:                                  # P_1 = λ: one plain iteration
+    for p in polynomials[1:]:  # P_1 = λ: one plain iteration
         assert p.min() >= -REVERSAL - 1e-3 and p.max() <= 1.0 + 1e-9
     # Faster than Chebyshev (ρ 0.9) along the slow modes from the 5th iteration on.
     chebyshev = residual_polynomials(chebyshev_weights(0.9, 20), lam)
@@ -69,7 +70,7 @@ def test_weights_restart_from_the_first():
 
 def test_the_step_back_lands_between_the_last_two_iterations():
     sim = Simulation(small_dam_break())
-    sim.step(20)                                         # mid-splash: the iterations move particles
+    sim.step(20)  # mid-splash: the iterations move particles
     x_star, neighbours = sim.integrator.predicted, sim.grid.neighbours
     sim.integrator.advance(sim.dt_s, sim.control.gravity_m_s2)  # a substep's start (Simulation.substep)
     sim.grid.sort_and_permute(x_star.first, sim.state.index, sim.state)
@@ -83,8 +84,9 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     sim.density.step_back(x_star, 0.25)
     assert not x_star.in_second
     np.testing.assert_allclose(x_star.first.to_numpy(), newer + 0.25 * (older - newer), atol=1e-6)
-    np.testing.assert_allclose(sim.density.lam_total.to_numpy(),
-                               pressure_newer + 0.25 * (pressure_older - pressure_newer), atol=1e-6)
+    np.testing.assert_allclose(
+        sim.density.lam_total.to_numpy(), pressure_newer + 0.25 * (pressure_older - pressure_newer), atol=1e-6
+    )
 
 
 def rest_speed(acceleration, iterations, frames=120):
@@ -92,10 +94,15 @@ def rest_speed(acceleration, iterations, frames=120):
     6 × 8 × 6 tank settled for 1 s, under 8 substeps a frame and a fixed count of iterations."""
     height = 0.2
     block = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, height, 0.15]}
-    sim = Simulation({"name": "tank", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, 0.3, 0.15]},
-                      "fluid": {"spacing_m": 0.025, "blocks": [block]}, "time": {"substeps": 8, "settle_s": 1.0},
-                      "solver": {"expert": {"acceleration": acceleration}, "iterations": iterations,
-                                 "target_density_error": 0.0}})
+    sim = Simulation(
+        {
+            "name": "tank",
+            "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.15, 0.3, 0.15]},
+            "fluid": {"spacing_m": 0.025, "blocks": [block]},
+            "time": {"substeps": 8, "settle_s": 1.0},
+            "solver": {"expert": {"acceleration": acceleration}, "iterations": iterations, "target_density_error": 0.0},
+        }
+    )
     sim.step(frames // 2)
     speeds = []
     for _ in range(6):
@@ -119,11 +126,16 @@ def test_a_few_stable_iterations_hold_a_tank_still_where_chebyshev_pumps_it(iter
 @pytest.mark.parametrize("acceleration", ["stable", pytest.param("chebyshev", marks=pytest.mark.slow)])
 def test_accelerated_iterations_converge_faster_than_plain_jacobi(acceleration):
     # The same 4 iterations every substep (no target), through the impact.
-    plain, plain_max = dam_break_errors(["solver.expert.acceleration=none", "solver.target_density_error=0",
-                                         "solver.divergence_iterations=0"])
-    accelerated, accelerated_max = dam_break_errors([f"solver.expert.acceleration={acceleration}",
-                                                     "solver.target_density_error=0",
-                                                     "solver.divergence_iterations=0"])
+    plain, plain_max = dam_break_errors(
+        ["solver.expert.acceleration=none", "solver.target_density_error=0", "solver.divergence_iterations=0"]
+    )
+    accelerated, accelerated_max = dam_break_errors(
+        [
+            f"solver.expert.acceleration={acceleration}",
+            "solver.target_density_error=0",
+            "solver.divergence_iterations=0",
+        ]
+    )
     assert accelerated < 0.75 * plain
     assert accelerated_max < plain_max
 
@@ -145,7 +157,7 @@ def test_a_falling_block_falls_freely():
     scene["fluid"]["blocks"] = [{"min_m": [0.0, 0.3, 0.0], "max_m": [0.4, 0.7, 0.4]}]
     scene["solver"]["scorr_k"] = 0.0
     sim = Simulation(scene)
-    sim.step(6)                                          # 0.1 s: falls 5 cm, far from the floor
+    sim.step(6)  # 0.1 s: falls 5 cm, far from the floor
     vertical = sim.velocities()[:, 1]
     assert vertical == pytest.approx(np.full_like(vertical, -9.81 * sim.time_s), rel=2e-4)
 
@@ -163,7 +175,7 @@ def test_the_seed_preset_reaches_its_error_target():
         iterations.add(stats["iterations"])
     assert np.mean(means) <= 0.001
     assert max(maxima) <= 0.05
-    assert len(iterations) > 1                           # the target decides, not a fixed count
+    assert len(iterations) > 1  # the target decides, not a fixed count
 
 
 def test_divergence_pressure_carries_the_hydrostatic_load():
@@ -172,8 +184,16 @@ def test_divergence_pressure_carries_the_hydrostatic_load():
     # +6-7%). Averaged over a second: the column breathes, and one frame's slope swings by ±10-20%.
     # Plain Jacobi with a fixed count: under Chebyshev weights (then the default) and a target the share
     # read 0.31-0.46 and the slope +4 to +10% between the suite's compile and the full one.
-    sim = Simulation(column_scene(spacing_m=0.0375, substeps=4, iterations=10, divergence_iterations=1,
-                                  expert={"acceleration": "none"}, target_density_error=0.0))
+    sim = Simulation(
+        column_scene(
+            spacing_m=0.0375,
+            substeps=4,
+            iterations=10,
+            divergence_iterations=1,
+            expert={"acceleration": "none"},
+            target_density_error=0.0,
+        )
+    )
     sim.step(60)
     h = sim.scene.kernel_radius_m
     total_slopes, carried_slopes = [], []
@@ -206,11 +226,11 @@ def settled_pool(frames):
 
 @pytest.mark.slow
 def test_a_settled_pool_is_still_and_level():
-    sim, surface, fill = settled_pool(240)               # 4 s
+    sim, surface, fill = settled_pool(240)  # 4 s
     stats = sim.stats()
-    assert stats["mean_density_error"] <= 0.002          # ≤ 0.2% compressed in the mean
+    assert stats["mean_density_error"] <= 0.002  # ≤ 0.2% compressed in the mean
     assert stats["max_speed_m_s"] < 0.1
-    assert surface == pytest.approx(fill, rel=0.006)     # measured −0.43 to −0.50%; −0.7% without the ghost
+    assert surface == pytest.approx(fill, rel=0.006)  # measured −0.43 to −0.50%; −0.7% without the ghost
     # The layer against a wall sits with its neighbours: top particles of wall columns and inner ones.
     x = sim.positions()
     spacing = sim.scene.fluid.spacing_m
@@ -230,7 +250,7 @@ def test_pressures_are_the_mean_over_the_frames_substeps():
     assert sim.pressure_substeps == sim.frame_substeps == 3
     one_frame = sim.pressures()
     assert np.all(np.isfinite(one_frame)) and one_frame.max() > 0.0
-    sim.substep()                                       # a substep on its own joins the frame's mean
+    sim.substep()  # a substep on its own joins the frame's mean
     assert sim.pressure_substeps == 4
-    sim.restore(sim.snapshot())                         # nothing summed yet after a restore
+    sim.restore(sim.snapshot())  # nothing summed yet after a restore
     assert sim.pressure_substeps == 0 and not np.any(sim.pressures())

@@ -1,10 +1,11 @@
 """Same scene, same backend, same thread count: the same bits, run after run and after a restore."""
+
 import numpy as np
 import pytest
-from scenes import small_dam_break
 
 from pbf import Simulation
 from pbf.solver import Snapshot
+from scenes import small_dam_break
 
 
 def test_runs_and_restored_snapshots_replay_bit_for_bit():

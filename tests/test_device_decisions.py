@@ -1,13 +1,14 @@
 """The substep of the GPU backends, whose decisions stay on the device (the iterations' stopping test, the
 neighbour lists' overflow), run here on the CPU (``pbf.solver.backend.decisions_on_device``): it takes
 the host path's decisions and reads the device at most once per substep."""
+
 import numpy as np
 import pytest
-from scenes import small_dam_break
 
 from pbf import Simulation
 from pbf.solver.backend import decisions_on_device
 from pbf.study.common import TransferCounter
+from scenes import small_dam_break
 
 
 def frames(sim, count):

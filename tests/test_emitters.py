@@ -1,19 +1,31 @@
 """Emitters: water enters at the rest spacing, within the budget allocated at the start, and a
 restored snapshot replays the pour exactly."""
+
 import numpy as np
 import pytest
 
-from pbf import Simulation, SceneError
+from pbf import SceneError, Simulation
 from pbf.scene import from_dict
 
 SPACING = 0.02
 
 
 def pour(**fluid):
-    return {"name": "pour", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.3, 0.4, 0.3]},
-            "fluid": {"spacing_m": SPACING, **fluid},
-            "emitters": [{"position_m": [0.15, 0.3, 0.15], "direction": [0.0, -1.0, 0.0], "radius_m": 0.03,
-                          "speed_m_s": 1.0, "start_s": 0.1, "end_s": 0.5}]}
+    return {
+        "name": "pour",
+        "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.3, 0.4, 0.3]},
+        "fluid": {"spacing_m": SPACING, **fluid},
+        "emitters": [
+            {
+                "position_m": [0.15, 0.3, 0.15],
+                "direction": [0.0, -1.0, 0.0],
+                "radius_m": 0.03,
+                "speed_m_s": 1.0,
+                "start_s": 0.1,
+                "end_s": 0.5,
+            }
+        ],
+    }
 
 
 def test_a_pour_fills_the_budget_at_the_rest_spacing_and_replays():
@@ -42,20 +54,26 @@ def test_a_pour_fills_the_budget_at_the_rest_spacing_and_replays():
     assert np.isfinite(first).all() and first[:, 1].min() > 0.0
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"max_particles": 100}, "'fluid.max_particles' = 100 is less than"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"max_particles": 100}, "'fluid.max_particles' = 100 is less than"),
+    ],
+)
 def test_a_budget_too_small_is_refused(change, message):
     with pytest.raises(SceneError, match=message):
         from_dict(pour(**change))
 
 
-@pytest.mark.parametrize("emitter, message", [
-    ({"end_s": 0.05}, "must be after start_s"),
-    ({"direction": [0.0, 0.0, 0.0]}, "non-zero vector"),
-    ({"radius_m": 0.005}, "less than half a spacing"),
-    ({"position_m": [0.01, 0.3, 0.15]}, "must lie inside the container"),
-])
+@pytest.mark.parametrize(
+    "emitter, message",
+    [
+        ({"end_s": 0.05}, "must be after start_s"),
+        ({"direction": [0.0, 0.0, 0.0]}, "non-zero vector"),
+        ({"radius_m": 0.005}, "less than half a spacing"),
+        ({"position_m": [0.01, 0.3, 0.15]}, "must lie inside the container"),
+    ],
+)
 def test_bad_emitters_are_refused(emitter, message):
     scene = pour()
     scene["emitters"][0].update(emitter)
@@ -78,7 +96,7 @@ def test_the_pour_stays_one_stream_down_to_the_pool():
         centre = layers.mean(axis=1)
         whole = np.linalg.norm(layers - centre[:, None], axis=2).max(axis=1) < emitter.radius_m + s
         falling = np.nonzero(whole & (centre[:, 1] > 5 * s))[0]
-        assert len(falling) >= 10                                        # the stream is there
+        assert len(falling) >= 10  # the stream is there
         pairs = [(a, b) for a, b in zip(falling[:-1], falling[1:]) if b == a + 1]
         distances = [np.linalg.norm(centre[b] - centre[a]) / s for a, b in pairs]
         assert len(pairs) >= len(falling) - 2 and max(distances) <= 1.5, max(distances)

@@ -1,5 +1,6 @@
 """A preset that is another at a different size says so in data: ``extends`` lays its keys over the
 other scene's."""
+
 import dataclasses
 
 import pytest
@@ -10,10 +11,15 @@ from pbf.scene import SceneError, load_scene
 def test_the_large_dam_break_is_the_seed_scene_but_for_what_it_sets():
     seed, large = load_scene("dam_break"), load_scene("dam_break_large")
     assert large.fluid.spacing_m == 0.005 and large.time.substeps == 10 and large.particle_count == 1_000_000
-    same = dataclasses.replace(large, name=seed.name, description=seed.description, source=seed.source,
-                               fluid=dataclasses.replace(large.fluid, spacing_m=seed.fluid.spacing_m),
-                               time=dataclasses.replace(large.time, substeps=seed.time.substeps),
-                               render=dataclasses.replace(large.render, width_px=1280, height_px=720))
+    same = dataclasses.replace(
+        large,
+        name=seed.name,
+        description=seed.description,
+        source=seed.source,
+        fluid=dataclasses.replace(large.fluid, spacing_m=seed.fluid.spacing_m),
+        time=dataclasses.replace(large.time, substeps=seed.time.substeps),
+        render=dataclasses.replace(large.render, width_px=1280, height_px=720),
+    )
     assert same == seed
     # Its time step is the seed's scaled with the spacing.
     assert large.dt_s / seed.dt_s == pytest.approx(large.fluid.spacing_m / seed.fluid.spacing_m)
@@ -21,10 +27,12 @@ def test_the_large_dam_break_is_the_seed_scene_but_for_what_it_sets():
 
 def test_tables_merge_and_lists_are_replaced(tmp_path):
     child = tmp_path / "child.toml"
-    child.write_text('extends = "dam_break"\n[solver]\niterations = 4\n'
-                     '[[fluid.blocks]]\nmin_m = [0.0, 0.0, 0.0]\nmax_m = [0.2, 0.2, 0.2]\n')
+    child.write_text(
+        'extends = "dam_break"\n[solver]\niterations = 4\n'
+        "[[fluid.blocks]]\nmin_m = [0.0, 0.0, 0.0]\nmax_m = [0.2, 0.2, 0.2]\n"
+    )
     scene = load_scene(child)
-    assert scene.solver.iterations == 4 and scene.solver.surface_density        # merged into the seed's
+    assert scene.solver.iterations == 4 and scene.solver.surface_density  # merged into the seed's
     assert len(scene.fluid.blocks) == 1 and scene.fluid.blocks[0].max_m == (0.2, 0.2, 0.2)
     grandchild = tmp_path / "grandchild.toml"
     grandchild.write_text('extends = "child.toml"\n[time]\nsubsteps = 3\n')

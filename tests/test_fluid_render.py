@@ -2,6 +2,7 @@
 the depth of water, a ball's silhouette stays on the ball, and every run gives the same image. (Its
 use in headless runs and the window is tested in ``test_surface.py``, beside the meshes, so that one
 Simulation serves them all.)"""
+
 import math
 
 import numpy as np
@@ -32,9 +33,17 @@ def as_field(particles):
 def render(particles, view, renderer=None):
     """Render with ``renderer`` or a new W × H one over a floor at y = 0; returns it (for its fields)
     and the image."""
-    renderer = renderer or FluidRenderer(W, H, SPACING, SPACING**3, floor_y_m=0.0, tile_m=0.1,
-                                         absorption_per_m=(2.0, 0.7, 0.35), water_rgb=(0.05, 0.3, 0.45),
-                                         horizon_rgb=(0.96, 0.96, 0.94))
+    renderer = renderer or FluidRenderer(
+        W,
+        H,
+        SPACING,
+        SPACING**3,
+        floor_y_m=0.0,
+        tile_m=0.1,
+        absorption_per_m=(2.0, 0.7, 0.35),
+        water_rgb=(0.05, 0.3, 0.45),
+        horizon_rgb=(0.96, 0.96, 0.94),
+    )
     return renderer, renderer.render(view, as_field(particles), len(particles), LIGHT_DIRECTION)
 
 
@@ -42,7 +51,7 @@ def coarse_rays(view, renderer):
     """Unit view rays through the centres of the coarse pixels, (h, w, 3)."""
     right, up, forward = view.basis()
     focal = view.focal_px(renderer.coarse_height)
-    rows, cols = np.mgrid[0:renderer.coarse_height, 0:renderer.coarse_width]
+    rows, cols = np.mgrid[0 : renderer.coarse_height, 0 : renderer.coarse_width]
     u = (cols + 0.5 - 0.5 * renderer.coarse_width) / focal
     w = (0.5 * renderer.coarse_height - rows - 0.5) / focal
     rays = u[..., None] * right + w[..., None] * up + forward
@@ -61,8 +70,12 @@ def test_a_still_pool_renders_flat():
     t = (top - view.eye[1]) / rays[..., 1]
     hits = view.eye + t[..., None] * rays
     margin = 3 * SPACING
-    inner = ((hits[..., 0] > margin) & (hits[..., 0] < side * SPACING - margin)
-             & (hits[..., 2] > margin) & (hits[..., 2] < side * SPACING - margin))
+    inner = (
+        (hits[..., 0] > margin)
+        & (hits[..., 0] < side * SPACING - margin)
+        & (hits[..., 2] > margin)
+        & (hits[..., 2] < side * SPACING - margin)
+    )
     assert inner.sum() > 2000
     normals = renderer.normal.to_numpy()[inner]
     tilt = np.degrees(np.arccos(np.clip(normals[:, 1], -1.0, 1.0)))
@@ -84,7 +97,7 @@ def test_thickness_is_the_depth_of_water():
         view = View(centre + np.array([0.0, 1.0, 0.0]), centre, 30.0)  # straight down
         renderer, _ = render(pool, view, renderer)
         h, w = renderer.coarse_height, renderer.coarse_width
-        middle = renderer.thickness.to_numpy()[h // 2 - 10:h // 2 + 10, w // 2 - 10:w // 2 + 10]
+        middle = renderer.thickness.to_numpy()[h // 2 - 10 : h // 2 + 10, w // 2 - 10 : w // 2 + 10]
         measured.append(np.median(middle))
         # Looking straight down, the path through the water is its depth.
         assert np.median(middle) == pytest.approx(layers * SPACING, rel=0.05)
@@ -137,7 +150,6 @@ def test_bad_style_is_refused(tmp_path, capsys):
         cli.parse_args(["dam_break", "--style", "glass"])
 
 
-
 def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
     # GPU backends splat a thread per (particle, pixel) (pbf.app.splat); here on the CPU against the
     # per-particle loops: the same pixels covered, the same image up to rounding.
@@ -145,9 +157,17 @@ def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
     rng = np.random.default_rng(12)
     splash = (np.array([0.3, 0.3, 0.3]) + rng.normal(0.0, 0.08, (1500, 3))).astype(np.float32)
     per_particle, first = render(splash, view)
-    per_pixel = FluidRenderer(W, H, SPACING, SPACING**3, floor_y_m=0.0, tile_m=0.1,
-                              absorption_per_m=(2.0, 0.7, 0.35), water_rgb=(0.05, 0.3, 0.45),
-                              horizon_rgb=(0.96, 0.96, 0.94))
+    per_pixel = FluidRenderer(
+        W,
+        H,
+        SPACING,
+        SPACING**3,
+        floor_y_m=0.0,
+        tile_m=0.1,
+        absorption_per_m=(2.0, 0.7, 0.35),
+        water_rgb=(0.05, 0.3, 0.45),
+        horizon_rgb=(0.96, 0.96, 0.94),
+    )
     per_pixel.per_item = True
     _, second = render(splash, view, per_pixel)
     # The same pairs of particle and pixel; the two kernels round the same formulas apart (LLVM fuses

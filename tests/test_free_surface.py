@@ -1,11 +1,12 @@
 """The ghost fluid beyond the free surface (``solver.surface_density``, pbf.solver.density)."""
+
 import numpy as np
 import pytest
-from scenes import column_scene
 
 from pbf import Simulation
 from pbf.solver import sph
 from pbf.study.common import colour_surface_height, fill_height_m
+from scenes import column_scene
 
 
 def ghost_of_the_first_substep(sim):
@@ -37,7 +38,7 @@ def test_the_ghost_completes_the_top_layer_of_a_lattice_and_nothing_else(kernel_
     assert 0.1 < psi_top < 0.25
     assert psi[in_top] == pytest.approx(psi_top, abs=1e-4)
     assert density_ratios(x, sim)[in_top] + psi[in_top] == pytest.approx(1.0, abs=1e-4)
-    assert not np.any(psi[x[:, 1] < top - 0.5 * 0.025])   # the layers below, the floor layer included
+    assert not np.any(psi[x[:, 1] < top - 0.5 * 0.025])  # the layers below, the floor layer included
 
 
 def test_a_squeezed_layer_gets_no_ghost():
@@ -72,8 +73,11 @@ def test_the_seed_pool_settles_level_and_still():
     surfaces = []
     for _ in range(11):
         sim.step(12)
-        surfaces.append(colour_surface_height(sim.positions(), sim.model.particle_volume_m3, h, probes, probes,
-                                              (0.5 * fill, 1.5 * fill)))
+        surfaces.append(
+            colour_surface_height(
+                sim.positions(), sim.model.particle_volume_m3, h, probes, probes, (0.5 * fill, 1.5 * fill)
+            )
+        )
     stats = sim.stats()
     assert stats["mean_density_error"] <= 0.002
     assert np.mean(surfaces) == pytest.approx(fill, rel=0.005)

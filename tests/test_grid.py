@@ -1,4 +1,5 @@
 """Neighbour lists from the counting-sort grid equal brute force, including the hard layouts."""
+
 import numpy as np
 import pytest
 import taichi as ti

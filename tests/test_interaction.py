@@ -1,5 +1,6 @@
 """The mouse moves the water: driven through the window's own input handling, with a stand-in for the
 GGUI window (no display needed)."""
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -8,9 +9,13 @@ from pbf import Simulation
 from pbf.app.render import View
 from pbf.app.window import OrbitCamera, WindowViewer
 
-POOL = {"name": "pool", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [1.2, 0.4, 0.3]},
-        "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [1.2, 0.1, 0.3]}]},
-        "time": {"substeps": 1}, "solver": {"iterations": 2}}
+POOL = {
+    "name": "pool",
+    "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [1.2, 0.4, 0.3]},
+    "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [1.2, 0.1, 0.3]}]},
+    "time": {"substeps": 1},
+    "solver": {"iterations": 2},
+}
 
 
 class StandInWindow:
@@ -43,10 +48,10 @@ def test_dragging_pushes_the_water_under_the_cursor_and_nothing_else():
     # Looking down at the pool's surface near its left end, x to the right of the image.
     viewer.camera = OrbitCamera.from_view(View(np.array([0.2, 0.5, 0.6]), np.array([0.2, 0.1, 0.15]), 45.0))
     window.pressed = {ti.ui.LMB}
-    viewer.handle_input(1 / 60)                      # press: the ray hits the water, the hand grabs
+    viewer.handle_input(1 / 60)  # press: the ray hits the water, the hand grabs
     assert viewer.hand.holding and sim.control.push is None
     grabbed = viewer.hand.point.copy()
-    window.cursor = (0.53, 0.5)                      # drag to the right
+    window.cursor = (0.53, 0.5)  # drag to the right
     viewer.handle_input(1 / 60)
     push = sim.control.push
     assert push is not None and push.velocity_m_s[0] > 0.5 and abs(push.velocity_m_s[2]) < 0.1 * push.velocity_m_s[0]
@@ -64,7 +69,7 @@ def test_dragging_pushes_the_water_under_the_cursor_and_nothing_else():
     far = np.linalg.norm(x_ref - grabbed, axis=1) > reach
     assert far.sum() > 100 and np.array_equal(x[far], x_ref[far]) and np.array_equal(v[far], v_ref[far])
     window.pressed = set()
-    viewer.handle_input(1 / 60)                      # release: the hand lets go
+    viewer.handle_input(1 / 60)  # release: the hand lets go
     assert not viewer.hand.holding and sim.control.push is None
 
 
@@ -74,7 +79,7 @@ def test_a_press_that_misses_the_water_grabs_nothing():
     viewer = WindowViewer(sim, window)
     viewer.camera = OrbitCamera.from_view(View(np.array([0.6, 0.3, 1.5]), np.array([0.6, 0.35, 0.0]), 45.0))
     window.pressed = {ti.ui.LMB}
-    window.cursor = (0.5, 0.9)                       # the sky above the pool
+    window.cursor = (0.5, 0.9)  # the sky above the pool
     viewer.handle_input(1 / 60)
     window.cursor = (0.6, 0.9)
     viewer.handle_input(1 / 60)
@@ -87,11 +92,13 @@ class Key:
 
 
 def test_keys_switch_the_emitters_and_the_wave_maker():
-    scene = {"name": "toggles", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.4, 0.2]},
-             "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.1, 0.2]}]},
-             "wave_maker": {"stroke_m": 0.03, "period_s": 0.5},
-             "emitters": [{"position_m": [0.4, 0.3, 0.1], "direction": [0, -1, 0], "radius_m": 0.03,
-                           "end_s": 2.0}]}
+    scene = {
+        "name": "toggles",
+        "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.4, 0.2]},
+        "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.1, 0.2]}]},
+        "wave_maker": {"stroke_m": 0.03, "period_s": 0.5},
+        "emitters": [{"position_m": [0.4, 0.3, 0.1], "direction": [0, -1, 0], "radius_m": 0.03, "end_s": 2.0}],
+    }
     sim = Simulation(scene)
     window = StandInWindow()
     viewer = WindowViewer(sim, window)
@@ -101,8 +108,8 @@ def test_keys_switch_the_emitters_and_the_wave_maker():
     assert not sim.control.emitters_on and not sim.control.wave_maker_on
     count = sim.particle_count
     sim.step(10)
-    assert sim.particle_count == count                                   # no water poured
-    assert float(sim.boundaries.container.piston_x[None]) == 0.0                          # the piston stood still
+    assert sim.particle_count == count  # no water poured
+    assert float(sim.boundaries.container.piston_x[None]) == 0.0  # the piston stood still
     window.get_events = lambda kind: [Key("f"), Key("m")]
     viewer.handle_input(1 / 60)
     sim.step(10)
@@ -127,6 +134,6 @@ def test_every_key_is_one_ggui_delivers_and_each_does_what_the_help_says():
     viewer.handle_input(1 / 60)
     assert viewer.paused and viewer.help_shown and not viewer.panel_shown
     window.get_events = lambda kind: [Key("n")]
-    assert viewer.advance()                          # n: one frame ...
+    assert viewer.advance()  # n: one frame ...
     window.get_events = lambda kind: []
-    assert not viewer.advance()                      # ... and paused again
+    assert not viewer.advance()  # ... and paused again

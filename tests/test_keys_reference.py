@@ -1,5 +1,6 @@
 """The key reference is generated from the schema: docs/KEYS.md must be its current output, and every
 key of the schema must appear in it with its bounds."""
+
 import dataclasses
 from pathlib import Path
 
@@ -20,8 +21,9 @@ def test_every_key_is_listed_with_its_range():
     for dotted in _schema_keys(Scene):
         listed = dotted.replace(".blocks.", ".blocks[].").replace("obstacles.", "obstacles[].")
         listed = listed.replace("emitters.", "emitters[].")
-        dataclass_table = any(dataclasses.is_dataclass(f.default) for f in dataclasses.fields(Scene)
-                              if f.name == dotted)
+        dataclass_table = any(
+            dataclasses.is_dataclass(f.default) for f in dataclasses.fields(Scene) if f.name == dotted
+        )
         assert dataclass_table or f"`{listed}`" in text or f"[{listed}]" in text, dotted
     assert "| `fluid.spacing_m` | number | `0.025` | [0.0001, 100] |" in text
     assert "[1, 100]" in text.split("`solver.iterations`")[1].split("\n")[0]

@@ -3,6 +3,7 @@
 Every ``import`` and ``from … import`` of a ``pbf`` module counts, at module level or inside a
 function, so an import hidden in a function cannot break a rule unseen.
 """
+
 import ast
 from pathlib import Path
 
@@ -57,7 +58,7 @@ def test_no_import_cycle():
         state[name] = "open"
         for target in sorted(edges(name)):
             if state.get(target) == "open":
-                pytest.fail("import cycle: " + " → ".join(path[path.index(target):] + [target]))
+                pytest.fail("import cycle: " + " → ".join(path[path.index(target) :] + [target]))
             if target not in state:
                 visit(target, path + [target])
         state[name] = "done"

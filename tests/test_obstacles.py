@@ -1,8 +1,9 @@
 """Static box obstacles: exact ghost density at faces, edges and corners; no particle ever inside."""
+
 import numpy as np
 import pytest
 
-from pbf import Simulation, SceneError, load_scene
+from pbf import SceneError, Simulation, load_scene
 from pbf.scene import from_dict
 
 SPACING = 0.025
@@ -10,10 +11,14 @@ SPACING = 0.025
 
 def block_on_obstacle(**extra):
     """A block of water resting on top of an obstacle of the same footprint, gravity off."""
-    return {"name": "block_on_obstacle", "gravity_m_s2": [0.0, 0.0, 0.0],
-            "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.4, 0.6, 0.4]},
-            "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0.1, 0.2, 0.1], "max_m": [0.3, 0.4, 0.3]}]},
-            "obstacles": [{"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.2, 0.3]}], **extra}
+    return {
+        "name": "block_on_obstacle",
+        "gravity_m_s2": [0.0, 0.0, 0.0],
+        "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.4, 0.6, 0.4]},
+        "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0.1, 0.2, 0.1], "max_m": [0.3, 0.4, 0.3]}]},
+        "obstacles": [{"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.2, 0.3]}],
+        **extra,
+    }
 
 
 def test_water_on_an_obstacle_sees_the_ghost_lattice_at_faces_edges_and_corners():
@@ -54,11 +59,14 @@ def test_dam_break_around_an_obstacle_stays_out_of_it():
     assert sim.stats()["max_speed_m_s"] < 5.0
 
 
-@pytest.mark.parametrize("obstacle, message", [
-    ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.04, 0.3]}, "at least 2 spacings"),
-    ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.2, 0.5]}, "lies outside the container"),
-    ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.25, 0.3]}, "overlaps fluid.blocks[0]"),
-])
+@pytest.mark.parametrize(
+    "obstacle, message",
+    [
+        ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.04, 0.3]}, "at least 2 spacings"),
+        ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.2, 0.5]}, "lies outside the container"),
+        ({"min_m": [0.1, 0.0, 0.1], "max_m": [0.3, 0.25, 0.3]}, "overlaps fluid.blocks[0]"),
+    ],
+)
 def test_bad_obstacles_are_refused(obstacle, message):
     with pytest.raises(SceneError) as error:
         from_dict(block_on_obstacle(obstacles=[obstacle]), "test.toml")

@@ -1,4 +1,5 @@
 """No option is silently ignored: each takes effect or is refused, before anything starts."""
+
 import pytest
 from command_line import assert_one_error, refused, run_cli
 
@@ -13,40 +14,52 @@ def here(tmp_path, monkeypatch):
     return tmp_path
 
 
-@pytest.mark.parametrize("argv, names", [
-    (["--video", "v.mp4"], ["--video writes files, which the window does not; add --headless"]),
-    (["--export", "ply"], ["--export writes files, which the window does not; add --headless"]),
-    (["--stats-only", "--video", "v.mp4"], ["--video: --stats-only renders and writes nothing"]),
-    (["--stats-only", "--export", "npz"], ["--export: --stats-only renders and writes nothing"]),
-    (["--stats-only", "--out", "frames"], ["--out: --stats-only renders and writes nothing"]),
-    (["--stats-only", "--size", "64x48"], ["--size: --stats-only renders and writes nothing"]),
-    (["--stats-only", "--colour-map", "viridis"], ["--colour-map: --stats-only"]),
-    (["--headless", "--size", ""], ["--size '': expected WIDTHxHEIGHT in pixels"]),
-    (["--headless", "--size", "64x"], ["--size 64x: expected WIDTHxHEIGHT"]),
-    (["--headless", "--fov", ""], ["--fov '': expected degrees"]),
-    (["--headless", "--camera", ""], ["--camera '': expected X,Y,Z in metres"]),
-    (["--headless", "--look-at", "1,2"], ["--look-at 1,2: expected X,Y,Z in metres"]),
-    (["--headless", "--colour-map", ""], ["command line --colour-map '': key 'render.colour_map'"]),
-    (["--headless", "--camera", "1,2,3]\n[solver]\niterations=100\n#"], ["--camera", "expected X,Y,Z in metres"]),
-    (["--headless", "--colour-map", 'viridis"\n[solver]\niterations = 100\n#'], ["key 'render.colour_map'"]),
-    (["--headless", "--set", "render.width_px=64\n[solver]\niterations = 100"],
-     ["command line --set", "expected one line of printable text (a newline would start a second TOML statement)"]),
-    (["--headless", "--set", "solver.iterations=4 # x\n[time]\nsubsteps=999"], ["expected one line of printable"]),
-    (["--headless", "--set", "solver..iterations=4"], ["'solver..iterations' is not a dotted key"]),
-    (["--headless", "--set", "iterations"], ["expected KEY=VALUE"]),
-    (["--frames", "0"], ["argument --frames: expected a whole number of frames in [1, 99,999]"]),
-    (["--frames", "100000"], ["got 100000"]),
-    (["--frames", "9" * 5000], ["expected a whole number of frames", "…"]),
-    (["--arch", "opengl"], ["argument --arch: invalid choice: 'opengl'"]),
-])
+@pytest.mark.parametrize(
+    "argv, names",
+    [
+        (["--video", "v.mp4"], ["--video writes files, which the window does not; add --headless"]),
+        (["--export", "ply"], ["--export writes files, which the window does not; add --headless"]),
+        (["--stats-only", "--video", "v.mp4"], ["--video: --stats-only renders and writes nothing"]),
+        (["--stats-only", "--export", "npz"], ["--export: --stats-only renders and writes nothing"]),
+        (["--stats-only", "--out", "frames"], ["--out: --stats-only renders and writes nothing"]),
+        (["--stats-only", "--size", "64x48"], ["--size: --stats-only renders and writes nothing"]),
+        (["--stats-only", "--colour-map", "viridis"], ["--colour-map: --stats-only"]),
+        (["--headless", "--size", ""], ["--size '': expected WIDTHxHEIGHT in pixels"]),
+        (["--headless", "--size", "64x"], ["--size 64x: expected WIDTHxHEIGHT"]),
+        (["--headless", "--fov", ""], ["--fov '': expected degrees"]),
+        (["--headless", "--camera", ""], ["--camera '': expected X,Y,Z in metres"]),
+        (["--headless", "--look-at", "1,2"], ["--look-at 1,2: expected X,Y,Z in metres"]),
+        (["--headless", "--colour-map", ""], ["command line --colour-map '': key 'render.colour_map'"]),
+        (["--headless", "--camera", "1,2,3]\n[solver]\niterations=100\n#"], ["--camera", "expected X,Y,Z in metres"]),
+        (["--headless", "--colour-map", 'viridis"\n[solver]\niterations = 100\n#'], ["key 'render.colour_map'"]),
+        (
+            ["--headless", "--set", "render.width_px=64\n[solver]\niterations = 100"],
+            [
+                "command line --set",
+                "expected one line of printable text (a newline would start a second TOML statement)",
+            ],
+        ),
+        (["--headless", "--set", "solver.iterations=4 # x\n[time]\nsubsteps=999"], ["expected one line of printable"]),
+        (["--headless", "--set", "solver..iterations=4"], ["'solver..iterations' is not a dotted key"]),
+        (["--headless", "--set", "iterations"], ["expected KEY=VALUE"]),
+        (["--frames", "0"], ["argument --frames: expected a whole number of frames in [1, 99,999]"]),
+        (["--frames", "100000"], ["got 100000"]),
+        (["--frames", "9" * 5000], ["expected a whole number of frames", "…"]),
+        (["--arch", "opengl"], ["argument --arch: invalid choice: 'opengl'"]),
+    ],
+)
 def test_options_that_would_do_nothing_are_refused(here, capsys, argv, names):
     refused(capsys, ["dam_break", *argv], *names, cwd=here)
 
 
 def test_a_bad_backend_variable_is_refused_before_the_scene_loads(here, capsys, monkeypatch):
     monkeypatch.setenv(ENV_VAR, "tpu")
-    refused(capsys, ["no_such_scene"], "PBF_ARCH=tpu: unknown backend; allowed: auto, cpu, gpu, cuda, vulkan, metal",
-            cwd=here)
+    refused(
+        capsys,
+        ["no_such_scene"],
+        "PBF_ARCH=tpu: unknown backend; allowed: auto, cpu, gpu, cuda, vulkan, metal",
+        cwd=here,
+    )
 
 
 def test_the_command_line_names_the_solvers_backends():
@@ -55,14 +68,36 @@ def test_the_command_line_names_the_solvers_backends():
 
 def test_view_options_reach_the_scene(here):
     # No --headless: the window starts in the surface style, and key v shows the particles' colours.
-    args = cli.parse_args(["dam_break", "--size", "64x48", "--camera", "1,2,3", "--look-at", "0,0.1,0",
-                           "--fov", "35", "--colour-by", "density", "--colour-map", "viridis", "--style", "surface",
-                           "--set", "render.height_px=32"])
+    args = cli.parse_args(
+        [
+            "dam_break",
+            "--size",
+            "64x48",
+            "--camera",
+            "1,2,3",
+            "--look-at",
+            "0,0.1,0",
+            "--fov",
+            "35",
+            "--colour-by",
+            "density",
+            "--colour-map",
+            "viridis",
+            "--style",
+            "surface",
+            "--set",
+            "render.height_px=32",
+        ]
+    )
     scene = cli.load(args)
     assert (scene.render.width_px, scene.render.height_px) == (64, 32)  # --set after the shortcut wins
     assert scene.camera.position_m == (1.0, 2.0, 3.0) and scene.camera.look_at_m == (0.0, 0.1, 0.0)
     assert (scene.camera.fov_deg, scene.render.colour_by, scene.render.colour_map, scene.render.style) == (
-        35.0, "density", "viridis", "surface")
+        35.0,
+        "density",
+        "viridis",
+        "surface",
+    )
 
 
 def test_help_and_refusals_need_no_solver(tmp_path):

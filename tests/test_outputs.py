@@ -1,5 +1,6 @@
 """Every output path is checked before the simulation starts; a scene's name never steers where
 files go; a rerun never mixes its frames with an earlier run's, and deletes nothing unless asked."""
+
 import os
 from pathlib import Path
 
@@ -21,19 +22,22 @@ def here(tmp_path, monkeypatch):
     return tmp_path
 
 
-@pytest.mark.parametrize("argv, names", [
-    (["--out", "a_file"], ["--out 'a_file': is a file; expected a folder"]),
-    (["--out", "a_file/frames"], ["--out 'a_file/frames':", "a_file is a file, not a folder"]),
-    (["--out", "a_file/deeper/frames"], ["a_file is a file, not a folder"]),
-    (["--out", "/"], ["--out '/': is the filesystem root"]),
-    (["--out", ""], ["--out '': expected the path of a folder"]),
-    (["--out", "frames\nfolder"], ["expected the path of a folder"]),
-    (["--video", "a_folder.mp4"], ["--video 'a_folder.mp4': is a folder; expected a video file"]),
-    (["--video", "a_file/v.mp4"], ["a_file is a file, not a folder"]),
-    (["--video", ""], ["--video '': expected the path of a video file"]),
-    (["--video", "v.gif"], ["--video 'v.gif': expected a file ending in .mp4"]),
-    (["--out", "x" * 300], ["File name too long"]),
-])
+@pytest.mark.parametrize(
+    "argv, names",
+    [
+        (["--out", "a_file"], ["--out 'a_file': is a file; expected a folder"]),
+        (["--out", "a_file/frames"], ["--out 'a_file/frames':", "a_file is a file, not a folder"]),
+        (["--out", "a_file/deeper/frames"], ["a_file is a file, not a folder"]),
+        (["--out", "/"], ["--out '/': is the filesystem root"]),
+        (["--out", ""], ["--out '': expected the path of a folder"]),
+        (["--out", "frames\nfolder"], ["expected the path of a folder"]),
+        (["--video", "a_folder.mp4"], ["--video 'a_folder.mp4': is a folder; expected a video file"]),
+        (["--video", "a_file/v.mp4"], ["a_file is a file, not a folder"]),
+        (["--video", ""], ["--video '': expected the path of a video file"]),
+        (["--video", "v.gif"], ["--video 'v.gif': expected a file ending in .mp4"]),
+        (["--out", "x" * 300], ["File name too long"]),
+    ],
+)
 def test_bad_output_paths_are_refused_before_the_run(here, capsys, argv, names):
     refused(capsys, ["dam_break", "--headless", "--frames", "1", *argv], *names, cwd=here)
 
@@ -50,8 +54,12 @@ def test_a_folder_that_cannot_be_written(here, capsys, monkeypatch):
 
 def test_a_folder_where_a_frame_goes(here, capsys):
     (here / "frames" / "frame_00001.png").mkdir(parents=True)
-    refused(capsys, ["dam_break", "--headless", "--out", "frames"],
-            "frame_00001.png is a folder where a frame file goes", cwd=here)
+    refused(
+        capsys,
+        ["dam_break", "--headless", "--out", "frames"],
+        "frame_00001.png is a folder where a frame file goes",
+        cwd=here,
+    )
 
 
 def test_the_default_folder_is_the_scene_files_name_inside_out():
@@ -63,8 +71,11 @@ def test_the_default_folder_is_the_scene_files_name_inside_out():
 
 def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    scene = (Path(cli.schema.SCENES_DIR) / "dam_break.toml").read_text().replace('name = "dam_break"',
-                                                                                 'name = "../../escape"')
+    scene = (
+        (Path(cli.schema.SCENES_DIR) / "dam_break.toml")
+        .read_text()
+        .replace('name = "dam_break"', 'name = "../../escape"')
+    )
     (tmp_path / "evil.toml").write_text(scene)
     earlier = tmp_path / "out" / "evil"
     earlier.mkdir(parents=True)
@@ -74,16 +85,25 @@ def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path,
     (earlier / "notes.txt").write_text("mine")
     before = files_under(tmp_path)
     # Without --overwrite nothing is deleted: one line naming the folder and the option.
-    refused(capsys, ["evil.toml", "--headless", "--frames", "1", *COARSE],
-            "'out/evil': holds 7 files of an earlier run (frame_00000.png …); add --overwrite", cwd=tmp_path)
+    refused(
+        capsys,
+        ["evil.toml", "--headless", "--frames", "1", *COARSE],
+        "'out/evil': holds 7 files of an earlier run (frame_00000.png …); add --overwrite",
+        cwd=tmp_path,
+    )
     assert files_under(tmp_path) == before
     assert cli.main(["evil.toml", "--headless", "--frames", "1", "--overwrite", *COARSE]) == 0
     assert "removed 7 files of an earlier run from out/evil/" in capsys.readouterr().out
     assert sorted(p.name for p in earlier.iterdir()) == ["frame_00000.png", "frame_00001.png", "notes.txt"]
     assert (earlier / "frame_00000.png").read_bytes() != b"old"
     assert {p.relative_to(tmp_path) for p in files_under(tmp_path)} == {
-        Path("evil.toml"), Path("out"), Path("out/evil"), Path("out/evil/frame_00000.png"),
-        Path("out/evil/frame_00001.png"), Path("out/evil/notes.txt")}
+        Path("evil.toml"),
+        Path("out"),
+        Path("out/evil"),
+        Path("out/evil/frame_00000.png"),
+        Path("out/evil/frame_00001.png"),
+        Path("out/evil/notes.txt"),
+    }
 
 
 def test_command_line_refuses_a_file_as_the_frame_folder(tmp_path):

@@ -1,19 +1,21 @@
 """Physics invariants with explicit tolerances: rest, convergence, containment, stability."""
+
 import math
 
 import numpy as np
 import pytest
-from scenes import column_scene, small_dam_break
 
 from pbf import Simulation
 from pbf.solver import Snapshot
 from pbf.study.common import colour_surface_height, fill_height_m
+from scenes import column_scene, small_dam_break
 
 G = 9.81
 
 
-@pytest.mark.parametrize("spacing_m, substeps, iterations",
-                         [(0.025, 8, 4), pytest.param(0.0125, 16, 6, marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "spacing_m, substeps, iterations", [(0.025, 8, 4), pytest.param(0.0125, 16, 6, marks=pytest.mark.slow)]
+)
 def test_column_at_rest_stays_at_rest(spacing_m, substeps, iterations):
     # Halving the spacing with Δt ∝ spacing and the same constants must give the same figures: the
     # formulation is scale-free. Its convergence is not: Jacobi carries a correction about one
@@ -95,12 +97,16 @@ def test_positions_keep_creation_order():
 def pair_separation(distance_h, **solver):
     """Two particles alone in a box without gravity, ``distance_h`` smoothing radii apart: how far
     (in h) one substep moves them apart, and how far their centre moves (m)."""
-    scene = {"name": "pair", "gravity_m_s2": [0.0, 0.0, 0.0],
-             "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [1.0, 1.0, 1.0]},
-             "fluid": {"spacing_m": 0.05, "blocks": [{"min_m": [0.4, 0.5, 0.5], "max_m": [0.5, 0.55, 0.55]}]},
-             "viscosity": {"xsph": 0.0}, "vorticity": {"epsilon": 0.0},
-             # All 4 iterations: the error target would stop after the first (C < 0 reads as no error).
-             "solver": {"iterations": 4, "target_density_error": 0.0, **solver}}
+    scene = {
+        "name": "pair",
+        "gravity_m_s2": [0.0, 0.0, 0.0],
+        "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [1.0, 1.0, 1.0]},
+        "fluid": {"spacing_m": 0.05, "blocks": [{"min_m": [0.4, 0.5, 0.5], "max_m": [0.5, 0.55, 0.55]}]},
+        "viscosity": {"xsph": 0.0},
+        "vorticity": {"epsilon": 0.0},
+        # All 4 iterations: the error target would stop after the first (C < 0 reads as no error).
+        "solver": {"iterations": 4, "target_density_error": 0.0, **solver},
+    }
     sim = Simulation(scene)
     h = sim.scene.kernel_radius_m
     start = np.array([[0.5, 0.5, 0.5], [0.5 + distance_h * h, 0.5, 0.5]], np.float32)

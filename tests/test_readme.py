@@ -1,5 +1,6 @@
 """The README is the front door: its Python examples run as written, and its presets table is the
 presets that exist, each with the particle count and description `run.py --list` prints."""
+
 import re
 from pathlib import Path
 
@@ -32,10 +33,12 @@ def test_each_python_example_runs_as_written(number, tmp_path, monkeypatch, caps
 def presets_table() -> dict[str, tuple[str, str]]:
     """The README's presets table: name → (particles, what it shows)."""
     text = README.read_text(encoding="utf-8")
-    section = text[text.index("## Presets"):]
-    section = section[:section.index("\n## ", 1)]
-    return {match[0]: (match[1], match[2]) for match in re.findall(r"^\| `(\w+)` \| ([^|]+?) \| ([^|]+?) \|$",
-                                                                       section, flags=re.MULTILINE)}
+    section = text[text.index("## Presets") :]
+    section = section[: section.index("\n## ", 1)]
+    return {
+        match[0]: (match[1], match[2])
+        for match in re.findall(r"^\| `(\w+)` \| ([^|]+?) \| ([^|]+?) \|$", section, flags=re.MULTILINE)
+    }
 
 
 def test_the_presets_table_is_the_presets(capsys):

@@ -1,4 +1,5 @@
 """The headless renderer against the pinhole-camera formula, and the application's outputs end to end."""
+
 import math
 
 import imageio.v3 as iio
@@ -6,12 +7,12 @@ import numpy as np
 import pytest
 import taichi as ti
 from plyfile import PlyData
-from scenes import small_dam_break
 
 from pbf import Simulation, load_scene
 from pbf.app import cli
 from pbf.app.render import SceneRenderer, SphereRenderer, View
 from pbf.app.window import OrbitCamera
+from scenes import small_dam_break
 
 WHITE = (1.0, 1.0, 1.0)
 W, H = 320, 240
@@ -93,8 +94,22 @@ def test_orbit_camera_round_trip():
 
 def test_headless_run_writes_frames_video_and_particles(tmp_path):
     out = tmp_path / "frames"
-    argv = ["dam_break", "--headless", "--frames", "3", "--out", str(out), "--video", str(tmp_path / "v.mp4"),
-            "--export", "ply", "--size", "160x90", "--set", "fluid.spacing_m=0.05"]
+    argv = [
+        "dam_break",
+        "--headless",
+        "--frames",
+        "3",
+        "--out",
+        str(out),
+        "--video",
+        str(tmp_path / "v.mp4"),
+        "--export",
+        "ply",
+        "--size",
+        "160x90",
+        "--set",
+        "fluid.spacing_m=0.05",
+    ]
     assert cli.main(argv) == 0
     frames = sorted(out.glob("frame_*.png"))
     assert [p.name for p in frames] == [f"frame_{k:05d}.png" for k in range(4)]
@@ -106,8 +121,25 @@ def test_headless_run_writes_frames_video_and_particles(tmp_path):
 
 
 def test_npz_export(tmp_path):
-    assert cli.main(["dam_break", "--headless", "--frames", "1", "--out", str(tmp_path), "--export", "npz",
-                     "--size", "64x48", "--set", "fluid.spacing_m=0.05"]) == 0
+    assert (
+        cli.main(
+            [
+                "dam_break",
+                "--headless",
+                "--frames",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--export",
+                "npz",
+                "--size",
+                "64x48",
+                "--set",
+                "fluid.spacing_m=0.05",
+            ]
+        )
+        == 0
+    )
     data = np.load(tmp_path / "particles_00001.npz")
     assert data["positions_m"].shape == data["velocities_m_s"].shape == (1000, 3)
     assert data["time_s"] == pytest.approx(1 / 60)
@@ -116,17 +148,24 @@ def test_npz_export(tmp_path):
 def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    assert cli.main(["dam_break", "--frames", "1", "--out", str(tmp_path), "--size", "64x48",
-                     "--set", "fluid.spacing_m=0.05"]) == 0
+    assert (
+        cli.main(
+            ["dam_break", "--frames", "1", "--out", str(tmp_path), "--size", "64x48", "--set", "fluid.spacing_m=0.05"]
+        )
+        == 0
+    )
     assert "no window (no display" in capsys.readouterr().out
     assert len(list(tmp_path.glob("frame_*.png"))) == 2
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["no_such_scene"], "no such scene file"),
-    (["dam_break", "--set", "render.colour_by=pressure"], "render.colour_by"),
-    (["dam_break", "--size", "641x480"], "render.width_px"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["no_such_scene"], "no such scene file"),
+        (["dam_break", "--set", "render.colour_by=pressure"], "render.colour_by"),
+        (["dam_break", "--size", "641x480"], "render.width_px"),
+    ],
+)
 def test_bad_input_writes_nothing(tmp_path, capsys, argv, message):
     out = tmp_path / "out"
     assert cli.main(argv + ["--headless", "--out", str(out)]) == 2

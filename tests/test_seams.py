@@ -1,5 +1,6 @@
 """The seams new features attach to: the per-particle field registry (declared once, carried by the
 sort, kept by snapshots, reset for emitted particles) and the boundaries behind one interface."""
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -39,8 +40,15 @@ def test_a_snapshot_with_a_field_of_the_wrong_shape_or_name_is_refused():
     with pytest.raises(ValueError, match=r"fields\['multiplier'\] of shape"):
         sim.restore(Snapshot(start.positions_m, start.velocities_m_s, 0.0, 0, fields={"multiplier": np.zeros(3)}))
     with pytest.raises(ValueError, match="unknown particle field 'temperature'"):
-        sim.restore(Snapshot(start.positions_m, start.velocities_m_s, 0.0, 0,
-                             fields={"temperature": np.zeros(len(start.positions_m))}))
+        sim.restore(
+            Snapshot(
+                start.positions_m,
+                start.velocities_m_s,
+                0.0,
+                0,
+                fields={"temperature": np.zeros(len(start.positions_m))},
+            )
+        )
 
 
 @ti.data_oriented
@@ -72,10 +80,12 @@ def test_the_boundaries_sum_their_parts_and_project_into_the_fluid_domain():
     scene["obstacles"] = [{"min_m": [0.5, 0.0, 0.2], "max_m": [0.6, 0.2, 0.4]}]
     sim = Simulation(scene, quiet=True)
     r = sim.scene.particle_radius_m
-    points = [[0.55, 0.18, 0.3],   # inside the obstacle: pushed out through its nearest open face (the top)
-              [-0.5, 0.3, 0.3],    # outside the container: clamped in
-              [0.49, 0.01, 0.3],   # in the corner of floor and obstacle: both ghosts count
-              [0.3, 0.3, 0.3]]
+    points = [
+        [0.55, 0.18, 0.3],  # inside the obstacle: pushed out through its nearest open face (the top)
+        [-0.5, 0.3, 0.3],  # outside the container: clamped in
+        [0.49, 0.01, 0.3],  # in the corner of floor and obstacle: both ghosts count
+        [0.3, 0.3, 0.3],
+    ]
     probe = Probe(sim.boundaries, points)
     probe.run()
     projected = probe.projected.to_numpy()

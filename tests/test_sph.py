@@ -1,4 +1,5 @@
 """Kernel maths: normalisation, zero gradient sum, and the Taichi kernels against their NumPy twins."""
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -91,8 +92,8 @@ def test_jacobi_gain_matches_the_projection_matrix(ratio):
     for i, site in enumerate(sites):
         for offset, g in zip(offsets, gradients):
             j = np.ravel_multi_index(tuple((site + offset.astype(int)) % period), (period,) * 3)
-            jacobian[i, 3 * j:3 * j + 3] += g
-            jacobian[i, 3 * i:3 * i + 3] -= g
+            jacobian[i, 3 * j : 3 * j + 3] += g
+            jacobian[i, 3 * i : 3 * i + 3] -= g
     system = jacobian @ jacobian.T
     gain = np.linalg.eigvalsh(system).max() / (np.diag(system)[0] + relaxation)
     # The periodic lattice holds the wave vectors k = 2πm/8: sample the formula at exactly those.

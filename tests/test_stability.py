@@ -2,6 +2,7 @@
 
 Each test names what it protects against.
 """
+
 import math
 
 import numpy as np
@@ -14,8 +15,7 @@ BOX = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.4, 0.4, 0.4]}
 
 
 def scene(blocks, spacing_m=0.025, container=BOX, **time):
-    return {"name": "hard", "container": container, "time": time,
-            "fluid": {"spacing_m": spacing_m, "blocks": blocks}}
+    return {"name": "hard", "container": container, "time": time, "fluid": {"spacing_m": spacing_m, "blocks": blocks}}
 
 
 def assert_sane(sim, energy_bound_j):
@@ -37,8 +37,12 @@ def test_particles_starting_at_one_point():
     # huge density and nearly no constraint gradient, so λ is large and Δx must still stay bounded.
     sim = Simulation(scene([{"min_m": [0.1, 0.1, 0.1], "max_m": [0.3, 0.3, 0.3]}]))
     rng = np.random.default_rng(1)
-    sim.state.load({"x": np.full((sim.particle_count, 3), 0.2, np.float32)
-                    + rng.normal(0, 1e-6, (sim.particle_count, 3)), "v": np.zeros((sim.particle_count, 3), np.float32)})
+    sim.state.load(
+        {
+            "x": np.full((sim.particle_count, 3), 0.2, np.float32) + rng.normal(0, 1e-6, (sim.particle_count, 3)),
+            "v": np.zeros((sim.particle_count, 3), np.float32),
+        }
+    )
     for _ in range(4):
         sim.step(15)
         assert_sane(sim, energy_bound_j=sim.particle_count * sim.model.particle_mass_kg * 0.5 * 5.0**2)
@@ -84,8 +88,9 @@ def test_jet_at_50_m_s_into_a_wall():
 def test_time_step_beyond_the_stable_range_is_substepped(substeps):
     # Against a too-large Δt: a 1/15 s frame of a falling block would move particles several spacings
     # per step; the CFL limit adds substeps instead of exploding.
-    sim = Simulation({**scene([{"min_m": [0.0, 0.1, 0.0], "max_m": [0.2, 0.35, 0.2]}], frame_dt_s=1 / 15,
-                                substeps=substeps)})
+    sim = Simulation(
+        {**scene([{"min_m": [0.0, 0.1, 0.0], "max_m": [0.2, 0.35, 0.2]}], frame_dt_s=1 / 15, substeps=substeps)}
+    )
     released = potential_energy_j(sim)
     for _ in range(4):
         sim.step(5)

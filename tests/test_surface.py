@@ -3,13 +3,13 @@ the same on every run, and written in formats other tools read; and both surface
 them: headless runs (meshes and ``--style surface`` frames) and the window's key v.
 
 One Simulation serves every test here that needs one: each costs seconds of compiling."""
+
 import math
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
 from plyfile import PlyData
-from scenes import column_scene
 
 from pbf import Simulation
 from pbf.app import cli, loop
@@ -18,6 +18,7 @@ from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
 from pbf.app.surface import Mesh, reconstruct, write_mesh
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
+from scenes import column_scene
 
 SPACING = 0.025
 
@@ -35,9 +36,13 @@ def settled():
 
 def open_scene(**surface):
     """A 1 m box with no fluid of interest: the scene only carries the spacing and [surface]."""
-    return from_dict({"container": {"min_m": [0, 0, 0], "max_m": [1, 1, 1]},
-                      "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.1, 0.1, 0.1]}]},
-                      "surface": surface})
+    return from_dict(
+        {
+            "container": {"min_m": [0, 0, 0], "max_m": [1, 1, 1]},
+            "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.1, 0.1, 0.1]}]},
+            "surface": surface,
+        }
+    )
 
 
 def assert_closed(mesh: Mesh):
@@ -142,8 +147,20 @@ def test_headless_run_writes_surface_frames_meshes_and_particles(settled, tmp_pa
 
 
 def test_command_line_asks_for_surfaces():
-    args = cli.parse_args(["dam_break", "--headless", "--style", "surface", "--export", "mesh", "--export", "npz",
-                           "--set", "surface.mesh_format=obj"])
+    args = cli.parse_args(
+        [
+            "dam_break",
+            "--headless",
+            "--style",
+            "surface",
+            "--export",
+            "mesh",
+            "--export",
+            "npz",
+            "--set",
+            "surface.mesh_format=obj",
+        ]
+    )
     assert args.export == ["mesh", "npz"]
     scene = cli.load(args)
     assert scene.render.style == "surface" and scene.surface.mesh_format == "obj"
@@ -204,17 +221,21 @@ def test_key_v_switches_the_window_between_surface_and_particles(settled):
     assert window.shown.dev_alloc.alloc_id == packed.ctypes.data and list(window.shown.shape) == [160, 90]
     shown = unpack_rgb(packed)
     particles = sim.readout()
-    expected = fluid_renderer(sim, 160, 90).render(viewer.camera.view(), particles.positions, particles.count,
-                                                   LIGHT_DIRECTION)
+    expected = fluid_renderer(sim, 160, 90).render(
+        viewer.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION
+    )
     assert np.array_equal(shown, expected)
 
 
-@pytest.mark.parametrize("assignment, key", [
-    ("surface.iso_level=1.5", "surface.iso_level"),
-    ("surface.cube_size_spacings=0", "surface.cube_size_spacings"),
-    ("surface.mesh_format=stl", "surface.mesh_format"),
-    ("surface.smoothing_iterations=-1", "surface.smoothing_iterations"),
-])
+@pytest.mark.parametrize(
+    "assignment, key",
+    [
+        ("surface.iso_level=1.5", "surface.iso_level"),
+        ("surface.cube_size_spacings=0", "surface.cube_size_spacings"),
+        ("surface.mesh_format=stl", "surface.mesh_format"),
+        ("surface.smoothing_iterations=-1", "surface.smoothing_iterations"),
+    ],
+)
 def test_bad_surface_keys_write_nothing(tmp_path, capsys, assignment, key):
     out = tmp_path / "out"
     assert cli.main(["dam_break", "--headless", "--export", "mesh", "--out", str(out), "--set", assignment]) == 2

@@ -1,4 +1,5 @@
 """Cheap versions of the validation runs (pbf.study.validate) and of the speed/error sweep (pbf.study.sweep)."""
+
 import csv
 
 import numpy as np
@@ -12,8 +13,8 @@ def test_martin_moyce_surge_front_follows_the_experiment():
     # the experiment everywhere after T = 1 (frictionless walls, an instant release), by at most
     # about a quarter of a; the figures at every spacing are in docs/VALIDATION.md.
     run = validate.martin_moyce(9)
-    assert run.Z[0] == pytest.approx(1.0, abs=1e-3)     # the column's edge at x = a
-    assert np.all(np.diff(run.Z) > -0.02)               # the front never runs back
+    assert run.Z[0] == pytest.approx(1.0, abs=1e-3)  # the column's edge at x = a
+    assert np.all(np.diff(run.Z) > -0.02)  # the front never runs back
     assert run.max_deviation < 0.35
     assert 0.0 < run.mean_offset < 0.3
     measured_T, measured_Z = validate.martin_moyce_data()
@@ -23,7 +24,7 @@ def test_martin_moyce_surge_front_follows_the_experiment():
 
 def test_surge_front_ignores_spray():
     positions = np.array([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0], [0.9, 0.5, 0.0]])
-    counts = np.array([30, 12, 1])                      # the last particle is a lone droplet
+    counts = np.array([30, 12, 1])  # the last particle is a lone droplet
     assert validate.surge_front(positions, counts, spacing_m=0.01) == pytest.approx(0.205)
 
 
@@ -47,8 +48,13 @@ def point(particles, ms, error):
 
 
 def test_pareto_front_keeps_the_points_nothing_beats():
-    points = [point(8000, 10, 0.02), point(8000, 20, 0.01), point(8000, 30, 0.015), point(8000, 40, 0.005),
-              point(64000, 50, 0.03)]
+    points = [
+        point(8000, 10, 0.02),
+        point(8000, 20, 0.01),
+        point(8000, 30, 0.015),
+        point(8000, 40, 0.005),
+        point(64000, 50, 0.03),
+    ]
     sweep.mark_pareto(points)
     assert [p.pareto for p in points] == [True, True, False, True, True]
 
@@ -56,11 +62,32 @@ def test_pareto_front_keeps_the_points_nothing_beats():
 @pytest.mark.slow
 def test_sweep_writes_its_table_and_plot(tmp_path):
     csv_path, plot_path = tmp_path / "sweep.csv", tmp_path / "sweep.png"
-    points = bench.main(["sweep", "--sizes", "1000", "--iterations", "1", "4", "--substeps", "2", "--frames", "14",
-                         "--rest-settle", "2", "--rest-frames", "2", "--target", "0.01",
-                         "--csv", str(csv_path), "--plot", str(plot_path)])
+    points = bench.main(
+        [
+            "sweep",
+            "--sizes",
+            "1000",
+            "--iterations",
+            "1",
+            "4",
+            "--substeps",
+            "2",
+            "--frames",
+            "14",
+            "--rest-settle",
+            "2",
+            "--rest-frames",
+            "2",
+            "--target",
+            "0.01",
+            "--csv",
+            str(csv_path),
+            "--plot",
+            str(plot_path),
+        ]
+    )
     rows = list(csv.DictReader(csv_path.open()))
-    assert len(rows) == len(points) == 3                # 1 and 4 iterations, and the target point
+    assert len(rows) == len(points) == 3  # 1 and 4 iterations, and the target point
     assert {float(r["iterations_used"]) for r in rows[:2]} == {1.0, 4.0}
     # 14 frames take the block through its impact: more iterations, less error.
     assert float(rows[1]["mean_density_error"]) < float(rows[0]["mean_density_error"])

@@ -1,5 +1,6 @@
 """Each preset frames its action: its water (and the container, where no camera is set) in the image,
 and the window's panel beside it, not over it."""
+
 import itertools
 
 import numpy as np

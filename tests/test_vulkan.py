@@ -10,6 +10,7 @@ that differ in the last bit take different iteration counts a dozen frames in (t
 happened to agree on theirs put Vulkan's mean density error 3.6% outside their range). The seed scene
 on Vulkan must stay inside that spread, widened by as much again on either side.
 """
+
 import os
 import subprocess
 import sys
@@ -26,10 +27,13 @@ from pbf.solver.sph import kernel_gradient_np, kernel_np
 pytestmark = [pytest.mark.vulkan, pytest.mark.slow]
 HERE = Path(__file__).parent
 WORKER_TIMEOUT_S = 420
-CPU_VARIANTS = {"cpu, optimised": [], "cpu, fast compile": ["--fast-compile"],
-                "cpu, device decisions": ["--fast-compile", "--device-decisions"],
-                "cpu, perturbed 1": ["--fast-compile", "--perturb", "1"],
-                "cpu, perturbed 2": ["--fast-compile", "--perturb", "2"]}
+CPU_VARIANTS = {
+    "cpu, optimised": [],
+    "cpu, fast compile": ["--fast-compile"],
+    "cpu, device decisions": ["--fast-compile", "--device-decisions"],
+    "cpu, perturbed 1": ["--fast-compile", "--perturb", "1"],
+    "cpu, perturbed 2": ["--fast-compile", "--perturb", "2"],
+}
 REST_TOLERANCE = 0.05
 """The pool at rest on Vulkan against the CPU: its statistics within 5% (0.7% apart, measured)."""
 SNAPSHOT_FRAMES = 20
@@ -39,8 +43,13 @@ PIXEL_TOLERANCE = 8
 
 
 def run_worker(out: Path, arch: str, flags, tasks, env) -> dict:
-    result = subprocess.run([sys.executable, str(HERE / "vulkan_run.py"), str(out), arch, *flags, *tasks],
-                            capture_output=True, text=True, timeout=WORKER_TIMEOUT_S, env=env)
+    result = subprocess.run(
+        [sys.executable, str(HERE / "vulkan_run.py"), str(out), arch, *flags, *tasks],
+        capture_output=True,
+        text=True,
+        timeout=WORKER_TIMEOUT_S,
+        env=env,
+    )
     assert result.returncode == 0, f"{arch} {flags}: {result.stderr[-3000:]}"
     return {"stdout": result.stdout, **dict(np.load(out))}
 
@@ -57,8 +66,11 @@ def runs(tmp_path_factory):
     np.savez(folder / "snapshot.npz", positions=sim.positions(), velocities=sim.velocities())
     env = {**os.environ, RENDER_SNAPSHOT: str(folder / "snapshot.npz")}
     env.pop("PBF_ARCH", None)
-    results = {"vulkan": run_worker(folder / "vulkan.npz", "vulkan", [],
-                                    ["kernel", "scan", "grid", "seed", "rest", "render"], env)}
+    results = {
+        "vulkan": run_worker(
+            folder / "vulkan.npz", "vulkan", [], ["kernel", "scan", "grid", "seed", "rest", "render"], env
+        )
+    }
     for name, flags in CPU_VARIANTS.items():
         tasks = ["seed", "rest", "render"] if name == "cpu, optimised" else ["seed"]
         out = folder / f"{name.replace(', ', '_').replace(' ', '_')}.npz"
@@ -104,7 +116,7 @@ def test_grid_matches_brute_force(runs, checked):
     starts = np.concatenate([[0], np.cumsum(counts)])
     got = [None] * len(points)
     for slot, original in enumerate(order):
-        got[original] = set(order[flat[starts[slot]:starts[slot + 1]]].tolist())
+        got[original] = set(order[flat[starts[slot] : starts[slot + 1]]].tolist())
     expected = float32_brute_force(points, h)
     wrong = [i for i in range(len(points)) if got[i] != expected[i]]
     assert not wrong, f"{len(wrong)} particles with wrong neighbours, e.g. {wrong[:5]}"
@@ -121,8 +133,9 @@ def test_a_pool_at_rest_stays_at_rest(runs):
     assert stats["max_speed_m_s"] < 0.1 * wave_speed
     for name, value, expected in zip(STATISTICS, vulkan["rest_statistics"], cpu["rest_statistics"]):
         assert value == pytest.approx(expected, rel=REST_TOLERANCE), name
-    assert np.percentile(vulkan["rest_speeds"], 99) == pytest.approx(np.percentile(cpu["rest_speeds"], 99),
-                                                                      rel=REST_TOLERANCE)
+    assert np.percentile(vulkan["rest_speeds"], 99) == pytest.approx(
+        np.percentile(cpu["rest_speeds"], 99), rel=REST_TOLERANCE
+    )
 
 
 def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):
@@ -136,7 +149,8 @@ def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):
     spread = high - low
     for k, name in enumerate(STATISTICS):
         assert low[k] - spread[k] <= vulkan_means[k] <= high[k] + spread[k], (
-            f"{name}: vulkan {vulkan_means[k]:.6g}, the CPU runs {cpu_means[:, k]}")
+            f"{name}: vulkan {vulkan_means[k]:.6g}, the CPU runs {cpu_means[:, k]}"
+        )
 
 
 def test_the_substep_reads_the_device_at_most_once(runs):

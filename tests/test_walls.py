@@ -1,5 +1,6 @@
 """The ghost fluid behind the container's walls: the fixed ghost tables and the mirror images
 (``solver.wall_mirror``), and the layer of water against a wall."""
+
 import numpy as np
 import pytest
 
@@ -10,9 +11,14 @@ TANK = {"min_m": [0.0, 0.0, 0.0], "max_m": [0.2, 0.4, 0.2]}
 
 def filled_tank(wall_mirror):
     """A block touching the floor and four walls (eight edges, four corners), filled 0.2 m deep."""
-    return Simulation({"name": "tank", "container": TANK,
-                       "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.2, 0.2, 0.2]}]},
-                       "solver": {"wall_mirror": wall_mirror}})
+    return Simulation(
+        {
+            "name": "tank",
+            "container": TANK,
+            "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.2, 0.2, 0.2]}]},
+            "solver": {"wall_mirror": wall_mirror},
+        }
+    )
 
 
 def ratios(sim):

@@ -1,19 +1,24 @@
 """The piston wave maker: where the wall stands, that water never gets behind it, and its checks."""
+
 import math
 
 import numpy as np
 import pytest
 
-from pbf import Simulation, SceneError
+from pbf import SceneError, Simulation
 from pbf.scene import from_dict
 
 STROKE, PERIOD = 0.04, 0.6
 
 
 def tank(**extra):
-    return {"name": "piston", "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.3, 0.1]},
-            "fluid": {"spacing_m": 0.02, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.12, 0.1]}]},
-            "wave_maker": {"stroke_m": STROKE, "period_s": PERIOD}, **extra}
+    return {
+        "name": "piston",
+        "container": {"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.3, 0.1]},
+        "fluid": {"spacing_m": 0.02, "blocks": [{"min_m": [0.0, 0.0, 0.0], "max_m": [0.6, 0.12, 0.1]}]},
+        "wave_maker": {"stroke_m": STROKE, "period_s": PERIOD},
+        **extra,
+    }
 
 
 def test_the_piston_pushes_the_water_and_nothing_gets_behind_it():

@@ -2,18 +2,19 @@
 packed RGBA words (checked against GGUI itself where Vulkan is available), the panel shows the
 simulation's and the renderer's milliseconds apart, and its statistics are not recomputed every
 frame."""
+
 import re
 import time
 
 import numpy as np
 import pytest
 import taichi as ti
-from scenes import small_dam_break
 
 from pbf import Simulation
 from pbf.app import window as window_module
 from pbf.app.render import SphereRenderer, unpack_rgb
 from pbf.app.window import WindowViewer, show_packed
+from scenes import small_dam_break
 
 W, H = 160, 90
 
@@ -101,8 +102,9 @@ def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is():
     # The same picture as the headless renderer draws from the window's camera.
     particles = sim.readout()
     reference = SphereRenderer(W, H, sim.scene.render.background_rgb, sim.scene.render.container_rgb, viewer.edges)
-    expected = reference.render(viewer.camera.view(), particles.positions, viewer.colours.update(), particles.count,
-                                particles.radius_m)
+    expected = reference.render(
+        viewer.camera.view(), particles.positions, viewer.colours.update(), particles.count, particles.radius_m
+    )
     assert np.array_equal(unpack_rgb(packed), expected)
     viewer.surface = True  # key v: the surface renderer's image, through the same hand-over
     viewer.show()
@@ -117,7 +119,9 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     viewer = WindowViewer(sim, window)
     viewer.show()
     assert [text for text in window.texts if text.startswith(("sim ", "render "))] == [
-        "sim - ms per frame", "render - ms (draw - + show -)"]  # nothing stepped or drawn yet
+        "sim - ms per frame",
+        "render - ms (draw - + show -)",
+    ]  # nothing stepped or drawn yet
     assert viewer.advance()
     time.sleep(0.05)  # a step of 50 ms, as the loop's sim.step() would take
     viewer.show()
@@ -125,8 +129,9 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     sim_line = [text for text in window.texts if text.startswith("sim ")][-1]
     render_line = [text for text in window.texts if text.startswith("render ")][-1]
     sim_ms = float(re.fullmatch(r"sim (\S+) ms per frame", sim_line).group(1))
-    render_ms, draw_ms, show_ms = map(float, re.fullmatch(r"render (\S+) ms \(draw (\S+) \+ show (\S+)\)",
-                                                          render_line).groups())
+    render_ms, draw_ms, show_ms = map(
+        float, re.fullmatch(r"render (\S+) ms \(draw (\S+) \+ show (\S+)\)", render_line).groups()
+    )
     assert 50.0 <= sim_ms < 1000.0
     assert draw_ms > 0.0 and show_ms >= 0.0 and render_ms == pytest.approx(draw_ms + show_ms, abs=0.11)
 

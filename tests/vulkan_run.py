@@ -8,6 +8,7 @@ per substep), ``rest`` (a pool filling the seed scene's floor, at rest), ``rende
 of the snapshot in RENDER_SNAPSHOT, particles and surface). Everything lands in OUT.npz for the test to
 judge. One Simulation serves the last three: on lavapipe each compiles its kernels for 30-40 s.
 """
+
 import argparse
 import os
 import sys
@@ -120,12 +121,26 @@ def grid_task(out: dict) -> None:
 
 def statistics_row(sim) -> list[float]:
     stats = sim.stats()
-    return [stats["mean_density_error"], stats["max_density_error"], stats["max_speed_m_s"], stats["kinetic_energy_j"],
-            stats["mean_neighbours"], stats["iterations"], stats["substeps"]]
+    return [
+        stats["mean_density_error"],
+        stats["max_density_error"],
+        stats["max_speed_m_s"],
+        stats["kinetic_energy_j"],
+        stats["mean_neighbours"],
+        stats["iterations"],
+        stats["substeps"],
+    ]
 
 
-STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j", "mean_neighbours",
-              "iterations", "substeps")
+STATISTICS = (
+    "mean_density_error",
+    "max_density_error",
+    "max_speed_m_s",
+    "kinetic_energy_j",
+    "mean_neighbours",
+    "iterations",
+    "substeps",
+)
 
 
 SIMULATION = {}
@@ -187,8 +202,14 @@ def render_task(out: dict) -> None:
         out[f"render_{style}"] = SceneRenderer(sim, *RENDER_SIZE, style=style).frame()
 
 
-TASKS = {"kernel": kernel_task, "scan": scan_task, "grid": grid_task, "seed": seed_task, "rest": rest_task,
-         "render": render_task}
+TASKS = {
+    "kernel": kernel_task,
+    "scan": scan_task,
+    "grid": grid_task,
+    "seed": seed_task,
+    "rest": rest_task,
+    "render": render_task,
+}
 
 
 def main() -> None:

@@ -11,6 +11,7 @@ the backend and every output path. A failure prints one line to stderr and retur
 it build a Simulation and a viewer (window, headless frames or statistics) and hand both to the one
 loop of ``pbf.app.loop``.
 """
+
 import argparse
 import difflib
 import json
@@ -27,18 +28,20 @@ ARCHES = ("auto", "cpu", "gpu", "cuda", "vulkan", "metal")
 and a bad backend are answered without importing the solver."""
 ARCH_VARIABLE = "PBF_ARCH"
 """``pbf.solver.ENV_VAR``."""
-EPILOG = "\n".join([
-    "examples:",
-    "  %(prog)s                   the seed dam break in a window (headless without one)",
-    "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
-    "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
-    "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
-    "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
-    "  %(prog)s --list            the presets",
-    "",
-    "in the window:",
-    *(f"  {line.strip()}" for line in HELP),
-])
+EPILOG = "\n".join(
+    [
+        "examples:",
+        "  %(prog)s                   the seed dam break in a window (headless without one)",
+        "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
+        "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
+        "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
+        "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
+        "  %(prog)s --list            the presets",
+        "",
+        "in the window:",
+        *(f"  {line.strip()}" for line in HELP),
+    ]
+)
 """The end of --help: examples and the window's mouse and keys."""
 HEADLESS_FRAMES = 180
 """Frames a headless or statistics run takes without --frames: 3 s at 60 fps."""
@@ -71,37 +74,66 @@ def frame_count(text: str) -> int:
 def build_parser() -> Parser:
     # No prog: argparse names the program as it was called, run.py or the installed pbf command.
     # allow_abbrev=False: argparse would read a mistyped --frame as --frames, or --over as --overwrite.
-    parser = Parser(allow_abbrev=False, description="Position Based Fluids in Taichi: a window, headless frames and video, "
-                                "particle and surface files.",
-                    formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG)
+    parser = Parser(
+        allow_abbrev=False,
+        description="Position Based Fluids in Taichi: a window, headless frames and video, particle and surface files.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EPILOG,
+    )
     parser.add_argument("scene", nargs="?", default=None, help="preset name or path to a TOML file (default dam_break)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a scene key, e.g. --set solver.iterations=6 (repeatable)")
-    parser.add_argument("--arch", choices=ARCHES, default=None,
-                        help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto: CUDA, else a hardware Vulkan or "
-                             f"Metal GPU, else the CPU; gpu: the best GPU backend found)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scene key, e.g. --set solver.iterations=6 (repeatable)",
+    )
+    parser.add_argument(
+        "--arch",
+        choices=ARCHES,
+        default=None,
+        help=f"Taichi backend (default: ${ARCH_VARIABLE} or auto: CUDA, else a hardware Vulkan or "
+        f"Metal GPU, else the CPU; gpu: the best GPU backend found)",
+    )
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
-    parser.add_argument("--keys", action="store_true",
-                        help="print the reference of every scene key (Markdown, as docs/KEYS.md) and exit")
+    parser.add_argument(
+        "--keys",
+        action="store_true",
+        help="print the reference of every scene key (Markdown, as docs/KEYS.md) and exit",
+    )
     output = parser.add_argument_group("output")
     mode = output.add_mutually_exclusive_group()
     mode.add_argument("--headless", action="store_true", help="render frames to files instead of a window")
     mode.add_argument("--stats-only", action="store_true", help="simulate and print statistics, render nothing")
-    output.add_argument("--frames", type=frame_count, default=None,
-                        help=f"frames to simulate (default: {HEADLESS_FRAMES}, 3 s at 60 fps, headless; the window "
-                             f"runs until closed)")
-    output.add_argument("--out", default=None,
-                        help="folder for PNG frames (default out/ + the scene file's name; also where the window "
-                             "writes when none can open); a folder holding an earlier run's files is refused "
-                             "unless --overwrite")
-    output.add_argument("--overwrite", action="store_true",
-                        help="replace an earlier run's files in --out (only frame_*.png, particles_*.ply/.npz and "
-                             "surface_*.ply/.obj are removed) and an existing --video file")
+    output.add_argument(
+        "--frames",
+        type=frame_count,
+        default=None,
+        help=f"frames to simulate (default: {HEADLESS_FRAMES}, 3 s at 60 fps, headless; the window runs until closed)",
+    )
+    output.add_argument(
+        "--out",
+        default=None,
+        help="folder for PNG frames (default out/ + the scene file's name; also where the window "
+        "writes when none can open); a folder holding an earlier run's files is refused "
+        "unless --overwrite",
+    )
+    output.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run's files in --out (only frame_*.png, particles_*.ply/.npz and "
+        "surface_*.ply/.obj are removed) and an existing --video file",
+    )
     output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
-    output.add_argument("--export", choices=export.EXPORTS, action="append", default=None,
-                        help="also write per frame the particles (ply, npz: positions and velocities) or the "
-                             "fluid's surface (mesh: PLY or OBJ, see surface.mesh_format); repeatable; needs "
-                             "--headless")
+    output.add_argument(
+        "--export",
+        choices=export.EXPORTS,
+        action="append",
+        default=None,
+        help="also write per frame the particles (ply, npz: positions and velocities) or the "
+        "fluid's surface (mesh: PLY or OBJ, see surface.mesh_format); repeatable; needs "
+        "--headless",
+    )
     view = parser.add_argument_group("view (shortcuts for --set camera.* and render.*; not with --stats-only)")
     view.add_argument("--size", metavar="WxH", help="image size in pixels, e.g. 1920x1080")
     view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
@@ -109,8 +141,11 @@ def build_parser() -> Parser:
     view.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees")
     view.add_argument("--colour-by", choices=("speed", "density"), help="particle colour")
     view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
-    view.add_argument("--style", choices=("particles", "surface"),
-                      help="headless frames: particles as coloured spheres, or the water's surface")
+    view.add_argument(
+        "--style",
+        choices=("particles", "surface"),
+        help="headless frames: particles as coloured spheres, or the water's surface",
+    )
     return parser
 
 
@@ -145,8 +180,11 @@ def checked_args(argv=None):
             hint = f"; did you mean {closest[0]}?" if closest else "; python run.py --help lists every option"
             raise UsageError(f"unknown option {schema.echo(word)}{hint}")
         raise UsageError(f"unexpected argument {schema.echo(word)}: one scene at a time, options start with --")
-    given = [dest for dest in ("scene", "arch", "frames", "out", *FILE_OPTIONS, *VIEW_OPTIONS)
-             if getattr(args, dest) is not None] + [d for d in ("set", "headless", "stats_only") if getattr(args, d)]
+    given = [
+        dest
+        for dest in ("scene", "arch", "frames", "out", *FILE_OPTIONS, *VIEW_OPTIONS)
+        if getattr(args, dest) is not None
+    ] + [d for d in ("set", "headless", "stats_only") if getattr(args, d)]
     if args.list and args.keys:
         raise UsageError("--list and --keys each print a reference; give one of the two")
     for flag, does in (("list", "lists the presets"), ("keys", "prints the key reference")):
@@ -161,8 +199,10 @@ def checked_args(argv=None):
     if args.headless and args.style == "surface":
         for dest in ("colour_by", "colour_map"):
             if getattr(args, dest) is not None:
-                raise UsageError(f"{_option(dest)}: --style surface draws the water's surface, without particle "
-                                 f"colours; drop one of the two")
+                raise UsageError(
+                    f"{_option(dest)}: --style surface draws the water's surface, without particle "
+                    f"colours; drop one of the two"
+                )
     for dest in FILE_OPTIONS:
         if not (args.headless or args.stats_only) and getattr(args, dest) is not None:
             raise UsageError(f"{_option(dest)} writes files, which the window does not; add --headless")
@@ -205,8 +245,11 @@ def view_overrides(args) -> dict[str, str]:
     if args.fov is not None:
         fov = _numbers(args.fov, "--fov", 1, "degrees, e.g. 35")[0]
         sets[f"camera.fov_deg={fov!r}"] = f"command line --fov {schema.echo(args.fov)}"
-    for dest, key in (("colour_by", "render.colour_by"), ("colour_map", "render.colour_map"),
-                      ("style", "render.style")):
+    for dest, key in (
+        ("colour_by", "render.colour_by"),
+        ("colour_map", "render.colour_map"),
+        ("style", "render.style"),
+    ):
         text = getattr(args, dest)
         if text is not None:
             sets[f"{key}={json.dumps(text, ensure_ascii=False)}"] = f"command line {_option(dest)} {schema.echo(text)}"
@@ -245,8 +288,10 @@ def check_view(scene, args) -> None:
     if args.headless and scene.render.style == "surface" and args.style is None:
         for dest in ("colour_by", "colour_map"):
             if getattr(args, dest) is not None:
-                raise UsageError(f"{_option(dest)}: the scene's render.style = \"surface\" draws the water's "
-                                 f"surface, without particle colours; drop it, or add --style particles")
+                raise UsageError(
+                    f"{_option(dest)}: the scene's render.style = \"surface\" draws the water's "
+                    f"surface, without particle colours; drop it, or add --style particles"
+                )
 
 
 def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
@@ -291,11 +336,14 @@ def choose_viewer(sim, args, out, video):
         from pbf.app import window
 
         try:
-            viewer = window.WindowViewer(sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px,
-                                                                 sim.scene.render.height_px))
+            viewer = window.WindowViewer(
+                sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px, sim.scene.render.height_px)
+            )
         except window.WindowUnavailable as reason:
-            print(f"[pbf] no window ({reason}); rendering the initial state and {frames} frames headless into "
-                  f"{out}/ instead")
+            print(
+                f"[pbf] no window ({reason}); rendering the initial state and {frames} frames headless into "
+                f"{out}/ instead"
+            )
         else:
             if args.out is not None:
                 print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
@@ -346,16 +394,21 @@ def main(argv=None) -> int:
     except BackendError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    more = (f" (up to {sim.model.capacity:,} with its emitters)" if sim.model.capacity > sim.particle_count else "")
-    print(f"[pbf] {scene.name}: {sim.particle_count:,} particles{more}, Δt = {sim.dt_s * 1e3:.2f} ms, "
-          f"{sim.control.iterations} iterations")
+    more = f" (up to {sim.model.capacity:,} with its emitters)" if sim.model.capacity > sim.particle_count else ""
+    print(
+        f"[pbf] {scene.name}: {sim.particle_count:,} particles{more}, Δt = {sim.dt_s * 1e3:.2f} ms, "
+        f"{sim.control.iterations} iterations"
+    )
     try:
         viewer, frames = choose_viewer(sim, args, out, video)
     except outputs.OutputError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print("[pbf] preparing the solver's kernels (compiled on a first run, loaded from Taichi's cache after) ...",
-          end=" ", flush=True)
+    print(
+        "[pbf] preparing the solver's kernels (compiled on a first run, loaded from Taichi's cache after) ...",
+        end=" ",
+        flush=True,
+    )
     print(f"ready in {loop.warm_up(sim):.1f} s")
     loop.run(sim, viewer, frames)
     if isinstance(viewer, FrameWriter):

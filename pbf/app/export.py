@@ -1,4 +1,5 @@
 """Particle data for other tools: binary PLY (Blender, Houdini, ParaView) or NumPy .npz, one file per frame."""
+
 from pathlib import Path
 
 import numpy as np

@@ -32,6 +32,7 @@ a quarter of the pixels costs an eighth); only the composition is at full resolu
 Everything reads positions as Taichi fields and writes an (H, W, 3) uint8 image; nothing here
 changes the simulation.
 """
+
 import math
 
 import numpy as np
@@ -74,9 +75,20 @@ FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 class FluidRenderer:
     """Renders particles as a water surface over a floor and under a sky, with line segments."""
 
-    def __init__(self, width_px: int, height_px: int, spacing_m: float, particle_volume_m3: float,
-                 floor_y_m: float, tile_m: float, absorption_per_m, water_rgb, horizon_rgb,
-                 line_rgb=(0.0, 0.0, 0.0), segments=None):
+    def __init__(
+        self,
+        width_px: int,
+        height_px: int,
+        spacing_m: float,
+        particle_volume_m3: float,
+        floor_y_m: float,
+        tile_m: float,
+        absorption_per_m,
+        water_rgb,
+        horizon_rgb,
+        line_rgb=(0.0, 0.0, 0.0),
+        segments=None,
+    ):
         """The floor is the plane y = ``floor_y_m`` in square tiles of ``tile_m``; ``absorption_per_m``
         is Beer–Lambert's σ for red, green and blue; ``water_rgb`` the colour of deep water;
         ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue)."""
@@ -170,8 +182,7 @@ class FluidRenderer:
             self.thickness_steps[row, col] = 0
 
     @ti.kernel
-    def _splat(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3,
-               focal: ti.f32):
+    def _splat(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
         radius = self.radius
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
@@ -201,8 +212,9 @@ class FluidRenderer:
                             ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
-    def _splat_items(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3,
-                     focal: ti.f32):
+    def _splat_items(
+        self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
+    ):
         """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
         (``pbf.app.splat``): the same tests and integer sums, so the same image."""
         radius = self.radius
@@ -240,9 +252,18 @@ class FluidRenderer:
                 ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
-    def _filter(self, depth_in: ti.template(), depth_out: ti.template(), step_row: ti.i32, step_col: ti.i32,
-                focal: ti.f32, thickness_in: ti.template(), thickness_unit: ti.f32, thickness_out: ti.template(),
-                with_thickness: ti.template()):
+    def _filter(
+        self,
+        depth_in: ti.template(),
+        depth_out: ti.template(),
+        step_row: ti.i32,
+        step_col: ti.i32,
+        focal: ti.f32,
+        thickness_in: ti.template(),
+        thickness_unit: ti.f32,
+        thickness_out: ti.template(),
+        with_thickness: ti.template(),
+    ):
         """One separable pass of the narrow-range filter along (step_row, step_col), and of a plain
         Gaussian over the thickness when ``with_thickness``."""
         mu = THRESHOLD_SPACINGS * self.spacing
@@ -437,15 +458,28 @@ class FluidRenderer:
             self._splat(positions, count, eye, right, up, forward, coarse_focal)
         # The thickness is smoothed in the first round only: it needs no edges kept, and one round of
         # σ/√rounds is smooth enough for a tint.
-        self._filter(self.depth, self.depth_pass, 0, 1, coarse_focal,
-                     self.thickness_steps, self.quantum, self.thickness_pass, True)
-        self._filter(self.depth_pass, self.smooth_depth, 1, 0, coarse_focal,
-                     self.thickness_pass, 1.0, self.thickness, True)
+        self._filter(
+            self.depth,
+            self.depth_pass,
+            0,
+            1,
+            coarse_focal,
+            self.thickness_steps,
+            self.quantum,
+            self.thickness_pass,
+            True,
+        )
+        self._filter(
+            self.depth_pass, self.smooth_depth, 1, 0, coarse_focal, self.thickness_pass, 1.0, self.thickness, True
+        )
         for _ in range(FILTER_ROUNDS - 1):
-            for source, target, step_row, step_col in ((self.smooth_depth, self.depth_pass, 0, 1),
-                                                       (self.depth_pass, self.smooth_depth, 1, 0)):
-                self._filter(source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness,
-                             False)
+            for source, target, step_row, step_col in (
+                (self.smooth_depth, self.depth_pass, 0, 1),
+                (self.depth_pass, self.smooth_depth, 1, 0),
+            ):
+                self._filter(
+                    source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness, False
+                )
         self._normals(eye, right, up, forward, coarse_focal)
         self._shade(eye, right, up, forward, coarse_focal, ti.Vector(np.asarray(light_direction, np.float32)))
         self._compose()

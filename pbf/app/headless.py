@@ -1,5 +1,6 @@
 """The headless viewer: numbered PNG frames, an optional video and per-frame particle and surface
 mesh files, with a progress bar."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,18 +11,18 @@ from tqdm import tqdm
 
 from pbf.app.export import write_particles
 from pbf.app.outputs import bodies_name, frame_name, particles_name, surface_name
-from pbf.app.surface import body_mesh, reconstruct, write_mesh
 from pbf.app.render import SceneRenderer
+from pbf.app.surface import body_mesh, reconstruct, write_mesh
 
 
 class FrameWriter:
     """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame,
     and, when asked, appends each to a video and writes the particles (``particles_00000.ply`` or
-    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``, and the bodies' ``bodies_00000``) beside it. The paths
+    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``, and the bodies' ``bodies_00000``) beside it.
+    The paths
     are checked before the run (``pbf.app.outputs``); this only creates the folders."""
 
-    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export=(),
-                 progress: bool = True):
+    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export=(), progress: bool = True):
         self.sim = sim
         self.out_dir = out_dir
         self.exports = tuple(dict.fromkeys(export or ()))
@@ -52,17 +53,26 @@ class FrameWriter:
             self.writer.append_data(image)
         for name in self.exports:
             if name == "mesh":
-                write_mesh(self.out_dir / surface_name(number, self.sim.scene.surface.mesh_format),
-                           reconstruct(self.sim.positions(), self.sim.scene), self.sim.time_s)
+                write_mesh(
+                    self.out_dir / surface_name(number, self.sim.scene.surface.mesh_format),
+                    reconstruct(self.sim.positions(), self.sim.scene),
+                    self.sim.time_s,
+                )
                 bodies = self.sim.scene.bodies
                 if bodies:
-                    mesh = body_mesh([b.shape for b in bodies], [b.half_extents() for b in bodies],
-                                     self.sim.body_states())
-                    write_mesh(self.out_dir / bodies_name(number, self.sim.scene.surface.mesh_format), mesh,
-                               self.sim.time_s)
+                    mesh = body_mesh(
+                        [b.shape for b in bodies], [b.half_extents() for b in bodies], self.sim.body_states()
+                    )
+                    write_mesh(
+                        self.out_dir / bodies_name(number, self.sim.scene.surface.mesh_format), mesh, self.sim.time_s
+                    )
             else:
-                write_particles(self.out_dir / particles_name(number, name), self.sim.positions(),
-                                self.sim.velocities(), self.sim.time_s)
+                write_particles(
+                    self.out_dir / particles_name(number, name),
+                    self.sim.positions(),
+                    self.sim.velocities(),
+                    self.sim.time_s,
+                )
         self.progress.update()
 
     def close(self) -> None:

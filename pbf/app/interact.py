@@ -1,11 +1,13 @@
 """Reaching into the water with the mouse.
 
 A press casts a ray from the camera through the cursor; the first particle it passes within a
-spacing of (the water each particle stands for, gaps between drawn spheres included) is where the hand grabs, at that distance from the eye. While the button is held
+spacing of (the water each particle stands for, gaps between drawn spheres included) is where the hand grabs, at
+that distance from the eye. While the button is held
 the hand follows the cursor at that distance, and its velocity (how far it moved since the last frame,
 over the frame's time) is handed to the solver as a ``Push``: the water around it is pulled along,
 smoothly in space and never faster than the hand. Releasing lets go.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,5 +1,6 @@
 """The window's keys, mouse and help lines, apart from the window so that ``--help`` can list them
 without starting Taichi. Key names are GGUI's (``ti.ui.SPACE`` is " ", ``ti.ui.ESCAPE`` "Escape")."""
+
 import string
 
 SPACE, ESCAPE = " ", "Escape"
@@ -15,11 +16,24 @@ KEYS = {
     ESCAPE: "quit",
 }
 """The window's keys and what they do (W A S D / Q E, held, move the camera)."""
-GGUI_KEYS = set(string.ascii_lowercase) | {SPACE, ESCAPE, "Tab", "Return", "BackSpace", "Shift",
-                                           "Left", "Right", "Up", "Down"}
+GGUI_KEYS = set(string.ascii_lowercase) | {
+    SPACE,
+    ESCAPE,
+    "Tab",
+    "Return",
+    "BackSpace",
+    "Shift",
+    "Left",
+    "Right",
+    "Up",
+    "Down",
+}
 """Key names GGUI reports. Measured under Xvfb with xdotool: letters and these named keys arrive;
 '.', ',', '/', '-', '=', digits and F1 never do, so no key of ours may be one of them."""
 MOUSE = ("mouse: left drag pushes water, right drag orbits,", "shift + right (or middle) drag zooms")
-HELP = (*MOUSE, "keys: WASD/QE move the camera",
-        *(f"  {'space' if key == SPACE else 'esc' if key == ESCAPE else key}: {what}" for key, what in KEYS.items()))
+HELP = (
+    *MOUSE,
+    "keys: WASD/QE move the camera",
+    *(f"  {'space' if key == SPACE else 'esc' if key == ESCAPE else key}: {what}" for key, what in KEYS.items()),
+)
 """The help lines, in the window's panel (key h) and at the end of ``--help``."""

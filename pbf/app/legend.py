@@ -3,6 +3,7 @@
 Drawn onto headless frames when ``render.legend`` is set (Pillow draws the text: a font rasteriser
 is not something to write by hand), and written as a line in the window's panel.
 """
+
 import matplotlib
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont

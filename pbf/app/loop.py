@@ -4,6 +4,7 @@ The loop steps the simulation and hands each frame to a viewer (as Newton's exam
 with a null one for headless runs). A viewer decides when to step (the window pauses), shows each
 frame (draws it, writes it to files, or prints statistics) and says when to stop.
 """
+
 from __future__ import annotations
 
 import time
@@ -51,9 +52,11 @@ def warm_up(sim) -> float:
 
 def stats_line(sim) -> str:
     s = sim.stats()
-    return (f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
-            f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
-            f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})")
+    return (
+        f"t = {s['time_s']:6.2f} s  density error mean {s['mean_density_error']:.3%} "
+        f"max {s['max_density_error']:.2%}  max speed {s['max_speed_m_s']:.2f} m/s  "
+        f"KE {s['kinetic_energy_j']:.3g} J  neighbours {s['mean_neighbours']:.1f} (max {s['max_neighbours']})"
+    )
 
 
 class StatsViewer:
@@ -79,4 +82,6 @@ class StatsViewer:
 
     def close(self) -> None:
         elapsed = time.perf_counter() - self.started
-        print(f"[pbf] {self.sim.frame} frames in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s, JIT included)")
+        print(
+            f"[pbf] {self.sim.frame} frames in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s, JIT included)"
+        )

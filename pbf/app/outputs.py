@@ -1,7 +1,8 @@
 """Where a run writes, checked before it starts: the frame folder, the video and the files in them.
 
 A run writes ``frame_NNNNN.png`` and, when asked, ``particles_NNNNN.ply`` or ``.npz`` and
-``surface_NNNNN.ply`` or ``.obj`` (and ``bodies_NNNNN`` beside it, the rigid bodies' meshes) into one folder, and a video where ``--video`` says. Every path is
+``surface_NNNNN.ply`` or ``.obj`` (and ``bodies_NNNNN`` beside it, the rigid bodies' meshes) into one folder, and a
+video where ``--video`` says. Every path is
 checked before the simulation starts, so a bad one fails with one message and leaves nothing half
 written: an empty path, the filesystem root, a file where a folder is needed (or a folder where a
 file is), a parent that is a file, a place that cannot be written (tried by creating and removing
@@ -13,6 +14,7 @@ run's) and an existing video are refused, unless ``overwrite`` is given (the com
 mix, and nothing else in the folder is touched. Pure standard library: the command line checks its
 outputs without starting Taichi.
 """
+
 from __future__ import annotations
 
 import os
@@ -103,11 +105,15 @@ def check_folder(text: str, label: str, overwrite: bool = False) -> Path:
             earlier = earlier_files(path)
             blocking = next((p for p in earlier if p.is_dir() and not p.is_symlink()), None)
             if blocking is not None:
-                raise OutputError(f"{label} {_shown(text)}: {blocking.name} is a folder where a frame file goes; "
-                                  f"move it or choose another folder")
+                raise OutputError(
+                    f"{label} {_shown(text)}: {blocking.name} is a folder where a frame file goes; "
+                    f"move it or choose another folder"
+                )
             if earlier and not overwrite:
-                raise OutputError(f"{label} {_shown(text)}: holds {len(earlier)} files of an earlier run "
-                                  f"({earlier[0].name} …); {OVERWRITE_HINT}, or choose another folder")
+                raise OutputError(
+                    f"{label} {_shown(text)}: holds {len(earlier)} files of an earlier run "
+                    f"({earlier[0].name} …); {OVERWRITE_HINT}, or choose another folder"
+                )
             _probe(path, f"{label} {_shown(text)}")
         else:
             _writable_place(path, f"{label} {_shown(text)}")
@@ -131,8 +137,9 @@ def check_video(text: str, label: str, overwrite: bool = False) -> Path:
             if not path.is_file():
                 raise OutputError(f"{label} {_shown(text)}: is not a regular file; expected a video file")
             if not overwrite:
-                raise OutputError(f"{label} {_shown(text)}: exists; add --overwrite to replace it, or choose "
-                                  f"another name")
+                raise OutputError(
+                    f"{label} {_shown(text)}: exists; add --overwrite to replace it, or choose another name"
+                )
             if not os.access(path, os.W_OK):
                 raise OutputError(f"{label} {_shown(text)}: cannot replace it (no permission)")
             _probe(path.parent, f"{label} {_shown(text)}")

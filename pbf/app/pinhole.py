@@ -1,4 +1,5 @@
 """The pinhole projection both headless renderers share: an eye-relative point to its pixel."""
+
 import taichi as ti
 
 

@@ -247,8 +247,17 @@ class SphereRenderer:
             self.order[i] = i
 
     @ti.kernel
-    def _splat(self, x: ti.template(), count: ti.i32, radius: ti.f32, eye: vec3, right: vec3, up: vec3,
-               forward: vec3, focal: ti.f32):
+    def _splat(
+        self,
+        x: ti.template(),
+        count: ti.i32,
+        radius: ti.f32,
+        eye: vec3,
+        right: vec3,
+        up: vec3,
+        forward: vec3,
+        focal: ti.f32,
+    ):
         for k in range(count):
             i = self.order[k]
             centre = x[i] - eye
@@ -268,7 +277,10 @@ class SphereRenderer:
                 for c in range(c0, c1):
                     offset = c + 0.5 - col
                     half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-                    r0, r1 = ti.max(0, ti.cast(row - half, ti.i32)), ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
+                    r0, r1 = (
+                        ti.max(0, ti.cast(row - half, ti.i32)),
+                        ti.min(self.height, ti.cast(row + half, ti.i32) + 1),
+                    )
                     column_ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward
                     for r in range(r0, r1):
                         y = self.height - 1 - r
@@ -285,8 +297,17 @@ class SphereRenderer:
                                     ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
-    def _splat_items(self, x: ti.template(), count: ti.i32, radius: ti.f32, eye: vec3, right: vec3, up: vec3,
-                     forward: vec3, focal: ti.f32):
+    def _splat_items(
+        self,
+        x: ti.template(),
+        count: ti.i32,
+        radius: ti.f32,
+        eye: vec3,
+        right: vec3,
+        up: vec3,
+        forward: vec3,
+        focal: ti.f32,
+    ):
         """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
         (``pbf.app.splat``): the same tests, so the same image."""
         for k in range(count):
@@ -317,8 +338,11 @@ class SphereRenderer:
             half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
             in_disc = ti.max(0, ti.cast(row - half, ti.i32)) <= r < ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
             if in_disc and self.keys[c, y] > nearest:
-                ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward + up * (
-                    (0.5 * self.height - r - 0.5) / focal)
+                ray = (
+                    right * ((c + 0.5 - 0.5 * self.width) / focal)
+                    + forward
+                    + up * ((0.5 * self.height - r - 0.5) / focal)
+                )
                 a, b = ray.norm_sqr(), ray.dot(centre)
                 disc = b * b - a * (centre.norm_sqr() - radius * radius)
                 if disc >= 0.0:
@@ -328,8 +352,19 @@ class SphereRenderer:
                         ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
-    def _shade(self, x: ti.template(), colours: ti.template(), radius: ti.f32, eye: vec3, right: vec3, up: vec3,
-               forward: vec3, focal: ti.f32, light: vec3, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
+    def _shade(
+        self,
+        x: ti.template(),
+        colours: ti.template(),
+        radius: ti.f32,
+        eye: vec3,
+        right: vec3,
+        up: vec3,
+        forward: vec3,
+        focal: ti.f32,
+        light: vec3,
+        out: ti.types.ndarray(dtype=ti.u32, ndim=2),
+    ):
         for col, y in self.keys:
             key = self.keys[col, y]
             word = pack_rgba(self.background)  # a constant: most pixels are background
@@ -350,8 +385,15 @@ class SphereRenderer:
             out[col, y] = word
 
     @ti.kernel
-    def _lines(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32,
-               out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
+    def _lines(
+        self,
+        eye: vec3,
+        right: vec3,
+        up: vec3,
+        forward: vec3,
+        focal: ti.f32,
+        out: ti.types.ndarray(dtype=ti.u32, ndim=2),
+    ):
         for s in range(self.segment_count):
             a, b = self.segments[2 * s], self.segments[2 * s + 1]
             samples = 2 * (self.width + self.height)
@@ -386,8 +428,18 @@ class SphereRenderer:
                 self._splat_items(positions, count, radius_m, eye, right, up, forward, focal)
             else:
                 self._splat(positions, count, radius_m, eye, right, up, forward, focal)
-        self._shade(positions, colours, radius_m, eye, right, up, forward, focal,
-                    ti.Vector(LIGHT_DIRECTION.astype(np.float32)), self.image)
+        self._shade(
+            positions,
+            colours,
+            radius_m,
+            eye,
+            right,
+            up,
+            forward,
+            focal,
+            ti.Vector(LIGHT_DIRECTION.astype(np.float32)),
+            self.image,
+        )
         if self.segment_count:
             self._lines(eye, right, up, forward, focal, self.image)
         if self.image is not self.packed:
@@ -404,12 +456,19 @@ def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
     floor in tiles an eighth of the box wide, its colours, the container and obstacle edges."""
     scene = sim.scene
     lower, upper = scene.container.min_m, scene.container.max_m
-    return FluidRenderer(width_px, height_px, scene.fluid.spacing_m,
-                         sim.model.particle_mass_kg / scene.fluid.rest_density_kg_m3,
-                         floor_y_m=lower[1], tile_m=(upper[0] - lower[0]) / 8,
-                         absorption_per_m=scene.surface.absorption_per_m, water_rgb=scene.surface.water_rgb,
-                         horizon_rgb=scene.render.background_rgb, line_rgb=scene.render.container_rgb,
-                         segments=scene_edges(scene))
+    return FluidRenderer(
+        width_px,
+        height_px,
+        scene.fluid.spacing_m,
+        sim.model.particle_mass_kg / scene.fluid.rest_density_kg_m3,
+        floor_y_m=lower[1],
+        tile_m=(upper[0] - lower[0]) / 8,
+        absorption_per_m=scene.surface.absorption_per_m,
+        water_rgb=scene.surface.water_rgb,
+        horizon_rgb=scene.render.background_rgb,
+        line_rgb=scene.render.container_rgb,
+        segments=scene_edges(scene),
+    )
 
 
 BODY_RGB = (0.85, 0.55, 0.25)
@@ -504,8 +563,9 @@ class SceneRenderer:
         else:
             self.fluid = None
             self.colours = ParticleColours(sim, render)
-            self.spheres = SphereRenderer(width, height, render.background_rgb, render.container_rgb,
-                                          scene_edges(scene))
+            self.spheres = SphereRenderer(
+                width, height, render.background_rgb, render.container_rgb, scene_edges(scene)
+            )
         self.bodies = BodyPoints(sim) if scene.bodies and self.spheres is not None else None
 
     def frame(self) -> np.ndarray:

@@ -11,6 +11,7 @@ holes. Here instead the rectangles' areas are prefix-summed into a list of work 
 atomic at the top level of the loop. The image does not depend on the order of the items (each
 pixel keeps the least key, or sums integers), so it is the same as the per-particle loops'.
 """
+
 import math
 
 import taichi as ti

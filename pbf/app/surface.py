@@ -8,6 +8,7 @@ Laplacian smoothing for surface reconstruction of particle-based fluids"). The p
 the scene's ``[surface]`` table in particle spacings. The mesh is written as binary PLY or as OBJ
 (text: the format has no binary form) for Blender, Houdini or ParaView.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -98,8 +99,23 @@ def body_mesh(shapes, half_extents_m, states) -> Mesh:
 def _box_mesh(half: np.ndarray):
     corners = np.array([[(-1, 1)[k >> a & 1] * half[a] for a in range(3)] for k in range(8)], np.float64)
     # Two triangles per face, counter-clockwise seen from outside (corner k has bit a set for +half on axis a).
-    faces = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]], np.int32)
+    faces = np.array(
+        [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ],
+        np.int32,
+    )
     return corners, faces
 
 
@@ -107,8 +123,14 @@ def _sphere_mesh(radius: float):
     rings, sectors = BODY_SPHERE_RINGS, 2 * BODY_SPHERE_RINGS
     theta = np.linspace(0, np.pi, rings + 1)[1:-1]
     phi = np.linspace(0, 2 * np.pi, sectors, endpoint=False)
-    ring = np.stack([np.outer(np.sin(theta), np.cos(phi)), np.repeat(np.cos(theta)[:, None], sectors, 1),
-                     np.outer(np.sin(theta), np.sin(phi))], axis=-1).reshape(-1, 3)
+    ring = np.stack(
+        [
+            np.outer(np.sin(theta), np.cos(phi)),
+            np.repeat(np.cos(theta)[:, None], sectors, 1),
+            np.outer(np.sin(theta), np.sin(phi)),
+        ],
+        axis=-1,
+    ).reshape(-1, 3)
     points = np.concatenate([[[0, 1, 0]], ring, [[0, -1, 0]]]) * radius
     top, bottom = 0, len(points) - 1
     faces = []

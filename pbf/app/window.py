@@ -3,7 +3,8 @@
 Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
 forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
-paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v switches between particles and the
+paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v
+switches between particles and the
 water's surface, esc quits.
 
 Every frame is rendered by the project's own Taichi renderers on the window's camera and handed to
@@ -16,6 +17,7 @@ fragment shader writes depth and so shades every hidden layer of water (docs/BEN
 would cost more than the whole surface render. The panel shows the simulation's and the renderer's
 milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
+
 import math
 import os
 import sys
@@ -29,7 +31,15 @@ from taichi.ui.utils import get_field_info
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
-from pbf.app.render import LIGHT_DIRECTION, BodyPoints, ParticleColours, SphereRenderer, View, fluid_renderer, scene_edges
+from pbf.app.render import (
+    LIGHT_DIRECTION,
+    BodyPoints,
+    ParticleColours,
+    SphereRenderer,
+    View,
+    fluid_renderer,
+    scene_edges,
+)
 
 PANEL = (0.01, 0.01, 0.3, 0.455)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help, in
@@ -78,12 +88,18 @@ class OrbitCamera:
     def from_view(cls, view: View) -> "OrbitCamera":
         offset = view.eye - view.target
         distance = float(np.linalg.norm(offset))
-        return cls(view.target.astype(float), math.atan2(offset[0], offset[2]),
-                   math.asin(offset[1] / distance), distance, view.fov_deg)
+        return cls(
+            view.target.astype(float),
+            math.atan2(offset[0], offset[2]),
+            math.asin(offset[1] / distance),
+            distance,
+            view.fov_deg,
+        )
 
     def view(self) -> View:
-        direction = np.array([math.cos(self.pitch) * math.sin(self.yaw), math.sin(self.pitch),
-                              math.cos(self.pitch) * math.cos(self.yaw)])
+        direction = np.array(
+            [math.cos(self.pitch) * math.sin(self.yaw), math.sin(self.pitch), math.cos(self.pitch) * math.cos(self.yaw)]
+        )
         return View(self.target + self.distance * direction, self.target.copy(), self.fov_deg)
 
     def orbit(self, dx: float, dy: float) -> None:
@@ -236,8 +252,9 @@ class WindowViewer:
                 self.surface = not self.surface
         speed = 0.5 * self.camera.distance * seconds  # half the viewing distance per second
         keys = {key: window.is_pressed(key) for key in "wasdqe"}
-        self.camera.move(speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]),
-                         speed * (keys["e"] - keys["q"]))
+        self.camera.move(
+            speed * (keys["w"] - keys["s"]), speed * (keys["d"] - keys["a"]), speed * (keys["e"] - keys["q"])
+        )
         self.handle_mouse(seconds)
         return True
 
@@ -291,11 +308,15 @@ class WindowViewer:
                 gui.text(legend_line(self.render))
             # f and m act only where the scene has emitters or a wave maker; say so either way.
             scene = self.sim.scene
-            gui.text(f"emitters (f): {('on' if control.emitters_on else 'off') if scene.emitters else 'none here'};  "
-                     f"wave maker (m): {('on' if control.wave_maker_on else 'off') if scene.wave_maker.stroke_m else 'none here'}")
+            gui.text(
+                f"emitters (f): {('on' if control.emitters_on else 'off') if scene.emitters else 'none here'};  "
+                f"wave maker (m): "
+                f"{('on' if control.wave_maker_on else 'off') if scene.wave_maker.stroke_m else 'none here'}"
+            )
             # The CFL limit may take more substeps than asked, and an error target fewer iterations.
-            gui.text(f"substeps {control.substeps} asked, {stats['substeps']} used; "
-                     f"iterations {stats['iterations']} used")
+            gui.text(
+                f"substeps {control.substeps} asked, {stats['substeps']} used; iterations {stats['iterations']} used"
+            )
             control.iterations = gui.slider_int("iterations", control.iterations, 1, 20)
             control.substeps = gui.slider_int("substeps", control.substeps, 1, 16)
             control.xsph = gui.slider_float("XSPH c", control.xsph, 0.0, 0.1)
@@ -318,8 +339,9 @@ class WindowViewer:
         else:
             renderer = self.sphere_renderer
             if renderer is None or (renderer.width, renderer.height) != (width, height):
-                self.sphere_renderer = renderer = SphereRenderer(width, height, self.render.background_rgb,
-                                                                 self.render.container_rgb, self.edges)
+                self.sphere_renderer = renderer = SphereRenderer(
+                    width, height, self.render.background_rgb, self.render.container_rgb, self.edges
+                )
             positions, colours, count = particles.positions, self.colours.update(), particles.count
             if self.body_points is not None:
                 positions, colours, count = self.body_points.combine(positions, colours, count)
@@ -330,6 +352,7 @@ class WindowViewer:
 def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | None) -> tuple[str, str]:
     """The panel's milliseconds per frame: the simulation's step, and apart from it the rendering (our
     renderer's draw, then GGUI's show: the canvas image, the panel and the present)."""
+
     def ms(value):
         return "-" if value is None else f"{value:.1f}"
 

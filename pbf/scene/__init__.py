@@ -9,20 +9,37 @@ line's ``--set`` or ``<dict>``), the key and what is allowed.
 
 One module per table, each holding its dataclass beside the checks of its keys: ``geometry``
 (container, blocks, obstacles), ``fluid``, ``emitters``, ``timestep``, ``solver`` (with XSPH and
-vorticity), ``wave_maker``, ``bodies`` (rigid boxes and spheres), ``view`` (camera, render, surface: the application's). ``schema`` is the
+vorticity), ``wave_maker``, ``bodies`` (rigid boxes and spheres), ``view`` (camera, render, surface: the
+application's). ``schema`` is the
 machinery they share, ``root`` the whole scene, ``files`` the TOML files and overrides, ``reference``
 the key reference generated from the keys' own docs (``pbf keys``, docs/KEYS.md).
 
 This package imports nothing of the solver, the application or the studies: the values the solver
 derives from a scene (particle mass, grid, the memory and index checks) are ``pbf.solver.model``'s.
 """
+
 from pbf.scene.bodies import BODY_MAX_CFL, MAX_BODIES, MIN_BODY_SPACINGS, Body
 from pbf.scene.emitters import Emitter
-from pbf.scene.files import (MAX_SCENE_BYTES, SCENES_DIR, attribute, from_dict, load_scene, parse_override,
-                             read_table, resolve_path)
+from pbf.scene.files import (
+    MAX_SCENE_BYTES,
+    SCENES_DIR,
+    attribute,
+    from_dict,
+    load_scene,
+    parse_override,
+    read_table,
+    resolve_path,
+)
 from pbf.scene.fluid import MAX_TABLES, Fluid
-from pbf.scene.geometry import (MIN_OBSTACLE_SPACINGS, OBSTACLE_MAX_CFL, POSITION_REACH_SPACINGS, Block,
-                                Container, Obstacle, block_counts)
+from pbf.scene.geometry import (
+    MIN_OBSTACLE_SPACINGS,
+    OBSTACLE_MAX_CFL,
+    POSITION_REACH_SPACINGS,
+    Block,
+    Container,
+    Obstacle,
+    block_counts,
+)
 from pbf.scene.root import MAX_OBSTACLES, Scene
 from pbf.scene.schema import FLOAT32_SAFE, SceneError, Vec3, echo
 from pbf.scene.solver import CHEBYSHEV_RHO, MAX_ITERATIONS, MIN_ITERATIONS, Expert, Solver, Viscosity, Vorticity
@@ -31,10 +48,46 @@ from pbf.scene.view import CAMERA_REACH_DIAGONALS, Camera, Render, Surface, defa
 from pbf.scene.wave_maker import WaveMaker
 
 __all__ = [
-    "BODY_MAX_CFL", "MAX_BODIES", "MIN_BODY_SPACINGS", "Body", "CAMERA_REACH_DIAGONALS", "CHEBYSHEV_RHO", "FLOAT32_SAFE", "MAX_ITERATIONS", "MAX_OBSTACLES", "MAX_SCENE_BYTES",
-    "MAX_TABLES", "MIN_ITERATIONS", "MIN_OBSTACLE_SPACINGS", "OBSTACLE_MAX_CFL", "POSITION_REACH_SPACINGS",
-    "SCENES_DIR", "Block", "Camera", "Container", "Emitter", "Expert", "Fluid", "Obstacle", "Render", "Scene",
-    "SceneError", "Solver", "Surface", "Time", "Vec3", "Viscosity", "Vorticity", "WaveMaker", "attribute",
-    "block_counts", "default_look_at_m", "echo", "from_dict", "load_scene", "parse_override", "read_table",
+    "BODY_MAX_CFL",
+    "MAX_BODIES",
+    "MIN_BODY_SPACINGS",
+    "Body",
+    "CAMERA_REACH_DIAGONALS",
+    "CHEBYSHEV_RHO",
+    "FLOAT32_SAFE",
+    "MAX_ITERATIONS",
+    "MAX_OBSTACLES",
+    "MAX_SCENE_BYTES",
+    "MAX_TABLES",
+    "MIN_ITERATIONS",
+    "MIN_OBSTACLE_SPACINGS",
+    "OBSTACLE_MAX_CFL",
+    "POSITION_REACH_SPACINGS",
+    "SCENES_DIR",
+    "Block",
+    "Camera",
+    "Container",
+    "Emitter",
+    "Expert",
+    "Fluid",
+    "Obstacle",
+    "Render",
+    "Scene",
+    "SceneError",
+    "Solver",
+    "Surface",
+    "Time",
+    "Vec3",
+    "Viscosity",
+    "Vorticity",
+    "WaveMaker",
+    "attribute",
+    "block_counts",
+    "default_look_at_m",
+    "echo",
+    "from_dict",
+    "load_scene",
+    "parse_override",
+    "read_table",
     "resolve_path",
 ]

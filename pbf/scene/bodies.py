@@ -1,5 +1,6 @@
 """Rigid bodies: boxes and spheres that float, sink and are thrown, two-way coupled with the water
 (``pbf.solver.bodies``), and what their poses must agree on."""
+
 from __future__ import annotations
 
 import math
@@ -25,17 +26,21 @@ class Body:
     """A rigid body: a box or a sphere of uniform density, with an initial pose and velocity. Water
     inside it at the start (grown by half a spacing) is removed."""
 
-    size_m: Vec3 = key(doc="a box's half extents along its own axes, m; a sphere's radius is the first value "
-                       "(the others are ignored)")
-    density_kg_m3: float = key(check=_between(1.0, 1e5), doc="the body's density, kg/m³ (below the water's "
-                               "it floats)")
+    size_m: Vec3 = key(
+        doc="a box's half extents along its own axes, m; a sphere's radius is the first value (the others are ignored)"
+    )
+    density_kg_m3: float = key(check=_between(1.0, 1e5), doc="the body's density, kg/m³ (below the water's it floats)")
     position_m: Vec3 = key(doc="centre of mass at the start, m")
     shape: str = key("box", _one_of("box", "sphere"), "box or sphere")
-    orientation_deg: Vec3 = key((0.0, 0.0, 0.0), _vec_between(-360.0, 360.0), "rotation at the start about x, "
-                                "then y, then z (fixed axes), degrees")
+    orientation_deg: Vec3 = key(
+        (0.0, 0.0, 0.0),
+        _vec_between(-360.0, 360.0),
+        "rotation at the start about x, then y, then z (fixed axes), degrees",
+    )
     velocity_m_s: Vec3 = key((0.0, 0.0, 0.0), doc="initial velocity of the centre of mass, m/s")
-    angular_velocity_rad_s: Vec3 = key((0.0, 0.0, 0.0), _vec_between(-1e3, 1e3), "initial angular velocity, "
-                                       "rad/s (world axes)")
+    angular_velocity_rad_s: Vec3 = key(
+        (0.0, 0.0, 0.0), _vec_between(-1e3, 1e3), "initial angular velocity, rad/s (world axes)"
+    )
 
     def half_extents(self) -> np.ndarray:
         """The body's half extents along its own axes (a sphere: its radius on every axis), m."""
@@ -110,33 +115,46 @@ def _check_bodies(scene, source: str) -> None:
     c_lo, c_hi = np.array(scene.container.min_m), np.array(scene.container.max_m)
     for i, body in enumerate(scene.bodies):
         where = f"{source}: key 'bodies[{i}]"
-        if body.shape == "box" and min(body.size_m) * 2 < thinnest or body.shape == "sphere" and \
-                body.size_m[0] * 2 < thinnest:
-            raise SceneError(f"{where}.size_m' = {_vec(body.size_m)}: a body must be at least {MIN_BODY_SPACINGS} "
-                             f"spacings ({_num(thinnest)} m) thick on every axis (size_m holds half extents, or the "
-                             f"radius), or particles could cross it")
+        if (
+            body.shape == "box"
+            and min(body.size_m) * 2 < thinnest
+            or body.shape == "sphere"
+            and body.size_m[0] * 2 < thinnest
+        ):
+            raise SceneError(
+                f"{where}.size_m' = {_vec(body.size_m)}: a body must be at least {MIN_BODY_SPACINGS} "
+                f"spacings ({_num(thinnest)} m) thick on every axis (size_m holds half extents, or the "
+                f"radius), or particles could cross it"
+            )
         lo, hi = body.world_bounds()
         if np.any(lo < c_lo) or np.any(hi > c_hi):
-            raise SceneError(f"{where}.position_m': the body reaches {_vec(lo)}–{_vec(hi)} m, outside the container "
-                             f"{_vec(c_lo)}–{_vec(c_hi)} m; move it inside")
+            raise SceneError(
+                f"{where}.position_m': the body reaches {_vec(lo)}–{_vec(hi)} m, outside the container "
+                f"{_vec(c_lo)}–{_vec(c_hi)} m; move it inside"
+            )
         for j, obstacle in enumerate(scene.obstacles):
             if np.all(np.minimum(hi, obstacle.max_m) > np.maximum(lo, obstacle.min_m)):
-                raise SceneError(f"{where}.position_m' overlaps obstacles[{j}]; bodies must start clear of "
-                                 f"obstacles")
+                raise SceneError(f"{where}.position_m' overlaps obstacles[{j}]; bodies must start clear of obstacles")
         for j, other in enumerate(scene.bodies[:i]):
             gap = np.linalg.norm(np.array(body.position_m) - np.array(other.position_m))
             if gap < body.bounding_radius() + other.bounding_radius():
-                raise SceneError(f"{where}.position_m' is within reach of bodies[{j}] ({_num(gap)} m between "
-                                 f"centres, less than their bounding radii {_num(body.bounding_radius())} + "
-                                 f"{_num(other.bounding_radius())} m); bodies must start apart")
+                raise SceneError(
+                    f"{where}.position_m' is within reach of bodies[{j}] ({_num(gap)} m between "
+                    f"centres, less than their bounding radii {_num(body.bounding_radius())} + "
+                    f"{_num(other.bounding_radius())} m); bodies must start apart"
+                )
         followed = scene.fastest_followed_m_s
         fall = _length(scene.gravity_m_s2) * scene.time.frame_dt_s
         speed = _length(body.velocity_m_s) + _length(body.angular_velocity_rad_s) * body.bounding_radius()
         if not speed + fall <= followed:
-            raise SceneError(f"{where}.velocity_m_s': its fastest point moves at {_num(speed)} m/s (|v| + |ω| r, plus "
-                             f"{_num(fall)} m/s of gravity in the first frame), faster than the {_num(followed)} m/s "
-                             f"a frame's substeps can follow (time.max_substeps × time.max_cfl × fluid.spacing_m / "
-                             f"time.frame_dt_s); allowed: ≤ {_num(followed - fall)} m/s, or raise time.max_substeps")
+            raise SceneError(
+                f"{where}.velocity_m_s': its fastest point moves at {_num(speed)} m/s (|v| + |ω| r, plus "
+                f"{_num(fall)} m/s of gravity in the first frame), faster than the {_num(followed)} m/s "
+                f"a frame's substeps can follow (time.max_substeps × time.max_cfl × fluid.spacing_m / "
+                f"time.frame_dt_s); allowed: ≤ {_num(followed - fall)} m/s, or raise time.max_substeps"
+            )
     if scene.bodies and scene.time.max_cfl > BODY_MAX_CFL:
-        raise SceneError(f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross a body "
-                         f"in one substep; with [[bodies]] it must be ≤ {_num(BODY_MAX_CFL)}")
+        raise SceneError(
+            f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross a body "
+            f"in one substep; with [[bodies]] it must be ≤ {_num(BODY_MAX_CFL)}"
+        )

@@ -1,10 +1,12 @@
 """Emitters: nozzles that add water while the scene runs, and what they must agree on."""
+
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
 from pbf.scene.schema import SceneError, Vec3, _between, _length, _num, key
+
 
 @dataclass(frozen=True)
 class Emitter:
@@ -13,11 +15,13 @@ class Emitter:
 
     position_m: Vec3 = key(doc="centre of the nozzle, m")
     direction: Vec3 = key(doc="direction of the stream (any length; normalised)")
-    radius_m: float = key(check=_between(0.0, 1e7), doc="radius of the nozzle, m (at least half a spacing, and "
-                          "inside the container)")
+    radius_m: float = key(
+        check=_between(0.0, 1e7), doc="radius of the nozzle, m (at least half a spacing, and inside the container)"
+    )
     end_s: float = key(check=_between(0.0, 1e6), doc="when the stream stops, s")
-    speed_m_s: float = key(1.0, _between(1e-6, 1e6), "speed of the stream, m/s (at most what a frame's substeps can "
-                           "follow)")
+    speed_m_s: float = key(
+        1.0, _between(1e-6, 1e6), "speed of the stream, m/s (at most what a frame's substeps can follow)"
+    )
     start_s: float = key(0.0, _between(0.0, 1e6), "when the stream starts, s")
 
     def unit_direction(self) -> Vec3:
@@ -38,8 +42,6 @@ class Emitter:
         return int(math.floor((self.end_s - self.start_s) * self.speed_m_s / spacing + 1e-9)) + 1
 
 
-
-
 def _check_emitters(scene, source: str) -> None:
     """Emitters: a real interval and nozzle, inside the container and out of obstacles, within budget."""
     spacing = scene.fluid.spacing_m
@@ -47,29 +49,36 @@ def _check_emitters(scene, source: str) -> None:
     for i, emitter in enumerate(scene.emitters):
         where = f"{source}: key 'emitters[{i}]"
         if not emitter.end_s > emitter.start_s:
-            raise SceneError(f"{where}.end_s' = {_num(emitter.end_s)} s must be after start_s = "
-                             f"{_num(emitter.start_s)} s")
+            raise SceneError(
+                f"{where}.end_s' = {_num(emitter.end_s)} s must be after start_s = {_num(emitter.start_s)} s"
+            )
         if not _length(emitter.direction) >= 1e-9:
             raise SceneError(f"{where}.direction': expected a non-zero vector, e.g. [0, -1, 0]")
         if emitter.radius_m < 0.5 * spacing:
-            raise SceneError(f"{where}.radius_m' = {_num(emitter.radius_m)} m is less than half a spacing "
-                             f"({_num(0.5 * spacing)} m): the nozzle would hold no particle")
+            raise SceneError(
+                f"{where}.radius_m' = {_num(emitter.radius_m)} m is less than half a spacing "
+                f"({_num(0.5 * spacing)} m): the nozzle would hold no particle"
+            )
         margin = emitter.radius_m + 0.5 * spacing  # the whole disc, at any orientation, a radius from the walls
         if any(p - margin < lo or p + margin > hi for p, lo, hi in zip(emitter.position_m, c_lo, c_hi)):
-            raise SceneError(f"{where}.position_m': the nozzle (radius {_num(emitter.radius_m)} m) must lie inside "
-                             f"the container, at least radius_m + spacing/2 = {_num(margin)} m from every wall")
+            raise SceneError(
+                f"{where}.position_m': the nozzle (radius {_num(emitter.radius_m)} m) must lie inside "
+                f"the container, at least radius_m + spacing/2 = {_num(margin)} m from every wall"
+            )
         for j, obstacle in enumerate(scene.obstacles):
-            if all(lo - margin < p < hi + margin for p, lo, hi in zip(emitter.position_m, obstacle.min_m,
-                                                                       obstacle.max_m)):
-                raise SceneError(f"{where}.position_m': the nozzle touches obstacles[{j}]; move it at least "
-                                 f"{_num(margin)} m away")
+            if all(
+                lo - margin < p < hi + margin for p, lo, hi in zip(emitter.position_m, obstacle.min_m, obstacle.max_m)
+            ):
+                raise SceneError(
+                    f"{where}.position_m': the nozzle touches obstacles[{j}]; move it at least {_num(margin)} m away"
+                )
     need = scene.particle_count + scene.emitted_count
     if scene.fluid.max_particles and scene.fluid.max_particles < need:
-        raise SceneError(f"{source}: key 'fluid.max_particles' = {scene.fluid.max_particles:,} is less than the "
-                         f"{scene.particle_count:,} particles of the blocks and the {scene.emitted_count:,} the "
-                         f"emitters add (rate × duration); allowed: ≥ {need:,}, or 0 for exactly that")
-
-
+        raise SceneError(
+            f"{source}: key 'fluid.max_particles' = {scene.fluid.max_particles:,} is less than the "
+            f"{scene.particle_count:,} particles of the blocks and the {scene.emitted_count:,} the "
+            f"emitters add (rate × duration); allowed: ≥ {need:,}, or 0 for exactly that"
+        )
 
 
 def _check_emitter_room(scene, source: str) -> None:
@@ -79,8 +88,7 @@ def _check_emitter_room(scene, source: str) -> None:
     named, with the end_s that would fit."""
     spacing = scene.fluid.spacing_m
     extent = [hi - lo for lo, hi in zip(scene.container.min_m, scene.container.max_m)]
-    free_m3 = math.prod(extent) - sum(math.prod(hi - lo for lo, hi in zip(o.min_m, o.max_m))
-                                      for o in scene.obstacles)
+    free_m3 = math.prod(extent) - sum(math.prod(hi - lo for lo, hi in zip(o.min_m, o.max_m)) for o in scene.obstacles)
     room = math.floor(free_m3 / spacing**3 * (1 + 1e-9))  # particles the free volume holds at rest
     used = scene.particle_count
     for i, emitter in enumerate(scene.emitters):
@@ -88,10 +96,15 @@ def _check_emitter_room(scene, source: str) -> None:
         added = emitter.layers(spacing) * sites
         if used + added > room:
             fits = (room - used) // sites  # whole layers that still fit
-            allowed = (f"end_s < {_num(emitter.start_s + fits * spacing / emitter.speed_m_s)} s" if fits >= 1
-                       else "no emitter here (the water before it fills the container)")
-            raise SceneError(f"{source}: key 'emitters[{i}].end_s' = {_num(emitter.end_s)} s adds {added:,} particles "
-                             f"({_num(added * spacing**3)} m³ of water) to the {used:,} already counted, more than the "
-                             f"{room:,} ({_num(free_m3)} m³) the container holds outside the obstacles at "
-                             f"fluid.spacing_m = {_num(spacing)}; allowed: {allowed}")
+            allowed = (
+                f"end_s < {_num(emitter.start_s + fits * spacing / emitter.speed_m_s)} s"
+                if fits >= 1
+                else "no emitter here (the water before it fills the container)"
+            )
+            raise SceneError(
+                f"{source}: key 'emitters[{i}].end_s' = {_num(emitter.end_s)} s adds {added:,} particles "
+                f"({_num(added * spacing**3)} m³ of water) to the {used:,} already counted, more than the "
+                f"{room:,} ({_num(free_m3)} m³) the container holds outside the obstacles at "
+                f"fluid.spacing_m = {_num(spacing)}; allowed: {allowed}"
+            )
         used += added

@@ -1,5 +1,6 @@
 """Scene files and ``--set`` overrides: finding a preset, reading TOML safely, applying overrides,
 and saying of an error whether the file or the command line set its key."""
+
 from __future__ import annotations
 
 import copy
@@ -61,8 +62,10 @@ def _parse_toml(text: str, source: str) -> dict:
     except RecursionError:
         raise SceneError(f"{source}: not valid TOML: arrays or tables nested deeper than Python can read") from None
     except ValueError:  # an integer longer than int() reads (sys.int_info.default_max_str_digits)
-        raise SceneError(f"{source}: holds an integer of more than {sys.get_int_max_str_digits():,} digits; "
-                         f"every number in a scene has far fewer") from None
+        raise SceneError(
+            f"{source}: holds an integer of more than {sys.get_int_max_str_digits():,} digits; "
+            f"every number in a scene has far fewer"
+        ) from None
 
 
 def read_table(path: Path) -> dict:
@@ -73,13 +76,17 @@ def read_table(path: Path) -> dict:
     except OSError as error:
         raise SceneError(f"{path}: cannot be read ({error.strerror or error})") from None
     if len(data) > MAX_SCENE_BYTES:
-        raise SceneError(f"{path}: more than {MAX_SCENE_BYTES:,} bytes; a scene file is at most {MAX_SCENE_BYTES:,} "
-                         f"bytes (the presets are 1-2 kB)")
+        raise SceneError(
+            f"{path}: more than {MAX_SCENE_BYTES:,} bytes; a scene file is at most {MAX_SCENE_BYTES:,} "
+            f"bytes (the presets are 1-2 kB)"
+        )
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
-        raise SceneError(f"{path}: not UTF-8 text (byte 0x{data[error.start]:02x} at offset {error.start}); a scene "
-                         f"is a TOML text file") from None
+        raise SceneError(
+            f"{path}: not UTF-8 text (byte 0x{data[error.start]:02x} at offset {error.start}); a scene "
+            f"is a TOML text file"
+        ) from None
     return _parse_toml(text.removeprefix("\ufeff"), str(path))
 
 
@@ -110,8 +117,7 @@ def resolve_extends(table: dict, source: str, folder: Path | None = None, seen: 
     if not isinstance(name, str):
         raise SceneError(f"{where}: expected a preset name or the path of a TOML file, got {_show(name)}", "extends")
     if len(seen) >= MAX_EXTENDS:
-        raise SceneError(f"{where}: more than {MAX_EXTENDS} scenes extend one another ({' → '.join(seen)})",
-                         "extends")
+        raise SceneError(f"{where}: more than {MAX_EXTENDS} scenes extend one another ({' → '.join(seen)})", "extends")
     candidate = Path(name)
     if folder is not None and candidate.suffix == ".toml" and not candidate.is_absolute():
         candidate = folder / candidate
@@ -131,8 +137,9 @@ def parse_override(assignment: str) -> tuple[list[str], object]:
     if not isinstance(assignment, str):
         raise SceneError(f"{label}: expected a 'KEY=VALUE' string")
     if not assignment.isprintable():
-        raise SceneError(f"{label}: expected one line of printable text (a newline would start a second TOML "
-                         f"statement)")
+        raise SceneError(
+            f"{label}: expected one line of printable text (a newline would start a second TOML statement)"
+        )
     if "=" not in assignment:
         raise SceneError(f"{label}: expected KEY=VALUE, e.g. solver.iterations=6")
     dotted, text = assignment.split("=", 1)
@@ -150,10 +157,14 @@ def parse_override(assignment: str) -> tuple[list[str], object]:
 
 def _table_of(scene: Scene) -> dict:
     """A Scene as the dict of its TOML file (omitted camera points left out)."""
+
     def plain(value):
         if dataclasses.is_dataclass(value):
-            return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)
-                    if not f.metadata.get("internal") and getattr(value, f.name) is not None}
+            return {
+                f.name: plain(getattr(value, f.name))
+                for f in dataclasses.fields(value)
+                if not f.metadata.get("internal") and getattr(value, f.name) is not None
+            }
         if isinstance(value, tuple):
             return [plain(v) for v in value]
         return value
@@ -167,10 +178,12 @@ def _set(table: dict, keys: list[str], value, label: str) -> None:
     for depth, part in enumerate(keys[:-1]):
         target = target.setdefault(part, {})
         if isinstance(target, list):
-            raise SceneError(f"{label}: '{'.'.join(keys[:depth + 1])}' is a list of tables; set it whole, e.g. "
-                             f"--set '{'.'.join(keys[:depth + 1])}=[{{min_m = [0, 0, 0], max_m = [0.5, 0.5, 0.5]}}]'")
+            raise SceneError(
+                f"{label}: '{'.'.join(keys[: depth + 1])}' is a list of tables; set it whole, e.g. "
+                f"--set '{'.'.join(keys[: depth + 1])}=[{{min_m = [0, 0, 0], max_m = [0.5, 0.5, 0.5]}}]'"
+            )
         if not isinstance(target, dict):
-            raise SceneError(f"{label}: '{'.'.join(keys[:depth + 1])}' is not a table")
+            raise SceneError(f"{label}: '{'.'.join(keys[: depth + 1])}' is not a table")
     target[keys[-1]] = value
 
 
@@ -209,18 +222,30 @@ def attribute(error: SceneError, labels: dict[str, str]) -> SceneError:
     maps to a label (``{"solver.iterations": "command line --set solver.iterations=0"}``): the
     user typed that value, not the file. Otherwise ``error`` itself."""
     key = error.key
-    label = next((label for dotted, label in labels.items()
-                  if key is not None and re.match(re.escape(dotted) + r"($|[.\[])", key)), None)
+    label = next(
+        (
+            label
+            for dotted, label in labels.items()
+            if key is not None and re.match(re.escape(dotted) + r"($|[.\[])", key)
+        ),
+        None,
+    )
     if label is None:
         # A check of what two keys must agree on names one of them; when the other came from the
         # command line (--set obstacles=… against the file's time.max_cfl), say so, and keep the file's.
         message = str(error)
-        mentioned = next((label for dotted, label in labels.items()
-                          if re.search(r"(?<![\w.])" + re.escape(dotted) + r"(?![\w])", message)), None)
+        mentioned = next(
+            (
+                label
+                for dotted, label in labels.items()
+                if re.search(r"(?<![\w.])" + re.escape(dotted) + r"(?![\w])", message)
+            ),
+            None,
+        )
         if mentioned is None or message.startswith(mentioned):
             return error
         return SceneError(f"{mentioned}: does not agree with {message}", key)
     message = str(error)
     start = message.find(f"key '{_clip(key)}'")
     start -= len("unknown ") if message[:start].endswith("unknown ") else 0
-    return SceneError(f"{label}: {message[max(start, 0):]}", key)
+    return SceneError(f"{label}: {message[max(start, 0) :]}", key)

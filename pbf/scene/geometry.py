@@ -1,5 +1,6 @@
 """The container, the fluid's blocks and the static obstacles: where things are, and what their
 positions must agree on (inside the box, no shared volume, thick enough not to be crossed)."""
+
 from __future__ import annotations
 
 import math
@@ -42,8 +43,6 @@ class Obstacle:
     max_m: Vec3 = key(doc="upper corner, m")
 
 
-
-
 def block_counts(block: Block, spacing: float) -> tuple[int, int, int]:
     """Lattice sites per axis: as many spacings as fit in the block (a rounding tolerance of 1e-6 s)."""
     return tuple(int(math.floor((hi - lo) / spacing + 1e-6)) for lo, hi in zip(block.min_m, block.max_m))
@@ -60,14 +59,19 @@ def _check_container(scene, source: str) -> None:
                 f"{source}: key 'container.{name}': a wall at {_num(farthest)} m lies {_num(farthest / spacing)} "
                 f"spacings from the origin; float32 positions resolve 1/128 spacing only within "
                 f"{POSITION_REACH_SPACINGS:,} spacings ({_num(reach)} m at fluid.spacing_m = {_num(spacing)}): "
-                f"move the container towards the origin or use a larger spacing")
+                f"move the container towards the origin or use a larger spacing"
+            )
     if any(h <= l for l, h in zip(lo, hi)):
-        raise SceneError(f"{source}: key 'container.max_m' must exceed 'container.min_m' on every axis, "
-                         f"got min {_vec(lo)} and max {_vec(hi)}")
+        raise SceneError(
+            f"{source}: key 'container.max_m' must exceed 'container.min_m' on every axis, "
+            f"got min {_vec(lo)} and max {_vec(hi)}"
+        )
     if any(h - l < 2 * scene.kernel_radius_m for l, h in zip(lo, hi)):
-        raise SceneError(f"{source}: key 'container.max_m': the box must be at least two smoothing radii "
-                         f"(2 h = {_num(2 * scene.kernel_radius_m)} m) wide on every axis for fluid.spacing_m = "
-                         f"{_num(spacing)}")
+        raise SceneError(
+            f"{source}: key 'container.max_m': the box must be at least two smoothing radii "
+            f"(2 h = {_num(2 * scene.kernel_radius_m)} m) wide on every axis for fluid.spacing_m = "
+            f"{_num(spacing)}"
+        )
 
 
 def _check_blocks(scene, source: str) -> None:
@@ -75,8 +79,9 @@ def _check_blocks(scene, source: str) -> None:
     if not blocks:
         if scene.emitters:
             return
-        raise SceneError(f"{source}: key 'fluid.blocks': at least one [[fluid.blocks]] table (or an [[emitters]] "
-                         f"table) is required")
+        raise SceneError(
+            f"{source}: key 'fluid.blocks': at least one [[fluid.blocks]] table (or an [[emitters]] table) is required"
+        )
     c_lo, c_hi = np.array(scene.container.min_m), np.array(scene.container.max_m)
     spacing = scene.fluid.spacing_m
     tolerance = 1e-9 * (float(np.max(np.abs(np.concatenate([c_lo, c_hi])))) + 1.0)
@@ -88,11 +93,15 @@ def _check_blocks(scene, source: str) -> None:
         if np.any(b_hi <= b_lo):
             raise SceneError(f"{where}.max_m' must exceed min_m on every axis, got {_vec(b_lo)} and {_vec(b_hi)}")
         if np.any(b_lo < c_lo - tolerance) or np.any(b_hi > c_hi + tolerance):
-            raise SceneError(f"{where}': block {_box(b_lo, b_hi)} lies outside the container {_box(c_lo, c_hi)}; "
-                             f"allowed: min_m ≥ container.min_m and max_m ≤ container.max_m")
+            raise SceneError(
+                f"{where}': block {_box(b_lo, b_hi)} lies outside the container {_box(c_lo, c_hi)}; "
+                f"allowed: min_m ≥ container.min_m and max_m ≤ container.max_m"
+            )
         if min(block_counts(block, spacing)) < 1:
-            raise SceneError(f"{where}': block {_box(b_lo, b_hi)} is thinner than one spacing ({_num(spacing)} m) "
-                             f"on some axis, so it holds no particle")
+            raise SceneError(
+                f"{where}': block {_box(b_lo, b_hi)} is thinner than one spacing ({_num(spacing)} m) "
+                f"on some axis, so it holds no particle"
+            )
         # One vectorised comparison against all earlier blocks: a thousand blocks check in milliseconds.
         overlap = np.all(np.minimum(b_hi, highs[:i]) - np.maximum(b_lo, lows[:i]) > tolerance, axis=1)
         if overlap.any():
@@ -117,23 +126,29 @@ def _check_obstacles(scene, source: str) -> None:
         return all(min(ah, bh) - max(al, bl) > tolerance for al, ah, bl, bh in zip(a_lo, a_hi, b_lo, b_hi))
 
     if scene.obstacles and scene.time.max_cfl > OBSTACLE_MAX_CFL:
-        raise SceneError(f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross an "
-                         f"obstacle in one substep; with [[obstacles]] it must be ≤ {_num(OBSTACLE_MAX_CFL)}")
+        raise SceneError(
+            f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross an "
+            f"obstacle in one substep; with [[obstacles]] it must be ≤ {_num(OBSTACLE_MAX_CFL)}"
+        )
     for i, obstacle in enumerate(scene.obstacles):
         lo, hi = obstacle.min_m, obstacle.max_m
         where = f"{source}: key 'obstacles[{i}]"
         if any(h - l < thinnest for l, h in zip(lo, hi)):
-            raise SceneError(f"{where}.max_m': obstacle {_box(lo, hi)} must be at least {MIN_OBSTACLE_SPACINGS} "
-                             f"spacings ({_num(thinnest)} m) thick on every axis, or particles could cross it")
+            raise SceneError(
+                f"{where}.max_m': obstacle {_box(lo, hi)} must be at least {MIN_OBSTACLE_SPACINGS} "
+                f"spacings ({_num(thinnest)} m) thick on every axis, or particles could cross it"
+            )
         if any(l < cl - tolerance or h > ch + tolerance for l, h, cl, ch in zip(lo, hi, c_lo, c_hi)):
-            raise SceneError(f"{where}': obstacle {_box(lo, hi)} lies outside the container {_box(c_lo, c_hi)}; "
-                             f"allowed: min_m ≥ container.min_m and max_m ≤ container.max_m")
+            raise SceneError(
+                f"{where}': obstacle {_box(lo, hi)} lies outside the container {_box(c_lo, c_hi)}; "
+                f"allowed: min_m ≥ container.min_m and max_m ≤ container.max_m"
+            )
         for j, block in enumerate(scene.fluid.blocks):
             if overlap(lo, hi, block.min_m, block.max_m):
-                raise SceneError(f"{where}' overlaps fluid.blocks[{j}] ({_box(block.min_m, block.max_m)}); "
-                                 f"move the block or the obstacle so that they share no volume")
+                raise SceneError(
+                    f"{where}' overlaps fluid.blocks[{j}] ({_box(block.min_m, block.max_m)}); "
+                    f"move the block or the obstacle so that they share no volume"
+                )
         for j, other in enumerate(scene.obstacles[:i]):
             if overlap(lo, hi, other.min_m, other.max_m):
                 raise SceneError(f"{where}' overlaps obstacles[{j}]; obstacles must not share volume")
-
-

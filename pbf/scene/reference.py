@@ -1,6 +1,7 @@
 """The key reference, generated from the schema's own declarations: each key's dotted name, type,
 default, allowed values and doc line, table by table. ``pbf keys`` prints it and docs/KEYS.md is its
 output (``tests/test_keys_reference.py`` fails when the file is stale)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -62,11 +63,15 @@ def _rows(cls, prefix: str, tables: list) -> list[str]:
             tables.append((f"[{prefix}{f.name}]", annotation, f"{prefix}{f.name}."))
         elif item is not None and dataclasses.is_dataclass(item):
             tables.append((f"[[{prefix}{f.name}]]", item, f"{prefix}{f.name}[]."))
-            rows.append(f"| `{prefix}{f.name}` | list of tables | `[]` | {_allowed(f.metadata['check'])} | "
-                        f"{f.metadata['doc']} |")
+            rows.append(
+                f"| `{prefix}{f.name}` | list of tables | `[]` | {_allowed(f.metadata['check'])} | "
+                f"{f.metadata['doc']} |"
+            )
         else:
-            rows.append(f"| `{prefix}{f.name}` | {_type_name(annotation)} | {_default(f)} | "
-                        f"{_allowed(f.metadata['check'])} | {f.metadata['doc']} |")
+            rows.append(
+                f"| `{prefix}{f.name}` | {_type_name(annotation)} | {_default(f)} | "
+                f"{_allowed(f.metadata['check'])} | {f.metadata['doc']} |"
+            )
     return rows
 
 

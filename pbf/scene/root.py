@@ -1,5 +1,6 @@
 """The whole scene: one table of tables, each built and checked by its own module, then the checks
 of what keys in different tables must agree on, in order."""
+
 from __future__ import annotations
 
 import math
@@ -28,12 +29,15 @@ class Scene:
     gravity_m_s2: Vec3 = key((0.0, -9.81, 0.0), doc="gravitational acceleration, m/s² (y is up)")
     container: Container = key(Container())
     fluid: Fluid = key(Fluid())
-    obstacles: tuple[Obstacle, ...] = key((), _at_most_tables(MAX_OBSTACLES), "static boxes in the container "
-                                          "([[obstacles]] tables)")
-    emitters: tuple[Emitter, ...] = key((), _at_most_tables(MAX_OBSTACLES), "nozzles that add water while the "
-                                        "scene runs ([[emitters]] tables)")
-    bodies: tuple[Body, ...] = key((), _at_most_tables(MAX_BODIES), "rigid boxes and spheres two-way coupled with "
-                                   "the water ([[bodies]] tables)")
+    obstacles: tuple[Obstacle, ...] = key(
+        (), _at_most_tables(MAX_OBSTACLES), "static boxes in the container ([[obstacles]] tables)"
+    )
+    emitters: tuple[Emitter, ...] = key(
+        (), _at_most_tables(MAX_OBSTACLES), "nozzles that add water while the scene runs ([[emitters]] tables)"
+    )
+    bodies: tuple[Body, ...] = key(
+        (), _at_most_tables(MAX_BODIES), "rigid boxes and spheres two-way coupled with the water ([[bodies]] tables)"
+    )
     time: Time = key(Time())
     solver: Solver = key(Solver())
     viscosity: Viscosity = key(Viscosity())
@@ -47,8 +51,9 @@ class Scene:
         # Every value converted to its annotated type and checked, nested tables included, so a
         # Scene built by hand is held to the same rules as a file; then what keys must agree on.
         if not isinstance(self.source, str):
-            raise SceneError(f"<Scene>: source: expected a string naming where the scene came from, "
-                             f"got {_show(self.source)}")
+            raise SceneError(
+                f"<Scene>: source: expected a string naming where the scene came from, got {_show(self.source)}"
+            )
         for name, value in _table_values(Scene, self, self.source, "").items():
             object.__setattr__(self, name, value)
         _check_scene(self)
@@ -90,8 +95,6 @@ class Scene:
         return self.fluid.max_particles or self.particle_count + self.emitted_count
 
 
-
-
 def _check_scene(scene: Scene) -> None:
     source = scene.source
     _check_container(scene, source)
@@ -106,5 +109,3 @@ def _check_scene(scene: Scene) -> None:
     _check_settle(scene, source)
     _check_camera(scene, source)
     _check_render(scene, source)
-
-

@@ -4,6 +4,7 @@ unknown and missing keys, and the one-line messages of :class:`SceneError`.
 Nothing here knows a particular table; each table's module declares its keys with :func:`key` and
 checks what its keys must agree on.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -22,6 +23,7 @@ Vec3 = tuple[float, float, float]
 FLOAT32_SAFE = 1e30
 """What the derived float32 quantities must stay below (float32 ends at 3.4e38; the margin leaves
 room for the sums and products the kernels form from them)."""
+
 
 class SceneError(ValueError):
     """A scene that cannot be run; the message names the source, the key and what is allowed.
@@ -106,8 +108,10 @@ def _closest(word: str, choices) -> str | None:
 
 def _between(lowest, highest):
     """Allowed: lowest ≤ value ≤ highest (the check carries its ``bounds`` for tests/test_bounds.py)."""
+
     def check(value):
         return None if lowest <= value <= highest else f"a value in [{_num(lowest)}, {_num(highest)}]"
+
     check.bounds = (lowest, highest)
     return check
 
@@ -116,6 +120,7 @@ def _vec_between(lowest, highest):
     def check(value):
         inside = all(lowest <= c <= highest for c in value)
         return None if inside else f"three values in [{_num(lowest)}, {_num(highest)}]"
+
     check.bounds = (lowest, highest)
     return check
 
@@ -131,8 +136,10 @@ _even_pixels.bounds = (16, 8192)
 
 def _one_of(*choices):
     """Allowed: one of ``choices``; a refusal also names the closest choice."""
+
     def check(value):
         return None if value in choices else ("one of " + ", ".join(map(repr, choices)), _closest(value, choices))
+
     check.choices = choices
     return check
 
@@ -141,12 +148,16 @@ def _colour_map(value):
     """a Matplotlib colour map name"""
     import matplotlib
 
-    return None if value in matplotlib.colormaps else ("a Matplotlib colour map name such as 'viridis' or 'Blues'",
-                                                       _closest(value, matplotlib.colormaps))
+    return (
+        None
+        if value in matplotlib.colormaps
+        else ("a Matplotlib colour map name such as 'viridis' or 'Blues'", _closest(value, matplotlib.colormaps))
+    )
 
 
 def _line(longest):
     """A single line of printable text (it is echoed in titles, progress bars and --list)."""
+
     def check(value):
         return None if len(value) <= longest and value.isprintable() else allowed
 
@@ -179,7 +190,6 @@ def key(default=dataclasses.MISSING, check=None, doc=""):
 # either would hang). Initial speeds and gravity are bounded by what a frame's substeps can follow
 # (see _check_time), and s_corr's float32 power by pbf.solver.model. tests/test_bounds.py checks
 # these figures against the bounds.
-
 
 
 # ----------------------------------------------------------------------------- values and types
@@ -261,8 +271,9 @@ def _unknown_key(name: str, prefix: str, known, source: str, root) -> SceneError
         leaves = {k: k.rsplit(".", 1)[-1] for k in _schema_keys(root)}
         leaf = _closest(name, set(leaves.values()))
         hint = next((f"did you mean '{k}'? " for k, l in leaves.items() if leaf is not None and l == leaf), "")
-    return SceneError(f"{source}: unknown key '{_clip(dotted)}'; {hint}allowed keys here: {', '.join(sorted(known))}",
-                      key=dotted)
+    return SceneError(
+        f"{source}: unknown key '{_clip(dotted)}'; {hint}allowed keys here: {', '.join(sorted(known))}", key=dotted
+    )
 
 
 def _table_values(cls, table, source: str, prefix: str, root=None) -> dict:
@@ -278,8 +289,9 @@ def _table_values(cls, table, source: str, prefix: str, root=None) -> dict:
     elif isinstance(table, dict):
         strange = [k for k in table if not isinstance(k, str)]
         if strange:
-            raise SceneError(f"{where_table}: key {_show(strange[0])} is not a string; keys are names such as "
-                             f"{next(iter(known))!r}")
+            raise SceneError(
+                f"{where_table}: key {_show(strange[0])} is not a string; keys are names such as {next(iter(known))!r}"
+            )
         unknown = sorted(set(table) - set(known))
         if unknown:
             raise _unknown_key(unknown[0], prefix, known, source, root)
@@ -304,8 +316,9 @@ def _table_values(cls, table, source: str, prefix: str, root=None) -> dict:
             allowed = None if check is None else check(value)
             if allowed is not None:
                 raise SceneError(f"{where}: expected {allowed} ({f.metadata['doc']}), got {len(value):,}")
-            value = tuple(item(**_table_values(item, t, source, f"{prefix}{name}[{i}].", root))
-                          for i, t in enumerate(value))
+            value = tuple(
+                item(**_table_values(item, t, source, f"{prefix}{name}[{i}].", root)) for i, t in enumerate(value)
+            )
         else:
             value = _convert(value, annotation, where)
             check = f.metadata["check"]
@@ -318,7 +331,6 @@ def _table_values(cls, table, source: str, prefix: str, root=None) -> dict:
     return values
 
 
-
 def _length(v) -> float:
     """|v|, scaled by its largest component so that no square overflows (inf only past 1.8e308, and
     inf compares). Not math.hypot or math.dist: once Taichi has started, the process flushes
@@ -326,5 +338,3 @@ def _length(v) -> float:
     false, so a check would pass."""
     largest = max(abs(c) for c in v)
     return 0.0 if largest == 0.0 else largest * math.sqrt(sum((c / largest) ** 2 for c in v))
-
-

@@ -1,5 +1,6 @@
 """Time: frames, substeps and the CFL limit, settling before t = 0, and the speeds a frame's
 substeps can follow."""
+
 from __future__ import annotations
 
 import math
@@ -7,65 +8,83 @@ from dataclasses import dataclass
 
 from pbf.scene.schema import SceneError, _between, _length, _num, key
 
+
 @dataclass(frozen=True)
 class Time:
     frame_dt_s: float = key(1.0 / 60.0, _between(1e-4, 1.0), "time per rendered frame, s")
     substeps: int = key(2, _between(1, 1000), "PBF steps per frame (Δt = frame_dt_s / substeps)")
-    max_cfl: float = key(1.2, _between(0.01, 4.0), "most particle spacings the fastest particle may travel in one "
-                         "substep; a frame takes more substeps when it would go further")
+    max_cfl: float = key(
+        1.2,
+        _between(0.01, 4.0),
+        "most particle spacings the fastest particle may travel in one "
+        "substep; a frame takes more substeps when it would go further",
+    )
     max_substeps: int = key(64, _between(1, 1000), "cap on the substeps one frame may take (a warning when reached)")
-    settle_s: float = key(0.0, _between(0.0, 60.0), "seconds of solver steps, velocities damped after each, that "
-                          "bring the blocks to the solver's own rest state before t = 0 (not with emitters)")
-
-
+    settle_s: float = key(
+        0.0,
+        _between(0.0, 60.0),
+        "seconds of solver steps, velocities damped after each, that "
+        "bring the blocks to the solver's own rest state before t = 0 (not with emitters)",
+    )
 
 
 def _check_time(scene, source: str) -> None:
     """Substeps, the CFL limit, initial speeds and gravity must fit what a frame can follow."""
     t = scene.time
     if t.substeps > t.max_substeps:
-        raise SceneError(f"{source}: key 'time.substeps' = {t.substeps} is more than time.max_substeps = "
-                         f"{t.max_substeps}, the cap on a frame's substeps; raise time.max_substeps or lower "
-                         f"time.substeps")
+        raise SceneError(
+            f"{source}: key 'time.substeps' = {t.substeps} is more than time.max_substeps = "
+            f"{t.max_substeps}, the cap on a frame's substeps; raise time.max_substeps or lower "
+            f"time.substeps"
+        )
     if not t.max_cfl <= scene.solver.kernel_ratio:
-        raise SceneError(f"{source}: key 'time.max_cfl' = {_num(t.max_cfl)} would let a particle pass its whole "
-                         f"neighbourhood (solver.kernel_ratio = {_num(scene.solver.kernel_ratio)} spacings) in one "
-                         f"substep; allowed: ≤ solver.kernel_ratio")
+        raise SceneError(
+            f"{source}: key 'time.max_cfl' = {_num(t.max_cfl)} would let a particle pass its whole "
+            f"neighbourhood (solver.kernel_ratio = {_num(scene.solver.kernel_ratio)} spacings) in one "
+            f"substep; allowed: ≤ solver.kernel_ratio"
+        )
     # Simulation.substeps_needed takes (fastest speed + |g| · frame_dt) · frame_dt / (max_cfl · s)
     # substeps, capped at max_substeps: beyond the cap particles tunnel from the first frame on.
     followed = scene.fastest_followed_m_s
     fall = _length(scene.gravity_m_s2) * t.frame_dt_s
     limits = "(time.max_substeps × time.max_cfl × fluid.spacing_m / time.frame_dt_s)"
     if not fall <= followed:
-        raise SceneError(f"{source}: key 'gravity_m_s2': |g| = {_num(fall / t.frame_dt_s)} m/s² gains "
-                         f"{_num(fall)} m/s in one frame, more than the {_num(followed)} m/s its substeps can follow "
-                         f"{limits}; allowed: |g| ≤ {_num(followed / t.frame_dt_s)} m/s², or raise "
-                         f"time.max_substeps")
+        raise SceneError(
+            f"{source}: key 'gravity_m_s2': |g| = {_num(fall / t.frame_dt_s)} m/s² gains "
+            f"{_num(fall)} m/s in one frame, more than the {_num(followed)} m/s its substeps can follow "
+            f"{limits}; allowed: |g| ≤ {_num(followed / t.frame_dt_s)} m/s², or raise "
+            f"time.max_substeps"
+        )
     for i, block in enumerate(scene.fluid.blocks):
         speed = _length(block.velocity_m_s)
         if not speed + fall <= followed:
-            raise SceneError(f"{source}: key 'fluid.blocks[{i}].velocity_m_s': {_num(speed)} m/s (plus "
-                             f"{_num(fall)} m/s of gravity in the first frame) is faster than the {_num(followed)} m/s "
-                             f"a frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s, or "
-                             f"raise time.max_substeps")
+            raise SceneError(
+                f"{source}: key 'fluid.blocks[{i}].velocity_m_s': {_num(speed)} m/s (plus "
+                f"{_num(fall)} m/s of gravity in the first frame) is faster than the {_num(followed)} m/s "
+                f"a frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s, or "
+                f"raise time.max_substeps"
+            )
     for i, emitter in enumerate(scene.emitters):
         if not emitter.speed_m_s + fall <= followed:
-            raise SceneError(f"{source}: key 'emitters[{i}].speed_m_s' = {_num(emitter.speed_m_s)} m/s (plus "
-                             f"{_num(fall)} m/s of gravity in a frame) is faster than the {_num(followed)} m/s a "
-                             f"frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s")
+            raise SceneError(
+                f"{source}: key 'emitters[{i}].speed_m_s' = {_num(emitter.speed_m_s)} m/s (plus "
+                f"{_num(fall)} m/s of gravity in a frame) is faster than the {_num(followed)} m/s a "
+                f"frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s"
+            )
     piston = math.pi * scene.wave_maker.stroke_m / scene.wave_maker.period_s  # the piston's top speed, π S / T
     if not piston + fall <= followed:
-        raise SceneError(f"{source}: key 'wave_maker.period_s' = {_num(scene.wave_maker.period_s)} s moves the piston "
-                         f"at up to π S / T = {_num(piston)} m/s, faster than the {_num(followed)} m/s a frame's "
-                         f"substeps can follow {limits}; allowed: period_s ≥ "
-                         f"{_num(math.pi * scene.wave_maker.stroke_m / max(followed - fall, 1e-300))} s")
-
+        raise SceneError(
+            f"{source}: key 'wave_maker.period_s' = {_num(scene.wave_maker.period_s)} s moves the piston "
+            f"at up to π S / T = {_num(piston)} m/s, faster than the {_num(followed)} m/s a frame's "
+            f"substeps can follow {limits}; allowed: period_s ≥ "
+            f"{_num(math.pi * scene.wave_maker.stroke_m / max(followed - fall, 1e-300))} s"
+        )
 
 
 def _check_settle(scene, source: str) -> None:
     """Settling runs the blocks alone: water that an emitter adds later cannot be settled beforehand."""
     if scene.time.settle_s > 0.0 and scene.emitters:
-        raise SceneError(f"{source}: key 'time.settle_s' = {_num(scene.time.settle_s)} settles the blocks before t = 0, "
-                         f"but this scene has emitters, whose water arrives later; allowed: 0 with emitters")
-
-
+        raise SceneError(
+            f"{source}: key 'time.settle_s' = {_num(scene.time.settle_s)} settles the blocks before t = 0, "
+            f"but this scene has emitters, whose water arrives later; allowed: 0 with emitters"
+        )

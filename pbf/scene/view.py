@@ -1,11 +1,23 @@
 """What the application shows: the camera, the rendering of frames and the reconstructed surface.
 The solver reads none of these."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from pbf.scene.schema import (SceneError, Vec3, _between, _colour_map, _even_pixels, _length, _num, _one_of,
-                              _vec, _vec_between, key)
+from pbf.scene.schema import (
+    SceneError,
+    Vec3,
+    _between,
+    _colour_map,
+    _even_pixels,
+    _length,
+    _num,
+    _one_of,
+    _vec,
+    _vec_between,
+    key,
+)
 
 CAMERA_REACH_DIAGONALS = 1000
 """How far the camera may stand from the container's centre, in container diagonals: from farther,
@@ -26,16 +38,24 @@ class Render:
     colour_by: str = key("speed", _one_of("speed", "density"), "particle colour: speed or density")
     colour_map: str = key("coolwarm", _colour_map, "Matplotlib colour map")
     speed_max_m_s: float = key(3.0, _between(1e-6, 1e6), "speed at the top of the colour map, m/s")
-    density_error_max: float = key(0.05, _between(1e-6, 1.0), "colour map spans ρ/ρ0 from 1 − this to 1 + this "
-                                   "(ρ/ρ0 ≥ 0, and float32 resolves 1e-6)")
+    density_error_max: float = key(
+        0.05,
+        _between(1e-6, 1.0),
+        "colour map spans ρ/ρ0 from 1 − this to 1 + this (ρ/ρ0 ≥ 0, and float32 resolves 1e-6)",
+    )
     background_rgb: Vec3 = key((0.96, 0.96, 0.94), _vec_between(0.0, 1.0), "background colour (red, green, blue)")
     container_rgb: Vec3 = key((0.25, 0.25, 0.3), _vec_between(0.0, 1.0), "colour of the container's edges")
     width_px: int = key(1280, _even_pixels, "image width, pixels")
     height_px: int = key(720, _even_pixels, "image height, pixels")
-    legend: bool = key(False, doc="draw the colour legend (bar, range and unit) on headless frames; the "
-                       "window's panel always shows it")
-    style: str = key("particles", _one_of("particles", "surface"), "frames and the window (at first; key v "
-                     "switches) show particles (spheres in the colour map) or the water's surface (see [surface])")
+    legend: bool = key(
+        False, doc="draw the colour legend (bar, range and unit) on headless frames; the window's panel always shows it"
+    )
+    style: str = key(
+        "particles",
+        _one_of("particles", "surface"),
+        "frames and the window (at first; key v "
+        "switches) show particles (spheres in the colour map) or the water's surface (see [surface])",
+    )
 
 
 @dataclass(frozen=True)
@@ -47,22 +67,32 @@ class Surface:
     smoothed by the weighted Laplacian of Löschner et al. 2023.
     """
 
-    smoothing_length_spacings: float = key(1.2, _between(0.5, 4.0), "SPH smoothing length of the colour "
-                                           "field (kernel support twice this), spacings")
+    smoothing_length_spacings: float = key(
+        1.2, _between(0.5, 4.0), "SPH smoothing length of the colour field (kernel support twice this), spacings"
+    )
     cube_size_spacings: float = key(0.5, _between(0.1, 2.0), "marching-cubes cell edge, spacings")
-    iso_level: float = key(0.5, _between(0.05, 0.95), "colour-field value of the surface (1 in the bulk, 0.5 "
-                           "where a flat body of the particles' volume ends)")
-    smoothing_iterations: int = key(5, _between(0, 1000), "Laplacian smoothing passes over the mesh (each "
-                                    "shrinks the water by about 0.3%)")
+    iso_level: float = key(
+        0.5,
+        _between(0.05, 0.95),
+        "colour-field value of the surface (1 in the bulk, 0.5 where a flat body of the particles' volume ends)",
+    )
+    smoothing_iterations: int = key(
+        5, _between(0, 1000), "Laplacian smoothing passes over the mesh (each shrinks the water by about 0.3%)"
+    )
     mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
-    deterministic: bool = key(True, doc="one thread, no subdomains: the same mesh on every run "
-                              "(splashsurf's parallel subdomains vary from run to run); false is faster")
-    absorption_per_m: Vec3 = key((5.0, 1.8, 1.0), _vec_between(0.0, 1e6), "Beer–Lambert absorption of red, "
-                                 "green and blue light in render.style = surface, 1/m")
-    water_rgb: Vec3 = key((0.03, 0.25, 0.4), _vec_between(0.0, 1.0), "colour of deep water (the light it absorbs "
-                          "is replaced by this)")
-
-
+    deterministic: bool = key(
+        True,
+        doc="one thread, no subdomains: the same mesh on every run "
+        "(splashsurf's parallel subdomains vary from run to run); false is faster",
+    )
+    absorption_per_m: Vec3 = key(
+        (5.0, 1.8, 1.0),
+        _vec_between(0.0, 1e6),
+        "Beer–Lambert absorption of red, green and blue light in render.style = surface, 1/m",
+    )
+    water_rgb: Vec3 = key(
+        (0.03, 0.25, 0.4), _vec_between(0.0, 1.0), "colour of deep water (the light it absorbs is replaced by this)"
+    )
 
 
 def default_look_at_m(scene) -> Vec3:
@@ -71,7 +101,6 @@ def default_look_at_m(scene) -> Vec3:
     lo, hi = scene.container.min_m, scene.container.max_m
     centre = [0.5 * (a + b) for a, b in zip(lo, hi)]
     return (centre[0], centre[1] - 0.08 * (hi[1] - lo[1]), centre[2])
-
 
 
 def _check_camera(scene, source: str) -> None:
@@ -83,20 +112,24 @@ def _check_camera(scene, source: str) -> None:
         point = getattr(scene.camera, name)
         distance = None if point is None else _length([a - b for a, b in zip(point, centre)])
         if distance is not None and not distance <= farthest:
-            raise SceneError(f"{source}: key 'camera.{name}': {_vec(point)} m is {_num(distance)} m "
-                             f"from the container's centre; allowed: within {CAMERA_REACH_DIAGONALS} container "
-                             f"diagonals ({_num(farthest)} m), beyond which the box is smaller than a pixel")
+            raise SceneError(
+                f"{source}: key 'camera.{name}': {_vec(point)} m is {_num(distance)} m "
+                f"from the container's centre; allowed: within {CAMERA_REACH_DIAGONALS} container "
+                f"diagonals ({_num(farthest)} m), beyond which the box is smaller than a pixel"
+            )
     eye = scene.camera.position_m
     target = scene.camera.look_at_m if scene.camera.look_at_m is not None else default_look_at_m(scene)
     if eye is not None and not _length([a - b for a, b in zip(eye, target)]) > 1e-6 * diagonal:
         given = "camera.look_at_m" if scene.camera.look_at_m is not None else "the default look-at point"
-        raise SceneError(f"{source}: key 'camera.position_m': the eye {_vec(eye)} m is at {given} {_vec(target)} m, "
-                         f"so it looks nowhere; move camera.position_m or set camera.look_at_m elsewhere")
+        raise SceneError(
+            f"{source}: key 'camera.position_m': the eye {_vec(eye)} m is at {given} {_vec(target)} m, "
+            f"so it looks nowhere; move camera.position_m or set camera.look_at_m elsewhere"
+        )
 
 
 def _check_render(scene, source: str) -> None:
     if scene.render.legend and scene.render.style == "surface":
-        raise SceneError(f"{source}: key 'render.legend': the surface style has no colour map to explain; "
-                         f"set render.legend = false or render.style = \"particles\"")
-
-
+        raise SceneError(
+            f"{source}: key 'render.legend': the surface style has no colour map to explain; "
+            f'set render.legend = false or render.style = "particles"'
+        )

@@ -3,11 +3,26 @@
 Its public face (what the application and the studies use) is imported here. The modules inside
 import only the scene schema (``pbf.scene``), Taichi and NumPy: no plotting, command line or images.
 """
-from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
+
 from pbf.solver.backend import ARCHES, ENV_VAR, BackendError, start_backend
+from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
 from pbf.solver.model import Control, Model, Push
 from pbf.solver.simulation import STAGES, Readout, Simulation, StageHook
 from pbf.solver.state import Snapshot
 
-__all__ = ["ARCHES", "ENV_VAR", "BackendError", "Control", "Model", "Push", "Readout", "STAGES", "STATE_LAYOUT", "Simulation",
-           "Snapshot", "StageHook", "quaternion_matrix_np", "start_backend"]
+__all__ = [
+    "ARCHES",
+    "ENV_VAR",
+    "BackendError",
+    "Control",
+    "Model",
+    "Push",
+    "Readout",
+    "STAGES",
+    "STATE_LAYOUT",
+    "Simulation",
+    "Snapshot",
+    "StageHook",
+    "quaternion_matrix_np",
+    "start_backend",
+]

@@ -30,6 +30,7 @@ holds still (0.00% with a fixed count of 2 or 3), and the seed preset's mean err
 same cost (docs/BENCHMARKS.md). One plain iteration (P_1 = λ) still reaches −0.8 in the shortest
 waves, which is why ``solver.min_iterations`` is 2 by default.
 """
+
 from __future__ import annotations
 
 import math
@@ -57,13 +58,21 @@ def stable_weights(lowest: float, count: int, reversal: float = REVERSAL) -> tup
     for _ in range(count - 1):
         a, b = before, lam * now - before
         rising, falling = b > 1e-12, b < -1e-12
-        ceiling = min(np.min((1.0 - a[rising]) / b[rising], initial=math.inf),
-                      np.min((a[falling] + reversal) / -b[falling], initial=math.inf), WEIGHT_CAP)
-        floor = max(np.max((-reversal - a[rising]) / b[rising], initial=-math.inf),
-                    np.max((a[falling] - 1.0) / -b[falling], initial=-math.inf), 1.0)
+        ceiling = min(
+            np.min((1.0 - a[rising]) / b[rising], initial=math.inf),
+            np.min((a[falling] + reversal) / -b[falling], initial=math.inf),
+            WEIGHT_CAP,
+        )
+        floor = max(
+            np.max((-reversal - a[rising]) / b[rising], initial=-math.inf),
+            np.max((a[falling] - 1.0) / -b[falling], initial=-math.inf),
+            1.0,
+        )
         if not ceiling >= floor:
-            raise ValueError(f"no weight keeps iteration {len(weights) + 1} within [−{reversal}, 1] on the spectrum "
-                             f"[{lowest:.3g}, 1]")
+            raise ValueError(
+                f"no weight keeps iteration {len(weights) + 1} within [−{reversal}, 1] on the spectrum "
+                f"[{lowest:.3g}, 1]"
+            )
         weight = float(ceiling)
         weights.append(weight)
         before, now = now, weight * lam * now + (1.0 - weight) * before

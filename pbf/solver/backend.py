@@ -20,6 +20,7 @@ On a GPU backend the substep keeps its decisions on the device (:func:`keeps_dec
 the Jacobi iterations' stopping test, the neighbour lists' overflow; the CPU backend decides on the
 host, where reading a result costs nothing and skipping a launch saves one.
 """
+
 import contextlib
 import ctypes
 import ctypes.util
@@ -112,16 +113,28 @@ def _cuda_device() -> Device | None:
 
 
 class _VkApplicationInfo(ctypes.Structure):
-    _fields_ = [("sType", ctypes.c_int), ("pNext", ctypes.c_void_p), ("pApplicationName", ctypes.c_char_p),
-                ("applicationVersion", ctypes.c_uint32), ("pEngineName", ctypes.c_char_p),
-                ("engineVersion", ctypes.c_uint32), ("apiVersion", ctypes.c_uint32)]
+    _fields_ = [
+        ("sType", ctypes.c_int),
+        ("pNext", ctypes.c_void_p),
+        ("pApplicationName", ctypes.c_char_p),
+        ("applicationVersion", ctypes.c_uint32),
+        ("pEngineName", ctypes.c_char_p),
+        ("engineVersion", ctypes.c_uint32),
+        ("apiVersion", ctypes.c_uint32),
+    ]
 
 
 class _VkInstanceCreateInfo(ctypes.Structure):
-    _fields_ = [("sType", ctypes.c_int), ("pNext", ctypes.c_void_p), ("flags", ctypes.c_uint32),
-                ("pApplicationInfo", ctypes.POINTER(_VkApplicationInfo)), ("enabledLayerCount", ctypes.c_uint32),
-                ("ppEnabledLayerNames", ctypes.c_void_p), ("enabledExtensionCount", ctypes.c_uint32),
-                ("ppEnabledExtensionNames", ctypes.c_void_p)]
+    _fields_ = [
+        ("sType", ctypes.c_int),
+        ("pNext", ctypes.c_void_p),
+        ("flags", ctypes.c_uint32),
+        ("pApplicationInfo", ctypes.POINTER(_VkApplicationInfo)),
+        ("enabledLayerCount", ctypes.c_uint32),
+        ("ppEnabledLayerNames", ctypes.c_void_p),
+        ("enabledExtensionCount", ctypes.c_uint32),
+        ("ppEnabledExtensionNames", ctypes.c_void_p),
+    ]
 
 
 VK_PHYSICAL_DEVICE_TYPE = {1: "integrated", 2: "discrete", 3: "virtual", 4: "cpu"}
@@ -159,11 +172,19 @@ def vulkan_devices() -> list[dict]:
             # 260, then 16 heaps of (VkDeviceSize size, flags) from 264, 16 bytes each.
             memory = ctypes.create_string_buffer(1024)
             vulkan.vkGetPhysicalDeviceMemoryProperties(ctypes.c_void_p(handle), memory)
-            heaps = [struct.unpack_from("<QI", memory.raw, 264 + 16 * k) for k in
-                     range(min(struct.unpack_from("<I", memory.raw, 260)[0], 16))]
+            heaps = [
+                struct.unpack_from("<QI", memory.raw, 264 + 16 * k)
+                for k in range(min(struct.unpack_from("<I", memory.raw, 260)[0], 16))
+            ]
             local = max((size for size, flags in heaps if flags & 1), default=0)  # VK_MEMORY_HEAP_DEVICE_LOCAL_BIT
-            devices.append({"name": name, "type": VK_PHYSICAL_DEVICE_TYPE.get(kind, "other"),
-                            "api_minor": (api >> 12) & 0x3FF, "memory_bytes": local})
+            devices.append(
+                {
+                    "name": name,
+                    "type": VK_PHYSICAL_DEVICE_TYPE.get(kind, "other"),
+                    "api_minor": (api >> 12) & 0x3FF,
+                    "memory_bytes": local,
+                }
+            )
     finally:
         vulkan.vkDestroyInstance(instance, None)
     return devices
@@ -212,9 +233,11 @@ def _choose(requested: str) -> tuple[Device, str]:
     if requested == "vulkan":
         device = _vulkan_device()
         if device is None:
-            raise BackendError("arch='vulkan' was requested but no Vulkan device is available (no Vulkan loader or "
-                               "driver; on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' gives a "
-                               "software one); use arch='cpu' or 'auto'")
+            raise BackendError(
+                "arch='vulkan' was requested but no Vulkan device is available (no Vulkan loader or "
+                "driver; on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' gives a "
+                "software one); use arch='cpu' or 'auto'"
+            )
         return device, "requested"
     if requested == "metal":
         device = _metal_device()
@@ -227,14 +250,17 @@ def _choose(requested: str) -> tuple[Device, str]:
     other = _metal_device() or _vulkan_device()
     if requested == "gpu":
         if other is None:
-            raise BackendError("arch='gpu' was requested but no GPU backend can start here (no CUDA GPU, no Metal, "
-                               "no Vulkan device); use arch='cpu' or 'auto'")
+            raise BackendError(
+                "arch='gpu' was requested but no GPU backend can start here (no CUDA GPU, no Metal, "
+                "no Vulkan device); use arch='cpu' or 'auto'"
+            )
         return other, "the best GPU backend found"
     if other is not None and not other.software:
         return other, f"no CUDA GPU, a {other.arch} device found"
     if other is not None:
-        return _cpu_device(), (f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than "
-                               f"the CPU backend")
+        return _cpu_device(), (
+            f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than the CPU backend"
+        )
     return _cpu_device(), "no GPU found"
 
 
@@ -242,8 +268,9 @@ def _cpu_device() -> Device:
     return Device("cpu", "")
 
 
-def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None,
-                  fast_compile: bool = False) -> str:
+def start_backend(
+    arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None, fast_compile: bool = False
+) -> str:
     """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto"; see the module docstring) and
     return the backend's name: "cpu", "cuda", "vulkan" or "metal". ``cpu_threads`` caps the CPU
     backend's threads (default: one per core). ``fast_compile`` turns off Taichi's advanced IR
@@ -269,8 +296,13 @@ def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int
     device, reason = _choose(requested)
     threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
     _options.clear()
-    _options.update(arch=getattr(ti, device.arch), default_fp=ti.f32, log_level=ti.WARN,
-                    advanced_optimization=not fast_compile, **threads)
+    _options.update(
+        arch=getattr(ti, device.arch),
+        default_fp=ti.f32,
+        log_level=ti.WARN,
+        advanced_optimization=not fast_compile,
+        **threads,
+    )
     try:
         _init(**_options)
         running = ti.lang.impl.current_cfg().arch
@@ -279,12 +311,16 @@ def start_backend(arch: str | None = None, quiet: bool = False, cpu_threads: int
     if device.arch != "cpu" and running != getattr(ti, device.arch):
         # Taichi falls back to the CPU by itself when a GPU backend fails to start.
         ti.reset()
-        raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
-                           f"back to the CPU); use arch='cpu' or 'auto'")
+        raise BackendError(
+            f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
+            f"back to the CPU); use arch='cpu' or 'auto'"
+        )
     _started = device
     if not quiet:
-        print(f"[pbf] Starting on {device.arch} ({describe(device, running.name)}, {reason}), "
-              f"Taichi {taichi_version()}", flush=True)
+        print(
+            f"[pbf] Starting on {device.arch} ({describe(device, running.name)}, {reason}), Taichi {taichi_version()}",
+            flush=True,
+        )
     return device.arch
 
 

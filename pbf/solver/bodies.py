@@ -37,6 +37,7 @@ with no corner inside is missed. A body moves at most time.max_cfl spacings a su
 counts in the CFL limit, ``speed_limit_m_s``) and is at least two spacings thick, so it cannot pass
 through a wall or another body in one substep.
 """
+
 import math
 
 import numpy as np
@@ -44,8 +45,14 @@ import taichi as ti
 
 from pbf.solver.model import BoundaryParams
 
-STATE_LAYOUT = (("position_m", 3), ("quaternion", 4), ("velocity_m_s", 3), ("angular_velocity_rad_s", 3),
-                ("force_n", 3), ("torque_n_m", 3))
+STATE_LAYOUT = (
+    ("position_m", 3),
+    ("quaternion", 4),
+    ("velocity_m_s", 3),
+    ("angular_velocity_rad_s", 3),
+    ("force_n", 3),
+    ("torque_n_m", 3),
+)
 """A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``): the pose, the velocities and the
 fluid's reaction of the last substep (the next step starts from it)."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
@@ -64,27 +71,39 @@ corner to stop undoing those at the others (after two, a box on the floor still 
 @ti.func
 def quaternion_multiply(a, b):
     """The Hamilton product a b of quaternions (w, x, y, z)."""
-    return ti.Vector([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-                      a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-                      a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-                      a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+    return ti.Vector(
+        [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ]
+    )
 
 
 @ti.func
 def quaternion_matrix(q):
     """The rotation matrix of a unit quaternion (w, x, y, z)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
-    return ti.Matrix([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return ti.Matrix(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def quaternion_matrix_np(q) -> np.ndarray:
     """NumPy twin of :func:`quaternion_matrix` (renderers, exports, tests)."""
     w, x, y, z = (float(c) for c in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 @ti.data_oriented
@@ -132,8 +151,10 @@ class Bodies:
             self.half[b] = bodies.half_extents_m[b]
             self.inverse_mass[b] = 1.0 / bodies.masses_kg[b]
             self.inertia[b] = bodies.inertia_kg_m2[b]
-        self._bounding = np.array([np.linalg.norm(h) if s == "box" else h[0]
-                                   for s, h in zip(bodies.shapes, bodies.half_extents_m)], np.float64)
+        self._bounding = np.array(
+            [np.linalg.norm(h) if s == "box" else h[0] for s, h in zip(bodies.shapes, bodies.half_extents_m)],
+            np.float64,
+        )
         self.held = False
         """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
 
@@ -160,9 +181,17 @@ class Bodies:
     def state(self) -> np.ndarray:
         """(count, STATE_WIDTH) float32 copy of every body's state (STATE_LAYOUT)."""
         n = self.count
-        return np.concatenate([self.position.to_numpy()[:n], self.quaternion.to_numpy()[:n],
-                               self.velocity.to_numpy()[:n], self.angular_velocity.to_numpy()[:n],
-                               self.force.to_numpy()[:n], self.torque.to_numpy()[:n]], axis=1).astype(np.float32)
+        return np.concatenate(
+            [
+                self.position.to_numpy()[:n],
+                self.quaternion.to_numpy()[:n],
+                self.velocity.to_numpy()[:n],
+                self.angular_velocity.to_numpy()[:n],
+                self.force.to_numpy()[:n],
+                self.torque.to_numpy()[:n],
+            ],
+            axis=1,
+        ).astype(np.float32)
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
@@ -356,8 +385,12 @@ class Bodies:
         self.position[a] += depth * ma / (ma + mb) * normal
         self.position[b] -= depth * mb / (ma + mb) * normal
         ra, rb = point - self.position[a], point - self.position[b]
-        relative = (self.velocity[a] + self.angular_velocity[a].cross(ra)
-                    - self.velocity[b] - self.angular_velocity[b].cross(rb))
+        relative = (
+            self.velocity[a]
+            + self.angular_velocity[a].cross(ra)
+            - self.velocity[b]
+            - self.angular_velocity[b].cross(rb)
+        )
         approach = relative.dot(normal)
         if approach < 0.0:
             na, nb = ra.cross(normal), rb.cross(normal)
@@ -365,8 +398,12 @@ class Bodies:
             j = -approach / k
             self._apply(a, j * normal, ra)
             self._apply(b, -j * normal, rb)
-            relative = (self.velocity[a] + self.angular_velocity[a].cross(ra)
-                        - self.velocity[b] - self.angular_velocity[b].cross(rb))
+            relative = (
+                self.velocity[a]
+                + self.angular_velocity[a].cross(ra)
+                - self.velocity[b]
+                - self.angular_velocity[b].cross(rb)
+            )
             slide = relative - relative.dot(normal) * normal
             speed = slide.norm()
             if speed > 1e-9:
@@ -504,8 +541,15 @@ class Bodies:
     # ------------------------------------------------------------------ the reaction
 
     @ti.kernel
-    def _gather(self, x: ti.template(), lam_total: ti.template(), multiplier: ti.template(), active: ti.template(),
-                position_scale: ti.f32, velocity_scale: ti.f32):
+    def _gather(
+        self,
+        x: ti.template(),
+        lam_total: ti.template(),
+        multiplier: ti.template(),
+        active: ti.template(),
+        position_scale: ti.f32,
+        velocity_scale: ti.f32,
+    ):
         for b, k in ti.ndrange(self.count, self.blocks):
             force = ti.Vector([0.0, 0.0, 0.0])
             torque = ti.Vector([0.0, 0.0, 0.0])
@@ -531,7 +575,7 @@ class Bodies:
     def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
         """The fluid's reaction on every body over the substep just solved, F_b = Σ_i V p_i ∇ψ_b(x_i)
         and its torque (module docstring), p_i = −ρ0 h² (L_i/Δt² + Λ_i); the next :meth:`advance` applies it."""
-        scale = -self.params.rest_density_kg_m3 * self.kernel_radius ** 2
+        scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
         self._gather(x, lam_total, multiplier, active, scale / dt**2, scale)
 
 

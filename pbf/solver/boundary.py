@@ -24,6 +24,7 @@ two or three orthogonal half-spaces: the wall, edge and corner tables of the con
 ghost of an obstacle is exact (to the tables) at its faces, its convex edges and its corners, and a
 block resting on an obstacle starts at ρ0 as it does on the floor.
 """
+
 import math
 
 import numpy as np
@@ -50,8 +51,11 @@ class GhostTables:
         self.density_table.from_numpy(density.astype(np.float32))
         self.slope_table.from_numpy(slope.astype(np.float32))
         n = OVERLAP_SAMPLES
-        tables = sph.wall_overlap_tables(spacing_m, kernel_radius_m, n) if edges_and_corners else (
-            np.zeros((n, n)), np.zeros((n, n, 2)), np.zeros((n, n, n)), np.zeros((n, n, n, 3)))
+        tables = (
+            sph.wall_overlap_tables(spacing_m, kernel_radius_m, n)
+            if edges_and_corners
+            else (np.zeros((n, n)), np.zeros((n, n, 2)), np.zeros((n, n, n)), np.zeros((n, n, n, 3)))
+        )
         self.edge = ti.field(ti.f32, shape=(n, n))
         self.edge_gradient = ti.Vector.field(2, ti.f32, shape=(n, n))
         self.corner = ti.field(ti.f32, shape=(n, n, n))

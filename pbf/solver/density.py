@@ -60,13 +60,13 @@ Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow 
 under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
 waves, which carry most of the density error, still converge.
 """
+
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import SCORR_N, DensityParams
 from pbf.solver.scan import TreeSum
 from pbf.solver.sph import kernel, kernel_and_gradient
-
 
 SURFACE_RAMP = (0.25, 0.75)
 """Where between the smoothed colour gradient of a lattice's second layer (0) and of its top layer (1)
@@ -175,8 +175,9 @@ class DensityConstraint:
             # A loop of its own for the particles at a wall: with the images' code in the common loop,
             # every particle's pairs took 2.5 times as long, the few at a wall or not.
             if near.sum() > 0:
-                ratio, gradient_i, sum_sq, own_images = self.mirrored_pair_sums(x, xi, i, neighbours, near, plane,
-                                                                                gradients)
+                ratio, gradient_i, sum_sq, own_images = self.mirrored_pair_sums(
+                    x, xi, i, neighbours, near, plane, gradients
+                )
             else:
                 ratio, gradient_i, sum_sq = self.plain_pair_sums(x, xi, i, neighbours, gradients)
         else:
@@ -202,8 +203,9 @@ class DensityConstraint:
         return ratio, gradient_i, sum_sq
 
     @ti.func
-    def mirrored_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane,
-                           gradients: ti.template()):
+    def mirrored_pair_sums(
+        self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane, gradients: ti.template()
+    ):
         """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
         h = self.h
         w_self, g_self, _ = self.image_sums(xi, xi, near, plane, gradients)
@@ -241,8 +243,9 @@ class DensityConstraint:
         return xi
 
     @ti.func
-    def constraint(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
-                   first_iteration):
+    def constraint(
+        self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(), first_iteration
+    ):
         """C_i = ρ_i/ρ0 − 1 (walls included, the surface ghost not) at the positions in the buffer
         ``from_second`` picks; in the ``first_iteration`` also the denominator of λ̂_i, kept for the
         substep (module docstring), and the colour gradient the surface ghost is smoothed from."""
@@ -340,8 +343,9 @@ class DensityConstraint:
         return (lam_i + self.lam[j] + s_corr) * self.volume * self.h * grad_w
 
     @ti.func
-    def jacobi_step(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
-                    weight):
+    def jacobi_step(
+        self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(), weight
+    ):
         """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
         other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
         h = self.h
@@ -368,8 +372,17 @@ class DensityConstraint:
             second[i] = moved
 
     @ti.func
-    def multiplier_pass(self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(),
-                        measure: ti.template(), first_iteration, weight):
+    def multiplier_pass(
+        self,
+        first: ti.template(),
+        second: ti.template(),
+        from_second,
+        i,
+        neighbours: ti.template(),
+        measure: ti.template(),
+        first_iteration,
+        weight,
+    ):
         """C_i and λ̂_i of particle i; with the surface ghost, in the first iteration only C_i (λ̂ waits
         for the ghost, which needs every ĝ_j: :meth:`surface_pass`)."""
         c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
@@ -382,15 +395,24 @@ class DensityConstraint:
             self.lagrange_multiplier(i, c, measure, first_iteration, weight)
 
     @ti.func
-    def surface_pass(self, first: ti.template(), i, neighbours: ti.template(), measure: ti.template(),
-                     first_iteration, weight):
+    def surface_pass(
+        self, first: ti.template(), i, neighbours: ti.template(), measure: ti.template(), first_iteration, weight
+    ):
         """ψ_i and λ̂_i in a substep's first iteration, which always starts from the first buffer."""
         self.surface[i] = self.surface_ghost(first, i, neighbours)
         self.lagrange_multiplier(i, self.plain_error[i] + self.surface[i], measure, first_iteration, weight)
 
     @ti.kernel
-    def iterate(self, first: ti.template(), second: ti.template(), from_second: ti.i32, neighbours: NeighbourList,
-                measure: ti.template(), first_iteration: ti.i32, weight: ti.f32) -> tuple[ti.f32, ti.f32, ti.i32]:
+    def iterate(
+        self,
+        first: ti.template(),
+        second: ti.template(),
+        from_second: ti.i32,
+        neighbours: NeighbourList,
+        measure: ti.template(),
+        first_iteration: ti.i32,
+        weight: ti.f32,
+    ) -> tuple[ti.f32, ti.f32, ti.i32]:
         """One Jacobi iteration as one kernel: all λ from x, then all corrected positions, weighted
         against the other buffer (which holds the positions of the iteration before) and collided with
         the boundaries (Algorithm 1, line 15), into that buffer; x is ``second`` when ``from_second``, else
@@ -448,7 +470,7 @@ class DensityConstraint:
     def pressure_scale(self, dt: float) -> float:
         """p_i = −ρ0 h² L_i / Δt² (Pa per unit ρ0, L_i = lam_total): matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
         with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
-        return -self.h**2 / dt**2
+        return -(self.h**2) / dt**2
 
     def project(self, predicted, neighbours, measure: bool = False, first: bool = False, weight: float = 1.0):
         """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19) on the x* of
@@ -461,9 +483,9 @@ class DensityConstraint:
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
         assert not (first and predicted.in_second), "a substep's x* starts in the first buffer"
-        high, low, count = self.iterate(predicted.first, predicted.second, predicted.in_second, neighbours,
-                                        bool(measure), first, weight)
+        high, low, count = self.iterate(
+            predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure), first, weight
+        )
         predicted.swap()
         # The pair's sum in float64 on the host: the same mean as a float64 sum of the errors to ~1e-13.
         return (float(high) + float(low)) / max(count, 1) if measure else None
-

@@ -1,5 +1,6 @@
 """Statistics of the current state, reduced inside a kernel (no Python loop over particles, no atomic
 into one address: tree reductions of ``pbf.solver.scan``, the same bits on any thread count)."""
+
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList

@@ -29,6 +29,7 @@ is a pressure), so its iterations only correct the change. Positions stay at x d
 neighbour lists are those just built at x* (pairs that only come within h at x are separating, and
 the kernel gives pairs beyond h nothing).
 """
+
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList

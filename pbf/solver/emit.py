@@ -11,6 +11,7 @@ A drowned nozzle pauses: a layer whose sites the water already occupies (a live 
 half a spacing of a site, where the density constraint would push the pair apart at once) is
 skipped, as while the emitters are switched off, and the stream resumes once the water has gone.
 """
+
 import itertools
 import math
 
@@ -57,8 +58,11 @@ class Emitters:
         return min(int(math.floor(moved + 1e-9)) + 1, emitter.layers(self.spacing))
 
     @ti.kernel
-    def _append(self, positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
-                velocities: ti.types.ndarray(dtype=ti.math.vec3, ndim=1)):
+    def _append(
+        self,
+        positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
+        velocities: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
+    ):
         # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
         # caller hands in (restore() also refuses emitted layers that could overflow the budget).
         first = ti.min(ti.max(self.state.active[None], 0), self.capacity)
@@ -71,8 +75,12 @@ class Emitters:
         self.state.active[None] = first + added
 
     @ti.kernel
-    def _occupied(self, sites: ti.types.ndarray(dtype=ti.math.vec3, ndim=1), occupied: ti.types.ndarray(dtype=ti.i32,
-                  ndim=1), radius: ti.f32):
+    def _occupied(
+        self,
+        sites: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
+        occupied: ti.types.ndarray(dtype=ti.i32, ndim=1),
+        radius: ti.f32,
+    ):
         """occupied[k] = 1 where a live particle lies within ``radius`` of sites[k]. The cells within
         the grid's reach (h) of the site's hold every particle that was within h at the last sort, and
         none has moved a spacing since (time.max_cfl), so none within radius < h − max_cfl s is missed."""
@@ -81,8 +89,9 @@ class Emitters:
             p = sites[k]
             c = grid.cell_of(p)
             found = 0
-            for dx, dy, dz in ti.ndrange((-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1),
-                                         (-grid.reach, grid.reach + 1)):
+            for dx, dy, dz in ti.ndrange(
+                (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1)
+            ):
                 cell = c + ti.Vector([dx, dy, dz])
                 if all(cell >= 0) and all(cell < grid.resolution):
                     linear = grid.linear(cell)
@@ -121,5 +130,7 @@ class Emitters:
             kept = [k for k, drowned in enumerate(self.drowned(positions)) if not drowned]
             if kept:
                 # Only the new layers cross to the device (kernel arguments of their own size).
-                self._append(np.concatenate([positions[k] for k in kept]).astype(np.float32),
-                             np.concatenate([velocities[k] for k in kept]).astype(np.float32))
+                self._append(
+                    np.concatenate([positions[k] for k in kept]).astype(np.float32),
+                    np.concatenate([velocities[k] for k in kept]).astype(np.float32),
+                )

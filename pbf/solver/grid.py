@@ -18,6 +18,7 @@ unless needed) and the host learns once a frame how full the compact list got
 (``build_neighbours``, ``settle_frame``). No step uses an atomic into one address: the overflow is a
 flag that only overflowing particles set, the counts per cell are atomics into many addresses.
 """
+
 import math
 import warnings
 
@@ -255,9 +256,12 @@ class NeighbourGrid:
         most_entries = max(int(most_entries), self.most_entries_in_frame)
         if truncated:
             self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(most_entries * 1.5)))
-            warnings.warn(f"the neighbour list needed {most_entries:,} entries, more than the {SLOTS} per particle "
-                          f"it held; a substep of the last frame missed neighbours. Grown: exact from here on",
-                          RuntimeWarning, stacklevel=3)
+            warnings.warn(
+                f"the neighbour list needed {most_entries:,} entries, more than the {SLOTS} per particle "
+                f"it held; a substep of the last frame missed neighbours. Grown: exact from here on",
+                RuntimeWarning,
+                stacklevel=3,
+            )
         self.checking = most_entries > CHECK_ABOVE * self.neighbours.shape[0]
         self.most_entries_in_frame = 0
 

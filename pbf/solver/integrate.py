@@ -1,5 +1,6 @@
 """Time integration: external forces and prediction (Algorithm 1, lines 1-4); lines 20-23 are
 ``pbf.solver.postprocess``."""
+
 import numpy as np
 import taichi as ti
 

@@ -14,6 +14,7 @@ copied back into the first buffer) and reads nothing; the iteration count comes 
 (``used``, for ``stats()``). The two paths take the same decisions from the same mean errors, which
 the device forms in float32 and the host in float64 from the same compensated sum.
 """
+
 import math
 
 import numpy as np
@@ -70,8 +71,13 @@ class JacobiIterations:
         weights, last_error = self.weights, math.inf
         weights.restart()
         for k in range(control.iterations):  # lines 8-19: λ, Δx, collision, x* += Δx
-            error = self.density.project(predicted, neighbours,  # Jacobi, into the other buffer
-                                         measure=target > 0.0, first=k == 0, weight=weights.next())
+            error = self.density.project(
+                predicted,
+                neighbours,  # Jacobi, into the other buffer
+                measure=target > 0.0,
+                first=k == 0,
+                weight=weights.next(),
+            )
             self._used = k + 1
             if target > 0.0 and error < target and k + 1 >= control.min_iterations:
                 if control.step_back and k + 1 > control.min_iterations and last_error >= target:
@@ -87,14 +93,31 @@ class JacobiIterations:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         for k in range(control.iterations):
-            self._iterate(predicted.first, predicted.second, neighbours, target > 0.0, k, target,
-                          control.min_iterations, int(control.step_back))
+            self._iterate(
+                predicted.first,
+                predicted.second,
+                neighbours,
+                target > 0.0,
+                k,
+                target,
+                control.min_iterations,
+                int(control.step_back),
+            )
         self._finish(predicted.first, predicted.second)
         predicted.in_second = False
 
     @ti.kernel
-    def _iterate(self, first: ti.template(), second: ti.template(), neighbours: NeighbourList,
-                 measure: ti.template(), k: ti.i32, target: ti.f32, min_iterations: ti.i32, step_back: ti.i32):
+    def _iterate(
+        self,
+        first: ti.template(),
+        second: ti.template(),
+        neighbours: NeighbourList,
+        measure: ti.template(),
+        k: ti.i32,
+        target: ti.f32,
+        min_iterations: ti.i32,
+        step_back: ti.i32,
+    ):
         """Iteration ``k`` of the substep, over no particles once the target was met; then the rules of
         :meth:`_run_on_host` on the device's entries."""
         if k == 0:

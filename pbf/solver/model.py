@@ -11,6 +11,7 @@ A parameter's path from a TOML file to a kernel: ``scene.load_scene`` validates 
 ``Scene``; ``Model.from_scene`` derives the stage's parameter object from it; the stage's constructor
 stores the object; its kernels read the fields as compile-time constants.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -75,16 +76,23 @@ class GridParams:
     """Cells per h: every neighbour lies within ``reach`` cells of a particle's own."""
 
     @classmethod
-    def covering(cls, particle_count: int, lower_m, upper_m, kernel_radius_m: float,
-                 reach: int = NEIGHBOUR_REACH) -> GridParams:
+    def covering(
+        cls, particle_count: int, lower_m, upper_m, kernel_radius_m: float, reach: int = NEIGHBOUR_REACH
+    ) -> GridParams:
         """The finest grid over the box whose cells are at least h / reach wide (with a 1e-4 margin
         against float32 rounding), so the cells within ``reach`` of a particle's own hold all its
         neighbours."""
         extent = np.array(upper_m, np.float64) - np.array(lower_m, np.float64)
         cell = kernel_radius_m / reach * (1 + 1e-4)
         resolution = tuple(max(1, int(math.floor(e / cell))) for e in extent)
-        return cls(particle_count, tuple(map(float, lower_m)), tuple(map(float, upper_m)), float(kernel_radius_m),
-                   resolution, reach)
+        return cls(
+            particle_count,
+            tuple(map(float, lower_m)),
+            tuple(map(float, upper_m)),
+            float(kernel_radius_m),
+            resolution,
+            reach,
+        )
 
     @property
     def cell_count(self) -> int:
@@ -122,16 +130,29 @@ class BodyParams:
             if body.shape == "sphere":
                 inertia = np.full(3, 0.4 * mass * half[0] ** 2)
             else:  # a box of edges 2a, 2b, 2c: I_x = m (b² + c²) / 3
-                inertia = mass / 3.0 * np.array([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2,
-                                                 half[0] ** 2 + half[1] ** 2])
+                inertia = (
+                    mass
+                    / 3.0
+                    * np.array([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2, half[0] ** 2 + half[1] ** 2])
+                )
             shapes.append(body.shape)
             halves.append(tuple(map(float, half)))
             masses.append(float(mass))
             inertias.append(tuple(map(float, inertia)))
-            initial.append(tuple(map(float, (*body.position_m, *body.quaternion(), *body.velocity_m_s,
-                                             *body.angular_velocity_rad_s))))
-        return cls(tuple(shapes), tuple(halves), tuple(masses), tuple(inertias), tuple(initial),
-                   scene.fluid.rest_density_kg_m3, particle_volume_m3)
+            initial.append(
+                tuple(
+                    map(float, (*body.position_m, *body.quaternion(), *body.velocity_m_s, *body.angular_velocity_rad_s))
+                )
+            )
+        return cls(
+            tuple(shapes),
+            tuple(halves),
+            tuple(masses),
+            tuple(inertias),
+            tuple(initial),
+            scene.fluid.rest_density_kg_m3,
+            particle_volume_m3,
+        )
 
 
 @dataclass(frozen=True)
@@ -209,11 +230,19 @@ class Push:
     def __post_init__(self):
         # Checked here, so that control.push never carries a NaN or an overflow into a kernel.
         for name in ("point_m", "velocity_m_s"):
-            object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name),
-                                                           FLOAT32_SAFE))
-        object.__setattr__(self, "radius_m", _checked_number("control.push.radius_m", self.radius_m, float,
-                                                             (0.0, FLOAT32_SAFE), "radius of the hand, m",
-                                                             above_lowest=True))
+            object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name), FLOAT32_SAFE))
+        object.__setattr__(
+            self,
+            "radius_m",
+            _checked_number(
+                "control.push.radius_m",
+                self.radius_m,
+                float,
+                (0.0, FLOAT32_SAFE),
+                "radius of the hand, m",
+                above_lowest=True,
+            ),
+        )
 
 
 @dataclass
@@ -261,9 +290,17 @@ class Control:
         control = cls.__new__(cls)
         # The largest |g| the scene's frames can follow (pbf.scene.timestep._check_time), before any field.
         object.__setattr__(control, "_most_gravity_m_s2", scene.fastest_followed_m_s / scene.time.frame_dt_s)
-        control.__init__(s.iterations, min(s.min_iterations, s.iterations), scene.time.substeps,
-                         s.target_density_error, s.expert.step_back, s.divergence_iterations, scene.viscosity.xsph,
-                         scene.vorticity.epsilon, scene.gravity_m_s2)
+        control.__init__(
+            s.iterations,
+            min(s.min_iterations, s.iterations),
+            scene.time.substeps,
+            s.target_density_error,
+            s.expert.step_back,
+            s.divergence_iterations,
+            scene.viscosity.xsph,
+            scene.vorticity.epsilon,
+            scene.gravity_m_s2,
+        )
         return control
 
 
@@ -278,8 +315,9 @@ def _given(value) -> str:
     return f"{_show(value)} ({type(value).__name__})"
 
 
-def _checked_number(label: str, value, kind: type, bounds: tuple[float, float], meaning: str,
-                    above_lowest: bool = False):
+def _checked_number(
+    label: str, value, kind: type, bounds: tuple[float, float], meaning: str, above_lowest: bool = False
+):
     """``value`` as an int or a finite float within ``bounds`` (above the lowest, if asked), or a
     TypeError (wrong type: a bool, a string, a float for an integer) or ValueError naming ``label``."""
     lowest, highest = bounds
@@ -306,8 +344,12 @@ def _checked_number(label: str, value, kind: type, bounds: tuple[float, float], 
 def _checked_vector(label: str, value, largest: float, meaning: str = "m or m/s") -> Vec3:
     """Three finite numbers each within ±``largest``, as a tuple of floats, or TypeError/ValueError."""
     allowed = f"three finite numbers [x, y, z] within ±{_num(largest)} ({meaning})"
-    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 3 \
-            or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value):
+    if (
+        isinstance(value, (str, bytes))
+        or not isinstance(value, (tuple, list, np.ndarray))
+        or len(value) != 3
+        or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value)
+    ):
         raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
     try:
         converted = tuple(float(c) for c in value)
@@ -341,9 +383,11 @@ def _gravity(control, value) -> Vec3:
     largest = max(abs(c) for c in vector)
     length = 0.0 if largest == 0.0 else largest * math.sqrt(sum((c / largest) ** 2 for c in vector))
     if length > most:
-        raise ValueError(f"control.gravity_m_s2: expected |g| ≤ {_num(most)} m/s², what the scene's frames can "
-                         f"follow (time.max_substeps × time.max_cfl × fluid.spacing_m / time.frame_dt_s²), got "
-                         f"|g| = {_num(length)} m/s²")
+        raise ValueError(
+            f"control.gravity_m_s2: expected |g| ≤ {_num(most)} m/s², what the scene's frames can "
+            f"follow (time.max_substeps × time.max_cfl × fluid.spacing_m / time.frame_dt_s²), got "
+            f"|g| = {_num(length)} m/s²"
+        )
     return vector
 
 
@@ -354,10 +398,15 @@ def _push(control, value) -> Push | None:
 
 
 CONTROL_KEYS = {
-    "iterations": "solver.iterations", "min_iterations": "solver.min_iterations", "substeps": "time.substeps",
-    "target_density_error": "solver.target_density_error", "step_back": "solver.expert.step_back",
-    "divergence_iterations": "solver.divergence_iterations", "xsph": "viscosity.xsph",
-    "vorticity": "vorticity.epsilon", "gravity_m_s2": "gravity_m_s2",
+    "iterations": "solver.iterations",
+    "min_iterations": "solver.min_iterations",
+    "substeps": "time.substeps",
+    "target_density_error": "solver.target_density_error",
+    "step_back": "solver.expert.step_back",
+    "divergence_iterations": "solver.divergence_iterations",
+    "xsph": "viscosity.xsph",
+    "vorticity": "vorticity.epsilon",
+    "gravity_m_s2": "gravity_m_s2",
 }
 """The scene key each Control field starts from, and whose bounds it keeps."""
 CONTROL_CHECKS = {
@@ -375,8 +424,6 @@ CONTROL_CHECKS = {
     "wave_maker_on": lambda control, value: _checked_bool("control.wave_maker_on", value),
 }
 """How each Control field is checked on assignment."""
-
-
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
@@ -429,17 +476,41 @@ class Model:
         gain = sph.jacobi_gain(h / spacing, s.expert.relaxation)
         omega = min(1.0, STABLE_GAIN / gain)
         density = DensityParams(
-            particle_count=n, kernel_radius_m=h, particle_volume_m3=volume, relaxation=s.expert.relaxation,
-            omega=omega, scorr_k=s.scorr_k, inverse_w_dq=1.0 / float(sph.kernel_np(SCORR_DQ * h, h)), max_correction=MAX_CORRECTION,
+            particle_count=n,
+            kernel_radius_m=h,
+            particle_volume_m3=volume,
+            relaxation=s.expert.relaxation,
+            omega=omega,
+            scorr_k=s.scorr_k,
+            inverse_w_dq=1.0 / float(sph.kernel_np(SCORR_DQ * h, h)),
+            max_correction=MAX_CORRECTION,
             surface_density=s.surface_density,
             surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
-            wall_mirror=s.wall_mirror)
-        return cls(scene, n, mass, volume, grid,
-                   BoundaryParams(lower, upper, scene.particle_radius_m, spacing, h, s.expert.wall_density,
-                                  s.wall_mirror, tuple((o.min_m, o.max_m) for o in scene.obstacles),
-                                  scene.wave_maker.stroke_m, scene.wave_maker.period_s,
-                                  BodyParams.from_scene(scene, volume)),
-                   density, VelocityParams(n, h, volume), iteration_weights(s.expert, 1.0 - omega * gain))
+            wall_mirror=s.wall_mirror,
+        )
+        return cls(
+            scene,
+            n,
+            mass,
+            volume,
+            grid,
+            BoundaryParams(
+                lower,
+                upper,
+                scene.particle_radius_m,
+                spacing,
+                h,
+                s.expert.wall_density,
+                s.wall_mirror,
+                tuple((o.min_m, o.max_m) for o in scene.obstacles),
+                scene.wave_maker.stroke_m,
+                scene.wave_maker.period_s,
+                BodyParams.from_scene(scene, volume),
+            ),
+            density,
+            VelocityParams(n, h, volume),
+            iteration_weights(s.expert, 1.0 - omega * gain),
+        )
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
         """Lattice positions (m) and velocities (m/s) of every block, float32 arrays of shape (n, 3).
@@ -469,8 +540,9 @@ def _culprit(scene: Scene) -> tuple[str, str]:
     the emitters add more than the blocks hold, else the spacing."""
     blocks, emitted = scene.particle_count, scene.emitted_count
     if scene.fluid.max_particles > blocks + emitted:
-        return "fluid.max_particles", (f"lower fluid.max_particles to {blocks + emitted:,} or 0 (exactly the "
-                                       f"blocks' and emitters' particles)")
+        return "fluid.max_particles", (
+            f"lower fluid.max_particles to {blocks + emitted:,} or 0 (exactly the blocks' and emitters' particles)"
+        )
     if emitted > blocks:
         spacing = scene.fluid.spacing_m
         added = [e.layers(spacing) * e.sites_per_layer(spacing) for e in scene.emitters]
@@ -510,9 +582,11 @@ def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) ->
         raise SceneError(
             f"{scene.source}: key '{culprit}': {particles:,} particles × {slots} neighbour slots "
             f"= {particles * slots:,} entries, more than the {INT32_MAX:,} an int32 index reaches; allowed: at most "
-            f"{INT32_MAX // slots:,} particles; {remedy}")
+            f"{INT32_MAX // slots:,} particles; {remedy}"
+        )
     if cells + 1 > INT32_MAX:
         raise SceneError(
             f"{scene.source}: key 'container.max_m': the neighbour grid (cells of h/{NEIGHBOUR_REACH}) over the "
             f"container has {cells:,} cells, more than the {INT32_MAX:,} an int32 index reaches; use a smaller "
-            f"container or a larger spacing")
+            f"container or a larger spacing"
+        )

@@ -14,6 +14,7 @@ lost to coarse particles. Every pass reads v_j as (x*_j − x_j)/Δt instead of 
 the velocity update needs no pass of its own and the smoothed velocity can be written straight into
 v (nothing in that pass reads v): two particle loops fewer than update, smooth into a copy, copy back.
 """
+
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
@@ -40,9 +41,19 @@ class VelocityPostprocess:
         return (x_pred[i] - self.state.x[i]) * inverse_dt
 
     @ti.kernel
-    def finish(self, x_pred: ti.template(), neighbours: NeighbourList, dt: ti.f32, vorticity: ti.f32,
-               xsph: ti.f32, with_vorticity: ti.template(), with_xsph: ti.template(), impulse: ti.template(),
-               pressure_per_impulse: ti.f32, first_of_frame: ti.i32):
+    def finish(
+        self,
+        x_pred: ti.template(),
+        neighbours: NeighbourList,
+        dt: ti.f32,
+        vorticity: ti.f32,
+        xsph: ti.f32,
+        with_vorticity: ti.template(),
+        with_xsph: ti.template(),
+        impulse: ti.template(),
+        pressure_per_impulse: ti.f32,
+        first_of_frame: ti.i32,
+    ):
         """v from x* and x, ω (if confining), confinement and XSPH into v, then x ← x* and the substep's
         pressure added to the frame's sum: one launch."""
         h = self.h
@@ -54,7 +65,8 @@ class VelocityPostprocess:
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
                     omega += self.volume * kernel_gradient(xi - x_pred[j], h).cross(
-                        self.velocity(x_pred, j, inverse_dt) - vi)
+                        self.velocity(x_pred, j, inverse_dt) - vi
+                    )
                 self.omega[i] = omega
                 self.omega_norm[i] = omega.norm()
         for i in range(self.state.active[None]):
@@ -93,5 +105,15 @@ class VelocityPostprocess:
         then x = x*; and the pressure (Pa) of the multipliers ``impulse`` (L, per particle) and Λ, at
         ``pressure_per_impulse`` Pa per unit of L, added to ``State.pressure_sum`` (which starts again
         at the ``first_of_frame`` substep)."""
-        self.finish(x_pred, neighbours, dt, vorticity, xsph, vorticity > 0.0, xsph > 0.0, impulse,
-                    pressure_per_impulse, first_of_frame)
+        self.finish(
+            x_pred,
+            neighbours,
+            dt,
+            vorticity,
+            xsph,
+            vorticity > 0.0,
+            xsph > 0.0,
+            impulse,
+            pressure_per_impulse,
+            first_of_frame,
+        )

@@ -20,6 +20,7 @@ integrated GPUs lack. Taichi compiles with fast math, under which LLVM may rewri
 and erase the error term; every step of TwoSum therefore passes through an integer xor with a zero
 the compiler cannot see (``_opaque``), which costs two bit casts and keeps the arithmetic as written.
 """
+
 import math
 
 import taichi as ti

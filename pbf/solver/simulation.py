@@ -1,4 +1,5 @@
 """The Simulation: a scene's particles, the PBF step (Macklin & Müller 2013, Algorithm 1) and its read-outs."""
+
 from __future__ import annotations
 
 import contextlib
@@ -6,20 +7,21 @@ import math
 import numbers
 import os
 import warnings
+from contextlib import AbstractContextManager as ContextManager
 from dataclasses import dataclass, replace
-from typing import ContextManager, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from pbf import scene as schema
 from pbf.scene.schema import _show
+from pbf.solver.acceleration import Weights
 from pbf.solver.backend import keeps_decisions_on_device, start_backend
 from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
-from pbf.solver.acceleration import Weights
 from pbf.solver.density import DensityConstraint
-from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.diagnostics import Diagnostics
+from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
 from pbf.solver.integrate import Integrator
@@ -28,8 +30,14 @@ from pbf.solver.model import Control, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
 
-STAGES = ("predict", "sort by cell", "neighbour lists", "divergence pre-correction", "solver iterations",
-          "velocity, vorticity, XSPH, x = x*")
+STAGES = (
+    "predict",
+    "sort by cell",
+    "neighbour lists",
+    "divergence pre-correction",
+    "solver iterations",
+    "velocity, vorticity, XSPH, x = x*",
+)
 """The stages :meth:`Simulation.substep` reports to its :class:`StageHook`, in order."""
 
 
@@ -73,8 +81,9 @@ def _particle_array(name: str, values) -> np.ndarray:
     try:
         array = np.asarray(values)
     except (ValueError, TypeError) as error:  # ragged lists
-        raise TypeError(f"restore: {name}: expected an array of numbers, got {type(values).__name__} ({error})") \
-            from None
+        raise TypeError(
+            f"restore: {name}: expected an array of numbers, got {type(values).__name__} ({error})"
+        ) from None
     if array.dtype.kind not in "fiu" or array.dtype == np.float16:
         raise TypeError(f"restore: {name}: expected an array of real numbers, got dtype {array.dtype}")
     with np.errstate(over="ignore"):  # beyond float32: inf, refused as not finite
@@ -100,8 +109,14 @@ class Simulation:
     >>> sim.reset()                            # back to the initial state
     """
 
-    def __init__(self, scene: schema.Scene | dict | str | os.PathLike, arch: str | None = None,
-                 overrides=(), quiet: bool = False, hook: StageHook | None = None):
+    def __init__(
+        self,
+        scene: schema.Scene | dict | str | os.PathLike,
+        arch: str | None = None,
+        overrides=(),
+        quiet: bool = False,
+        hook: StageHook | None = None,
+    ):
         scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
         self.model = Model.from_scene(scene)  # validates memory before Taichi allocates anything
         self.backend = start_backend(arch, quiet=quiet)
@@ -171,9 +186,16 @@ class Simulation:
     def snapshot(self) -> Snapshot:
         """Positions, velocities, the divergence pressure (creation order), time and frame, the bodies:
         what :meth:`restore` takes."""
-        return Snapshot(self.positions(), self.velocities(), self.time_s, self.frame, tuple(self.emitters.emitted),
-                        self.piston_time_s, self.state.kept_fields(),
-                        None if self.bodies is None else self.bodies.state())
+        return Snapshot(
+            self.positions(),
+            self.velocities(),
+            self.time_s,
+            self.frame,
+            tuple(self.emitters.emitted),
+            self.piston_time_s,
+            self.state.kept_fields(),
+            None if self.bodies is None else self.bodies.state(),
+        )
 
     def restore(self, snapshot: Snapshot) -> None:
         """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it.
@@ -197,13 +219,17 @@ class Simulation:
     def _checked_snapshot(self, snapshot) -> tuple[np.ndarray, np.ndarray, dict, list[int]]:
         """The snapshot's arrays (float32) and emitted layers, each checked against this scene."""
         if not isinstance(snapshot, Snapshot):
-            raise TypeError(f"restore: expected a pbf.solver.Snapshot (from Simulation.snapshot(), or "
-                            f"Snapshot(positions_m, velocities_m_s, time_s, frame)), got {type(snapshot).__name__}")
+            raise TypeError(
+                f"restore: expected a pbf.solver.Snapshot (from Simulation.snapshot(), or "
+                f"Snapshot(positions_m, velocities_m_s, time_s, frame)), got {type(snapshot).__name__}"
+            )
         positions = _particle_array("positions_m", snapshot.positions_m)
         velocities = _particle_array("velocities_m_s", snapshot.velocities_m_s)
         if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
-            raise ValueError(f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
-                             f"{positions.shape} and {velocities.shape}")
+            raise ValueError(
+                f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
+                f"{positions.shape} and {velocities.shape}"
+            )
         if not isinstance(snapshot.fields, dict):
             raise TypeError(f"restore: expected fields as a dict of name → array, got {type(snapshot.fields).__name__}")
         kept = {spec.name: spec for spec in self.state.fields if spec.kept and spec.name not in ("x", "v")}
@@ -211,23 +237,30 @@ class Simulation:
         for name, values in snapshot.fields.items():
             spec = kept.get(name)
             if spec is None:
-                raise ValueError(f"restore: unknown particle field {name!r} in the snapshot; kept fields: "
-                                 f"{', '.join(kept)}")
+                raise ValueError(
+                    f"restore: unknown particle field {name!r} in the snapshot; kept fields: {', '.join(kept)}"
+                )
             fields[name] = _particle_array(f"fields[{name!r}]", values)
             shape = positions.shape[:1] + (() if spec.components == 1 else (spec.components,))
             if fields[name].shape != shape:
                 raise ValueError(f"restore: expected fields[{name!r}] of shape {shape}, got {fields[name].shape}")
         count = len(positions)
         if count > self.model.capacity:
-            raise ValueError(f"restore: {count:,} particles, more than the {self.model.capacity:,} this "
-                             f"scene allocates (its blocks and emitters)")
-        for name, values in (("positions_m", positions), ("velocities_m_s", velocities),
-                             *((f"fields[{name!r}]", values) for name, values in fields.items())):
+            raise ValueError(
+                f"restore: {count:,} particles, more than the {self.model.capacity:,} this "
+                f"scene allocates (its blocks and emitters)"
+            )
+        for name, values in (
+            ("positions_m", positions),
+            ("velocities_m_s", velocities),
+            *((f"fields[{name!r}]", values) for name, values in fields.items()),
+        ):
             bad = ~np.isfinite(values)
             if bad.any():
                 row = int(np.argwhere(bad)[0][0])
-                raise ValueError(f"restore: {name} of particle {row} is {values[row].tolist()}; expected finite "
-                                 f"numbers")
+                raise ValueError(
+                    f"restore: {name} of particle {row} is {values[row].tolist()}; expected finite numbers"
+                )
         self._check_inside(positions, velocities)
         _clock("time_s", snapshot.time_s)
         if snapshot.piston_time_s is not None:
@@ -235,7 +268,8 @@ class Simulation:
         frame = snapshot.frame
         if isinstance(frame, (bool, np.bool_)) or not isinstance(frame, numbers.Integral) or frame < 0:
             raise (ValueError if isinstance(frame, numbers.Integral) else TypeError)(
-                f"restore: expected frame as a whole number ≥ 0, got {_show(frame)}")
+                f"restore: expected frame as a whole number ≥ 0, got {_show(frame)}"
+            )
         return positions, velocities, fields, self._checked_layers(snapshot.emitted_layers, count)
 
     def _checked_bodies(self, snapshot) -> np.ndarray | None:
@@ -248,8 +282,10 @@ class Simulation:
             return self.bodies.initial_state()
         bodies = _particle_array("bodies", snapshot.bodies)
         if bodies.shape != (self.bodies.count, STATE_WIDTH):
-            raise ValueError(f"restore: expected bodies of shape ({self.bodies.count}, {STATE_WIDTH}) "
-                             f"(pbf.solver.bodies.STATE_LAYOUT), got {bodies.shape}")
+            raise ValueError(
+                f"restore: expected bodies of shape ({self.bodies.count}, {STATE_WIDTH}) "
+                f"(pbf.solver.bodies.STATE_LAYOUT), got {bodies.shape}"
+            )
         if not np.isfinite(bodies).all():
             raise ValueError("restore: the bodies' states hold a value that is not finite")
         return bodies
@@ -262,15 +298,19 @@ class Simulation:
         outside = np.any((positions < lower - slack) | (positions > upper + slack), axis=1)
         if outside.any():
             row = int(np.argmax(outside))
-            raise ValueError(f"restore: particle {row} at {positions[row].tolist()} m lies outside this scene's "
-                             f"container {lower.tolist()}–{upper.tolist()} m (a snapshot of another scene?)")
+            raise ValueError(
+                f"restore: particle {row} at {positions[row].tolist()} m lies outside this scene's "
+                f"container {lower.tolist()}–{upper.tolist()} m (a snapshot of another scene?)"
+            )
         fastest = self.scene.fastest_followed_m_s
         speeds = np.sqrt(np.sum(velocities.astype(np.float64) ** 2, axis=1))
         if len(speeds) and speeds.max() > fastest:
             row = int(np.argmax(speeds))
-            raise ValueError(f"restore: particle {row} moves at {float(speeds[row]):.6g} m/s, faster than the "
-                             f"{fastest:.6g} m/s this scene's frames can follow (time.max_substeps × time.max_cfl × "
-                             f"fluid.spacing_m / time.frame_dt_s)")
+            raise ValueError(
+                f"restore: particle {row} moves at {float(speeds[row]):.6g} m/s, faster than the "
+                f"{fastest:.6g} m/s this scene's frames can follow (time.max_substeps × time.max_cfl × "
+                f"fluid.spacing_m / time.frame_dt_s)"
+            )
 
     def _checked_layers(self, layers, count: int) -> list[int]:
         """Emitted layers: one whole number per emitter of this scene, from 0 to its total, such that
@@ -278,26 +318,33 @@ class Simulation:
         fine: layers skipped while the emitters were off or a nozzle drowned add none.)"""
         emitters, spacing = self.scene.emitters, self.scene.fluid.spacing_m
         if not isinstance(layers, (tuple, list, np.ndarray)):
-            raise TypeError(f"restore: expected emitted_layers as a tuple of whole numbers, one per emitter, got "
-                            f"{type(layers).__name__}")
+            raise TypeError(
+                f"restore: expected emitted_layers as a tuple of whole numbers, one per emitter, got "
+                f"{type(layers).__name__}"
+            )
         layers = list(layers) if len(layers) else [0] * len(emitters)
         if len(layers) != len(emitters):
-            raise ValueError(f"restore: {len(layers)} emitted layer counts for the {len(emitters)} emitters of this "
-                             f"scene (a snapshot of another scene?)")
+            raise ValueError(
+                f"restore: {len(layers)} emitted layer counts for the {len(emitters)} emitters of this "
+                f"scene (a snapshot of another scene?)"
+            )
         for k, (done, emitter) in enumerate(zip(layers, emitters)):
             if isinstance(done, (bool, np.bool_)) or not isinstance(done, numbers.Integral):
-                raise TypeError(f"restore: emitted_layers[{k}]: expected a whole number, got "
-                                f"{_show(done)}")
+                raise TypeError(f"restore: emitted_layers[{k}]: expected a whole number, got {_show(done)}")
             if not 0 <= done <= emitter.layers(spacing):
-                raise ValueError(f"restore: emitted_layers[{k}] = {int(done)}; allowed: 0 to the "
-                                 f"{emitter.layers(spacing):,} layers emitters[{k}] adds in all")
+                raise ValueError(
+                    f"restore: emitted_layers[{k}] = {int(done)}; allowed: 0 to the "
+                    f"{emitter.layers(spacing):,} layers emitters[{k}] adds in all"
+                )
         layers = [int(done) for done in layers]
         sites = [e.sites_per_layer(spacing) for e in emitters]
         to_come = sum((e.layers(spacing) - done) * n for e, done, n in zip(emitters, layers, sites))
         if count + to_come > self.model.capacity:
-            raise ValueError(f"restore: {count:,} particles and the {to_come:,} the emitters have still to add "
-                             f"(emitted_layers = {tuple(layers)}) exceed the {self.model.capacity:,} this scene "
-                             f"allocates")
+            raise ValueError(
+                f"restore: {count:,} particles and the {to_come:,} the emitters have still to add "
+                f"(emitted_layers = {tuple(layers)}) exceed the {self.model.capacity:,} this scene "
+                f"allocates"
+            )
         return layers
 
     def _after_restore(self) -> None:
@@ -330,13 +377,18 @@ class Simulation:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
         time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
         t = self.scene.time
-        speed = (max(self.diagnostics.max_speed(), self.boundaries.speed_limit_m_s())
-                 + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s)
+        speed = (
+            max(self.diagnostics.max_speed(), self.boundaries.speed_limit_m_s())
+            + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
+        )
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
         if needed > t.max_substeps:
-            warnings.warn(f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
-                          f"time.max_cfl = {t.max_cfl}; capped at time.max_substeps = {t.max_substeps}",
-                          RuntimeWarning, stacklevel=3)
+            warnings.warn(
+                f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
+                f"time.max_cfl = {t.max_cfl}; capped at time.max_substeps = {t.max_substeps}",
+                RuntimeWarning,
+                stacklevel=3,
+            )
         return min(needed, t.max_substeps)
 
     def _sort_by_cell(self, x) -> None:
@@ -351,10 +403,10 @@ class Simulation:
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
             self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
-            if self.bodies is not None:                          # and the bodies it touches
+            if self.bodies is not None:  # and the bodies it touches
                 self.bodies.grab(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
-        if self.bodies is not None:                              # the rigid step, with the water's last reaction
+        if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
         self.boundaries.move(self.piston_time_s, dt)
 
@@ -367,31 +419,37 @@ class Simulation:
             if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
                 raise TypeError(f"substep: dt: expected a number of seconds, got {_show(dt)}")
             if not 0.0 < dt <= frame_dt:
-                raise ValueError(f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), "
-                                 f"got {_show(dt)}")
+                raise ValueError(
+                    f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), got {_show(dt)}"
+                )
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         x_star = self.integrator.predicted
-        self._outside_inputs(dt)                                 # emitters, the mouse, moving walls
+        self._outside_inputs(dt)  # emitters, the mouse, moving walls
         with hook.stage("predict"):
-            self.integrator.advance(dt, control.gravity_m_s2)    # lines 1-4: v += Δt g, x* = x + Δt v
-        with hook.stage("sort by cell"):                         # lines 5-7: find neighbouring particles
+            self.integrator.advance(dt, control.gravity_m_s2)  # lines 1-4: v += Δt g, x* = x + Δt v
+        with hook.stage("sort by cell"):  # lines 5-7: find neighbouring particles
             self._sort_by_cell(x_star.first)
         with hook.stage("neighbour lists"):
             self.grid.build_neighbours(x_star.first, checked=False)
-        with hook.stage("divergence pre-correction"):            # ours: v made divergence-free (at x,
-            if control.divergence_iterations > 0:                # warm-started), then x* = x + Δt v again
+        with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
+            if control.divergence_iterations > 0:  # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
-        with hook.stage("solver iterations"):                    # lines 8-19, until the error target
+        with hook.stage("solver iterations"):  # lines 8-19, until the error target
             self.iterations.run(x_star, self.grid.neighbours, control)
-            x_star.gather()                                      # x* back in the first buffer
+            x_star.gather()  # x* back in the first buffer
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
-            self.postprocess.run(x_star.first, self.grid.neighbours, dt,  # lines 20-23: v = (x* − x)/Δt,
-                                 control.vorticity, control.xsph,           # confinement, XSPH, x = x*;
-                                 self.density.lam_total,                    # and the pressure, summed
-                                 self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
-                                 self.pressure_substeps == 0)
-        if self.bodies is not None:                              # the water's reaction on the bodies
+            self.postprocess.run(
+                x_star.first,
+                self.grid.neighbours,
+                dt,  # lines 20-23: v = (x* − x)/Δt,
+                control.vorticity,
+                control.xsph,  # confinement, XSPH, x = x*;
+                self.density.lam_total,  # and the pressure, summed
+                self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
+                self.pressure_substeps == 0,
+            )
+        if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1
         self.time_s += dt
@@ -405,7 +463,7 @@ class Simulation:
             raise ValueError(f"step: frames: expected 0 or more, got {_show(frames)}")
         for _ in range(frames):
             self.frame_substeps = self.substeps_needed()
-            self.pressure_substeps = 0                           # pressures(): this frame's mean
+            self.pressure_substeps = 0  # pressures(): this frame's mean
             dt = self.scene.time.frame_dt_s / self.frame_substeps
             for _ in range(self.frame_substeps):
                 self.substep(dt)
@@ -451,6 +509,12 @@ class Simulation:
     def stats(self) -> dict:
         """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
         figures = self.diagnostics.compute(self.grid.neighbours)
-        figures.update(time_s=self.time_s, frame=self.frame, particles=self.particle_count,
-                       backend=self.backend, iterations=self.iterations_used, substeps=self.frame_substeps)
+        figures.update(
+            time_s=self.time_s,
+            frame=self.frame,
+            particles=self.particle_count,
+            backend=self.backend,
+            iterations=self.iterations_used,
+            substeps=self.frame_substeps,
+        )
         return figures

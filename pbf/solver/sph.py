@@ -10,6 +10,7 @@ h is the support radius (W = 0 for r ≥ h).
 The NumPy twins compute derived constants once (particle mass, wall density table) and give tests an
 independent implementation to check the Taichi versions against.
 """
+
 import math
 
 import numpy as np
@@ -164,13 +165,21 @@ def wall_overlap_tables(spacing, h, samples):
         r2 = a[:, None, :, None] ** 2 + a[None, :, None, :] ** 2 + y * y
         quadrant += kernel_np(np.sqrt(r2), h).sum(axis=(2, 3))
     for k in range(n + 1):
-        r2 = (a[:, None, None, :, None] ** 2 + a[None, :, None, None, :] ** 2
-              + (d[None, None, :, None, None] + behind[k]) ** 2)
+        r2 = (
+            a[:, None, None, :, None] ** 2
+            + a[None, :, None, None, :] ** 2
+            + (d[None, None, :, None, None] + behind[k]) ** 2
+        )
         octant += kernel_np(np.sqrt(r2), h).sum(axis=(3, 4))
     total = lattice_density_sum(spacing, h)
     quadrant /= total
     octant /= total
-    return quadrant, np.stack(np.gradient(quadrant, d, d), axis=-1), octant, np.stack(np.gradient(octant, d, d, d), axis=-1)
+    return (
+        quadrant,
+        np.stack(np.gradient(quadrant, d, d), axis=-1),
+        octant,
+        np.stack(np.gradient(octant, d, d, d), axis=-1),
+    )
 
 
 def jacobi_gain(kernel_ratio, relaxation, samples=24):

@@ -34,13 +34,27 @@ class ParticleField:
 PARTICLE_FIELDS = (
     ParticleField("x", ti.f32, 3, "m", "position", kept=True),
     ParticleField("v", ti.f32, 3, "m/s", "velocity", kept=True),
-    ParticleField("index", ti.i32, 1, "", "the particle's creation index (its row in positions())", kept=False,
-                  initial="creation"),
-    ParticleField("multiplier", ti.f32, 1, "1/s²", "Λ/Δt² of pbf.solver.divergence: the last substep's "
-                  "divergence pressure, which the next one starts from", kept=True),
-    ParticleField("pressure_sum", ti.f32, 1, "Pa", "the sum of each substep's pressure since the frame began "
-                  "(Simulation.pressures divides it by the count): one substep's alternates under accelerated "
-                  "weights, a frame's mean does not", kept=False),
+    ParticleField(
+        "index", ti.i32, 1, "", "the particle's creation index (its row in positions())", kept=False, initial="creation"
+    ),
+    ParticleField(
+        "multiplier",
+        ti.f32,
+        1,
+        "1/s²",
+        "Λ/Δt² of pbf.solver.divergence: the last substep's divergence pressure, which the next one starts from",
+        kept=True,
+    ),
+    ParticleField(
+        "pressure_sum",
+        ti.f32,
+        1,
+        "Pa",
+        "the sum of each substep's pressure since the frame began "
+        "(Simulation.pressures divides it by the count): one substep's alternates under accelerated "
+        "weights, a frame's mean does not",
+        kept=False,
+    ),
 )
 """The particles' quantities, in the order the sort carries them."""
 SNAPSHOT_NAMES = {"x": "positions_m", "v": "velocities_m_s"}
@@ -174,5 +188,8 @@ class State:
 
     def kept_fields(self) -> dict:
         """Every kept field but x and v, by name, in creation order (what a Snapshot's ``fields`` holds)."""
-        return {spec.name: self.in_creation_order(getattr(self, spec.name)) for spec in self.fields
-                if spec.kept and spec.name not in SNAPSHOT_NAMES}
+        return {
+            spec.name: self.in_creation_order(getattr(self, spec.name))
+            for spec in self.fields
+            if spec.kept and spec.name not in SNAPSHOT_NAMES
+        }

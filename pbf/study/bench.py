@@ -23,6 +23,7 @@ tables from several runs (backends, or the CPU with ``--fast-compile``, ``--devi
 ``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
 each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
+
 import argparse
 import csv
 import platform
@@ -31,7 +32,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
 from tqdm import tqdm
 
 from pbf.scene import SCENES_DIR, load_scene
@@ -41,8 +41,9 @@ from pbf.study import sweep as speed_error
 from pbf.study.common import StageTimer, TransferCounter, dam_break, stage_breakdown, timed
 
 
-def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(),
-             device_decisions: bool = False) -> dict:
+def run_size(
+    particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(), device_decisions: bool = False
+) -> dict:
     with decisions_on_device(device_decisions):
         sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
     substep_ms, mean_errors, max_errors = [], [], []
@@ -85,13 +86,17 @@ def run_size(particles: int, iterations: int, frames: int, warmup_frames: int, o
 
 def sizes(args) -> list[dict]:
     rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set, args.device_decisions) for n in args.sizes]
-    print(f"{'backend':>7} {'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
-          f"{'mean err':>9} {'max err':>8} {'reads/substep':>13} {'launches/substep':>16}")
+    print(
+        f"{'backend':>7} {'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
+        f"{'mean err':>9} {'max err':>8} {'reads/substep':>13} {'launches/substep':>16}"
+    )
     for r in rows:
-        print(f"{r['backend']:>7} {r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} "
-              f"{r['median_ms_per_substep']:>11.2f} {r['particle_substeps_per_s']:>20,.0f} "
-              f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
-              f"{r['launches_per_substep']:>16.1f}")
+        print(
+            f"{r['backend']:>7} {r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} "
+            f"{r['median_ms_per_substep']:>11.2f} {r['particle_substeps_per_s']:>20,.0f} "
+            f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
+            f"{r['launches_per_substep']:>16.1f}"
+        )
     print("\nstage breakdown, median ms per substep:")
     for r in rows:
         print(f"  {r['particles']:,}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stages_ms"].items()))
@@ -110,7 +115,12 @@ TERMS = {
     "no XSPH viscosity": ["viscosity.xsph=0"],
     "no s_corr": ["solver.scorr_k=0"],
     "no wall density": ["solver.expert.wall_density=false"],
-    "none of the four": ["vorticity.epsilon=0", "viscosity.xsph=0", "solver.scorr_k=0", "solver.expert.wall_density=false"],
+    "none of the four": [
+        "vorticity.epsilon=0",
+        "viscosity.xsph=0",
+        "solver.scorr_k=0",
+        "solver.expert.wall_density=false",
+    ],
 }
 
 
@@ -120,8 +130,10 @@ def terms(args) -> list[dict]:
     rows = []
     for particles in args.sizes:
         base = dam_break(particles, args.iterations, args.set)
-        variants = {name: Simulation(load_scene("dam_break", _overrides(base) + args.set + extra), quiet=True)
-                    for name, extra in TERMS.items()}
+        variants = {
+            name: Simulation(load_scene("dam_break", _overrides(base) + args.set + extra), quiet=True)
+            for name, extra in TERMS.items()
+        }
         reference = next(iter(variants.values()))
         reference.step(args.warmup)
         snapshot, dt = reference.snapshot(), reference.dt_s
@@ -135,23 +147,40 @@ def terms(args) -> list[dict]:
         full = sum(medians["all terms (preset)"].values())
         for name, stages in medians.items():
             total = sum(stages.values())
-            rows.append({"particles": reference.particle_count, "variant": name, "ms_per_substep": total,
-                         "solver_ms": stages["solver iterations"],
-                         "velocity_ms": stages["velocity, vorticity, XSPH, x = x*"],
-                         "saving_ms": full - total, "ratio_to_all": total / full,
-                         "mean_density_error": variants[name].stats()["mean_density_error"]})
-    print(f"{'particles':>9}  {'variant':<26} {'ms/substep':>10} {'solver':>7} {'velocity':>8} {'saves ms':>9} "
-          f"{'ratio':>6} {'mean err':>9}")
+            rows.append(
+                {
+                    "particles": reference.particle_count,
+                    "variant": name,
+                    "ms_per_substep": total,
+                    "solver_ms": stages["solver iterations"],
+                    "velocity_ms": stages["velocity, vorticity, XSPH, x = x*"],
+                    "saving_ms": full - total,
+                    "ratio_to_all": total / full,
+                    "mean_density_error": variants[name].stats()["mean_density_error"],
+                }
+            )
+    print(
+        f"{'particles':>9}  {'variant':<26} {'ms/substep':>10} {'solver':>7} {'velocity':>8} {'saves ms':>9} "
+        f"{'ratio':>6} {'mean err':>9}"
+    )
     for r in rows:
-        print(f"{r['particles']:>9,}  {r['variant']:<26} {r['ms_per_substep']:>10.2f} {r['solver_ms']:>7.2f} "
-              f"{r['velocity_ms']:>8.2f} {r['saving_ms']:>9.2f} {r['ratio_to_all']:>6.2f} {r['mean_density_error']:>9.3%}")
+        print(
+            f"{r['particles']:>9,}  {r['variant']:<26} {r['ms_per_substep']:>10.2f} {r['solver_ms']:>7.2f} "
+            f"{r['velocity_ms']:>8.2f} {r['saving_ms']:>9.2f} {r['ratio_to_all']:>6.2f} {r['mean_density_error']:>9.3%}"
+        )
     return rows
 
 
 PERTURBATION_M = 1e-7
 """``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
-PRESET_STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j",
-                     "mean_neighbours", "iterations")
+PRESET_STATISTICS = (
+    "mean_density_error",
+    "max_density_error",
+    "max_speed_m_s",
+    "kinetic_energy_j",
+    "mean_neighbours",
+    "iterations",
+)
 
 
 def presets(args) -> list[dict]:
@@ -172,17 +201,30 @@ def presets(args) -> list[dict]:
             substeps += sim.frame_substeps
             if frame >= args.frames // 2:
                 samples.append(sim.stats())
-        rows.append({"preset": name, "backend": args.backend, "variant": args.variant, "particles": sim.particle_count,
-                     "frames": args.frames, "s_per_frame": seconds / args.frames, "reads_per_substep": reads / substeps,
-                     "launches_per_substep": launches / substeps,
-                     **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS}})
-    print(f"{'preset':<20} {'particles':>9} {'s/frame':>8} {'reads/substep':>13} {'launches/substep':>16} "
-          f"{'mean err':>9} {'max err':>8} {'max v':>6} {'KE J':>9} {'neighbours':>10} {'iters':>5}")
+        rows.append(
+            {
+                "preset": name,
+                "backend": args.backend,
+                "variant": args.variant,
+                "particles": sim.particle_count,
+                "frames": args.frames,
+                "s_per_frame": seconds / args.frames,
+                "reads_per_substep": reads / substeps,
+                "launches_per_substep": launches / substeps,
+                **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS},
+            }
+        )
+    print(
+        f"{'preset':<20} {'particles':>9} {'s/frame':>8} {'reads/substep':>13} {'launches/substep':>16} "
+        f"{'mean err':>9} {'max err':>8} {'max v':>6} {'KE J':>9} {'neighbours':>10} {'iters':>5}"
+    )
     for r in rows:
-        print(f"{r['preset']:<20} {r['particles']:>9,} {r['s_per_frame']:>8.2f} {r['reads_per_substep']:>13.2f} "
-              f"{r['launches_per_substep']:>16.1f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} "
-              f"{r['max_speed_m_s']:>6.2f} {r['kinetic_energy_j']:>9.4g} {r['mean_neighbours']:>10.2f} "
-              f"{r['iterations']:>5.2f}")
+        print(
+            f"{r['preset']:<20} {r['particles']:>9,} {r['s_per_frame']:>8.2f} {r['reads_per_substep']:>13.2f} "
+            f"{r['launches_per_substep']:>16.1f} {r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} "
+            f"{r['max_speed_m_s']:>6.2f} {r['kinetic_energy_j']:>9.4g} {r['mean_neighbours']:>10.2f} "
+            f"{r['iterations']:>5.2f}"
+        )
     if args.csv:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         with args.csv.open("w", newline="") as f:
@@ -209,25 +251,47 @@ def compare(paths: list[Path]) -> list[dict]:
             for row in others:
                 value = float(row[key])
                 inside = low - spread <= value <= high + spread
-                verdicts.append({"preset": name, "statistic": key, "backend": row["backend"], "value": value,
-                                 "cpu_low": low, "cpu_high": high, "inside": inside})
-                print(f"{name:<20} {key:<20} {row['backend']:>7} {value:>12.5g}   cpu {low:>12.5g} … {high:<12.5g}"
-                      f"  {'inside' if inside else 'OUTSIDE'}")
+                verdicts.append(
+                    {
+                        "preset": name,
+                        "statistic": key,
+                        "backend": row["backend"],
+                        "value": value,
+                        "cpu_low": low,
+                        "cpu_high": high,
+                        "inside": inside,
+                    }
+                )
+                print(
+                    f"{name:<20} {key:<20} {row['backend']:>7} {value:>12.5g}   cpu {low:>12.5g} … {high:<12.5g}"
+                    f"  {'inside' if inside else 'OUTSIDE'}"
+                )
     print(f"{sum(v['inside'] for v in verdicts)} of {len(verdicts)} inside the CPU's own spread")
     return verdicts
 
 
 def _overrides(scene) -> list[str]:
-    return [f"fluid.spacing_m={scene.fluid.spacing_m!r}", f"solver.iterations={scene.solver.iterations}",
-            f"time.substeps={scene.time.substeps}"]
+    return [
+        f"fluid.spacing_m={scene.fluid.spacing_m!r}",
+        f"solver.iterations={scene.solver.iterations}",
+        f"time.substeps={scene.time.substeps}",
+    ]
 
 
 def sweep(args):
     if args.from_csv:
         points = speed_error.read_csv(args.from_csv)
     else:
-        points = speed_error.sweep(args.sizes, args.iterations, args.substeps, args.target, args.frames,
-                                   args.rest_settle, args.rest_frames, args.set)
+        points = speed_error.sweep(
+            args.sizes,
+            args.iterations,
+            args.substeps,
+            args.target,
+            args.frames,
+            args.rest_settle,
+            args.rest_frames,
+            args.set,
+        )
         speed_error.write_csv(points, args.csv)
     speed_error.print_table(points)
     machine = f"{platform.processor() or platform.machine()}, {args.backend} backend"
@@ -241,40 +305,65 @@ def main(argv=None):
     parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms", "presets", "compare"), default="sizes")
     parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
     parser.add_argument("--presets", nargs="+", default=None, help="presets: which (default: all)")
-    parser.add_argument("--device-decisions", action="store_true",
-                        help="keep the substep's decisions on the device, as GPU backends do, on any backend")
+    parser.add_argument(
+        "--device-decisions",
+        action="store_true",
+        help="keep the substep's decisions on the device, as GPU backends do, on any backend",
+    )
     parser.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
-    parser.add_argument("--perturb", type=int, default=None, metavar="SEED",
-                        help="presets: start from positions moved by 1e-7 m (rounding-sized noise) drawn from SEED")
-    parser.add_argument("--sizes", type=int, nargs="+", default=None,
-                        help="particle counts (default: 8000 64000; terms: 8000)")
-    parser.add_argument("--iterations", type=int, nargs="+", default=None,
-                        help="solver iterations (default: 4; sweep: 1 2 3 4 6 8 12)")
-    parser.add_argument("--substeps", type=int, nargs="+", default=None,
-                        help="sweep: substeps per frame (default: 1 2 4)")
-    parser.add_argument("--target", type=float, default=0.005,
-                        help="sweep: also stop iterating under this mean density error (0: no such points)")
+    parser.add_argument(
+        "--perturb",
+        type=int,
+        default=None,
+        metavar="SEED",
+        help="presets: start from positions moved by 1e-7 m (rounding-sized noise) drawn from SEED",
+    )
+    parser.add_argument(
+        "--sizes", type=int, nargs="+", default=None, help="particle counts (default: 8000 64000; terms: 8000)"
+    )
+    parser.add_argument(
+        "--iterations", type=int, nargs="+", default=None, help="solver iterations (default: 4; sweep: 1 2 3 4 6 8 12)"
+    )
+    parser.add_argument(
+        "--substeps", type=int, nargs="+", default=None, help="sweep: substeps per frame (default: 1 2 4)"
+    )
+    parser.add_argument(
+        "--target",
+        type=float,
+        default=0.005,
+        help="sweep: also stop iterating under this mean density error (0: no such points)",
+    )
     parser.add_argument("--frames", type=int, default=60, help="timed frames per size or sweep point")
     parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms)")
     parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
     parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
     parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)",
+    )
     parser.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
-    parser.add_argument("--csv", type=Path, default=None, help="write the table as CSV "
-                        "(sweep default: docs/speed_vs_error.csv)")
+    parser.add_argument(
+        "--csv", type=Path, default=None, help="write the table as CSV (sweep default: docs/speed_vs_error.csv)"
+    )
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
     if args.mode == "compare":
         return compare(args.tables)
     args.backend = start_backend(args.arch, quiet=True, fast_compile=args.fast_compile)
-    args.variant = "+".join(["fast compile"] * args.fast_compile + ["device decisions"] * args.device_decisions
-                            + [f"perturbed {args.perturb}"] * (args.perturb is not None))
+    args.variant = "+".join(
+        ["fast compile"] * args.fast_compile
+        + ["device decisions"] * args.device_decisions
+        + [f"perturbed {args.perturb}"] * (args.perturb is not None)
+    )
     device = describe(running_device())
-    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} "
-          f"({device})")
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} ({device})"
+    )
     if args.mode == "sweep":
         args.sizes = args.sizes or [8000, 64000]
         args.iterations = args.iterations or list(speed_error.ITERATIONS)

@@ -1,6 +1,7 @@
 """What the studies share: scaled scenes, timing (a stage hook and a synchronised timer) and
 measurements of the free surface. Benchmarks, the sweep, the validation and the tests import it;
 it imports no study module."""
+
 from __future__ import annotations
 
 import contextlib
@@ -34,8 +35,9 @@ def dam_break(particles: int, iterations: int, overrides=()) -> Scene:
     particle moves per substep, in spacings, the same: the scene stays equally hard)."""
     base = load_scene("dam_break")
     substeps = max(1, round(base.time.substeps * (particles / 8000) ** (1 / 3)))
-    return scaled("dam_break", particles, 8000,
-                  [f"solver.iterations={iterations}", f"time.substeps={substeps}", *overrides])
+    return scaled(
+        "dam_break", particles, 8000, [f"solver.iterations={iterations}", f"time.substeps={substeps}", *overrides]
+    )
 
 
 def timed(function, *args):
@@ -77,10 +79,12 @@ class TransferCounter:
         def launch(original):
             def wrapped(kernel, t_kernel, *args):
                 counter.launches += 1
-                if counter._depth == 0 and (kernel.return_type is not None
-                                            or any(isinstance(a, np.ndarray) for a in args)):
+                if counter._depth == 0 and (
+                    kernel.return_type is not None or any(isinstance(a, np.ndarray) for a in args)
+                ):
                     counter.reads += 1
                 return original(kernel, t_kernel, *args)
+
             return wrapped
 
         def access(original, is_read):
@@ -93,6 +97,7 @@ class TransferCounter:
                     return original(obj, *args)
                 finally:
                     counter._depth -= 1
+
             return wrapped
 
         targets = [(kernel_impl.Kernel, "launch_kernel", launch)]

@@ -14,6 +14,7 @@ they are the same in every round (the solver is deterministic). The validation r
 piston. The whole table takes about three minutes on a 2-core CPU. ``--quick`` runs every row a few
 frames only, to check that the command works (its figures mean nothing).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,13 +52,23 @@ def machine(backend: str) -> str:
     described = f"{cpu}, {os.cpu_count()} cores"
     if backend == "cuda":
         try:
-            gpu = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"], capture_output=True,
-                                 text=True, timeout=10).stdout.strip().splitlines()
+            gpu = (
+                subprocess.run(
+                    ["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                    capture_output=True,
+                    text=True,
+                    timeout=10,
+                )
+                .stdout.strip()
+                .splitlines()
+            )
             described = f"{gpu[0]}; {described}" if gpu else described
         except (OSError, subprocess.SubprocessError):
             pass
-    return (f"{described}; Taichi {taichi_version()} on {backend}, Python {platform.python_version()}, "
-            f"{platform.system()} {platform.machine()}")
+    return (
+        f"{described}; Taichi {taichi_version()} on {backend}, Python {platform.python_version()}, "
+        f"{platform.system()} {platform.machine()}"
+    )
 
 
 def load_average() -> float | None:
@@ -84,35 +95,54 @@ def seed_second(frames: int, rounds: int) -> dict:
             maxima.append(stats["max_density_error"])
         seconds.append(elapsed)
     simulated_s = frames * sim.scene.time.frame_dt_s
-    return {"particles": sim.particle_count, "frames": frames, "simulated_s": simulated_s, "load": load_average(),
-            "seconds_per_simulated_s": statistics.median(seconds) / simulated_s,
-            "mean_error": float(np.mean(means)), "max_error": max(maxima)}
+    return {
+        "particles": sim.particle_count,
+        "frames": frames,
+        "simulated_s": simulated_s,
+        "load": load_average(),
+        "seconds_per_simulated_s": statistics.median(seconds) / simulated_s,
+        "mean_error": float(np.mean(means)),
+        "max_error": max(maxima),
+    }
 
 
 def rows(quick: bool, rounds: int) -> tuple[list[tuple[str, str]], float | None]:
     """(measure, value) of every line of the table, and the load average when the timing ended."""
     seed = seed_second(3 if quick else SEED_FRAMES, 1 if quick else rounds)
     surge = validate.martin_moyce(9 if quick else MARTIN_MOYCE_DIVISOR, end_T=0.5 if quick else 3.5)
-    tank = validate.hydrostatic(3 if quick else HYDROSTATIC_FRAMES, samples=2 if quick else 30,
-                                overrides=["time.settle_s=0"] if quick else ())
+    tank = validate.hydrostatic(
+        3 if quick else HYDROSTATIC_FRAMES, samples=2 if quick else 30, overrides=["time.settle_s=0"] if quick else ()
+    )
     waves = validate.wave_tank(end_s=0.1 if quick else 4.0, gauges_in_depths=(2.0,))
-    late_surface = tank.surface_m[len(tank.surface_m) // 2:].mean()
+    late_surface = tank.surface_m[len(tank.surface_m) // 2 :].mean()
     wave_ratio = waves.heights_m[0] / waves.expected_height_m
     speed = seed["seconds_per_simulated_s"]
     return [
-        (f"`{SEED_SCENE}` ({seed['particles']:,} particles), first {seed['frames']} frames "
-         f"({seed['simulated_s']:.3g} s): compute time",
-         f"{speed:.2f} s per simulated second ({1 / speed:.2f}× real time)"),
-        ("the same frames: density error, mean over the frames / largest",
-         f"{seed['mean_error']:.3%} / {seed['max_error']:.2%}"),
-        (f"Martin & Moyce (1952) surge front, spacing a/{surge.divisor} ({surge.particles:,} particles)",
-         f"max \\|Z − Z_exp\\| = {surge.max_deviation:.2f} a, mean Z − Z_exp = {surge.mean_offset:+.2f} a"),
-        (f"hydrostatic tank ({tank.particles:,} particles, {tank.times_s[-1]:.3g} s): dp/d(depth) against ρ0 g",
-         f"{tank.slope_pa_m / tank.expected_slope_pa_m - 1:+.1%}"),
-        ("the same tank: free surface against the fill height H (second half)",
-         f"{late_surface / tank.fill_height_m - 1:+.2%}"),
-        (f"wave tank ({waves.particles:,} particles): wave height two depths from the piston",
-         f"{wave_ratio:.2f} of linear theory (Biésel)"),
+        (
+            f"`{SEED_SCENE}` ({seed['particles']:,} particles), first {seed['frames']} frames "
+            f"({seed['simulated_s']:.3g} s): compute time",
+            f"{speed:.2f} s per simulated second ({1 / speed:.2f}× real time)",
+        ),
+        (
+            "the same frames: density error, mean over the frames / largest",
+            f"{seed['mean_error']:.3%} / {seed['max_error']:.2%}",
+        ),
+        (
+            f"Martin & Moyce (1952) surge front, spacing a/{surge.divisor} ({surge.particles:,} particles)",
+            f"max \\|Z − Z_exp\\| = {surge.max_deviation:.2f} a, mean Z − Z_exp = {surge.mean_offset:+.2f} a",
+        ),
+        (
+            f"hydrostatic tank ({tank.particles:,} particles, {tank.times_s[-1]:.3g} s): dp/d(depth) against ρ0 g",
+            f"{tank.slope_pa_m / tank.expected_slope_pa_m - 1:+.1%}",
+        ),
+        (
+            "the same tank: free surface against the fill height H (second half)",
+            f"{late_surface / tank.fill_height_m - 1:+.2%}",
+        ),
+        (
+            f"wave tank ({waves.particles:,} particles): wave height two depths from the piston",
+            f"{wave_ratio:.2f} of linear theory (Biésel)",
+        ),
     ], seed["load"]
 
 
@@ -126,8 +156,11 @@ def main(argv=None) -> None:
         parser.error(f"--rounds: {args.rounds}; allowed: 1 or more")
     backend = start_backend(args.arch)
     table, load = rows(args.quick, args.rounds)
-    print(f"\nmachine: {machine(backend)}" + ("" if load is None else f"; load average {load:.1f} after the timing")
-          + (" (--quick: not figures to quote)" if args.quick else ""))
+    print(
+        f"\nmachine: {machine(backend)}"
+        + ("" if load is None else f"; load average {load:.1f} after the timing")
+        + (" (--quick: not figures to quote)" if args.quick else "")
+    )
     width = max(len(measure) for measure, _ in table)
     print(f"\n| {'measure':{width}s} | value |\n|{'-' * (width + 2)}|---|")
     for measure, value in table:

@@ -13,6 +13,7 @@ the mean error falls under ``--target`` (at most the largest iteration count). T
 against time per frame on log axes and joins each size's Pareto front: the points that no other
 point beats on both.
 """
+
 import statistics
 from dataclasses import asdict, dataclass, fields
 
@@ -104,13 +105,19 @@ def run_rest(sim: Simulation, settle_frames: int, frames: int) -> dict:
 def mark_pareto(points: list[Point]) -> None:
     """Flag, per particle count, the points no other point beats on both time per frame and mean error."""
     for p in points:
-        p.pareto = not any(q.particles == p.particles and q is not p and q.ms_per_frame <= p.ms_per_frame
-                           and q.mean_density_error <= p.mean_density_error
-                           and (q.ms_per_frame, q.mean_density_error) != (p.ms_per_frame, p.mean_density_error)
-                           for q in points)
+        p.pareto = not any(
+            q.particles == p.particles
+            and q is not p
+            and q.ms_per_frame <= p.ms_per_frame
+            and q.mean_density_error <= p.mean_density_error
+            and (q.ms_per_frame, q.mean_density_error) != (p.ms_per_frame, p.mean_density_error)
+            for q in points
+        )
 
 
-def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames, overrides=()) -> list[Point]:
+def sweep(
+    sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames, overrides=()
+) -> list[Point]:
     settings = [(i, s, 0.0) for s in substep_counts for i in iteration_counts]
     if target > 0:
         settings += [(max(iteration_counts), s, target) for s in substep_counts]
@@ -120,8 +127,10 @@ def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, 
             dam = Simulation(scaled("dam_break", particles, 8000, overrides), quiet=True)
             tank = Simulation(scaled("hydrostatic", particles, 5120, overrides), quiet=True)
             for iterations, substeps, goal in settings:
-                bar.set_postfix_str(f"{dam.particle_count:,} particles, {iterations} it, {substeps} substeps"
-                                    + (f", target {goal:.2%}" if goal else ""))
+                bar.set_postfix_str(
+                    f"{dam.particle_count:,} particles, {iterations} it, {substeps} substeps"
+                    + (f", target {goal:.2%}" if goal else "")
+                )
                 configure(dam, iterations, substeps, goal)
                 figures = run_dam_break(dam, frames)
                 configure(tank, iterations, substeps, goal)
@@ -133,16 +142,20 @@ def sweep(sizes, iteration_counts, substep_counts, target, frames, rest_settle, 
 
 
 def print_table(points: list[Point]) -> None:
-    print(f"{'particles':>9} {'iters':>5} {'subst':>5} {'target':>6} {'used s/i':>9} {'ms/frame':>9} "
-          f"{'ms/subst':>8} {'particle-subst/s':>16} {'mean err':>8} {'max err':>8} {'peak v':>7} "
-          f"{'rest drift':>10} {'rest v':>7} pareto")
+    print(
+        f"{'particles':>9} {'iters':>5} {'subst':>5} {'target':>6} {'used s/i':>9} {'ms/frame':>9} "
+        f"{'ms/subst':>8} {'particle-subst/s':>16} {'mean err':>8} {'max err':>8} {'peak v':>7} "
+        f"{'rest drift':>10} {'rest v':>7} pareto"
+    )
     for p in points:
         target = f"{p.target_density_error:.2%}" if p.target_density_error else "-"
-        print(f"{p.particles:>9,} {p.iterations:>5} {p.substeps:>5} {target:>6} "
-              f"{p.substeps_used:>4.1f}/{p.iterations_used:<4.1f} {p.ms_per_frame:>9.1f} {p.ms_per_substep:>8.2f} "
-              f"{p.particle_substeps_per_s:>16,.0f} {p.mean_density_error:>8.3%} {p.max_density_error:>8.2%} "
-              f"{p.peak_speed_m_s:>7.2f} {p.rest_energy_drift:>10.2e} {p.rest_max_speed_m_s:>7.3f} "
-              f"{'*' if p.pareto else ''}")
+        print(
+            f"{p.particles:>9,} {p.iterations:>5} {p.substeps:>5} {target:>6} "
+            f"{p.substeps_used:>4.1f}/{p.iterations_used:<4.1f} {p.ms_per_frame:>9.1f} {p.ms_per_substep:>8.2f} "
+            f"{p.particle_substeps_per_s:>16,.0f} {p.mean_density_error:>8.3%} {p.max_density_error:>8.2%} "
+            f"{p.peak_speed_m_s:>7.2f} {p.rest_energy_drift:>10.2e} {p.rest_max_speed_m_s:>7.3f} "
+            f"{'*' if p.pareto else ''}"
+        )
 
 
 def write_csv(points: list[Point], path) -> None:
@@ -180,24 +193,53 @@ def plot(points: list[Point], path, title: str) -> None:
         mine = [p for p in points if p.particles == particles]
         for p in mine:
             if p.target_density_error:
-                ax.scatter(p.ms_per_frame, p.mean_density_error, marker="*", s=220, color=colour,
-                           edgecolor="black", zorder=4)
-                ax.annotate(f"{p.substeps} sub", (p.ms_per_frame, p.mean_density_error), xytext=(7, -9),
-                            textcoords="offset points", fontsize=7)
+                ax.scatter(
+                    p.ms_per_frame, p.mean_density_error, marker="*", s=220, color=colour, edgecolor="black", zorder=4
+                )
+                ax.annotate(
+                    f"{p.substeps} sub",
+                    (p.ms_per_frame, p.mean_density_error),
+                    xytext=(7, -9),
+                    textcoords="offset points",
+                    fontsize=7,
+                )
             else:
-                ax.scatter(p.ms_per_frame, p.mean_density_error, marker=markers[p.substeps], color=colour,
-                           alpha=0.9 if p.pareto else 0.35, zorder=3)
-                ax.annotate(str(p.iterations), (p.ms_per_frame, p.mean_density_error), xytext=(3, 3),
-                            textcoords="offset points", fontsize=7)
+                ax.scatter(
+                    p.ms_per_frame,
+                    p.mean_density_error,
+                    marker=markers[p.substeps],
+                    color=colour,
+                    alpha=0.9 if p.pareto else 0.35,
+                    zorder=3,
+                )
+                ax.annotate(
+                    str(p.iterations),
+                    (p.ms_per_frame, p.mean_density_error),
+                    xytext=(3, 3),
+                    textcoords="offset points",
+                    fontsize=7,
+                )
         front = sorted((p for p in mine if p.pareto), key=lambda p: p.ms_per_frame)
-        ax.step([p.ms_per_frame for p in front], [p.mean_density_error for p in front], where="post",
-                color=colour, label=f"{particles:,} particles: Pareto front")
+        ax.step(
+            [p.ms_per_frame for p in front],
+            [p.mean_density_error for p in front],
+            where="post",
+            color=colour,
+            label=f"{particles:,} particles: Pareto front",
+        )
     for substeps, marker in markers.items():
         ax.scatter([], [], marker=marker, color="grey", label=f"{substeps} substep{'s' * (substeps > 1)} per frame")
     targets = sorted({p.target_density_error for p in points if p.target_density_error})
     if targets:
-        ax.scatter([], [], marker="*", s=120, color="grey", edgecolor="black",
-                   label=f"stop under {', '.join(f'{t:.2%}' for t in targets)} mean error (substeps marked)")
+        ax.scatter(
+            [],
+            [],
+            marker="*",
+            s=120,
+            color="grey",
+            edgecolor="black",
+            label=f"stop under {', '.join(f'{t:.2%}' for t in targets)} mean error (substeps marked)",
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("median time per frame (ms)")
@@ -209,4 +251,3 @@ def plot(points: list[Point], path, title: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
-

@@ -13,6 +13,7 @@ fill height H. ``wave_tank`` runs the ``wave_tank`` preset and compares the heig
 piston makes with linear wave-maker theory (Biésel's transfer function). Each prints its figures and
 writes a plot (and the curves as CSV) under ``--out``.
 """
+
 import argparse
 import csv
 import math
@@ -32,8 +33,9 @@ SPRAY_NEIGHBOURS = 4
 
 def martin_moyce_data() -> tuple[np.ndarray, np.ndarray]:
     """The measured (T, Z) of the surge front, Martin & Moyce (1952) Table 2, n² = 2."""
-    lines = [line.strip() for line in MARTIN_MOYCE_CSV.read_text().splitlines()
-             if line.strip() and not line.startswith("#")]
+    lines = [
+        line.strip() for line in MARTIN_MOYCE_CSV.read_text().splitlines() if line.strip() and not line.startswith("#")
+    ]
     if lines[0] != "T,Z":
         raise ValueError(f"{MARTIN_MOYCE_CSV}: expected the columns T,Z, found {lines[0]!r}")
     table = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
@@ -70,8 +72,15 @@ def martin_moyce(divisor: int, end_T: float = 3.5, overrides=()) -> SurgeRun:
     spacing = a / divisor
     substeps = math.ceil(base.time.substeps * base.fluid.spacing_m / spacing - 1e-9)
     # One substep per "frame": the front is sampled every substep and the CFL limit still applies.
-    scene = load_scene("martin_moyce", [f"fluid.spacing_m={spacing!r}", "time.substeps=1",
-                                         f"time.frame_dt_s={base.time.frame_dt_s / substeps!r}", *overrides])
+    scene = load_scene(
+        "martin_moyce",
+        [
+            f"fluid.spacing_m={spacing!r}",
+            "time.substeps=1",
+            f"time.frame_dt_s={base.time.frame_dt_s / substeps!r}",
+            *overrides,
+        ],
+    )
     sim = Simulation(scene, quiet=True)
     g = float(np.linalg.norm(scene.gravity_m_s2))
     to_T = math.sqrt(2 * g / a)
@@ -84,8 +93,15 @@ def martin_moyce(divisor: int, end_T: float = 3.5, overrides=()) -> SurgeRun:
     measured_T, measured_Z = martin_moyce_data()
     deviation = np.interp(measured_T, T, Z) - measured_Z
     worst = int(np.argmax(np.abs(deviation)))
-    return SurgeRun(divisor, sim.particle_count, T, Z, float(abs(deviation[worst])), float(measured_T[worst]),
-                    float(deviation.mean()))
+    return SurgeRun(
+        divisor,
+        sim.particle_count,
+        T,
+        Z,
+        float(abs(deviation[worst])),
+        float(measured_T[worst]),
+        float(deviation.mean()),
+    )
 
 
 def plot_martin_moyce(runs: list[SurgeRun], path: Path) -> None:
@@ -98,8 +114,11 @@ def plot_martin_moyce(runs: list[SurgeRun], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4.5), constrained_layout=True)
     ax.plot(measured_T, measured_Z, "ko", label="Martin & Moyce (1952), n² = 2")
     for run in runs:
-        ax.plot(run.T, run.Z, label=f"PBF, spacing a/{run.divisor} ({run.particles:,} particles): "
-                                    f"max |ΔZ| {run.max_deviation:.2f}")
+        ax.plot(
+            run.T,
+            run.Z,
+            label=f"PBF, spacing a/{run.divisor} ({run.particles:,} particles): max |ΔZ| {run.max_deviation:.2f}",
+        )
     ax.set_xlabel("T = t·sqrt(2g/a)")
     ax.set_ylabel("Z = surge front x / a")
     ax.set_xlim(0, max(run.T[-1] for run in runs))
@@ -166,16 +185,23 @@ def hydrostatic(frames: int = 600, samples: int = 30, overrides=()) -> Hydrostat
     rho_g = scene.fluid.rest_density_kg_m3 * float(np.linalg.norm(scene.gravity_m_s2))
     # Interior: a smoothing radius from the side walls and floor, and below the surface layer, where
     # the kernel sees a full neighbourhood or the wall term completes it.
-    inner = ((x[:, 0] > lower[0] + h) & (x[:, 0] < upper[0] - h) & (x[:, 2] > lower[2] + h)
-             & (x[:, 2] < upper[2] - h) & (depth > h) & (x[:, 1] > lower[1] + h))
+    inner = (
+        (x[:, 0] > lower[0] + h)
+        & (x[:, 0] < upper[0] - h)
+        & (x[:, 2] > lower[2] + h)
+        & (x[:, 2] < upper[2] - h)
+        & (depth > h)
+        & (x[:, 1] > lower[1] + h)
+    )
     slope = float(np.polyfit(depth[inner], p[inner], 1)[0])
     rms = float(np.sqrt(np.mean((p[inner] - rho_g * depth[inner]) ** 2)) / (rho_g * H))
     edges = np.arange(0.0, H + spacing, spacing)
     which = np.digitize(depth, edges) - 1
     bins = [k for k in range(len(edges) - 1) if np.any(which == k)]
     binned = np.array([p[which == k].mean() for k in bins])
-    return HydrostaticRun(sim.particle_count, H, edges[bins] + spacing / 2, binned, slope, rho_g, rms,
-                          np.array(times), np.array(surfaces))
+    return HydrostaticRun(
+        sim.particle_count, H, edges[bins] + spacing / 2, binned, slope, rho_g, rms, np.array(times), np.array(surfaces)
+    )
 
 
 def plot_hydrostatic(run: HydrostaticRun, path: Path) -> None:
@@ -260,9 +286,21 @@ def wave_tank(end_s: float = 4.0, gauges_in_depths=(2.0, 3.0), overrides=()) -> 
         sim.step()
         x = sim.positions()
         times.append(sim.time_s)
-        elevations.append([colour_surface_height(x, sim.model.particle_volume_m3, h, [gauge], middle,
-                                                 (lower[1] + 0.25 * depth, lower[1] + 2.0 * depth)) - lower[1] - depth
-                           for gauge in gauges])
+        elevations.append(
+            [
+                colour_surface_height(
+                    x,
+                    sim.model.particle_volume_m3,
+                    h,
+                    [gauge],
+                    middle,
+                    (lower[1] + 0.25 * depth, lower[1] + 2.0 * depth),
+                )
+                - lower[1]
+                - depth
+                for gauge in gauges
+            ]
+        )
     times, elevation = np.array(times), np.array(elevations).T
     windows, heights = [], []
     for gauge, eta in zip(gauges, elevation):
@@ -271,8 +309,9 @@ def wave_tank(end_s: float = 4.0, gauges_in_depths=(2.0, 3.0), overrides=()) -> 
         inside = (times >= start) & (times <= stop)
         windows.append((start, stop))
         heights.append(float(eta[inside].max() - eta[inside].min()) if inside.any() else math.nan)
-    return WaveRun(sim.particle_count, depth, kd, biesel_height_ratio(kd) * stroke, gauges, times, elevation,
-                   windows, heights)
+    return WaveRun(
+        sim.particle_count, depth, kd, biesel_height_ratio(kd) * stroke, gauges, times, elevation, windows, heights
+    )
 
 
 def plot_wave_tank(run: WaveRun, path: Path) -> None:
@@ -283,16 +322,20 @@ def plot_wave_tank(run: WaveRun, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
     for gauge, eta, (start, stop), height in zip(run.gauges_m, run.elevation_m, run.windows_s, run.heights_m):
-        line, = ax.plot(run.times_s, eta * 1e3, label=f"x = {gauge:.2f} m ({gauge / run.depth_m:.0f} depths): "
-                                                     f"H = {height * 1e3:.1f} mm")
+        (line,) = ax.plot(
+            run.times_s,
+            eta * 1e3,
+            label=f"x = {gauge:.2f} m ({gauge / run.depth_m:.0f} depths): H = {height * 1e3:.1f} mm",
+        )
         ax.axvspan(start, stop, color=line.get_color(), alpha=0.08)
     for sign in (-1, 1):
         ax.axhline(sign * 0.5e3 * run.expected_height_m, color="k", ls="--", lw=1)
     ax.plot([], [], "k--", lw=1, label=f"± H/2 of linear theory (Biésel), H = {run.expected_height_m * 1e3:.1f} mm")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("surface elevation (mm)")
-    ax.set_title(f"Piston wave maker, {run.particles:,} particles, kd = {run.kd:.2f} "
-                 f"(shaded: the measured windows)", fontsize=10)
+    ax.set_title(
+        f"Piston wave maker, {run.particles:,} particles, kd = {run.kd:.2f} (shaded: the measured windows)", fontsize=10
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=130)
@@ -312,8 +355,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     cases = ("martin_moyce", "hydrostatic", "wave_tank")
     # Checked by hand: Python 3.11's argparse rejects an empty list of a positional that has choices.
     parser.add_argument("cases", nargs="*", help=f"any of {', '.join(cases)} (default: all)")
-    parser.add_argument("--divisors", type=int, nargs="+", default=[9, 12, 24],
-                        help="martin_moyce: spacings a/n (n a multiple of 3: the tank is 2a/3 deep)")
+    parser.add_argument(
+        "--divisors",
+        type=int,
+        nargs="+",
+        default=[9, 12, 24],
+        help="martin_moyce: spacings a/n (n a multiple of 3: the tank is 2a/3 deep)",
+    )
     parser.add_argument("--frames", type=int, default=600, help="hydrostatic: frames to run (60 per second)")
     parser.add_argument("--arch", default=None)
     parser.add_argument("--out", type=Path, default=Path("docs"))
@@ -326,8 +374,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         parser.error(f"--frames: {args.frames} frames; allowed: 1 or more")
     bad = [n for n in args.divisors if n % 3 or n < 3]
     if bad:
-        parser.error(f"--divisors: {bad} are not positive multiples of 3 (the tank is 2a/3 deep, a whole number "
-                     f"of spacings)")
+        parser.error(
+            f"--divisors: {bad} are not positive multiples of 3 (the tank is 2a/3 deep, a whole number of spacings)"
+        )
     return args
 
 
@@ -339,30 +388,37 @@ def main(argv=None):
         runs = [martin_moyce(n) for n in args.divisors]
         print(f"{'spacing':>8} {'particles':>9} {'max |ΔZ|':>8} {'at T':>5} {'mean ΔZ':>8}")
         for run in runs:
-            print(f"{'a/' + str(run.divisor):>8} {run.particles:>9,} {run.max_deviation:>8.3f} {run.at_T:>5.2f} "
-                  f"{run.mean_offset:>+8.3f}")
+            print(
+                f"{'a/' + str(run.divisor):>8} {run.particles:>9,} {run.max_deviation:>8.3f} {run.at_T:>5.2f} "
+                f"{run.mean_offset:>+8.3f}"
+            )
             write_curves(args.out / f"martin_moyce_a{run.divisor}.csv", {"T": run.T, "Z": run.Z})
         plot_martin_moyce(runs, args.out / "martin_moyce.png")
     if "hydrostatic" in args.cases:
         run = hydrostatic(args.frames)
-        late = run.surface_m[len(run.surface_m) // 2:]
-        print(f"hydrostatic, {run.particles:,} particles, {args.frames} frames: dp/d(depth) {run.slope_pa_m:,.0f} Pa/m "
-              f"against {run.expected_slope_pa_m:,.0f} ({run.slope_pa_m / run.expected_slope_pa_m - 1:+.1%}), "
-              f"rms pressure error {run.pressure_rms_error:.2%} of ρ0 g H; surface {run.surface_m[0]:.4f} m at "
-              f"the start, {late.mean():.4f} m mean over the second half (range {late.min():.4f}-{late.max():.4f}), "
-              f"H = {run.fill_height_m:.4f} m")
+        late = run.surface_m[len(run.surface_m) // 2 :]
+        print(
+            f"hydrostatic, {run.particles:,} particles, {args.frames} frames: dp/d(depth) {run.slope_pa_m:,.0f} Pa/m "
+            f"against {run.expected_slope_pa_m:,.0f} ({run.slope_pa_m / run.expected_slope_pa_m - 1:+.1%}), "
+            f"rms pressure error {run.pressure_rms_error:.2%} of ρ0 g H; surface {run.surface_m[0]:.4f} m at "
+            f"the start, {late.mean():.4f} m mean over the second half (range {late.min():.4f}-{late.max():.4f}), "
+            f"H = {run.fill_height_m:.4f} m"
+        )
         write_curves(args.out / "hydrostatic_pressure.csv", {"depth_m": run.depth_m, "pressure_pa": run.pressure_pa})
         write_curves(args.out / "hydrostatic_surface.csv", {"time_s": run.times_s, "surface_m": run.surface_m})
         plot_hydrostatic(run, args.out / "hydrostatic.png")
     if "wave_tank" in args.cases:
         run = wave_tank()
         for gauge, height in zip(run.gauges_m, run.heights_m):
-            print(f"wave_tank, {run.particles:,} particles: at {gauge:.2f} m from the piston H = {height * 1e3:.1f} mm "
-                  f"against Biésel's {run.expected_height_m * 1e3:.1f} mm ({height / run.expected_height_m:.2f}), "
-                  f"kd = {run.kd:.2f}")
-        write_curves(args.out / "wave_tank.csv", {"time_s": run.times_s,
-                                                  **{f"eta_m_at_{g:.2f}_m": e for g, e in zip(run.gauges_m,
-                                                                                             run.elevation_m)}})
+            print(
+                f"wave_tank, {run.particles:,} particles: at {gauge:.2f} m from the piston H = {height * 1e3:.1f} mm "
+                f"against Biésel's {run.expected_height_m * 1e3:.1f} mm ({height / run.expected_height_m:.2f}), "
+                f"kd = {run.kd:.2f}"
+            )
+        write_curves(
+            args.out / "wave_tank.csv",
+            {"time_s": run.times_s, **{f"eta_m_at_{g:.2f}_m": e for g, e in zip(run.gauges_m, run.elevation_m)}},
+        )
         plot_wave_tank(run, args.out / "wave_tank.png")
     print(f"wrote plots and curves under {args.out}/")
 
