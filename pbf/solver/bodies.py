@@ -266,8 +266,9 @@ class Bodies:
             q = q.normalized()
             self.quaternion[b] = q
             self.rotation[b] = quaternion_matrix(q)
-        ti.loop_config(serialize=True)
-        for _ in range(1):  # one thread: the contacts in a fixed order
+        # One thread takes the contacts in a fixed order (a top-level loop of one iteration): their work
+        # grows with the bodies squared, a few dozen, not with the particles.
+        for _ in range(1):
             self._contacts()
 
     @ti.func
