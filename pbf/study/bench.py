@@ -9,7 +9,7 @@
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
 particle-substeps per second, the mean and max density error over the timed frames, a per-stage
-breakdown of the substeps that follow, and, over as many frames again, the kernel launches and the
+breakdown of the substeps that follow, and, over ten frames more, the kernel launches and the
 device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
 One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms``
 times one substep of the same state, stage by stage, with each optional term (vorticity confinement,
@@ -40,6 +40,9 @@ from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study import sweep as speed_error
 from pbf.study.common import StageTimer, TransferCounter, dam_break, stage_breakdown, timed
 
+COUNTED_FRAMES = 10
+"""``sizes``: frames whose launches and reads are counted, after the timed ones."""
+
 
 def run_size(
     particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(), device_decisions: bool = False
@@ -65,7 +68,7 @@ def run_size(
     stages = stage_breakdown(sim, 9)
     substeps = 0
     with TransferCounter() as counter:
-        for _ in range(frames):
+        for _ in range(min(frames, COUNTED_FRAMES)):
             sim.step()
             substeps += sim.frame_substeps
     median_ms = statistics.median(substep_ms)
