@@ -387,9 +387,12 @@ def _cuda_free_bytes() -> int | None:
 def device_memory_bytes() -> int:
     """Memory the running backend can still give a Simulation's fields, bytes: the CUDA device's free
     memory (else its total), a hardware Vulkan device's largest device-local heap, and the host's free
-    memory on the CPU backend, on Metal (unified memory) and on a software Vulkan driver. The memory
-    check before allocation (``pbf.solver.model``) compares a scene's need against it."""
-    device = running_device()
+    memory on the CPU backend, on Metal (unified memory), on a software Vulkan driver and before any
+    backend has started. The memory check before allocation (``pbf.solver.model``) compares a scene's
+    need against it."""
+    if _started is None:
+        return host_available_bytes()
+    device = _started
     if device.arch == "cuda":
         return _cuda_free_bytes() or device.memory_bytes or host_available_bytes()
     if device.memory_bytes:
