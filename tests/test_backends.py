@@ -9,8 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from pbf.scene import SceneError, load_scene
 from pbf.solver import backend
 from pbf.solver.backend import BackendError, Device
+from pbf.solver.model import Model
 
 SOLVER = Path(backend.__file__).parent
 CUDA = Device("cuda", "NVIDIA Test GPU", False, 8 << 30)
@@ -114,6 +116,19 @@ def test_device_memory_of_a_gpu_is_its_own(monkeypatch):
     monkeypatch.setattr(backend, "_started", CUDA)
     monkeypatch.setattr(backend, "_cuda_free_bytes", lambda: 3 << 30)
     assert backend.device_memory_bytes() == 3 << 30
+
+
+def test_the_memory_check_before_allocation_reads_the_gpus_memory(monkeypatch):
+    # The seed scene needs a few MB: refused on a GPU with 1 MB free, named as the device's memory,
+    # before anything is allocated; the host's memory plays no part.
+    monkeypatch.setattr(backend, "_started", CUDA)
+    monkeypatch.setattr(backend, "_cuda_free_bytes", lambda: 1 << 20)
+    monkeypatch.setattr(backend, "host_available_bytes", lambda: 1 << 40)
+    with pytest.raises(SceneError, match=r"key 'fluid.spacing_m': 8,000 particles .* GiB of .*'s memory"):
+        Model.from_scene(load_scene("dam_break"))
+    monkeypatch.setattr(backend, "_cuda_free_bytes", lambda: 8 << 30)
+    monkeypatch.setattr(backend, "host_available_bytes", lambda: 1 << 20)
+    assert Model.from_scene(load_scene("dam_break")).capacity == 8000
 
 
 @pytest.mark.parametrize(

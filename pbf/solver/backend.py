@@ -400,6 +400,15 @@ def device_memory_bytes() -> int:
     return host_available_bytes()
 
 
+def memory_place() -> str:
+    """Where :func:`device_memory_bytes` looks, in words for a message."""
+    if _started is None or _started.arch not in GPU_ARCHES:
+        return "free on this computer"
+    if _started.arch == "cuda" or _started.memory_bytes:
+        return f"of {_started.name}'s memory"
+    return "free on this computer, which the device shares"
+
+
 def restart_backend() -> None:
     """Free every Taichi field and compiled kernel of this process and start the same backend again.
 

@@ -18,7 +18,6 @@ import dataclasses
 import difflib
 import math
 import numbers
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,7 +35,7 @@ from pbf.scene import (
     block_counts,
 )
 from pbf.scene.schema import _num, _show
-from pbf.solver import acceleration, sph
+from pbf.solver import acceleration, backend, sph
 
 Vec3 = tuple[float, float, float]
 
@@ -436,11 +435,9 @@ def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
 
 
 def available_memory_bytes() -> int:
-    """Physical memory that is free now (Linux/macOS), falling back to 8 GiB where it cannot be read."""
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return 8 << 30
+    """Memory the fields can still take: the GPU's on a GPU backend, the host's free memory on the CPU
+    backend and before a backend has started (``pbf.solver.backend.device_memory_bytes``)."""
+    return backend.device_memory_bytes()
 
 
 @dataclass(frozen=True)
@@ -565,7 +562,7 @@ def _check_memory(scene: Scene, particles: int, cells: int) -> None:
             culprit, remedy = "container.max_m", "use a smaller container or a larger spacing"
         raise SceneError(
             f"{scene.source}: key '{culprit}': {particles:,} particles and {cells:,} grid cells need about "
-            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB free; {remedy}"
+            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB {backend.memory_place()}; {remedy}"
         )
     _check_indices(scene, particles, cells)
 

@@ -118,8 +118,8 @@ class Simulation:
         hook: StageHook | None = None,
     ):
         scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
+        self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
         self.model = Model.from_scene(scene)  # validates memory before Taichi allocates anything
-        self.backend = start_backend(arch, quiet=quiet)
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
