@@ -1,6 +1,7 @@
 """Our PBF against SPlisHSPlasH 2.19's DFSPH and PBF on the seed dam break: cost and density error.
 
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --match            # all of it
+    python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --sloshing         # the standing wave's decay
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --methods dfsph \\
         --param maxError=0.01 --param "maxError=0.1,maxIterations=50" \\
         --ours "substeps=4,iterations=4" "substeps=4,target=0.001,max_iterations=30" --seconds 0.25
@@ -56,6 +57,15 @@ Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8
   more would only cost more. The settings found are then run again at ``--match-same-at`` kernel
   supports (2.0 spacings, SPlisHSPlasH's 4 particle radii) to show how much the support alone moves
   the ratio; ``--match-kernel-ratios`` runs the whole search at other supports.
+* ``--sloshing``: instead of the dam break, the standing wave of ``pbf.study.damping`` in each
+  ``--methods`` and in ours: the ``sloshing`` preset's tank and water (1,950 particles), settled for
+  a second (velocities × 0.9 after each step, as ours settles), then given its first sloshing mode's
+  linear velocity field at 10 mm amplitude, and followed three periods at SPlisHSPlasH's fixed step
+  of a quarter of our frame (ours: the preset's four substeps). Its container is one spacing wider
+  in x and z, so that its boundary particles, on the walls, stand one spacing from the water as in
+  its dam break; the mode is placed on the water's own extent. Both are measured alike: the mode's
+  amplitude in the particles' velocities every frame, and its decay per period fitted to the extrema
+  (``pbf.study.damping.decay_per_period``).
 * Times on a shared machine swing several-fold (SPlisHSPlasH's most: DFSPH at maxError 0.01 took
   26 to 264 ms per step in runs of the same day); the errors hardly do (ours repeat to the bit;
   SPlisHSPlasH's mean errors to 1%, its max errors to a fifth, and its PBF loses 5 to 13 particles
@@ -630,6 +640,152 @@ def match(
     return best, tried
 
 
+# ----------------------------------------------------------------------------- the standing wave
+
+# Run inside SPlisHSPlasH's own environment: the sloshing tank settled, the mode imposed, its amplitude
+# written every frame (argv: scene file, output folder, result .npy, settle steps, steps per frame,
+# JSON of the mode: k, omega, depth, the water's lower corner, amplitude).
+SPLASH_SLOSHING = r"""
+import json, math, sys
+import numpy as np
+import pysplishsplash as sph
+scene, out, result = sys.argv[1], sys.argv[2], sys.argv[3]
+settle, per_frame, mode = int(sys.argv[4]), int(sys.argv[5]), json.loads(sys.argv[6])
+base = sph.Exec.SimulatorBase()
+base.init(["splash", "--no-gui", "--no-initial-pause", "--output-dir", out, scene], "sloshing")
+base.initSimulation()
+fluid = sph.Simulation.getCurrent().getFluidModel(0)
+n = fluid.numActiveParticles()
+k, omega, depth, lower, amplitude = mode["k"], mode["omega"], mode["depth"], np.array(mode["lower"]), mode["amplitude"]
+def field(x, a):
+    y = np.clip(x[:, 1] - lower[1], 0.0, None)
+    c = a * omega / math.sinh(k * depth)
+    u = np.zeros_like(x)
+    u[:, 0] = -c * np.cosh(k * y) * np.sin(k * (x[:, 0] - lower[0]))
+    u[:, 1] = c * np.sinh(k * y) * np.cos(k * (x[:, 0] - lower[0]))
+    return u
+state = {"step": 0, "amplitudes": []}
+def step():
+    s = state["step"]; state["step"] += 1
+    if s < settle:
+        for i in range(n):
+            fluid.setVelocity(i, 0.9 * np.array(fluid.getVelocity(i)))
+        return
+    x = np.array([fluid.getPosition(i) for i in range(n)])
+    if s == settle:
+        for i, u in enumerate(field(x, amplitude)):
+            fluid.setVelocity(i, u)
+    if (s - settle) % per_frame == 0:
+        v = np.array([fluid.getVelocity(i) for i in range(n)])
+        u = field(x, 1.0)
+        state["amplitudes"].append(float((v * u).sum() / (u * u).sum()))
+        np.save(result, np.array(state["amplitudes"]))
+base.setTimeStepCB(step)
+base.runSimulation()
+base.cleanup()
+"""
+
+
+def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> tuple[np.ndarray, np.ndarray]:
+    """The standing wave in SPlisHSPlasH (module docstring, --sloshing): (times, the mode's amplitude)."""
+    from pbf.study import damping
+
+    scene = load_scene(damping.PRESET)
+    spacing, frame_dt = scene.fluid.spacing_m, scene.time.frame_dt_s
+    per_frame = scene.time.substeps
+    dt = frame_dt / per_frame
+    block = scene.fluid.blocks[0]
+    lower, upper = np.array(block.min_m), np.array(block.max_m)
+    container_upper = np.array(scene.container.max_m) + np.array([spacing, 0.0, spacing])
+    length, depth, width = upper - lower
+    k, omega = damping.sloshing_mode(length, depth, float(np.linalg.norm(scene.gravity_m_s2)))
+    settle = round(1.0 / dt)
+    stop = (settle + math.ceil(periods * 2 * math.pi / omega / dt) + 1) * dt
+    simulation_method, block_name, defaults = SPLASH_METHODS[method]
+    # The water one spacing inside the boundary particles in x and z (its dam break's placement);
+    # its first layer stands one spacing above the floor's.
+    water_lower = np.array([spacing, spacing, spacing])
+    config = {
+        "Configuration": {
+            "particleRadius": spacing / 2,
+            "simulationMethod": simulation_method,
+            "gravitation": list(scene.gravity_m_s2),
+            "timeStepSize": dt,
+            "cflMethod": 0,
+            "boundaryHandlingMethod": 0,
+            "stopAt": stop,
+            "enableVTKExport": False,
+            block_name: defaults,
+        },
+        "Materials": [
+            {
+                "id": "Fluid",
+                "density0": scene.fluid.rest_density_kg_m3,
+                "viscosityMethod": 0,
+                "vorticityMethod": 0,
+                "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0},
+            }
+        ],
+        "RigidBodies": [
+            {
+                "geometryFile": str(splash.parent / "data" / "models" / "UnitBox.obj"),
+                "translation": list(container_upper / 2),
+                "scale": list(container_upper),
+                "isDynamic": False,
+                "isWall": True,
+                "mapInvert": True,
+                "mapThickness": 0.0,
+                "mapResolution": [40, 30, 20],
+            }
+        ],
+        "FluidBlocks": [{"denseMode": 0, "start": [0.0, 0.0, 0.0], "end": list(water_lower + upper - lower)}],
+    }
+    mode = {"k": k, "omega": omega, "depth": float(depth), "lower": list(water_lower - spacing / 2), "amplitude": 0.01}
+    env = dict(os.environ, LD_PRELOAD=SYSTEM_GLDISPATCH, OMP_NUM_THREADS=str(threads))
+    with tempfile.TemporaryDirectory() as tmp:
+        path, result = Path(tmp) / "sloshing.json", Path(tmp) / "amplitudes.npy"
+        path.write_text(json.dumps(config))
+        run = subprocess.run(
+            [
+                splash_interpreter(splash),
+                "-c",
+                SPLASH_SLOSHING,
+                str(path),
+                str(Path(tmp) / "out"),
+                str(result),
+                str(settle),
+                str(per_frame),
+                json.dumps(mode),
+            ],
+            env=env,
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        if run.returncode or not result.exists():
+            sys.exit(
+                f"SPlisHSPlasH's standing wave failed ({run.returncode}):\n{run.stdout[-2000:]}{run.stderr[-2000:]}"
+            )
+        amplitudes = np.load(result)
+    return np.arange(len(amplitudes)) * frame_dt, amplitudes
+
+
+def sloshing_comparison(splash: Path, methods: list[str], threads: int, periods: float = 3.0) -> None:
+    """The standing wave's decay per period in SPlisHSPlasH's methods and in ours (``--sloshing``)."""
+    from pbf.study import damping
+
+    print(
+        f"{'run':<34} {'decay per period':>16} {'period':>8}   (linear theory: period "
+        f"{2 * math.pi / damping.sloshing_mode(0.45, 0.195, 9.81)[1]:.3f} s)"
+    )
+    for method in methods:
+        times, amplitudes = splash_sloshing(splash, method, periods, threads)
+        decay, _, period = damping.decay_per_period(times, amplitudes)
+        print(f"{'SPlisHSPlasH ' + SPLASH_METHODS[method][1]:<34} {decay:>16.1%} {period:>7.3f}s")
+    ours = damping.sloshing(periods=periods)
+    print(f"{'ours (the sloshing preset)':<34} {ours.decay_per_period:>16.1%} {ours.period_s:>7.3f}s")
+
+
 # ----------------------------------------------------------------------------- output
 
 HEADER = (
@@ -758,6 +914,11 @@ def main(argv=None):
     )
     parser.add_argument("--match", action="store_true", help="find our cheapest grid setting at equal or lower error")
     parser.add_argument(
+        "--sloshing",
+        action="store_true",
+        help="instead: the standing wave's decay per period in --methods and ours (pbf.study.damping)",
+    )
+    parser.add_argument(
         "--match-kernel-ratios",
         type=float,
         nargs="+",
@@ -791,7 +952,11 @@ def main(argv=None):
     args = parser.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)  # progress shows as it comes when written to a file
     if not args.splash.exists():
-        parser.error(f"--splash: {args.splash} does not exist")
+        parser.error(
+            f"--splash: {args.splash} does not exist; SPlisHSPlasH is installed apart from this project: "
+            f"python3 -m venv /tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 'numpy<2', "
+            f"then --splash /tmp/sphvenv/bin/splash"
+        )
     if args.threads < 1 or args.repeats < 1 or args.seconds <= 0:
         parser.error("--threads and --repeats must be positive integers, --seconds positive")
     try:
@@ -801,6 +966,8 @@ def main(argv=None):
     except (ValueError, SceneError) as error:
         parser.error(str(error))
     start_backend("cpu", cpu_threads=args.threads)
+    if args.sloshing:
+        return sloshing_comparison(args.splash, args.methods, args.threads)
     started = time.perf_counter()
     print(f"SPlisHSPlasH: {args.splash}; {args.threads} threads; {args.seconds:g} simulated s; Δt {args.dt_ms:g} ms")
 

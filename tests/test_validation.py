@@ -96,9 +96,16 @@ def test_sweep_writes_its_table_and_plot(tmp_path):
 
 def test_validate_command_line():
     # None named means all (Python 3.11's argparse rejected that when it checked the choices).
-    assert validate.parse_args([]).cases == ("martin_moyce", "hydrostatic", "wave_tank")
+    assert validate.parse_args([]).cases == ("martin_moyce", "hydrostatic", "wave_tank", "spheric2")
     assert validate.parse_args(["hydrostatic"]).cases == ["hydrostatic"]
-    for bad in (["--divisors", "10"], ["--divisors", "0"], ["--frames", "0"], ["dam_break"]):
+    for bad in (
+        ["--divisors", "10"],
+        ["--divisors", "0"],
+        ["--frames", "0"],
+        ["dam_break"],
+        ["--spheric-across", "3"],
+        ["--spheric-seconds", "9"],
+    ):
         with pytest.raises(SystemExit):
             validate.parse_args(bad)
 

@@ -305,6 +305,7 @@ def sweep(args):
             args.rest_settle,
             args.rest_frames,
             args.set,
+            args.flow,
         )
         speed_error.write_csv(points, args.csv)
     speed_error.print_table(points)
@@ -352,6 +353,12 @@ def main(argv=None):
     parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms)")
     parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
     parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
+    parser.add_argument(
+        "--flow",
+        action="store_true",
+        help="sweep: also run each setting on the flow cases "
+        "(SPHERIC Test 2, the wave tank, the standing wave; pbf.study.sweep.flow_measures)",
+    )
     parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
     parser.add_argument(
         "--set",

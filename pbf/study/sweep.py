@@ -1,7 +1,7 @@
 """Speed against error: the solver settings that trade one for the other, swept and plotted.
 
     python -m pbf.study.bench sweep [--sizes 8000 64000] [--iterations 1 2 3 4 6 8 12] [--substeps 1 2 4]
-                              [--target 0.005] [--frames 60] [--csv docs/speed_vs_error.csv]
+                              [--target 0.005] [--frames 60] [--flow] [--csv docs/speed_vs_error.csv]
                               [--plot docs/speed_vs_error.png]
 
 Each point is a dam break (the seed preset, spacing scaled to the particle count) run for ``frames``
@@ -12,8 +12,16 @@ drift of the same setting on a tank at rest. One more point per substep count st
 the mean error falls under ``--target`` (at most the largest iteration count). The plot puts error
 against time per frame on log axes and joins each size's Pareto front: the points that no other
 point beats on both.
+
+With ``--flow`` each setting is also run on the flow cases (:func:`flow_measures`, at their presets'
+own particle counts, the setting's iterations, substeps and target applied to them): SPHERIC Test 2
+(the rms errors of H2 and H4 over their ranges and the delay of the reflected wave at H4, over the
+first ``FLOW_SPHERIC_SECONDS``), the wave tank's height over Biésel's two depths from the piston, and
+the standing wave's decay per period (``pbf.study.damping``). The plot then gains a panel of those
+against the same time per frame, so that a setting is chosen on its flow as well as its density.
 """
 
+import math
 import statistics
 from dataclasses import asdict, dataclass, fields
 
@@ -48,6 +56,15 @@ class Point:
     """(E_end − E_start) / (M g H) on the tank at rest, E = kinetic + potential energy."""
     rest_max_speed_m_s: float
     pareto: bool = False
+    spheric_h2_rms: float = math.nan
+    """SPHERIC Test 2, the ``dam_break_obstacle`` preset with this setting: rms(H2 − measured) / measured range."""
+    spheric_h4_rms: float = math.nan
+    spheric_return_delay_s: float = math.nan
+    """The reflected wave's return at H4, simulated − measured (full-scale s)."""
+    wave_height_ratio: float = math.nan
+    """The ``wave_tank`` preset with this setting: H / H_Biésel two depths from the piston."""
+    sloshing_decay: float = math.nan
+    """The ``sloshing`` preset's standing wave with this setting: amplitude lost per period."""
 
 
 def configure(sim: Simulation, iterations: int, substeps: int, target: float) -> None:
@@ -102,6 +119,42 @@ def run_rest(sim: Simulation, settle_frames: int, frames: int) -> dict:
     return {"rest_energy_drift": (energy(sim) - start) / scale, "rest_max_speed_m_s": sim.stats()["max_speed_m_s"]}
 
 
+FLOW_SPHERIC_SECONDS = 3.4
+"""Full-scale seconds of SPHERIC Test 2 a sweep point runs: past the reflected wave's return at H4 (2.74 s)."""
+
+
+def flow_overrides(scene, iterations: int, substeps: int, target: float) -> list[str]:
+    """A sweep setting as overrides of a flow preset: its iterations (all of them without a target),
+    substeps and target; the preset's least iterations kept where the setting allows them."""
+    least = iterations if target == 0.0 else min(scene.solver.min_iterations, iterations)
+    return [
+        f"solver.iterations={iterations}",
+        f"solver.min_iterations={least}",
+        f"time.substeps={substeps}",
+        f"solver.target_density_error={target!r}",
+    ]
+
+
+def flow_measures(iterations: int, substeps: int, target: float, overrides=()) -> dict:
+    """The flow figures of one setting (module docstring)."""
+    from pbf.scene import load_scene
+    from pbf.study import damping, spheric, validate
+
+    def settings(preset):
+        return [*flow_overrides(load_scene(preset), iterations, substeps, target), *overrides]
+
+    figures = spheric.run(None, FLOW_SPHERIC_SECONDS, settings(spheric.PRESET)).figures
+    wave = validate.wave_tank(overrides=settings("wave_tank"))
+    slosh = damping.sloshing(settings(damping.PRESET), periods=3.0)
+    return {
+        "spheric_h2_rms": figures.rms_over_range["H2"],
+        "spheric_h4_rms": figures.rms_over_range["H4"],
+        "spheric_return_delay_s": figures.return_s[0] - figures.return_s[1],
+        "wave_height_ratio": wave.heights_m[0] / wave.expected_height_m,
+        "sloshing_decay": slosh.decay_per_period,
+    }
+
+
 def mark_pareto(points: list[Point]) -> None:
     """Flag, per particle count, the points no other point beats on both time per frame and mean error."""
     for p in points:
@@ -116,11 +169,15 @@ def mark_pareto(points: list[Point]) -> None:
 
 
 def sweep(
-    sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames, overrides=()
+    sizes, iteration_counts, substep_counts, target, frames, rest_settle, rest_frames, overrides=(), flow: bool = False
 ) -> list[Point]:
     settings = [(i, s, 0.0) for s in substep_counts for i in iteration_counts]
     if target > 0:
         settings += [(max(iteration_counts), s, target) for s in substep_counts]
+    flows = {}
+    if flow:
+        for setting in tqdm(settings, desc="flow cases", unit="setting"):
+            flows[setting] = flow_measures(*setting, overrides)
     points = []
     with tqdm(total=len(sizes) * len(settings), desc="sweep", unit="point") as bar:
         for particles in sizes:
@@ -135,6 +192,7 @@ def sweep(
                 figures = run_dam_break(dam, frames)
                 configure(tank, iterations, substeps, goal)
                 figures.update(run_rest(tank, rest_settle, rest_frames))
+                figures.update(flows.get((iterations, substeps, goal), {}))
                 points.append(Point(dam.particle_count, iterations, substeps, goal, **figures))
                 bar.update()
     mark_pareto(points)
@@ -156,6 +214,22 @@ def print_table(points: list[Point]) -> None:
             f"{p.peak_speed_m_s:>7.2f} {p.rest_energy_drift:>10.2e} {p.rest_max_speed_m_s:>7.3f} "
             f"{'*' if p.pareto else ''}"
         )
+    flowing = [p for p in points if not math.isnan(p.sloshing_decay)]
+    if flowing:
+        print(
+            f"\n{'iters':>5} {'subst':>5} {'target':>6} {'H2 rms':>7} {'H4 rms':>7} {'H4 return':>9} "
+            f"{'wave H/H_B':>10} {'slosh decay':>11}   (flow cases, their presets' particle counts)"
+        )
+        seen = set()
+        for p in flowing:
+            if (p.iterations, p.substeps, p.target_density_error) in seen:
+                continue
+            seen.add((p.iterations, p.substeps, p.target_density_error))
+            target = f"{p.target_density_error:.2%}" if p.target_density_error else "-"
+            print(
+                f"{p.iterations:>5} {p.substeps:>5} {target:>6} {p.spheric_h2_rms:>7.3f} {p.spheric_h4_rms:>7.3f} "
+                f"{p.spheric_return_delay_s:>+8.2f}s {p.wave_height_ratio:>10.2f} {p.sloshing_decay:>10.1%}"
+            )
 
 
 def write_csv(points: list[Point], path) -> None:
@@ -173,9 +247,12 @@ def read_csv(path) -> list[Point]:
     import csv
 
     types = {f.name: f.type for f in fields(Point)}
-    convert = {int: int, float: float, bool: lambda text: text == "True"}
-    with path.open(newline="") as f:
-        return [Point(**{k: convert[types[k]](v) for k, v in row.items()}) for row in csv.DictReader(f)]
+    convert = {"int": int, "float": float, "bool": lambda text: text == "True"}
+    with path.open(newline="") as f:  # a CSV from before the flow columns reads them as NaN
+        return [
+            Point(**{k: convert[str(getattr(types[k], "__name__", types[k]))](v) for k, v in row.items() if k in types})
+            for row in csv.DictReader(f)
+        ]
 
 
 def plot(points: list[Point], path, title: str) -> None:
@@ -185,7 +262,12 @@ def plot(points: list[Point], path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
+    flowing = [p for p in points if not math.isnan(p.sloshing_decay)]
+    if flowing:
+        fig, (ax, flow_ax) = plt.subplots(1, 2, figsize=(15, 5.5), constrained_layout=True)
+        plot_flow(flow_ax, flowing)
+    else:
+        fig, ax = plt.subplots(figsize=(8, 5.5), constrained_layout=True)
     shapes = "o^sDvPXh"
     markers = {s: shapes[k % len(shapes)] for k, s in enumerate(sorted({p.substeps for p in points}))}
     for k, particles in enumerate(sorted({p.particles for p in points})):
@@ -251,3 +333,42 @@ def plot(points: list[Point], path, title: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def plot_flow(ax, points: list[Point]) -> None:
+    """The flow measures of each setting against the time per frame of the smallest dam break: each
+    measure over its goal (SPHERIC's H4 return within 0.1 s, H2 and H4 rms within 6% of their ranges,
+    the wave tank at 0.9 of Biésel's height or more: its shortfall over 0.1), so that 1 is the goal."""
+    import matplotlib
+
+    smallest = min(p.particles for p in points)
+    mine = sorted((p for p in points if p.particles == smallest), key=lambda p: p.ms_per_frame)
+    measures = {
+        "H4 return delay / 0.1 s": lambda p: abs(p.spheric_return_delay_s) / 0.1,
+        "H2 rms / 0.06": lambda p: p.spheric_h2_rms / 0.06,
+        "H4 rms / 0.06": lambda p: p.spheric_h4_rms / 0.06,
+        "wave tank (1 − H/H_Biésel) / 0.1": lambda p: (1 - p.wave_height_ratio) / 0.1,
+        "standing wave's decay per period / 0.13": lambda p: p.sloshing_decay / 0.13,
+    }
+    for marker, (label, value) in zip("os^Dv", measures.items()):
+        ax.scatter([p.ms_per_frame for p in mine], [value(p) for p in mine], marker=marker, label=label, alpha=0.8)
+    for p in mine:
+        tag = f"{p.iterations}i/{p.substeps}s" + (f"/{p.target_density_error:.2%}" if p.target_density_error else "")
+        ax.annotate(
+            tag,
+            (p.ms_per_frame, measures["H4 return delay / 0.1 s"](p)),
+            xytext=(3, 3),
+            textcoords="offset points",
+            fontsize=6,
+        )
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(f"median time per frame of the {smallest:,}-particle dam break (ms)")
+    ax.set_ylabel("flow error over its goal (1: at the goal)")
+    ax.yaxis.set_major_locator(matplotlib.ticker.FixedLocator([0.25, 0.5, 1, 2, 4, 8, 16]))
+    ax.yaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_title("Flow: SPHERIC Test 2, the wave tank and the standing wave at each setting", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)

@@ -1,8 +1,8 @@
-"""Validation against experiment and theory: the Martin & Moyce dam break, a hydrostatic tank and a
-wave maker.
+"""Validation against experiment and theory: the Martin & Moyce dam break, a hydrostatic tank, a
+wave maker and the SPHERIC Test 2 dam break against a box.
 
-    python -m pbf.study.validate [martin_moyce] [hydrostatic] [wave_tank] [--divisors 9 12 24] [--frames 600]
-                                 [--out docs]
+    python -m pbf.study.validate [martin_moyce] [hydrostatic] [wave_tank] [spheric2] [--divisors 9 12 24]
+                                 [--frames 600] [--spheric-across N] [--spheric-seconds 7.39] [--out docs]
 
 ``martin_moyce`` runs the ``martin_moyce`` preset at spacings a/n for each n of ``--divisors``, tracks
 the surge front (the largest x reached by water, spray ignored) against dimensionless time
@@ -24,6 +24,7 @@ import numpy as np
 
 from pbf.scene import load_scene
 from pbf.solver import Simulation, start_backend
+from pbf.study import spheric
 from pbf.study.common import colour_surface_height, fill_height_m
 
 MARTIN_MOYCE_CSV = Path(__file__).resolve().parents[2] / "docs" / "data" / "martin_moyce_1952_surge_front.csv"
@@ -352,7 +353,7 @@ def write_curves(path: Path, columns: dict) -> None:
 def parse_args(argv=None) -> argparse.Namespace:
     """The command line; no cases named means all of them."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    cases = ("martin_moyce", "hydrostatic", "wave_tank")
+    cases = ("martin_moyce", "hydrostatic", "wave_tank", "spheric2")
     # Checked by hand: Python 3.11's argparse rejects an empty list of a positional that has choices.
     parser.add_argument("cases", nargs="*", help=f"any of {', '.join(cases)} (default: all)")
     parser.add_argument(
@@ -363,6 +364,18 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="martin_moyce: spacings a/n (n a multiple of 3: the tank is 2a/3 deep)",
     )
     parser.add_argument("--frames", type=int, default=600, help="hydrostatic: frames to run (60 per second)")
+    parser.add_argument(
+        "--spheric-across",
+        type=int,
+        default=None,
+        help="spheric2: particles over the tank's width (default: the preset's spacing)",
+    )
+    parser.add_argument(
+        "--spheric-seconds",
+        type=float,
+        default=7.39,
+        help="spheric2: full-scale seconds to run (the measurements end at 7.39)",
+    )
     parser.add_argument("--arch", default=None)
     parser.add_argument("--out", type=Path, default=Path("docs"))
     args = parser.parse_args(argv)
@@ -370,6 +383,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     if unknown:
         parser.error(f"unknown case {', '.join(unknown)}: choose from {', '.join(cases)}")
     args.cases = args.cases or cases
+    if args.spheric_across is not None and not 8 <= args.spheric_across <= 200:
+        parser.error(f"--spheric-across: {args.spheric_across}; allowed: 8 to 200 particles over the width")
+    if not 0.5 <= args.spheric_seconds <= 7.39:
+        parser.error(f"--spheric-seconds: {args.spheric_seconds}; allowed: 0.5 to 7.39 s (the measured span)")
     if args.frames < 1:
         parser.error(f"--frames: {args.frames} frames; allowed: 1 or more")
     bad = [n for n in args.divisors if n % 3 or n < 3]
@@ -420,6 +437,25 @@ def main(argv=None):
             {"time_s": run.times_s, **{f"eta_m_at_{g:.2f}_m": e for g, e in zip(run.gauges_m, run.elevation_m)}},
         )
         plot_wave_tank(run, args.out / "wave_tank.png")
+    if "spheric2" in args.cases:
+        data = spheric.measured()
+        run = spheric.run(args.spheric_across, args.spheric_seconds, data=data)
+        print(
+            f"spheric2, {run.particles:,} particles (spacing {run.spacing_m * 1e3:.3f} mm at scale "
+            f"1/{1 / run.scale:g}; water {run.volume_error:+.2%} of the experiment's volume), "
+            f"{run.substeps_per_frame:.2f} substeps and {run.seconds_per_frame:.3f} s a frame:"
+        )
+        for name, simulated, expected in spheric.summary_rows(run):
+            print(f"  {name:<40} {simulated:>24}" + (f"   measured {expected}" if expected else ""))
+        write_curves(
+            args.out / "spheric2.csv",
+            {
+                "time_s": run.times_s,
+                **{f"{n}_m": v for n, v in run.heights_m.items()},
+                **{f"{n}_Pa": v for n, v in run.pressures_pa.items()},
+            },
+        )
+        spheric.plot(run, data, args.out / "spheric2_heights.png", args.out / "spheric2_pressures.png")
     print(f"wrote plots and curves under {args.out}/")
 
 
