@@ -49,3 +49,23 @@ def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
     used, reads, _ = frames(sim, 3)
     assert used == [3, 3, 3]
     assert reads == pytest.approx(1.0 / sim.frame_substeps)  # the frame's one read: the CFL limit's speed
+
+
+def test_a_pouring_nozzle_adds_no_read_to_the_substep():
+    # A stream into an empty box: every substep appends a layer or more (the drowned check, the slots
+    # and the live count on the device), yet the substep still reads the device once at most.
+    scene = small_dam_break(iterations=3)
+    scene["solver"].update(target_density_error=0.0, min_iterations=1)
+    scene["fluid"]["blocks"] = []
+    scene["emitters"] = [
+        {"position_m": [0.4, 0.6, 0.2], "direction": [0, -1, 0], "radius_m": 0.07, "speed_m_s": 2.0, "end_s": 1.0}
+    ]
+    with decisions_on_device():
+        sim = Simulation(scene)
+    counts = []
+    for _ in range(3):
+        with TransferCounter() as counter:
+            sim.step()
+        counts.append(counter.reads / sim.frame_substeps)
+        assert sim.particle_count == sim.emitters.emitted[0] * len(sim.emitters.sites[0])  # none drowned yet
+    assert max(counts) <= 1.0 and sim.particle_count > 0

@@ -34,9 +34,17 @@ def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
     return np.array([spacing * (i * u + j * w) for i, j in grid]).reshape(-1, 3)
 
 
+LAYERS_PER_LAUNCH = 16
+"""Layers one launch appends at most; more due at once (after a restore, or a fast stream) take more
+launches, none of them a read."""
+
+
 @ti.data_oriented
 class Emitters:
-    """Appends each emitter's due layers to the state."""
+    """Appends each emitter's due layers to the state, on the device: the host knows from the clock
+    which layers are due; whether one is drowned, where it goes and how many particles are live stay on
+    the device, so an emitting substep reads nothing back (``Simulation.particle_count`` reads the
+    count when asked)."""
 
     def __init__(self, emitters, spacing_m: float, state, grid=None):
         self.emitters = emitters
@@ -46,9 +54,20 @@ class Emitters:
         """Slots allocated: no append writes past them."""
         self.grid = grid
         """The neighbour grid (``pbf.solver.grid``) of the last sort, to find water at a nozzle; None: no check."""
+        self.checks_water = grid is not None
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
         self.emitted = [0] * len(emitters)
         """Layers each emitter has added so far."""
+        self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]
+        """Where each emitter's sites start in ``site_offsets``."""
+        if self.offsets[-1]:
+            self.site_offsets = ti.Vector.field(3, ti.f32, self.offsets[-1])
+            """Every nozzle's sites, emitter after emitter, from its centre (m)."""
+            self.site_offsets.from_numpy(np.concatenate(self.sites).astype(np.float32))
+            self.taken = ti.field(ti.i32, LAYERS_PER_LAUNCH * max(len(sites) for sites in self.sites))
+            """Per (layer, site) of a launch: 1 where water already lies within half a spacing."""
+            self.layer_taken = ti.field(ti.i32, LAYERS_PER_LAUNCH)
+            """Per layer of a launch: 1 where any of its sites is taken (the layer is skipped)."""
 
     def layers_due(self, emitter: Emitter, time_s: float) -> int:
         """Layers emitted by ``time_s``: those with t_j ≤ time_s, at most the emitter's total."""
@@ -57,80 +76,92 @@ class Emitters:
         moved = (min(time_s, emitter.end_s) - emitter.start_s) * emitter.speed_m_s / self.spacing
         return min(int(math.floor(moved + 1e-9)) + 1, emitter.layers(self.spacing))
 
-    @ti.kernel
-    def _append(
-        self,
-        positions: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
-        velocities: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
-    ):
-        # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
-        # caller hands in (restore() also refuses emitted layers that could overflow the budget).
-        first = ti.min(ti.max(self.state.active[None], 0), self.capacity)
-        added = ti.min(positions.shape[0], self.capacity - first)
-        for k in range(added):
-            slot = first + k
-            self.state.x[slot] = positions[k]
-            self.state.v[slot] = velocities[k]
-            self.state.reset_new(slot)  # every other field at its initial value, the index in creation order
-        self.state.active[None] = first + added
-
-    @ti.kernel
-    def _occupied(
-        self,
-        sites: ti.types.ndarray(dtype=ti.math.vec3, ndim=1),
-        occupied: ti.types.ndarray(dtype=ti.i32, ndim=1),
-        radius: ti.f32,
-    ):
-        """occupied[k] = 1 where a live particle lies within ``radius`` of sites[k]. The cells within
-        the grid's reach (h) of the site's hold every particle that was within h at the last sort, and
-        none has moved a spacing since (time.max_cfl), so none within radius < h − max_cfl s is missed."""
+    @ti.func
+    def _water_within(self, p, radius):
+        """1 where a live particle lies within ``radius`` of p. The cells within the grid's reach (h) of
+        p's hold every particle that was within h at the last sort, and none has moved a spacing since
+        (time.max_cfl), so none within radius < h − max_cfl s is missed."""
         grid = self.grid
-        for k in range(sites.shape[0]):
-            p = sites[k]
-            c = grid.cell_of(p)
-            found = 0
-            for dx, dy, dz in ti.ndrange(
-                (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1)
-            ):
-                cell = c + ti.Vector([dx, dy, dz])
-                if all(cell >= 0) and all(cell < grid.resolution):
-                    linear = grid.linear(cell)
-                    for slot in range(grid.cell_start[linear], grid.cell_start[linear + 1]):
-                        if slot < self.state.active[None] and (self.state.x[slot] - p).norm_sqr() < radius * radius:
-                            found = 1
-            occupied[k] = found
+        c = grid.cell_of(p)
+        found = 0
+        for dx, dy, dz in ti.ndrange(
+            (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1)
+        ):
+            cell = c + ti.Vector([dx, dy, dz])
+            if all(cell >= 0) and all(cell < grid.resolution):
+                linear = grid.linear(cell)
+                for slot in range(grid.cell_start[linear], grid.cell_start[linear + 1]):
+                    if slot < self.state.active[None] and (self.state.x[slot] - p).norm_sqr() < radius * radius:
+                        found = 1
+        return found
 
-    def drowned(self, layers: list[np.ndarray]) -> list[bool]:
-        """Whether each layer's sites are taken by water already (one small read from the device)."""
-        if self.grid is None or not layers:
-            return [False] * len(layers)
-        sites = np.concatenate(layers).astype(np.float32)
-        occupied = np.zeros(len(sites), np.int32)
-        self._occupied(sites, occupied, 0.5 * self.spacing)
-        bounds = np.cumsum([0] + [len(layer) for layer in layers])
-        return [bool(occupied[a:b].any()) for a, b in itertools.pairwise(bounds)]
+    @ti.kernel
+    def _append_layers(
+        self,
+        first_site: ti.i32,
+        sites: ti.i32,
+        layers: ti.i32,
+        centre: ti.math.vec3,
+        direction: ti.math.vec3,
+        travelled: ti.f32,
+        velocity: ti.math.vec3,
+    ):
+        """Append ``layers`` layers of one nozzle's ``sites`` sites: layer j centred at centre +
+        (travelled − j s) direction, each skipped where water already lies at one of its sites (a
+        drowned nozzle). Every loop is parallel: over (layer, site), then over layers (each thread
+        reading its layer's sites), then over (layer, site) again; the live count is moved last."""
+        radius = 0.5 * self.spacing
+        for j, k in ti.ndrange(layers, sites):
+            p = centre + (travelled - j * self.spacing) * direction + self.site_offsets[first_site + k]
+            found = 0
+            if ti.static(self.checks_water):
+                found = self._water_within(p, radius)
+            self.taken[j * sites + k] = found
+        for j in range(layers):
+            found = 0
+            for k in range(sites):
+                found |= self.taken[j * sites + k]
+            self.layer_taken[j] = found
+        # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
+        # scene (restore() also refuses emitted layers that could overflow the budget).
+        for j, k in ti.ndrange(layers, sites):
+            if self.layer_taken[j] == 0:
+                before = 0  # layers kept ahead of this one
+                for i in range(j):
+                    before += 1 - self.layer_taken[i]
+                slot = ti.min(ti.max(self.state.active[None], 0), self.capacity) + before * sites + k
+                if slot < self.capacity:
+                    p = centre + (travelled - j * self.spacing) * direction + self.site_offsets[first_site + k]
+                    self.state.x[slot] = p
+                    self.state.v[slot] = velocity
+                    self.state.reset_new(slot)  # every other field at its initial value, the index in creation order
+        for _ in range(1):  # after every append has read the old count
+            kept = 0
+            for j in range(layers):
+                kept += 1 - self.layer_taken[j]
+            first = ti.min(ti.max(self.state.active[None], 0), self.capacity)
+            self.state.active[None] = ti.min(first + kept * sites, self.capacity)
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
         time since leaving the nozzle has carried it; the substep moves them on with everything else.
         When not ``pouring``, the layers due are skipped instead: turned back on, a nozzle resumes its
         stream rather than releasing everything it held back at once."""
-        positions, velocities = [], []
-        for k, (emitter, sites) in enumerate(zip(self.emitters, self.sites)):
+        for k, emitter in enumerate(self.emitters):
             due = self.layers_due(emitter, now_s)
             if not pouring:
                 self.emitted[k] = max(self.emitted[k], due)
-            direction = np.array(emitter.unit_direction())
-            for j in range(self.emitted[k], due):
-                travelled = emitter.speed_m_s * (now_s - emitter.start_s) - j * self.spacing
-                positions.append(np.array(emitter.position_m) + travelled * direction + sites)
-                velocities.append(np.broadcast_to(emitter.speed_m_s * direction, sites.shape))
-            self.emitted[k] = max(self.emitted[k], due)
-        if positions:
-            kept = [k for k, drowned in enumerate(self.drowned(positions)) if not drowned]
-            if kept:
-                # Only the new layers cross to the device (kernel arguments of their own size).
-                self._append(
-                    np.concatenate([positions[k] for k in kept]).astype(np.float32),
-                    np.concatenate([velocities[k] for k in kept]).astype(np.float32),
+            direction = emitter.unit_direction()
+            velocity = tuple(emitter.speed_m_s * d for d in direction)
+            for first in range(self.emitted[k], due, LAYERS_PER_LAUNCH):
+                travelled = emitter.speed_m_s * (now_s - emitter.start_s) - first * self.spacing
+                self._append_layers(
+                    self.offsets[k],
+                    len(self.sites[k]),
+                    min(LAYERS_PER_LAUNCH, due - first),
+                    emitter.position_m,
+                    direction,
+                    travelled,
+                    velocity,
                 )
+            self.emitted[k] = max(self.emitted[k], due)
