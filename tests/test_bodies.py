@@ -35,14 +35,14 @@ def inside(sim, row, half, margin=0.0):
     return np.all(np.abs(local) < np.asarray(half) + margin, axis=1)
 
 
-def hydrostatic_level(sim, away_from, reach):
-    """Where the frame's mean pressure, fitted linearly in height over the pool away from a body, falls
-    to zero: the level the water's own pressure says it stands at (m)."""
-    x, p = sim.positions(), sim.pressures()
-    far = np.max(np.abs(x[:, [0, 2]] - away_from), axis=1) > reach
-    rows = far & (x[:, 1] > 0.04) & (x[:, 1] < DEPTH - 0.04)
-    slope, intercept = np.polyfit(x[rows, 1], p[rows], 1)
-    return -intercept / slope
+def water_level(sim, row, half, pool_area=0.4 * 0.4):
+    """The pool's level with an upright box body floating in it (m): the height L at which the water's
+    volume, N V (V = m/ρ0 a particle's), fills the pool less the box's part below L,
+    N V = A L − a (L − y_bottom), A the pool's area and a the box's."""
+    area = 4 * half[0] * half[2]
+    bottom = row[1] - half[1]
+    volume = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
+    return (volume - area * bottom) / (pool_area - area)
 
 
 @pytest.mark.parametrize(
@@ -119,7 +119,7 @@ def test_a_box_heavier_than_water_sinks_and_rests_on_the_floor():
 @pytest.mark.slow
 def test_archimedes_a_floating_box_settles_at_its_draft():
     # A box of density 500 kg/m³, 0.12 m high and 0.2 m wide (stable upright), let go at its draft in a
-    # settled pool. Its draft below the level where the water's own pressure is zero, averaged over the
+    # settled pool. Its draft below the pool's level (where the water's volume puts it), averaged over the
     # last two thirds of a second, is ρb/ρ0 of its height: buoyancy out of the pressure, not a formula.
     half, density = (0.1, 0.06, 0.1), 500.0
     sim = Simulation(
@@ -131,13 +131,17 @@ def test_archimedes_a_floating_box_settles_at_its_draft():
         sim.step()
         if frame >= 20:
             row = sim.bodies.state()[0]
-            drafts.append((hydrostatic_level(sim, 0.2, half[0] + 0.05) - (row[1] - half[1])) / (2 * half[1]))
+            assert quaternion_matrix_np(row[3:7])[1, 1] > np.cos(np.radians(3.0))  # upright: the level holds
+            drafts.append((water_level(sim, row, half) - (row[1] - half[1])) / (2 * half[1]))
     assert np.mean(drafts) == pytest.approx(density / 1000, rel=DRAFT_TOLERANCE)
 
 
-DRAFT_TOLERANCE = 0.15
-"""The draft's measured error is +8-10% at 2.4 spacings of draft (docs/drafts/bodies.md): the first
-layer of water under a body leans partly on the collision, whose push the body does not feel."""
+DRAFT_TOLERANCE = 0.1
+"""The draft's measured error here is +6.6% (2.4 spacings of draft; docs/VALIDATION.md, Floating bodies):
+the first layer of water under the box sits closer to it than a lattice's half spacing, and thinner,
+as the collision keeps it only 0.2 r from the box; with the collision at r the error is below 1% but a
+box hitting water stops dead (docs/BODIES.md). The margin is for the frames' bobbing (0.014 of the
+height rms) and the compile's rounding."""
 
 
 @pytest.mark.slow
@@ -156,18 +160,19 @@ def test_momentum_passes_between_a_box_and_the_water():
     mass = sim.model.particle_mass_kg
     body_mass = 1000 * 0.1 * 0.12 * 0.12
     start = body_mass * 0.5
-    for _ in range(18):  # 0.3 s: the box has gone 0.12 m into the water
+    totals = []
+    for _ in range(24):  # 0.4 s: the box has gone 0.08 m into the water
         sim.step()
-    row = sim.bodies.state()[0]
-    water = mass * sim.velocities().sum(axis=0)
-    assert row[7] < 0.45  # the water did slow the box
-    total = water + body_mass * row[7:10]
-    assert abs(total[0] - start) < MOMENTUM_TOLERANCE * start
+        row = sim.bodies.state()[0]
+        totals.append(mass * sim.velocities()[:, 0].sum() + body_mass * row[7])
+    assert row[7] < 0.3  # the water did slow the box (to 0.22 m/s)
+    assert np.max(np.abs(np.array(totals) - start)) < MOMENTUM_TOLERANCE * start
 
 
-MOMENTUM_TOLERANCE = 0.3
-"""The share of the box's momentum that may be lost or gained: the collision pushes water out of the
-box's way without a reaction on it (docs/drafts/bodies.md has the measured figure)."""
+MOMENTUM_TOLERANCE = 0.05
+"""The share of the box's momentum that may be lost or gained in any frame: measured at most 1.6% (the
+pressure's reaction is taken at the particles' positions at the end of the substep, not where each
+iteration moved them); without the collision's reaction the total grew by 20% (docs/VALIDATION.md)."""
 
 
 @pytest.mark.slow

@@ -15,10 +15,13 @@ multiplier the iterations moved it by, combined with their weights). The body ta
     F_b = Σ_i V p_i ∇ψ_b(x_i),   τ_b = Σ_i (x_i − c_b) × V p_i ∇ψ_b(x_i),
 
 so buoyancy and impact come out of the pressure, and momentum passes between water and body through
-the same term that moves the water. The pair terms of the constraint are antisymmetric, so at rest
-the sum over the particles of every boundary's term balances the water's weight: a floating body
-carries exactly what its ghost pushes. The sum runs over fixed blocks of particles in index order,
-then over the blocks in order (no float atomics), so it is the same bit for bit on every run.
+the same term that moves the water. The collision moves water too: each projection records the
+bodies' share of its move, D_i, followed through the iterations' weighted recurrence as x* is
+(``record_start``), and the body that pushed takes −m D_i / Δt² (m the particle's mass), as v = (x* −
+x)/Δt gave the particle m D_i / Δt. The pair terms of the constraint are antisymmetric, so at rest
+the sum over the particles of every boundary's terms balances the water's weight: a floating body
+carries exactly what it pushes. The sum runs over fixed blocks of particles in index order, then
+over the blocks in order (no float atomics), so it is the same bit for bit on every run.
 
 The step. Each substep, before the water's prediction, each body is advanced with symplectic Euler
 under gravity and the reaction of the substep before (v += Δt (g + F/M), ω += Δt I⁻¹ (τ − ω × Iω) in
@@ -60,9 +63,12 @@ FRICTION = 0.4
 """Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
 COLLISION_FRACTION = 0.2
 """The collision keeps particle centres this fraction of the particle radius outside a body, less than at
-the walls: only the ghost's pressure reaches the body, so the water should lean on the ghost, not on
-the collision. A box held half in a pool felt 71% of its buoyancy with the full radius, 85% with half,
-90% with 0.2 (docs/drafts/bodies.md)."""
+the walls, so that the ghost's pressure, which grows as water comes near, meets a moving body rather
+than the collision, which hands the water in the way the body's whole velocity in one substep: with
+the full radius a box of water's density running into water at 0.5 m/s stopped dead (0.04 m/s in one
+substep) where sharing its momentum with an added mass of 0.7 times the water it displaces gives 0.3
+m/s (0.34 m/s at 0.2 r). The cost: a floating box sits 6.6% too deep, against 0.6% too shallow with
+the full radius (docs/VALIDATION.md, Floating bodies)."""
 CONTACT_SWEEPS = 8
 """Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
 corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
@@ -146,6 +152,13 @@ class Bodies:
         self.blocks = math.ceil(capacity / self.block)
         self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
         self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)
+        """The part of x*_i this substep that the bodies' collision accounts for, D_i (m; see record_start)."""
+        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)
+        """D_i as the iteration before left it (the two-step recurrence's other term)."""
+        self.pusher = ti.field(ti.i32, shape=capacity)
+        """The body that pushed particle i last this substep (−1: none); it takes the reaction of D_i."""
+        self.particle_mass = bodies.rest_density_kg_m3 * bodies.particle_volume_m3
         for b in range(self.count):
             self.sphere[b] = int(bodies.shapes[b] == "sphere")
             self.half[b] = bodies.half_extents_m[b]
@@ -496,10 +509,11 @@ class Bodies:
         return density, gradient
 
     @ti.func
-    def project(self, p):
-        """p moved out of every body grown by the particle radius, through the nearest face (a box) or
-        along the radius (a sphere)."""
+    def push_out(self, p):
+        """p moved out of every body grown by the collision distance, through the nearest face (a box)
+        or along the radius (a sphere); and the last body that moved it (−1: none)."""
         q = p
+        pusher = -1
         for b in range(self.count):
             centre = self.position[b]
             if self.sphere[b]:
@@ -511,6 +525,7 @@ class Bodies:
                     if distance > 1e-12:
                         direction = offset / distance
                     q = centre + reach * direction
+                    pusher = b
             else:
                 r = self.rotation[b]
                 local = r.transpose() @ (q - centre)
@@ -521,7 +536,47 @@ class Bodies:
                         if normal[a] != 0.0:
                             local[a] = normal[a] * grown[a]
                     q = centre + r @ local
+                    pusher = b
+        return q, pusher
+
+    @ti.func
+    def project(self, p):
+        """p moved out of every body (:meth:`push_out`)."""
+        q, _pusher = self.push_out(p)
         return q
+
+    # The collision's push, recorded per particle so that the body feels it (:meth:`gather`). A
+    # substep's x* is the prediction's, then the Jacobi iterations' two-step recurrence
+    # x^{k+1} = x^{k−1} + w (x̂^{k+1} − x^{k−1}) (``pbf.solver.acceleration``), each collided, then
+    # perhaps a step back between the last two. That is linear in the pushes, so the part of x* the
+    # pushes account for follows the same recurrence: D^{k+1} = D^{k−1} + w (D^k − D^{k−1}) + c^{k+1}, c
+    # the push of iteration k + 1, as the multiplier L follows it (``DensityConstraint.lam_total``).
+    # With v = (x* − x)/Δt the bodies gave particle i the momentum m D_i / Δt over the substep.
+
+    @ti.func
+    def record_start(self, i, pushed, pusher):
+        """x*_i predicted and collided, the bodies' push ``pushed``: the record starts from it."""
+        self.shift[i] = pushed
+        self.shift_before[i] = pushed
+        self.pusher[i] = pusher
+
+    @ti.func
+    def record_iteration(self, i, pushed, pusher, weight):
+        """A Jacobi iteration of weight w moved x*_i and the bodies pushed it by ``pushed``."""
+        now = self.shift[i]
+        base = ti.select(weight == 1.0, now, self.shift_before[i] + weight * (now - self.shift_before[i]))
+        self.shift_before[i] = now
+        self.shift[i] = base + pushed
+        if pusher >= 0:
+            self.pusher[i] = pusher
+
+    @ti.func
+    def record_between(self, i, pushed, pusher, fraction):
+        """x*_i stepped back by ``fraction`` toward the iteration before, then collided."""
+        now = self.shift[i]
+        self.shift[i] = now + fraction * (self.shift_before[i] - now) + pushed
+        if pusher >= 0:
+            self.pusher[i] = pusher
 
     @ti.func
     def velocity(self, p):
@@ -550,18 +605,22 @@ class Bodies:
         active: ti.template(),
         position_scale: ti.f32,
         velocity_scale: ti.f32,
+        push_scale: ti.f32,
     ):
         for b, k in ti.ndrange(self.count, self.blocks):
             force = ti.Vector([0.0, 0.0, 0.0])
             torque = ti.Vector([0.0, 0.0, 0.0])
             centre = self.position[b]
             for i in range(k * self.block, ti.min((k + 1) * self.block, active[None])):
+                f = ti.Vector([0.0, 0.0, 0.0])
                 _density, gradient = self._ghost_of(x[i], b)
                 if gradient.norm_sqr() > 0.0:
                     pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
                     f = self.volume * pressure * gradient
-                    force += f
-                    torque += (x[i] - centre).cross(f)
+                if self.pusher[i] == b:
+                    f += push_scale * self.shift[i]
+                force += f
+                torque += (x[i] - centre).cross(f)
             self.partial_force[b, k] = force
             self.partial_torque[b, k] = torque
         for b in range(self.count):
@@ -575,9 +634,10 @@ class Bodies:
 
     def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
         """The fluid's reaction on every body over the substep just solved, F_b = Σ_i V p_i ∇ψ_b(x_i)
-        and its torque (module docstring), p_i = −ρ0 h² (L_i/Δt² + Λ_i); the next :meth:`advance` applies it."""
+        − Σ_{i pushed by b} m D_i / Δt² and its torque (module docstring), p_i = −ρ0 h² (L_i/Δt² + Λ_i);
+        the next :meth:`advance` applies it."""
         scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
-        self._gather(x, lam_total, multiplier, active, scale / dt**2, scale)
+        self._gather(x, lam_total, multiplier, active, scale / dt**2, scale, -self.particle_mass / dt**2)
 
 
 def _padded(values: np.ndarray, fill=None) -> np.ndarray:

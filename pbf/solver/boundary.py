@@ -421,6 +421,53 @@ class Boundaries:
         return q
 
     @ti.func
+    def _project_pushed(self, p):
+        """:meth:`project` with bodies, and the bodies' part of the move with the body that made it: what
+        is left of their push once the container has taken back what they pushed through a wall (a
+        particle caught between a body and a wall does not move, so it lifts no body off the floor)."""
+        q = p
+        for k in ti.static(range(len(self.parts) - 1)):
+            q = self.parts[k].project(q)
+        before = q
+        q, pusher = self.bodies.push_out(q)
+        q = self.container.project(q)
+        return q, q - before, pusher
+
+    @ti.func
+    def project_start(self, p, i):
+        """:meth:`project` for particle i's x* as a substep predicts it; with bodies, the bodies' push
+        starts the record their reaction reads (``Bodies.record_start``)."""
+        q = p
+        if ti.static(self.with_bodies):
+            q, pushed, pusher = self._project_pushed(p)
+            self.bodies.record_start(i, pushed, pusher)
+        else:
+            q = self.project(p)
+        return q
+
+    @ti.func
+    def project_iteration(self, p, i, weight):
+        """:meth:`project` for particle i's x* after a Jacobi iteration of ``weight``, recorded alike."""
+        q = p
+        if ti.static(self.with_bodies):
+            q, pushed, pusher = self._project_pushed(p)
+            self.bodies.record_iteration(i, pushed, pusher, weight)
+        else:
+            q = self.project(p)
+        return q
+
+    @ti.func
+    def project_between(self, p, i, fraction):
+        """:meth:`project` for particle i's x* stepped back by ``fraction``, recorded alike."""
+        q = p
+        if ti.static(self.with_bodies):
+            q, pushed, pusher = self._project_pushed(p)
+            self.bodies.record_between(i, pushed, pusher, fraction)
+        else:
+            q = self.project(p)
+        return q
+
+    @ti.func
     def ghost(self, p, leave_out_mirrored: ti.template()):
         """Ghost density ρ/ρ0 behind every boundary within h of p, and its gradient (1/m); with
         ``leave_out_mirrored`` without the boundaries whose ghost is the fluid's mirror image."""

@@ -60,7 +60,7 @@ class Integrator:
         for i in range(self.state.active[None]):
             v = self.state.v[i] + dt * gravity
             self.state.v[i] = v
-            self.predicted.first[i] = self.boundaries.project(self.state.x[i] + dt * v)
+            self.predicted.first[i] = self.boundaries.project_start(self.state.x[i] + dt * v, i)
 
     @ti.kernel
     def damp(self, factor: ti.f32):
@@ -71,7 +71,7 @@ class Integrator:
     @ti.kernel
     def _predict(self, x_pred: ti.template(), dt: ti.f32):
         for i in range(self.state.active[None]):
-            x_pred[i] = self.boundaries.project(self.state.x[i] + dt * self.state.v[i])
+            x_pred[i] = self.boundaries.project_start(self.state.x[i] + dt * self.state.v[i], i)
 
     def predict(self, dt: float) -> None:
         """x* ← x + Δt v (line 3), kept inside the boundaries so the grid never sees a lost particle."""

@@ -128,6 +128,9 @@ class Simulation:
         """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
         self.bodies = self.boundaries.bodies
         """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
+        if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
+            self.state.carry(self.bodies.shift)
+            self.state.carry(self.bodies.pusher)
         self.grid = NeighbourGrid(model.grid, self.state.active)
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid)
         self.integrator = Integrator(self.state, self.boundaries)
