@@ -1,10 +1,16 @@
 """What rigid bodies cost: floating_boxes' frames with its four boxes against the same pool without
 them, runs interleaved frame by frame, medians; and the particles within reach of a body (those the
 reaction sums over). With ``momentum``: the momentum a box passes to water at rest, no gravity, no
-wall within reach (tests/test_bodies.py's scene). Prints a table.
+wall within reach (tests/test_bodies.py's scene). With ``archimedes``: boxes of 300-900 kg/m³ let go
+at their draft in a settled pool (the Archimedes test's scene), their drafts against the level the
+water's volume gives and against the level its pressure gives. With ``collision``: the draft of the
+500 kg/m³ box and the speed of the box the momentum scene drives into water, for collision distances
+from 0.2 to 1 particle radius (``pbf.solver.bodies.COLLISION_FRACTION``). Prints a table.
 
     PYTHONPATH=$PWD python benchmarks/bodies.py [frames]
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum
+    PYTHONPATH=$PWD python benchmarks/bodies.py archimedes
+    PYTHONPATH=$PWD python benchmarks/bodies.py collision
 """
 
 import sys
@@ -19,7 +25,7 @@ from pbf import Simulation, load_scene
 def main(frames: int = 20) -> None:
     with_bodies = load_scene("floating_boxes", ["time.settle_s=0"])
     without = replace(with_bodies, bodies=())
-    sims = {"4 bodies": Simulation(with_bodies, quiet=True), "no bodies": Simulation(without, quiet=True)}
+    sims = {"no bodies": Simulation(without, quiet=True), "4 bodies": Simulation(with_bodies, quiet=True)}
     for sim in sims.values():
         sim.step(2)  # compile
     times = {name: [] for name in sims}
@@ -37,17 +43,131 @@ def main(frames: int = 20) -> None:
         local = (x - row[0:3]) @ _rotation(row[3:7])
         gap = np.linalg.norm(np.maximum(np.abs(local) - body.half_extents(), 0.0), axis=1)
         near += int(np.sum(gap < h))
-    a, b = np.median(times["4 bodies"]), np.median(times["no bodies"])
-    print("| scene | particles | median ms/substep |\n|---|---|---|")
-    print(f"| floating_boxes, no bodies | {sims['no bodies'].particle_count:,} | {1e3 * b:.2f} |")
-    print(f"| floating_boxes, 4 bodies | {sim.particle_count:,} | {1e3 * a:.2f} |")
-    print(
-        f"\nper body: {1e3 * (a - b) / 4:.3f} ms/substep; particles within h of a body: {near:,} "
-        f"({1e6 * (a - b) / max(near, 1):.2f} µs per coupled particle per substep)"
-    )
+    base = np.median(times["no bodies"])
+    print("| floating_boxes | particles | median ms/substep | per body | per particle within h of a body |")
+    print("|---|---|---|---|---|")
+    for name in sims:
+        t = np.median(times[name])
+        extra = (
+            "| |" if name == "no bodies" else f"| {1e3 * (t - base) / 4:.2f} ms | {1e6 * (t - base) / near:.2f} µs |"
+        )
+        print(f"| {name} | {sims[name].particle_count:,} | {1e3 * t:.2f} {extra}")
+    print(f"\nparticles within h of a body at the end: {near:,}")
 
 
 def momentum(frames: int = 24) -> None:
+    sim, mass, body_mass, start = _momentum_scene()
+    print(
+        "| t (s) | box v_x (m/s) | water P_x / P0 | box P_x / P0 | reaction in flight / P0 | total / P0 |\n"
+        "|---|---|---|---|---|---|"
+    )
+    for frame in range(frames):
+        sim.step()
+        if frame % 3 == 2:
+            water, box, flight = _momenta(sim, mass, body_mass)
+            print(
+                f"| {sim.time_s:.2f} | {box / body_mass:.3f} | {water / start:.3f} | {box / start:.3f} | "
+                f"{flight / start:.3f} | {(water + box + flight) / start:.3f} |"
+            )
+
+
+def _momenta(sim, mass: float, body_mass: float) -> tuple[float, float, float]:
+    """x momenta of the water, of the box, and of the reaction of the last substep, which the box takes
+    in its next step (the coupling is explicit), kg m/s."""
+    row = sim.body_states()[0]
+    return mass * float(sim.velocities()[:, 0].sum()), body_mass * float(row[7]), float(row[13]) * sim.last_dt_s
+
+
+HALF = (0.1, 0.06, 0.1)
+"""The floating box's half extents (tests/test_bodies.py's Archimedes test), m."""
+
+
+def _floating(density: float, frames: int = 60, measured_from: int = 20) -> dict:
+    """The Archimedes test's run: a box of ``density`` let go at its draft in a settled pool 0.2 m deep,
+    0.4 m square (spacing 0.025 m); its mean draft / height over frames 20-60 against the water's
+    volume level and its pressure level (where the far field's fitted pressure is zero), its fastest
+    speed and the median of the pool's fastest particle."""
+    scene = {
+        "name": "pool",
+        "container": {"max_m": [0.4, 0.4, 0.4]},
+        "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.4, 0.2, 0.4]}]},
+        "bodies": [
+            {
+                "size_m": list(HALF),
+                "density_kg_m3": density,
+                "position_m": [0.2, 0.2 + HALF[1] * (1 - 2 * density / 1000), 0.2],
+            }
+        ],
+        "solver": {"iterations": 10, "target_density_error": 0.001},
+        "time": {"settle_s": 0.3},
+    }
+    sim = Simulation(scene, quiet=True)
+    volume = sim.particle_count * sim.model.particle_mass_kg / 1000.0
+    area, pool_area, height = 4 * HALF[0] * HALF[2], 0.16, 2 * HALF[1]
+    by_volume, by_pressure, speeds, fastest = [], [], [], []
+    for frame in range(frames):
+        sim.step()
+        if frame < measured_from:
+            continue
+        row = sim.body_states()[0]
+        bottom = row[1] - HALF[1]
+        by_volume.append(((volume - area * bottom) / (pool_area - area) - bottom) / height)
+        x, p = sim.positions(), sim.pressures()
+        far = np.max(np.abs(x[:, [0, 2]] - 0.2), axis=1) > HALF[0] + 0.05
+        rows = far & (x[:, 1] > 0.04) & (x[:, 1] < 0.16)
+        slope, intercept = np.polyfit(x[rows, 1], p[rows], 1)
+        by_pressure.append((-intercept / slope - bottom) / height)
+        speeds.append(float(np.linalg.norm(row[7:10])))
+        fastest.append(float(np.linalg.norm(sim.velocities(), axis=1).max()))
+    return {
+        "volume": float(np.mean(by_volume)),
+        "volume_rms": float(np.std(by_volume)),
+        "pressure": float(np.mean(by_pressure)),
+        "speed": max(speeds),
+        "median_speed": float(np.median(speeds)),
+        "pool_fastest": float(np.median(fastest)),
+    }
+
+
+def archimedes() -> None:
+    print(
+        "| box kg/m³ | expected draft / height | draft (volume level) | error | draft (pressure level) | error "
+        "| body's fastest (m/s) | body's median / pool's fastest median |\n|---|---|---|---|---|---|---|---|"
+    )
+    for density in (300.0, 500.0, 700.0, 900.0):
+        r, e = _floating(density), density / 1000
+        print(
+            f"| {density:.0f} | {e:.2f} | {r['volume']:.3f} ± {r['volume_rms']:.3f} | {r['volume'] / e - 1:+.1%} "
+            f"| {r['pressure']:.3f} | {r['pressure'] / e - 1:+.1%} | {r['speed']:.3f} "
+            f"| {r['median_speed'] / r['pool_fastest']:.2f} |"
+        )
+
+
+def collision() -> None:
+    from pbf.solver import bodies
+
+    print(
+        "| collision distance | draft / height, 500 kg/m³ (expected 0.5) | box v_x at 0.15 s | at 0.4 s "
+        "| total P / P0, worst frame |\n|---|---|---|---|---|"
+    )
+    kept = bodies.COLLISION_FRACTION
+    try:
+        for fraction in (0.2, 0.5, 0.75, 1.0):
+            bodies.COLLISION_FRACTION = fraction
+            draft = _floating(500.0)["volume"]
+            sim, mass, body_mass, start = _momentum_scene()
+            speeds, worst = {}, 0.0
+            for frame in range(24):
+                sim.step()
+                water, box, flight = _momenta(sim, mass, body_mass)
+                worst = max(worst, abs(water + box + flight - start) / start)
+                speeds[frame] = box / body_mass
+            print(f"| {fraction:g} r | {draft:.3f} | {speeds[8]:.3f} | {speeds[23]:.3f} | {1 + worst:.3f} |")
+    finally:
+        bodies.COLLISION_FRACTION = kept
+
+
+def _momentum_scene():
     spacing = 0.025
     scene = {
         "name": "push",
@@ -66,17 +186,7 @@ def momentum(frames: int = 24) -> None:
     }
     sim = Simulation(scene, quiet=True)
     mass, body_mass = sim.model.particle_mass_kg, 1000 * 0.1 * 0.12 * 0.12
-    start = body_mass * 0.5
-    print("| t (s) | box v_x (m/s) | water P_x / P0 | box P_x / P0 | total / P0 |\n|---|---|---|---|---|")
-    for frame in range(frames):
-        sim.step()
-        if frame % 3 == 2:
-            vx = sim.body_states()[0, 7]
-            water = mass * float(sim.velocities()[:, 0].sum())
-            print(
-                f"| {sim.time_s:.2f} | {vx:.3f} | {water / start:.3f} | {body_mass * vx / start:.3f} | "
-                f"{(water + body_mass * vx) / start:.3f} |"
-            )
+    return sim, mass, body_mass, body_mass * 0.5
 
 
 def _rotation(q):
@@ -88,5 +198,10 @@ def _rotation(q):
 if __name__ == "__main__":
     if sys.argv[1:2] == ["momentum"]:
         momentum()
+    elif sys.argv[1:2] == ["archimedes"]:
+        archimedes()
+    elif sys.argv[1:2] == ["collision"]:
+        collision()
+
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)
