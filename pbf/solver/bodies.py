@@ -30,7 +30,8 @@ the obstacles and the other bodies are resolved (``_contacts``). The water is th
 where it stands at the end of the substep, moving at its new velocity, as the piston is. The
 reaction comes one substep late: an explicit (partitioned) coupling. Bodies lighter than water are
 where such couplings can go unstable (added mass); at the densities of the presets (300-900 kg/m³)
-and the CFL-limited substeps it is stable (docs/drafts/bodies.md).
+and the CFL-limited substeps it is stable (docs/BODIES.md). A collision that hands the water a body's
+whole velocity at once is where it overshoots: hence COLLISION_FRACTION.
 
 Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
 sphere point that lies inside a wall, an obstacle or another body, with the penetration removed by
