@@ -105,8 +105,9 @@ def test_a_box_heavier_than_water_sinks_and_rests_on_the_floor():
     heights = []
     for frame in range(60):
         sim.step()
-        if frame % 6 == 5:
-            assert not inside(sim, sim.bodies.state()[0], half).any()
+        # Every frame: a particle under the landing box leaves by a side, not through the floor
+        # (Bodies._exit); before, a few were caught inside for some frames of the landing.
+        assert not inside(sim, sim.bodies.state()[0], half).any(), frame
         if frame >= 45:
             heights.append(sim.bodies.state()[0, 1])
     row = sim.bodies.state()[0]

@@ -127,6 +127,9 @@ class Bodies:
         self.obstacles = obstacles
         self.count = bodies.count
         self.radius = params.particle_radius_m * COLLISION_FRACTION
+        self.wall_margin = 0.99 * params.particle_radius_m
+        """How far inside the container a way out of a body must lead: the walls' collision distance, a
+        little less so that rounding does not shut a way flush with it."""
         self.kernel_radius = params.kernel_radius_m
         self.with_wall_density = params.wall_density
         self.lower = ti.Vector(list(params.lower_m))
@@ -532,13 +535,32 @@ class Bodies:
                 local = r.transpose() @ (q - centre)
                 grown = self.half[b] + self.radius
                 if (ti.abs(local) < grown).all():
-                    normal, _depth = self._box_exit(local, grown)
-                    for a in ti.static(range(3)):
-                        if normal[a] != 0.0:
-                            local[a] = normal[a] * grown[a]
-                    q = centre + r @ local
+                    q = self._exit(q, centre, r, local, grown)
                     pusher = b
         return q, pusher
+
+    @ti.func
+    def _exit(self, p, centre, r, local, grown):
+        """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out
+        stays inside the container, so that a particle under a box on the floor leaves by a side rather
+        than through the floor, from which the container would put it back inside the box; the nearest
+        face when every way out is shut."""
+        best, exit = 1e30, p
+        nearest, fallback = 1e30, p
+        for a, side in ti.static(ti.ndrange(3, 2)):
+            sign = 2.0 * side - 1.0
+            depth = grown[a] - sign * local[a]
+            out = local
+            out[a] = sign * grown[a]
+            target = centre + r @ out
+            if depth < nearest:
+                nearest, fallback = depth, target
+            open_way = (target > self.lower + self.wall_margin).all() and (target < self.upper - self.wall_margin).all()
+            if open_way and depth < best:
+                best, exit = depth, target
+        if best == 1e30:
+            exit = fallback
+        return exit
 
     @ti.func
     def project(self, p):
