@@ -195,7 +195,12 @@ def test_legend_shows_the_colour_map_and_its_range():
 
 def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
     # GPU backends splat a thread per (particle, pixel) (pbf.app.splat); here on the CPU against the
-    # per-particle loops, with particles near and far and some behind the eye, in both orders.
+    # per-particle loops, with particles near and far and some behind the eye, in both orders. The two
+    # kernels evaluate the same ray-sphere test but are compiled apart, and LLVM may fuse its
+    # multiply-adds differently in each (it depends on the CPU's instruction set): a ray that grazes a
+    # sphere may round to a hit in one and a miss in the other. So a handful of pixels may differ
+    # (one on this machine's CPU, none on another); a splat that lost or misplaced work items would
+    # change thousands.
     rng = np.random.default_rng(11)
     view = View(np.array([0.0, 0.2, 1.2]), np.array([0.0, 0.0, 0.0]), 60.0)
     centres = rng.uniform(-0.6, 0.6, size=(2000, 3)) * [1.0, 1.0, 2.0]
@@ -210,5 +215,5 @@ def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
             renderer = SphereRenderer(W, H, WHITE, segments=edges)
             renderer.per_item, renderer.front_to_back = per_item, front_to_back
             images.append(renderer.render(view, x, c, 2000, 0.02))
-        assert np.array_equal(*images)
+        assert np.count_nonzero(np.any(images[0] != images[1], axis=2)) <= 8  # of 76,800 pixels
         assert 0.05 < covered(images[0]).mean() < 0.95

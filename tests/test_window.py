@@ -136,6 +136,7 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     assert draw_ms > 0.0 and show_ms >= 0.0 and render_ms == pytest.approx(draw_ms + show_ms, abs=0.11)
 
 
+@pytest.mark.slow
 def test_statistics_are_recomputed_at_most_every_interval_while_running(monkeypatch):
     monkeypatch.setattr(window_module, "STATS_INTERVAL_S", 1e9)
     sim = Simulation(small_scene())
