@@ -154,7 +154,11 @@ def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch
         )
         == 0
     )
-    assert "no window (no display" in capsys.readouterr().out
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("[pbf]")]
+    assert lines[0] == "[pbf] no window: DISPLAY is not set; rendering headless instead", lines
+    assert lines[2] == "[pbf] dam_break: 1,000 particles, Δt = 8.33 ms, 10 iterations", lines  # no emitters
+    assert lines[3] == f"[pbf] rendering 2 frames (the start and 1 step) into {tmp_path}/", lines
+    assert lines[-1] == f"[pbf] wrote 2 frames in {tmp_path}/", lines
     assert len(list(tmp_path.glob("frame_*.png"))) == 2
 
 

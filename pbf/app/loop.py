@@ -8,6 +8,7 @@ frame (draws it, writes it to files, or prints statistics) and says when to stop
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 
@@ -25,12 +26,15 @@ class Viewer(Protocol):
         """Release what the viewer holds (files, progress bars); called however the loop ends."""
 
 
-def run(sim, viewer: Viewer, frames: int | None = None) -> None:
+def run(sim, viewer: Viewer, frames: int | None = None, first_shown: Callable[[], None] | None = None) -> None:
     """Show the current state, then step and show until the viewer stops or ``frames`` frames were
-    stepped (None: until the viewer stops)."""
+    stepped (None: until the viewer stops). ``first_shown`` is called once the first frame is shown
+    (the command line says then how long the start took)."""
     stepped = 0
     try:
         viewer.show()
+        if first_shown is not None:
+            first_shown()
         while viewer.running() and (frames is None or stepped < frames):
             if viewer.advance():
                 sim.step()

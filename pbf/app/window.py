@@ -18,9 +18,11 @@ would cost more than the whole surface render. The panel shows the simulation's 
 milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 
+import contextlib
 import math
 import os
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -132,16 +134,51 @@ centres on pixel centres, where both give the same colours; nearest saves 2.4 ms
 1280 × 720 (docs/BENCHMARKS.md, "The window"). Set before the driver starts, unless the user set it."""
 
 
+TAICHI_WINDOW_NOISE = ("RHI Error",)
+"""The beginnings of the lines Taichi's C++ side writes to stderr when GGUI cannot start Vulkan ("RHI Error:
+Can not create Vulkan instance"); WindowUnavailable says the same in the program's own words."""
+NO_VULKAN = (
+    "no Vulkan driver for the window (on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' "
+    "gives a software one)"
+)
+"""The reason given for Taichi's "Vulkan must be available for GGUI"."""
+
+
+@contextlib.contextmanager
+def stderr_caught(caught: list[str]):
+    """Run the body with file descriptor 2 (where Taichi's C++ logger writes, past Python's sys.stderr)
+    sent to a temporary file; its lines are appended to ``caught`` afterwards."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            caught.extend(sink.read().decode(errors="replace").splitlines(keepends=True))
+
+
 def open_window(title: str, width: int, height: int, vsync: bool = True):
-    """A GGUI window, or WindowUnavailable with the reason in one line."""
+    """A GGUI window, or WindowUnavailable with the reason in one line. Taichi's own error lines about a
+    window that cannot open are dropped (the reason replaces them); anything else it writes passes."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise WindowUnavailable("no display: DISPLAY is not set")
+        raise WindowUnavailable("DISPLAY is not set")
     for name, value in LAVAPIPE_SETTINGS.items():
         os.environ.setdefault(name, value)
+    caught: list[str] = []
     try:
-        return ti.ui.Window(title, (width, height), vsync=vsync)
+        with stderr_caught(caught):
+            return ti.ui.Window(title, (width, height), vsync=vsync)
     except RuntimeError as error:
-        raise WindowUnavailable(str(error).strip().splitlines()[-1]) from None
+        reason = str(error).strip().splitlines()[-1]
+        caught = [line for line in caught if not line.startswith(TAICHI_WINDOW_NOISE)]
+        raise WindowUnavailable(NO_VULKAN if "Vulkan must be available" in reason else reason) from None
+    finally:
+        sys.stderr.write("".join(caught))
 
 
 class WindowViewer:
