@@ -5,6 +5,7 @@ frame."""
 
 import re
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ import taichi as ti
 
 from pbf import Simulation
 from pbf.app import window as window_module
+from pbf.app.keys import HELP
 from pbf.app.render import SphereRenderer, unpack_rgb
 from pbf.app.window import WindowViewer, show_packed
 from scenes import small_dam_break
@@ -134,6 +136,66 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     )
     assert 50.0 <= sim_ms < 1000.0
     assert draw_ms > 0.0 and show_ms >= 0.0 and render_ms == pytest.approx(draw_ms + show_ms, abs=0.11)
+
+
+TEXT_PX, SLIDER_PX, FRAME_PX = 17, 23, 36
+"""The panel's pixels at GGUI's default font, read off a screenshot of ``python run.py`` under Xvfb (key h
+pressed with xdotool, ``import -window root``): a line of text, a slider, and the title bar with the
+padding above and below the lines."""
+
+
+class LinePanel(Panel):
+    """A panel that records its sliders as lines too, marked."""
+
+    def slider_int(self, name, value, low, high):
+        self.texts.append(("slider", name))
+        return value
+
+    slider_float = slider_int
+
+
+class HelpWindow(DrawingWindow):
+    """A 1280 × 720 window whose key h is pressed once; records each panel's name and height."""
+
+    def __init__(self):
+        super().__init__()
+        self.events = [SimpleNamespace(key="h")]
+        self.panels = []
+
+    def get_events(self, kind):
+        events, self.events = self.events, []
+        return events
+
+    def get_window_shape(self):
+        return (1280, 720)
+
+    def sub_window(self, name, x, y, width, height):
+        self.texts.clear()
+        self.panels.append((name, height))
+        return LinePanel(self.texts)
+
+
+def needed_px(lines) -> int:
+    sliders = sum(isinstance(line, tuple) for line in lines)
+    return FRAME_PX + SLIDER_PX * sliders + TEXT_PX * (len(lines) - sliders)
+
+
+def test_the_panel_grows_to_show_the_help_without_scrolling():
+    """GGUI's Dear ImGui takes a panel's size only when it first meets the panel's name (and keeps it in
+    imgui.ini), so the panel with the help must be another name, of the same title, tall enough for its
+    lines."""
+    sim = Simulation(small_scene())
+    window = HelpWindow()
+    viewer = WindowViewer(sim, window)
+    viewer.panel(viewer.current_stats())
+    name, height = window.panels[-1]
+    assert needed_px(window.texts) <= height * 720
+    assert viewer.advance()  # key h
+    viewer.panel(viewer.current_stats())
+    help_name, help_height = window.panels[-1]
+    assert HELP[-1] in window.texts
+    assert needed_px(window.texts) <= help_height * 720 <= 720, (needed_px(window.texts), help_height * 720)
+    assert help_name != name and help_name.split("###")[0] == name.split("###")[0] == window_module.PANEL_TITLE
 
 
 @pytest.mark.slow

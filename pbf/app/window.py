@@ -49,6 +49,7 @@ a window 720 pixels high (``WindowViewer.panel_rect`` sizes it by its lines for 
 ROW_PX = 22
 """The height of one line of the panel at GGUI's default font (0.455 of a 720-pixel window holds its 15)."""
 PANEL_ROWS = 15
+PANEL_TITLE = "pbf (h: help, Tab: hide)"
 """The panel's lines without the help: text, sliders and the title bar."""
 STATS_INTERVAL_S = 0.1
 """The panel's statistics are recomputed at most this often while the simulation runs (a reduction
@@ -329,11 +330,19 @@ class WindowViewer:
         rows = PANEL_ROWS + (len(HELP) + 1 if self.help_shown else 0)
         return left, top, width, min(1.0 - 2 * top, rows * ROW_PX / self.window.get_window_shape()[1])
 
+    def panel_name(self) -> str:
+        """The panel's GGUI name: its title and, after ``###``, what Dear ImGui (under GGUI) tells its windows
+        apart by. ImGui takes a window's size from ``sub_window`` only the first time it meets the name, and
+        remembers it (in imgui.ini, across runs too), so a panel grown for the help under the same name would
+        keep its first size and need scrolling: each height the panel takes is a window of its own name."""
+        height_px = round(self.panel_rect()[3] * self.window.get_window_shape()[1])
+        return f"{PANEL_TITLE}###pbf panel {height_px} px"
+
     def panel(self, stats: dict) -> None:
         if not self.panel_shown:
             return
         control = self.sim.control
-        with self.window.get_gui().sub_window("pbf (h: help, Tab: hide)", *self.panel_rect()) as gui:
+        with self.window.get_gui().sub_window(self.panel_name(), *self.panel_rect()) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
             for line in timing_lines(self.sim_ms, self.draw_ms, self.show_ms):
