@@ -140,7 +140,9 @@ def build_parser() -> Parser:
     view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
     view.add_argument("--look-at", metavar="X,Y,Z", help="point at the image centre, m")
     view.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees")
-    view.add_argument("--colour-by", choices=("speed", "density"), help="particle colour")
+    view.add_argument(
+        "--colour-by", choices=("speed", "density"), help="particle colour, with its legend on headless frames"
+    )
     view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
     view.add_argument(
         "--style",
@@ -259,9 +261,15 @@ def view_overrides(args) -> dict[str, str]:
 
 def load(args) -> schema.Scene:
     """The scene with the view options and then the --set overrides applied (--set wins); an error
-    in a value from the command line names the option it came from."""
+    in a value from the command line names the option it came from. --colour-by also turns on the
+    headless frames' legend (colours alone say nothing of what they measure), where the scene draws
+    particles and no --set says otherwise."""
     try:
-        return schema.load_scene(args.scene, [*args.view, *args.set])
+        scene = schema.load_scene(args.scene, [*args.view, *args.set])
+        legend_set = any(assignment.split("=", 1)[0].strip() == "render.legend" for assignment in args.set)
+        if args.colour_by is not None and scene.render.style == "particles" and not legend_set:
+            scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set])
+        return scene
     except schema.SceneError as error:
         raise schema.attribute(error, command_line_keys(args)) from None
 
