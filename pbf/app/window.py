@@ -1,6 +1,7 @@
 """The interactive window (Taichi GGUI): orbit camera, keys, a panel of live figures and sliders.
 
-Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
+Mouse: left drag on the water pushes it (``pbf.app.interact``; an amber ring marks the hand's reach
+where the cursor meets the water, and the hand while it holds), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
 forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
 paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v
@@ -30,10 +31,12 @@ import numpy as np
 import taichi as ti
 from taichi.ui.utils import get_field_info
 
+from pbf.app.fluid_render import FAR
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
 from pbf.app.render import (
+    EMPTY,
     LIGHT_DIRECTION,
     BodyPoints,
     ParticleColours,
@@ -51,6 +54,11 @@ ROW_PX = 22
 PANEL_ROWS = 15
 PANEL_TITLE = "pbf (h: help, Tab: hide)"
 """The panel's lines without the help: text, sliders and the title bar."""
+MARKER_RGB = (255, 200, 0)
+"""The ring that marks where the mouse meets the water (and, while dragging, the hand): amber, apart from
+the colour maps' blues and reds and from both backgrounds."""
+MARKER_WORD = MARKER_RGB[0] | (MARKER_RGB[1] << 8) | (MARKER_RGB[2] << 16) | 0xFF000000
+"""The ring's colour as a packed RGBA word (``pbf.app.render.pack_rgba``)."""
 STATS_INTERVAL_S = 0.1
 """The panel's statistics are recomputed at most this often while the simulation runs (a reduction
 over every particle; ten times a second is as often as figures can be read)."""
@@ -209,6 +217,9 @@ class WindowViewer:
         self.quit = False
         self.drag = None
         self.hand = Hand(sim)
+        self.cursor: tuple[float, float] | None = None
+        """The cursor in window fractions (origin bottom left) where it may touch the water: inside the
+        window and off the panel; None elsewhere."""
         self.fps = 0.0
         self.last_frame: float | None = None
         self.sim_ms: float | None = None
@@ -304,6 +315,7 @@ class WindowViewer:
         width, height = window.get_window_shape()
         left, top, panel_width, panel_height = self.panel_rect()
         over_panel = self.panel_shown and left <= x <= left + panel_width and top <= 1.0 - y <= top + panel_height
+        self.cursor = (x, y) if 0.0 <= x < 1.0 and 0.0 <= y < 1.0 and not over_panel else None
         if window.is_pressed(ti.ui.LMB):
             if self.hand.holding:
                 self.hand.drag(self.camera.view(), x, y, width / height, seconds)
@@ -392,7 +404,45 @@ class WindowViewer:
             if self.body_points is not None:
                 positions, colours, count = self.body_points.combine(positions, colours, count)
             packed = renderer.draw(view, positions, colours, count, particles.radius_m)
+        self.mark(packed, renderer, view, particles.count)
         show_packed(self.window.get_canvas(), packed)
+
+    def cursor_depth(self, renderer, count: int) -> float | None:
+        """The view depth (m) of the water drawn under the cursor, None where there is none: one pixel of the
+        renderer's depth (the surface's) or of its nearest-hit keys (the spheres': view depth bits and
+        particle id, a body's points after the water's ``count``)."""
+        if self.cursor is None:
+            return None
+        width, height = renderer.width, renderer.height
+        col, row_up = min(int(self.cursor[0] * width), width - 1), min(int(self.cursor[1] * height), height - 1)
+        if self.surface:
+            depth = float(renderer.image_depth[height - 1 - row_up, col])
+            return depth if depth < FAR else None
+        key = int(renderer.keys[col, row_up])
+        if key == EMPTY or key & 0xFFFFFFFF >= count:
+            return None
+        return float(np.array([key >> 32], np.int32).view(np.float32)[0])
+
+    def mark(self, packed: np.ndarray, renderer, view: View, count: int) -> None:
+        """Ring in ``packed`` what a left press would take hold of: the hand's reach (``Hand.radius_m``) around
+        the water under the cursor, or around the hand while it holds the water; nothing over empty space,
+        where a press does nothing."""
+        width, height = renderer.width, renderer.height
+        right, up, forward = view.basis()
+        focal = view.focal_px(height)
+        if self.hand.holding:
+            offset = self.hand.point - view.eye
+            depth = float(offset @ forward)
+            if depth <= 0.0:
+                return
+            x = 0.5 * width + focal * float(offset @ right) / depth
+            y = 0.5 * height + focal * float(offset @ up) / depth
+        else:
+            depth = self.cursor_depth(renderer, count)
+            if depth is None or depth <= 0.0:
+                return
+            x, y = self.cursor[0] * width, self.cursor[1] * height
+        ring(packed, x, y, focal * self.hand.radius_m / depth, MARKER_WORD)
 
 
 def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | None) -> tuple[str, str]:
@@ -404,3 +454,15 @@ def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | N
 
     render = None if draw_ms is None or show_ms is None else draw_ms + show_ms
     return f"sim {ms(sim_ms)} ms per frame", f"render {ms(render)} ms (draw {ms(draw_ms)} + show {ms(show_ms)})"
+
+
+def ring(packed: np.ndarray, x: float, y: float, radius_px: float, word: int) -> None:
+    """Set the pixels of a ring two pixels wide, of radius ``radius_px`` around (x, y) (pixels, y up), in a
+    (W, H) packed image to ``word``; what falls outside the image is left out."""
+    radius_px = max(radius_px, 3.0)
+    angles = np.linspace(0.0, 2.0 * np.pi, max(32, int(4 * np.pi * (radius_px + 1))), endpoint=False)
+    for r in (radius_px, radius_px + 1.0):
+        cols = np.floor(x + r * np.cos(angles)).astype(np.int64)
+        rows = np.floor(y + r * np.sin(angles)).astype(np.int64)
+        inside = (cols >= 0) & (cols < packed.shape[0]) & (rows >= 0) & (rows < packed.shape[1])
+        packed[cols[inside], rows[inside]] = word
