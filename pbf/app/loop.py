@@ -71,7 +71,9 @@ class StatsViewer:
         self.sim = sim
         self.frames = frames
         self.frames_per_report = max(1, round(1.0 / sim.scene.time.frame_dt_s))
-        self.started = time.perf_counter()
+        self.started: float | None = None
+        """When the first frame was shown: the kernels are ready by then (``warm_up``), so the rate at the end
+        is the stepping's own."""
 
     def running(self) -> bool:
         return True
@@ -81,11 +83,14 @@ class StatsViewer:
 
     def show(self) -> None:
         frame = self.sim.frame
+        if self.started is None:
+            self.started = time.perf_counter()
         if frame and (frame % self.frames_per_report == 0 or frame == self.frames):
             print(stats_line(self.sim))
 
     def close(self) -> None:
-        elapsed = time.perf_counter() - self.started
-        print(
-            f"[pbf] {self.sim.frame} frames in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s, JIT included)"
-        )
+        if self.started is None:
+            return
+        elapsed = max(time.perf_counter() - self.started, 1e-9)
+        frames = f"{self.sim.frame} frame{'' if self.sim.frame == 1 else 's'}"
+        print(f"[pbf] {frames} in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s)")
