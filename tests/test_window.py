@@ -85,6 +85,9 @@ class DrawingWindow:
     def show(self):
         self.shown += 1
 
+    def set_background_color(self, rgb):
+        self.background = rgb
+
 
 def small_scene():
     scene = small_dam_break()
@@ -293,3 +296,11 @@ def test_ggui_shows_a_packed_image_as_its_own_set_image_does():
     theirs = np.round(window.get_image_buffer_as_numpy()[..., :3] * 255).astype(np.uint8)
     assert np.array_equal(ours, theirs)
     assert tuple(ours[5, 45]) == (250, 10, 10) and tuple(ours[50, 5]) == (20, 40, 60)
+
+
+def test_the_window_says_what_it_waits_for_before_the_first_picture():
+    # Drawn twice: Dear ImGui does not draw a window in the frame it first lays it out.
+    window = DrawingWindow()
+    window_module.show_waiting(window, (0.9, 0.9, 0.8), ["compiling kernels ..."])
+    assert window.shown == 2 and window.texts == ["compiling kernels ..."] * 2
+    assert window.background == (0.9, 0.9, 0.8)

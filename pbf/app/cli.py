@@ -342,10 +342,12 @@ def try_window(scene, args):
     from pbf.app import window
 
     try:
-        return window.open_window(f"pbf: {scene.name}", scene.render.width_px, scene.render.height_px)
+        gui_window = window.open_window(f"pbf: {scene.name}", scene.render.width_px, scene.render.height_px)
     except window.WindowUnavailable as reason:
         print(f"[pbf] no window: {reason}; rendering headless instead")
         return None
+    window.show_waiting(gui_window, scene.render.background_rgb, [COMPILING.removeprefix("[pbf] ")])
+    return gui_window
 
 
 def choose_viewer(sim, args, gui_window, out, video):

@@ -190,6 +190,18 @@ def open_window(title: str, width: int, height: int, vsync: bool = True):
         sys.stderr.write("".join(caught))
 
 
+def show_waiting(gui_window, background_rgb, lines) -> None:
+    """Present one frame of the scene's background with ``lines`` in a small panel, so that the window says
+    what it waits for (the kernels compiling) instead of standing black until the first picture."""
+    for _ in range(2):  # Dear ImGui lays out a window it has not seen before in a first frame it does not draw
+        gui_window.get_canvas().set_background_color(tuple(float(c) for c in background_rgb))
+        height = (len(lines) + 2) * ROW_PX / gui_window.get_window_shape()[1]
+        with gui_window.get_gui().sub_window("pbf", 0.01, 0.01, 0.5, height) as gui:
+            for line in lines:
+                gui.text(line)
+        gui_window.show()
+
+
 class WindowViewer:
     """The interactive viewer of ``pbf.app.loop.run``: draws each frame in a GGUI window and turns keys
     and mouse into camera moves, pause, single steps and resets, until the user quits."""
