@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pbf import SceneError, load_scene
-from pbf.app import cli
+from pbf.app import cli, window
 from pbf.scene import from_dict
 from scenes import small_dam_break
 
@@ -130,15 +130,30 @@ def test_without_a_display_the_window_is_given_up_in_one_line(monkeypatch, capsy
     assert capsys.readouterr().out == "[pbf] no window: DISPLAY is not set; rendering headless instead\n"
 
 
+def test_a_display_that_cannot_be_opened_is_given_up_in_one_line(monkeypatch, capsys):
+    # GGUI's GLFW would print "cannot initialize GLFW" and end the process.
+    monkeypatch.setenv("DISPLAY", ":4242")
+    args = cli.parse_args(["dam_break"])
+    if window.unreachable_display() is None:
+        pytest.skip("no Xlib here to ask, or an X server answers on :4242")
+    capsys.readouterr()
+    assert cli.try_window(cli.load(args), args) is None
+    assert capsys.readouterr().out == (
+        "[pbf] no window: the display DISPLAY=:4242 cannot be opened; rendering headless instead\n"
+    )
+
+
 @pytest.mark.slow
 def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path):
     """The lines of a window run that falls back to files, as the user reads them, in a process of its own
     (GGUI, once started in a process, does not survive a second window without a driver). Where Vulkan
     cannot start, GGUI's C++ side writes "RHI Error: Can not create Vulkan instance" to file descriptor 2
     before the program says why there is no window: only the program's line shows (a loader pointed at no
-    driver, VK_ICD_FILENAMES, makes any machine one without Vulkan). Every number of frames said is the
+    driver, VK_ICD_FILENAMES, makes any machine one without Vulkan; a Wayland display, named, takes the run
+    past the X display's check to GGUI). Every number of frames said is the
     number written, and the pour, empty at the start, says how many particles its nozzle will add."""
-    env = {**os.environ, "DISPLAY": ":4242", "VK_ICD_FILENAMES": str(tmp_path / "no_driver.json")}
+    env = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    env |= {"WAYLAND_DISPLAY": "wayland-4242", "VK_ICD_FILENAMES": str(tmp_path / "no_driver.json")}
     out = tmp_path / "frames"
     result = run_cli("pour", "--arch", "cpu", "--frames", "2", "--out", out, "--size", "64x48", cwd=tmp_path, env=env)
     assert result.returncode == 0, result.stderr

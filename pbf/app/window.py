@@ -20,6 +20,8 @@ milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 
 import contextlib
+import ctypes
+import ctypes.util
 import math
 import os
 import sys
@@ -171,11 +173,36 @@ def stderr_caught(caught: list[str]):
             caught.extend(sink.read().decode(errors="replace").splitlines(keepends=True))
 
 
+def unreachable_display() -> str | None:
+    """Why the X display that $DISPLAY names cannot be opened, or None (it can, or there is no X library to
+    ask, or no DISPLAY). GGUI's GLFW, given a display it cannot open, prints "cannot initialize GLFW" and
+    ends the process, so the display is tried first with Xlib's ``XOpenDisplay``."""
+    display = os.environ.get("DISPLAY")
+    library = ctypes.util.find_library("X11") if display and sys.platform.startswith("linux") else None
+    if library is None:
+        return None
+    try:
+        x11 = ctypes.CDLL(library)
+    except OSError:
+        return None
+    x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    with stderr_caught([]):  # Xlib may say why on stderr; the reason below says it once
+        handle = x11.XOpenDisplay(None)
+    if not handle:
+        return f"the display DISPLAY={display} cannot be opened"
+    x11.XCloseDisplay(handle)
+    return None
+
+
 def open_window(title: str, width: int, height: int, vsync: bool = True):
     """A GGUI window, or WindowUnavailable with the reason in one line. Taichi's own error lines about a
     window that cannot open are dropped (the reason replaces them); anything else it writes passes."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         raise WindowUnavailable("DISPLAY is not set")
+    unreachable = unreachable_display()
+    if unreachable is not None:
+        raise WindowUnavailable(unreachable)
     for name, value in LAVAPIPE_SETTINGS.items():
         os.environ.setdefault(name, value)
     caught: list[str] = []
