@@ -8,8 +8,9 @@
 Everything the user gives is checked before Taichi starts and before anything is written: the
 options (each either takes effect or is refused, none is ignored), the scene with its overrides,
 the backend and every output path. A failure prints one line to stderr and returns 2. Only then does
-it build a Simulation and a viewer (window, headless frames or statistics) and hand both to the one
-loop of ``pbf.app.loop``.
+it start the backend, try the window (or say in one line why there is none), say that the kernels
+compile, build a Simulation and a viewer (window, headless frames or statistics) and hand both to the
+one loop of ``pbf.app.loop``, saying how long the start took once the first frame is shown.
 """
 
 import argparse
