@@ -94,3 +94,16 @@ def test_window_benchmark_runs_under_a_virtual_display():
         pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
     assert run.returncode == 0, run.stderr
     assert "| window | " in run.stdout
+
+
+@pytest.mark.slow
+def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
+    gallery = script("gallery")
+    monkeypatch.setitem(gallery.MOMENTS, "martin_moyce", 0.05)  # a few frames
+    out = tmp_path / "sheet.png"
+    gallery.main(["--presets", "martin_moyce", "--out", str(out), "--size", "64x36", "--columns", "1"])
+    assert out.stat().st_size > 1000 and "wrote" in capsys.readouterr().out
+
+
+def test_every_preset_has_a_moment_in_the_gallery():
+    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
