@@ -18,8 +18,9 @@ the scene's ``[surface]`` settings, with each ``--candidate`` (``KEY=VALUE`` ove
 spaces) and with the pipeline as it was before the splash work ("before": smoothing length 1.2
 spacings, 5 smoothing passes, splashsurf's smoothing-weight normalisation 13, no wall images), in an
 order that alternates from frame to frame. Per frame it prints the enclosed volume over the water's
-(particle count × particle mass / rest density) and ``!`` where the mesh is not closed; then each
-variant's median ms per mesh and triangles.
+(particle count × particle mass / rest density) and ``!`` where the mesh is not closed; then, over the
+dam break's frames, the ratio farthest from 1, each variant's median ms per mesh, the median of its
+per-frame time over the defaults' and its median triangle count.
 
     python benchmarks/surface.py --volume [--candidate "surface.iso_level=0.55" ...]
 
@@ -165,6 +166,9 @@ def measure_volume(frames: int, every: int, candidates: list[str]) -> None:
     median = statistics.median
     print(f"{'worst':>6}" + "".join(f"{max(ratios[n], key=lambda r: abs(r - 1)):>{width}.3f} " for n, _ in variants))
     print(f"{'ms':>6}" + "".join(f"{median(times[n]):>{width}.1f} " for n, _ in variants))
+    base = times[variants[0][0]]
+    relative = (median(t / b for t, b in zip(times[n], base)) for n, _ in variants)
+    print(f"{'÷ def':>6}" + "".join(f"{r:>{width}.2f} " for r in relative))
     print(f"{'tris':>6}" + "".join(f"{median(triangles[n]):>{width},.0f} " for n, _ in variants))
 
 
