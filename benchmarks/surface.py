@@ -20,7 +20,8 @@ spacings, 5 smoothing passes, splashsurf's smoothing-weight normalisation 13, no
 order that alternates from frame to frame. Per frame it prints the enclosed volume over the water's
 (particle count × particle mass / rest density) and ``!`` where the mesh is not closed; then, over the
 dam break's frames, the ratio farthest from 1, each variant's median ms per mesh, the median of its
-per-frame time over the defaults' and its median triangle count.
+per-frame time over the defaults' and its median triangle count; last, a lone particle's droplet over
+the particle's volume (spray).
 
     python benchmarks/surface.py --volume [--candidate "surface.iso_level=0.55" ...]
 
@@ -170,6 +171,11 @@ def measure_volume(frames: int, every: int, candidates: list[str]) -> None:
     relative = (median(t / b for t, b in zip(times[n], base)) for n, _ in variants)
     print(f"{'÷ def':>6}" + "".join(f"{r:>{width}.2f} " for r in relative))
     print(f"{'tris':>6}" + "".join(f"{median(triangles[n]):>{width},.0f} " for n, _ in variants))
+    # Spray: one particle alone in the middle of the seed's container, its mesh over its own volume.
+    lone = np.array([[0.5 * (a + b) for a, b in zip(sim.scene.container.min_m, sim.scene.container.max_m)]], np.float32)
+    particle_m3 = sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
+    droplets = (function(lone, sim.scene).enclosed_volume_m3() / particle_m3 for _, function in variants)
+    print(f"{'drop':>6}" + "".join(f"{d:>{width}.2f} " for d in droplets))
 
 
 def measure_window(frames: int) -> None:

@@ -11,12 +11,11 @@ the scene's ``[surface]`` table in particle spacings. The mesh is written as bin
 Why the kernel is narrow (0.8 spacings, support 1.6) and the walls are mirrored: the colour field is
 normalised per particle (m_j/ρ_j), so every particle counts as inside however few neighbours it has,
 and the iso surface wraps each one at the kernel's reach. A wide kernel wraps a splash's rough
-surface, its one-particle sheets and its spray in an envelope well above the water's volume, though
-the particles there are packed as at rest (docs/BENCHMARKS.md, "Surfaces"); a narrow one follows
-the particles. It also reaches less far past water against a wall, where clamping used to hide what
-smoothing takes, so the particles within a kernel's reach of a wall are mirrored across it (as the
-solver's wall mirror does): the field is that of water continuing through the wall, and the mesh
-meets the wall flat once clamped.
+surface, its one-particle sheets and its spray in an envelope well above the water's volume
+(docs/BENCHMARKS.md, "Surfaces"); a narrow one follows the particles. It also reaches less far past
+water against a wall, where clamping used to hide what smoothing takes, so the particles within a
+kernel's reach of a wall are mirrored across it (as the solver's wall mirror does): the field is that
+of water continuing through the wall, and the mesh meets the wall flat once clamped.
 """
 
 from __future__ import annotations
