@@ -13,17 +13,17 @@ Every figure is a median over the frames and rounds (ms of wall time, the frame 
 included, as the headless writer uses it); the ratio is the median of the per-frame ratios.
 
 ``--volume`` measures instead how much water the mesh holds: the tests' resting column (a 0.3 m tank
-filled 0.3 m deep, settled for 20 frames) and then the dam break's frames from rest, each meshed with
-the scene's ``[surface]`` settings, with each ``--candidate`` (``KEY=VALUE`` overrides separated by
-spaces) and with the pipeline as it was before the splash work ("before": smoothing length 1.2
-spacings, 5 smoothing passes, splashsurf's smoothing-weight normalisation 13, no wall images), in an
-order that alternates from frame to frame. Per frame it prints the enclosed volume over the water's
+filled 0.3 m deep, settled for 20 frames) and then the dam break's frames from rest (at 8,000
+particles unless ``--sizes`` says otherwise), each meshed with the scene's ``[surface]`` settings, with
+each ``--candidate`` (``KEY=VALUE`` overrides separated by spaces) and with the pipeline as it was
+before the splash work ("before": smoothing length 1.2 spacings, 5 smoothing passes, splashsurf's
+smoothing-weight normalisation 13, no wall images), in an order that alternates from frame to frame. Per frame it prints the enclosed volume over the water's
 (particle count × particle mass / rest density) and ``!`` where the mesh is not closed; then, over the
 dam break's frames, the ratio farthest from 1, each variant's median ms per mesh, the median of its
 per-frame time over the defaults' and its median triangle count; last, a lone particle's droplet over
 the particle's volume (spray).
 
-    python benchmarks/surface.py --volume [--candidate "surface.iso_level=0.55" ...]
+    python benchmarks/surface.py --volume [--sizes 8000] [--candidate "surface.iso_level=0.55" ...]
 
 ``--window`` opens the GGUI window at the seed scene's 1280 × 720 instead and, for ``--frames`` frames,
 steps the simulation and shows each frame twice, as particles and as the surface (key v): the frame
@@ -53,9 +53,7 @@ def timed_ms(function) -> tuple[float, object]:
 
 
 def measure(particles: int, frames: int, every: int, rounds: int) -> None:
-    seed = load_scene("dam_break")
-    spacing = seed.fluid.spacing_m * (SEED_PARTICLES / particles) ** (1 / 3)
-    scene = load_scene("dam_break", [f"fluid.spacing_m={spacing}"])
+    scene = dam_break(particles)
     parallel = dataclasses.replace(scene, surface=dataclasses.replace(scene.surface, deterministic=False))
     sim = Simulation(scene, quiet=True)
     rendering = sim.particle_count == SEED_PARTICLES
@@ -133,7 +131,14 @@ def volume_variants(candidates: list[str]) -> list[tuple[str, object]]:
     return variants
 
 
-def measure_volume(frames: int, every: int, candidates: list[str]) -> None:
+def dam_break(particles: int):
+    """The seed dam break with its spacing scaled to about ``particles`` particles."""
+    seed = load_scene("dam_break")
+    spacing = seed.fluid.spacing_m * (SEED_PARTICLES / particles) ** (1 / 3)
+    return load_scene("dam_break", [f"fluid.spacing_m={spacing}"])
+
+
+def measure_volume(particles: int, frames: int, every: int, candidates: list[str]) -> None:
     variants = volume_variants(candidates)
     ratios = {name: [] for name, _ in variants}
     times = {name: [] for name, _ in variants}
@@ -160,7 +165,8 @@ def measure_volume(frames: int, every: int, candidates: list[str]) -> None:
     column = Simulation(from_dict(RESTING_COLUMN), quiet=True)
     column.step(20)
     mesh_all("rest", column, 0)
-    sim = Simulation("dam_break", quiet=True)
+    sim = Simulation(dam_break(particles), quiet=True)
+    print(f"dam break, {sim.particle_count:,} particles")
     for round_number, frame in enumerate(range(10, frames + 1, every)):
         sim.step(frame - sim.frame)
         mesh_all(str(frame), sim, round_number)
@@ -207,7 +213,7 @@ def measure_window(frames: int) -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[SEED_PARTICLES, 64000])
+    parser.add_argument("--sizes", type=int, nargs="+", help="particle counts (8000 64000; --volume: 8000)")
     parser.add_argument("--frames", type=int, default=90)
     parser.add_argument("--every", type=int, default=10)
     parser.add_argument("--rounds", type=int, default=5)
@@ -227,9 +233,10 @@ def main(argv=None) -> None:
         measure_window(args.frames)
         return
     if args.volume:
-        measure_volume(args.frames, args.every, args.candidate)
+        for particles in args.sizes or [SEED_PARTICLES]:
+            measure_volume(particles, args.frames, args.every, args.candidate)
         return
-    for particles in args.sizes:
+    for particles in args.sizes or [SEED_PARTICLES, 64000]:
         measure(particles, args.frames, args.every, args.rounds)
 
 
