@@ -13,15 +13,16 @@ Every figure is a median over the frames and rounds (ms of wall time, the frame 
 included, as the headless writer uses it); the ratio is the median of the per-frame ratios.
 
 ``--volume`` measures instead how much water the mesh holds: the tests' resting column (a 0.3 m tank
-filled 0.3 m deep, settled for 20 frames) and then the dam break's frames from rest (at 8,000
-particles unless ``--sizes`` says otherwise), each meshed with the scene's ``[surface]`` settings, with
-each ``--candidate`` (``KEY=VALUE`` overrides separated by spaces) and with the pipeline as it was
-before the splash work ("before": smoothing length 1.2 spacings, 5 smoothing passes, splashsurf's
-smoothing-weight normalisation 13, no wall images), in an order that alternates from frame to frame. Per frame it prints the enclosed volume over the water's
-(particle count × particle mass / rest density) and ``!`` where the mesh is not closed; then, over the
-dam break's frames, the ratio farthest from 1, each variant's median ms per mesh, the median of its
-per-frame time over the defaults' and its median triangle count; last, a lone particle's droplet over
-the particle's volume (spray).
+filled 0.3 m deep, settled for 20 frames) and then the dam break's frames from rest (at 8,000 particles
+unless ``--sizes`` says otherwise), each meshed with the scene's ``[surface]`` settings, with each
+``--candidate`` (``KEY=VALUE`` overrides separated by spaces) and with the pipeline as it was before
+the splash work ("before": smoothing length 1.2 spacings, 5 smoothing passes, splashsurf's
+smoothing-weight normalisation 13, no wall images), in an order that alternates from frame to frame.
+Per frame it prints the enclosed volume over the water's (particle count × particle mass / rest
+density) and ``!`` where the mesh is not closed; then, over the dam break's frames, the ratio farthest
+from 1, each variant's median ms per mesh, the median of its per-frame time over the defaults', its
+median triangle count and the median share of them lying flat on a wall; last, a lone particle's
+droplet over the particle's volume (spray).
 
     python benchmarks/surface.py --volume [--sizes 8000] [--candidate "surface.iso_level=0.55" ...]
 
@@ -138,11 +139,22 @@ def dam_break(particles: int):
     return load_scene("dam_break", [f"fluid.spacing_m={spacing}"])
 
 
+def wall_share(mesh: Mesh, scene) -> float:
+    """The share of the triangles lying flat on a container wall (all three corners on its plane)."""
+    corners = mesh.vertices[mesh.triangles]
+    flat = np.zeros(len(corners), bool)
+    for axis in range(3):
+        for wall in (scene.container.min_m[axis], scene.container.max_m[axis]):
+            flat |= (corners[:, :, axis] == np.float32(wall)).all(axis=1)
+    return float(flat.mean()) if len(flat) else 0.0
+
+
 def measure_volume(particles: int, frames: int, every: int, candidates: list[str]) -> None:
     variants = volume_variants(candidates)
     ratios = {name: [] for name, _ in variants}
     times = {name: [] for name, _ in variants}
     triangles = {name: [] for name, _ in variants}
+    on_walls = {name: [] for name, _ in variants}
     width = max(12, *(len(name) for name, _ in variants))
 
     def mesh_all(label: str, sim: Simulation, round_number: int) -> None:
@@ -157,6 +169,7 @@ def measure_volume(particles: int, frames: int, every: int, candidates: list[str
                 ratios[name].append(results[name][0])
                 times[name].append(elapsed)
                 triangles[name].append(len(mesh.triangles))
+                on_walls[name].append(wall_share(mesh, sim.scene))
         cells = (f"{results[name][0]:>{width}.3f}{' ' if results[name][1] else '!'}" for name, _ in variants)
         print(f"{label:>6}" + "".join(cells))
 
@@ -177,6 +190,7 @@ def measure_volume(particles: int, frames: int, every: int, candidates: list[str
     relative = (median(t / b for t, b in zip(times[n], base)) for n, _ in variants)
     print(f"{'÷ def':>6}" + "".join(f"{r:>{width}.2f} " for r in relative))
     print(f"{'tris':>6}" + "".join(f"{median(triangles[n]):>{width},.0f} " for n, _ in variants))
+    print(f"{'walls':>6}" + "".join(f"{median(on_walls[n]):>{width}.2f} " for n, _ in variants))
     # Spray: one particle alone in the middle of the seed's container, its mesh over its own volume.
     lone = np.array([[0.5 * (a + b) for a, b in zip(sim.scene.container.min_m, sim.scene.container.max_m)]], np.float32)
     particle_m3 = sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
