@@ -15,7 +15,7 @@ from pbf import Simulation
 from pbf.app import cli, loop
 from pbf.app.headless import FrameWriter
 from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
-from pbf.app.surface import Mesh, reconstruct, write_mesh
+from pbf.app.surface import Mesh, reconstruct, with_wall_images, write_mesh
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
 from scenes import column_scene
@@ -69,12 +69,22 @@ def test_resting_water_gives_a_closed_mesh_of_its_volume(settled):
     mesh = reconstruct(sim.positions(), sim.scene)
     assert_closed(mesh)
     water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
-    assert mesh.enclosed_volume_m3() == pytest.approx(water_m3, rel=0.05)
+    # 97-100%: smoothing rounds the free surface's edge along the walls a little (99% measured). Water
+    # against a wall must reach it: without the wall images this column meshes at 95%.
+    assert 0.97 * water_m3 < mesh.enclosed_volume_m3() < water_m3
     lower, upper = (np.array(corner, np.float32) for corner in (sim.scene.container.min_m, sim.scene.container.max_m))
     assert (mesh.vertices >= lower).all() and (mesh.vertices <= upper).all()
     # The free surface lies within a spacing of the top particles.
     top = sim.positions()[:, 1].max()
     assert abs(mesh.vertices[:, 1].max() - top) < SPACING
+
+
+def test_particles_near_a_wall_are_mirrored_across_it():
+    lower, upper = (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
+    middle, corner = [0.5, 0.5, 0.5], [0.01, 0.98, 0.5]  # the corner's within reach of x = 0 and y = 1
+    points = with_wall_images(np.array([middle, corner], np.float32), lower, upper, 0.05)
+    expected = [middle, corner, [-0.01, 0.98, 0.5], [0.01, 1.02, 0.5], [-0.01, 1.02, 0.5]]
+    assert np.allclose(points, expected)
 
 
 def test_a_ball_of_particles_gives_a_sphere_of_its_radius():
