@@ -56,6 +56,16 @@ def test_surface_meshes_and_renders_a_frame(capsys):
 
 
 @pytest.mark.slow
+def test_surface_volume_compares_a_candidate(capsys):
+    script("surface").main(["--volume", "--frames", "10", "--every", "10", "--candidate", "surface.iso_level=0.55"])
+    out = capsys.readouterr().out
+    assert "candidate 1: surface.iso_level=0.55" in out
+    header, rest, frame = (line.split() for line in out.splitlines() if line.split()[0] in ("frame", "rest", "10"))
+    assert header == ["frame", "defaults", "candidate", "1", "before"] and len(rest) == len(frame) == 4
+    assert all(f"\n{row:>6} " in out for row in ("worst", "ms", "tris", "walls", "drop"))
+
+
+@pytest.mark.slow
 def test_headline_prints_its_table(capsys):
     headline.main(["--quick"])
     out = capsys.readouterr().out
