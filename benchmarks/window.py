@@ -19,6 +19,14 @@ window's process per frame (every thread: Taichi's, the Vulkan driver's), ``X`` 
 process of its own; "sim" is then the wait for it, "sim in its process" its own step) ``sim process
 cpu`` that of the other process: on a 2-core machine the frame rate cannot exceed 2000 / (their sum),
 whatever overlaps.
+
+``--start`` measures instead how long ``python run.py`` takes from its launch to the first frame, in
+the window and headless, with an empty Taichi kernel cache (a first run: ``TI_OFFLINE_CACHE_FILE_PATH``
+and Mesa's shader cache pointed at empty folders) and again with the cache that run filled, in
+``--rounds`` alternated rounds; it also counts the files each start adds to the kernel cache (none on
+a second start: every kernel, the window's and the renderers' included, came from the cache):
+
+    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py --start [--rounds 3] [--scene dam_break]
 """
 
 import argparse
@@ -28,6 +36,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -329,6 +338,72 @@ def table(results: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+RUN = Path(__file__).resolve().parent.parent / "run.py"
+READY = "[pbf] kernels ready and the first frame drawn in "
+"""The line ``python run.py`` prints once its first frame is drawn (``pbf.app.cli``)."""
+
+
+def first_frame_s(scene: str, window: bool, cache: Path, out: Path) -> tuple[float, float, int]:
+    """Start ``python run.py`` with the kernel cache in ``cache``; returns the seconds from its launch to
+    the line saying the first frame is drawn, the seconds that line gives (from before the first kernel
+    compiles), and the files the run added to the cache. The run is then stopped."""
+    before = len(list(cache.rglob("*")))
+    command = [sys.executable, str(RUN), scene, "--frames", "1", "--out", str(out), "--overwrite"]
+    env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache), "MESA_SHADER_CACHE_DIR": str(cache / "mesa")}
+    started = time.perf_counter()
+    process = subprocess.Popen(
+        command if window else [*command, "--headless"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env=env,
+    )
+    reported = None
+    for line in process.stdout:
+        if line.startswith(READY):
+            seconds = time.perf_counter() - started
+            reported = float(line[len(READY) :].split()[0])
+            break
+        if window and line.startswith("[pbf] no window"):
+            process.kill()
+            raise SystemExit(line.strip())
+    process.wait()  # one frame after the first: the process ends by itself
+    if reported is None:
+        raise SystemExit(f"run.py {scene} ended without its first frame (status {process.returncode})")
+    return seconds, reported, len(list(cache.rglob("*"))) - before
+
+
+def start_times(scene: str, rounds: int) -> str:
+    """The table of ``--start``: medians over the rounds, the rounds' figures beside them."""
+    rows = {(where, cache): [] for where in ("window", "headless") for cache in ("empty", "filled")}
+    for round_ in range(rounds):
+        for where in ("window", "headless"):
+            with tempfile.TemporaryDirectory() as folder:
+                cache, out = Path(folder) / "cache", Path(folder) / "out"
+                cache.mkdir()
+                for state in ("empty", "filled"):  # the first start fills the cache the second reads
+                    result = first_frame_s(scene, where == "window", cache, out)
+                    rows[where, state].append(result)
+                    print(
+                        f"round {round_ + 1}/{rounds} {where}, cache {state}: first frame after {result[0]:.1f} s "
+                        f"({result[1]:.1f} s from the compile line), {result[2]} new cache files",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+    lines = [
+        "| start | kernel cache | s to the first frame: median (runs) | s from the compile line | new cache files |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for (where, state), results in rows.items():
+        launch, reported, added = zip(*results)
+        runs = ", ".join(f"{value:.1f}" for value in launch)
+        lines.append(
+            f"| {where} | {state} | **{statistics.median(launch):.1f}** ({runs}) | {statistics.median(reported):.1f} "
+            f"| {max(added)} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -343,6 +418,9 @@ def main(argv=None) -> None:
         "--warmup", type=int, default=WARMUP_FRAMES, help=f"frames before the measured ones (default {WARMUP_FRAMES})"
     )
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
+    parser.add_argument(
+        "--start", action="store_true", help="time python run.py's start to its first frame, cache empty and filled"
+    )
     args = parser.parse_args(argv)
     if args.frames < 1 or args.rounds < 1 or args.warmup < 0:
         parser.error(
@@ -350,6 +428,11 @@ def main(argv=None) -> None:
         )
     if args.one:
         print(json.dumps(measure(args.one, args.frames, args.scene, args.warmup)), flush=True)
+        return
+    if args.start:
+        load = os.getloadavg()[0]
+        print(f"{args.scene}: python run.py's start, {args.rounds} rounds (load at the start {load:.1f})")
+        print(start_times(args.scene, args.rounds))
         return
     names = [name.strip() for name in args.variants.split(",") if name.strip()]
     unknown = [name for name in names if name not in VARIANTS]

@@ -56,6 +56,16 @@ def test_surface_meshes_and_renders_a_frame(capsys):
 
 
 @pytest.mark.slow
+def test_surface_volume_compares_a_candidate(capsys):
+    script("surface").main(["--volume", "--frames", "10", "--every", "10", "--candidate", "surface.iso_level=0.55"])
+    out = capsys.readouterr().out
+    assert "candidate 1: surface.iso_level=0.55" in out
+    header, rest, frame = (line.split() for line in out.splitlines() if line.split()[0] in ("frame", "rest", "10"))
+    assert header == ["frame", "defaults", "candidate", "1", "before"] and len(rest) == len(frame) == 4
+    assert all(f"\n{row:>6} " in out for row in ("worst", "ms", "tris", "walls", "drop"))
+
+
+@pytest.mark.slow
 def test_headline_prints_its_table(capsys):
     headline.main(["--quick"])
     out = capsys.readouterr().out
@@ -94,3 +104,16 @@ def test_window_benchmark_runs_under_a_virtual_display():
         pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
     assert run.returncode == 0, run.stderr
     assert "| window | " in run.stdout
+
+
+@pytest.mark.slow
+def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
+    gallery = script("gallery")
+    monkeypatch.setitem(gallery.MOMENTS, "martin_moyce", 0.05)  # a few frames
+    out = tmp_path / "sheet.png"
+    gallery.main(["--presets", "martin_moyce", "--out", str(out), "--size", "64x36", "--columns", "1"])
+    assert out.stat().st_size > 1000 and "wrote" in capsys.readouterr().out
+
+
+def test_every_preset_has_a_moment_in_the_gallery():
+    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}

@@ -73,6 +73,7 @@ def test_water_inside_a_body_at_the_start_is_removed():
     assert not inside(sim, sim.bodies.state()[0], half).any()
 
 
+@pytest.mark.slow
 def test_snapshot_and_restore_replay_the_bodies_bit_for_bit():
     sim = Simulation(
         pool(
@@ -195,6 +196,7 @@ def test_a_body_at_rest_on_a_pool_at_rest_stays_at_rest():
     assert np.median(body) < 0.5 * np.median(pool_fastest)
 
 
+@pytest.mark.slow
 def test_the_hand_carries_a_body_it_touches():
     from pbf.solver import Push
 

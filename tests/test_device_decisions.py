@@ -22,7 +22,8 @@ def frames(sim, count):
     return used, reads / substeps, launches / substeps
 
 
-@pytest.mark.parametrize("step_back", [True, pytest.param(False, marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("step_back", [True, False])
 def test_the_device_takes_the_hosts_decisions(step_back):
     scene = small_dam_break(iterations=10)
     scene["solver"].update(target_density_error=0.002, expert={"step_back": step_back})

@@ -1,6 +1,9 @@
 """An error is one short message: no traceback, no NumPy reprs, values echoed cut short, command-line
 values blamed on the command line, and the closest valid name suggested."""
 
+import os
+import re
+
 import numpy as np
 import pytest
 from command_line import assert_one_error, refused, run_cli
@@ -8,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pbf import SceneError, load_scene
+from pbf.app import cli, window
 from pbf.scene import from_dict
 from scenes import small_dam_break
 
@@ -109,3 +113,61 @@ def test_a_bad_value_is_one_line_without_traceback(tmp_path):
         "command line --set fluid.spacing_m=1e999: key 'fluid.spacing_m'",
         "expected a finite number, got inf",
     )
+
+
+# ------------------------------------------------------------------------------------ a run's own lines
+
+
+def pbf_lines(output: str) -> list[str]:
+    return [line for line in output.splitlines() if line.startswith("[pbf]")]
+
+
+def test_without_a_display_the_window_is_given_up_in_one_line(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    args = cli.parse_args(["dam_break"])
+    assert cli.try_window(cli.load(args), args) is None
+    assert capsys.readouterr().out == "[pbf] no window: DISPLAY is not set; rendering headless instead\n"
+
+
+def test_a_display_that_cannot_be_opened_is_given_up_in_one_line(monkeypatch, capsys):
+    # GGUI's GLFW would print "cannot initialize GLFW" and end the process.
+    monkeypatch.setenv("DISPLAY", ":4242")
+    args = cli.parse_args(["dam_break"])
+    if window.unreachable_display() is None:
+        pytest.skip("no Xlib here to ask, or an X server answers on :4242")
+    capsys.readouterr()
+    assert cli.try_window(cli.load(args), args) is None
+    assert capsys.readouterr().out == (
+        "[pbf] no window: the display DISPLAY=:4242 cannot be opened; rendering headless instead\n"
+    )
+
+
+@pytest.mark.slow
+def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path):
+    """The lines of a window run that falls back to files, as the user reads them, in a process of its own
+    (GGUI, once started in a process, does not survive a second window without a driver). Where Vulkan
+    cannot start, GGUI's C++ side writes "RHI Error: Can not create Vulkan instance" to file descriptor 2
+    before the program says why there is no window: only the program's line shows (a loader pointed at no
+    driver, VK_ICD_FILENAMES, makes any machine one without Vulkan; a Wayland display, named, takes the run
+    past the X display's check to GGUI). Every number of frames said is the
+    number written, and the pour, empty at the start, says how many particles its nozzle will add."""
+    env = {key: value for key, value in os.environ.items() if key != "DISPLAY"}
+    env |= {"WAYLAND_DISPLAY": "wayland-4242", "VK_ICD_FILENAMES": str(tmp_path / "no_driver.json")}
+    out = tmp_path / "frames"
+    result = run_cli("pour", "--arch", "cpu", "--frames", "2", "--out", out, "--size", "64x48", cwd=tmp_path, env=env)
+    assert result.returncode == 0, result.stderr
+    assert "RHI" not in result.stderr and "RHI" not in result.stdout, result.stderr
+    lines = pbf_lines(result.stdout)
+    assert lines[0].startswith("[pbf] Starting on cpu ("), result.stdout
+    assert lines[1:5] == [
+        "[pbf] no window: no Vulkan driver for the window (on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers "
+        "libvulkan1' gives a software one); rendering headless instead",
+        cli.COMPILING,
+        "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
+        f"[pbf] rendering 3 frames (the start and 2 steps) into {out}/",
+    ], result.stdout
+    assert re.fullmatch(r"\[pbf\] kernels ready and the first frame drawn in \d+\.\d s", lines[5]), result.stdout
+    assert lines[6:] == [f"[pbf] wrote 3 frames in {out}/"], result.stdout
+    assert len(list(out.glob("frame_*.png"))) == 3
+    assert "((" not in result.stdout and "))" not in result.stdout

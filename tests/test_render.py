@@ -146,16 +146,24 @@ def test_npz_export(tmp_path):
 
 
 def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch, capsys):
+    # The run's own lines (the start line aside: the tests' backend is already running): the window given
+    # up in one line, the frames said and written alike, and the pour, empty at the start, saying how
+    # many particles its nozzle will add.
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    assert (
-        cli.main(
-            ["dam_break", "--frames", "1", "--out", str(tmp_path), "--size", "64x48", "--set", "fluid.spacing_m=0.05"]
-        )
-        == 0
-    )
-    assert "no window (no display" in capsys.readouterr().out
+    assert cli.main(["pour", "--frames", "1", "--out", str(tmp_path), "--size", "64x48"]) == 0
+    output = capsys.readouterr().out
+    lines = [line for line in output.splitlines() if line.startswith("[pbf]")]
+    assert lines[:4] == [
+        "[pbf] no window: DISPLAY is not set; rendering headless instead",
+        cli.COMPILING,
+        "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
+        f"[pbf] rendering 2 frames (the start and 1 step) into {tmp_path}/",
+    ], output
+    assert lines[4].startswith("[pbf] kernels ready and the first frame drawn in "), output
+    assert lines[5:] == [f"[pbf] wrote 2 frames in {tmp_path}/"], output
     assert len(list(tmp_path.glob("frame_*.png"))) == 2
+    assert "((" not in output
 
 
 @pytest.mark.parametrize(
@@ -195,7 +203,12 @@ def test_legend_shows_the_colour_map_and_its_range():
 
 def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
     # GPU backends splat a thread per (particle, pixel) (pbf.app.splat); here on the CPU against the
-    # per-particle loops, with particles near and far and some behind the eye, in both orders.
+    # per-particle loops, with particles near and far and some behind the eye, in both orders. The two
+    # kernels evaluate the same ray-sphere test but are compiled apart, and LLVM may fuse its
+    # multiply-adds differently in each (it depends on the CPU's instruction set): a ray that grazes a
+    # sphere may round to a hit in one and a miss in the other. So a handful of pixels may differ
+    # (one on this machine's CPU, none on another); a splat that lost or misplaced work items would
+    # change thousands.
     rng = np.random.default_rng(11)
     view = View(np.array([0.0, 0.2, 1.2]), np.array([0.0, 0.0, 0.0]), 60.0)
     centres = rng.uniform(-0.6, 0.6, size=(2000, 3)) * [1.0, 1.0, 2.0]
@@ -210,5 +223,50 @@ def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
             renderer = SphereRenderer(W, H, WHITE, segments=edges)
             renderer.per_item, renderer.front_to_back = per_item, front_to_back
             images.append(renderer.render(view, x, c, 2000, 0.02))
-        assert np.array_equal(*images)
+        assert np.count_nonzero(np.any(images[0] != images[1], axis=2)) <= 8  # of 76,800 pixels
         assert 0.05 < covered(images[0]).mean() < 0.95
+
+
+def test_the_legends_labels_are_letters_not_empty_boxes():
+    # Pillow's default font has no ρ and no minus sign: it drew both as the box of a missing glyph,
+    # the same pixels as a code point no font has (one of Unicode's private use).
+    from pbf.app.legend import legend_font, legend_range
+
+    render = load_scene("dam_break", ['render.colour_by="density"']).render
+    labels = "".join(legend_range(render))
+    assert "ρ" in labels and "−" in labels
+    for height in (90, 360, 1080):
+        font = legend_font(height)
+        missing = np.asarray(font.getmask("\U000f0000"))
+        for character in set(labels) - {" "}:
+            assert not np.array_equal(np.asarray(font.getmask(character)), missing), (character, height)
+
+
+def test_the_legend_is_blended_into_its_corner_alone():
+    # On a plain frame the legend changes only the top right corner, holds the colour map's two ends in
+    # its bar, and its dark text on the light background: no pixel elsewhere moves.
+    import matplotlib
+
+    from pbf.app.legend import draw_legend
+
+    render = load_scene("dam_break", ['render.colour_by="density"']).render
+    background = np.round(np.array(render.background_rgb) * 255).astype(np.uint8)
+    plain = np.broadcast_to(background, (360, 640, 3)).copy()
+    image = draw_legend(plain.copy(), render)
+    rows, cols = np.nonzero(np.any(image != plain, axis=2))
+    assert cols.min() > 640 * 0.7 and rows.max() < 360 * 0.7
+    corner = image[: rows.max() + 1, cols.min() :].reshape(-1, 3).astype(int)
+    for end in (0.0, 1.0):  # within 2 of 255 for the blend's rounding
+        colour = np.round(np.array(matplotlib.colormaps[render.colour_map](end)[:3]) * 255)
+        assert np.any(np.all(np.abs(corner - colour) <= 2, axis=1)), end
+    assert corner.sum(axis=1).min() < 3 * 60  # the labels' ink (20, 20, 20), antialiased at its edges
+
+
+def test_colour_by_on_the_command_line_brings_the_legend():
+    def legend(*argv):
+        return cli.load(cli.parse_args(["dam_break", *argv])).render.legend
+
+    assert legend("--colour-by", "density") and legend("--colour-by", "speed")
+    assert not legend()  # the scene's own setting
+    assert not legend("--colour-by", "density", "--set", "render.legend=false")  # --set wins
+    assert not legend("--colour-by", "density", "--style", "surface")  # the window: no colours to explain

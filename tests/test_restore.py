@@ -200,6 +200,7 @@ def test_an_emitter_that_cannot_fit_the_container_is_refused_naming_it():
         from_dict(two)
 
 
+@pytest.mark.slow
 def test_a_drowned_nozzle_pauses_instead_of_pushing():
     # A nozzle 3.5 spacings above the floor of a small box: the water soon reaches it. Its layers
     # then pause; the water stays near rest density and inside the box.

@@ -32,6 +32,7 @@ def potential_energy_j(sim):
     return sim.model.particle_mass_kg * G * float(sim.positions()[:, 1].sum())
 
 
+@pytest.mark.slow
 def test_particles_starting_at_one_point():
     # Against division by vanishing gradients: 512 particles within a micrometre of each other have
     # huge density and nearly no constraint gradient, so λ is large and Δx must still stay bounded.

@@ -15,7 +15,7 @@ from pbf import Simulation
 from pbf.app import cli, loop
 from pbf.app.headless import FrameWriter
 from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
-from pbf.app.surface import Mesh, reconstruct, write_mesh
+from pbf.app.surface import Mesh, reconstruct, with_wall_images, write_mesh
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
 from scenes import column_scene
@@ -69,12 +69,22 @@ def test_resting_water_gives_a_closed_mesh_of_its_volume(settled):
     mesh = reconstruct(sim.positions(), sim.scene)
     assert_closed(mesh)
     water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
-    assert mesh.enclosed_volume_m3() == pytest.approx(water_m3, rel=0.05)
+    # 97-100%: smoothing rounds the free surface's edge along the walls a little (99% measured). Water
+    # against a wall must reach it: without the wall images this column meshes at 95%.
+    assert 0.97 * water_m3 < mesh.enclosed_volume_m3() < water_m3
     lower, upper = (np.array(corner, np.float32) for corner in (sim.scene.container.min_m, sim.scene.container.max_m))
     assert (mesh.vertices >= lower).all() and (mesh.vertices <= upper).all()
     # The free surface lies within a spacing of the top particles.
     top = sim.positions()[:, 1].max()
     assert abs(mesh.vertices[:, 1].max() - top) < SPACING
+
+
+def test_particles_near_a_wall_are_mirrored_across_it():
+    lower, upper = (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
+    middle, corner = [0.5, 0.5, 0.5], [0.01, 0.98, 0.5]  # the corner's within reach of x = 0 and y = 1
+    points = with_wall_images(np.array([middle, corner], np.float32), lower, upper, 0.05)
+    expected = [middle, corner, [-0.01, 0.98, 0.5], [0.01, 1.02, 0.5], [-0.01, 1.02, 0.5]]
+    assert np.allclose(points, expected)
 
 
 def test_a_ball_of_particles_gives_a_sphere_of_its_radius():
@@ -86,6 +96,42 @@ def test_a_ball_of_particles_gives_a_sphere_of_its_radius():
     distances = np.linalg.norm(mesh.vertices - centre, axis=1)
     assert distances.mean() == pytest.approx(water_radius, abs=0.25 * SPACING)
     assert distances.std() < 0.1 * SPACING  # round, not a lattice of bumps
+
+
+def test_a_sheet_one_particle_thick_holds_its_volume():
+    """A splash's sheets are one or two particles thick. Normalised per particle, the colour field is 1
+    on the sheet's particles, so a kernel wider than the sheet meshes it as a slab 1.6 spacings thick
+    at 1.2 spacings (61% too much water). Meshed with the defaults it holds its water within 10%
+    (its rim, rounded off, is where the rest goes)."""
+    k = np.arange(20)
+    rows, columns = np.meshgrid(k, k, indexing="ij")
+    sheet = np.stack([rows.ravel(), np.zeros(k.size**2), columns.ravel()], axis=1)
+    particles = (np.array([0.25, 0.5, 0.25]) + SPACING * sheet).astype(np.float32)
+    mesh = reconstruct(particles, open_scene())
+    assert_closed(mesh)
+    assert mesh.enclosed_volume_m3() == pytest.approx(len(particles) * SPACING**3, rel=0.10)
+
+
+@pytest.mark.slow
+def test_a_splash_is_meshed_with_its_water_volume():
+    """The seed dam break from its fall to its central jet (frames 10 to 90, every 10th): each mesh is
+    closed and holds the water's volume within 5%, as a resting column does within 1% (the worst frame
+    is 4.1% over). With a smoothing length of 1.2 spacings (the earlier default) the splash's rough
+    surface, sheets and spray were wrapped up to 24% too large (docs/BENCHMARKS.md, "Surfaces")."""
+    sim = Simulation("dam_break")
+    water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
+    for frame in range(10, 91, 10):
+        sim.step(frame - sim.frame)
+        mesh = reconstruct(sim.positions(), sim.scene)
+        assert mesh.is_closed(), frame
+        assert mesh.enclosed_volume_m3() == pytest.approx(water_m3, rel=0.05), frame
+
+
+def test_a_mesh_with_a_hole_is_not_closed():
+    mesh = reconstruct(ball(3.0, [0.5, 0.5, 0.5]), open_scene())
+    assert mesh.is_closed()
+    assert not Mesh(mesh.vertices, mesh.triangles[1:]).is_closed()
+    assert not Mesh(mesh.vertices, np.concatenate([mesh.triangles, mesh.triangles[:1]])).is_closed()
 
 
 def test_no_particle_gives_an_empty_mesh_and_one_gives_a_droplet(tmp_path):

@@ -21,6 +21,7 @@ def tank(**extra):
     }
 
 
+@pytest.mark.slow
 def test_the_piston_pushes_the_water_and_nothing_gets_behind_it():
     sim = Simulation(tank())
     box = sim.boundaries.container

@@ -5,6 +5,7 @@ frame."""
 
 import re
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,7 +13,8 @@ import taichi as ti
 
 from pbf import Simulation
 from pbf.app import window as window_module
-from pbf.app.render import SphereRenderer, unpack_rgb
+from pbf.app.keys import HELP
+from pbf.app.render import EMPTY, SphereRenderer, unpack_rgb
 from pbf.app.window import WindowViewer, show_packed
 from scenes import small_dam_break
 
@@ -53,10 +55,11 @@ class DrawingWindow:
 
     running = True
 
-    def __init__(self):
+    def __init__(self, cursor=(0.5, 0.5)):
         self.canvas = Recorder()
         self.texts = []
         self.shown = 0
+        self.cursor = cursor
 
     def get_events(self, kind):
         return []
@@ -65,7 +68,7 @@ class DrawingWindow:
         return False
 
     def get_cursor_pos(self):
-        return (0.5, 0.5)
+        return self.cursor
 
     def get_window_shape(self):
         return (W, H)
@@ -82,6 +85,9 @@ class DrawingWindow:
     def show(self):
         self.shown += 1
 
+    def set_background_color(self, rgb):
+        self.background = rgb
+
 
 def small_scene():
     scene = small_dam_break()
@@ -89,10 +95,23 @@ def small_scene():
     return scene
 
 
-def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is():
-    sim = Simulation(small_scene())
-    window = DrawingWindow()
+@pytest.fixture(scope="module")
+def shared_sim():
+    """One simulation for the tests that only draw it (each Simulation compiles its kernels anew)."""
+    return Simulation(small_scene())
+
+
+@pytest.fixture
+def sim(shared_sim):
+    shared_sim.reset()
+    shared_sim.control.push = None
+    return shared_sim
+
+
+def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is(sim):
+    window = DrawingWindow(cursor=(-1.0, -1.0))  # the mouse outside the window: no marker
     viewer = WindowViewer(sim, window)
+    viewer.advance()
     viewer.show()
     assert window.shown == 1 and len(window.canvas.images) == 1
     info = window.canvas.images[0]
@@ -113,8 +132,57 @@ def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is():
     assert np.array_equal(image, viewer.surface_renderer.image.to_numpy())
 
 
-def test_the_panel_shows_simulation_and_render_milliseconds_apart():
-    sim = Simulation(small_scene())
+def ring_pixels(before, after):
+    """The (x, y) of the pixels that changed between two packed frames, and whether all are the marker's."""
+    changed = np.argwhere(before != after)
+    return changed, bool(np.all(after[before != after] == window_module.MARKER_WORD))
+
+
+def test_a_ring_marks_the_water_under_the_mouse_and_the_hand_that_holds_it(sim):
+    """The ring is the hand's reach (Hand.radius_m) at the depth of the water under the cursor, seen through
+    the window's camera: a circle of f R / depth pixels around it, two pixels wide. Over empty space there
+    is none (a press there takes nothing); while the left button holds water it rings the hand."""
+    window = DrawingWindow(cursor=(-1.0, -1.0))
+    viewer = WindowViewer(sim, window)
+    viewer.advance()
+    viewer.show()
+    renderer = viewer.sphere_renderer
+    plain = renderer.packed.copy()
+    keys = renderer.keys.to_numpy()
+    water = np.argwhere((keys != EMPTY) & ((keys & 0xFFFFFFFF) < sim.particle_count))
+    col, row = water[len(water) // 2]  # a pixel of water, (x, y) with y up
+    depth = float(np.array([keys[col, row] >> 32], np.int32).view(np.float32)[0])
+    view = viewer.camera.view()
+    radius_px = view.focal_px(H) * viewer.hand.radius_m / depth
+    window.cursor = ((col + 0.5) / W, (row + 0.5) / H)
+    viewer.advance()
+    viewer.show()
+    changed, all_marker = ring_pixels(plain, renderer.packed)
+    assert all_marker and len(changed) > 2 * np.pi * radius_px  # a ring around, not a dot
+    distances = np.hypot(changed[:, 0] + 0.5 - (col + 0.5), changed[:, 1] + 0.5 - (row + 0.5))
+    assert distances.min() >= radius_px - 1.0 and distances.max() <= radius_px + 2.0 + 1.0  # pixel rounding
+
+    empty = np.argwhere(keys == EMPTY)[0]
+    window.cursor = ((empty[0] + 0.5) / W, (empty[1] + 0.5) / H)
+    viewer.advance()
+    viewer.show()
+    assert np.array_equal(renderer.packed, plain)  # nothing under the cursor: no ring
+
+    viewer.hand.grab(view, (col + 0.5) / W, (row + 0.5) / H, W / H)  # the left button, pressed on the water
+    viewer.show()
+    changed, all_marker = ring_pixels(plain, renderer.packed)
+    offset = viewer.hand.point - view.eye
+    right, up, forward = view.basis()
+    centre = (
+        W / 2 + view.focal_px(H) * (offset @ right) / (offset @ forward),
+        H / 2 + view.focal_px(H) * (offset @ up) / (offset @ forward),
+    )
+    radius_px = view.focal_px(H) * viewer.hand.radius_m / (offset @ forward)
+    distances = np.hypot(changed[:, 0] + 0.5 - centre[0], changed[:, 1] + 0.5 - centre[1])
+    assert all_marker and distances.min() >= radius_px - 1.0 and distances.max() <= radius_px + 3.0
+
+
+def test_the_panel_shows_simulation_and_render_milliseconds_apart(sim):
     window = DrawingWindow()
     viewer = WindowViewer(sim, window)
     viewer.show()
@@ -136,6 +204,66 @@ def test_the_panel_shows_simulation_and_render_milliseconds_apart():
     assert draw_ms > 0.0 and show_ms >= 0.0 and render_ms == pytest.approx(draw_ms + show_ms, abs=0.11)
 
 
+TEXT_PX, SLIDER_PX, FRAME_PX = 17, 23, 36
+"""The panel's pixels at GGUI's default font, read off a screenshot of ``python run.py`` under Xvfb (key h
+pressed with xdotool, ``import -window root``): a line of text, a slider, and the title bar with the
+padding above and below the lines."""
+
+
+class LinePanel(Panel):
+    """A panel that records its sliders as lines too, marked."""
+
+    def slider_int(self, name, value, low, high):
+        self.texts.append(("slider", name))
+        return value
+
+    slider_float = slider_int
+
+
+class HelpWindow(DrawingWindow):
+    """A 1280 × 720 window whose key h is pressed once; records each panel's name and height."""
+
+    def __init__(self):
+        super().__init__()
+        self.events = [SimpleNamespace(key="h")]
+        self.panels = []
+
+    def get_events(self, kind):
+        events, self.events = self.events, []
+        return events
+
+    def get_window_shape(self):
+        return (1280, 720)
+
+    def sub_window(self, name, x, y, width, height):
+        self.texts.clear()
+        self.panels.append((name, height))
+        return LinePanel(self.texts)
+
+
+def needed_px(lines) -> int:
+    sliders = sum(isinstance(line, tuple) for line in lines)
+    return FRAME_PX + SLIDER_PX * sliders + TEXT_PX * (len(lines) - sliders)
+
+
+def test_the_panel_grows_to_show_the_help_without_scrolling(sim):
+    """GGUI's Dear ImGui takes a panel's size only when it first meets the panel's name (and keeps it in
+    imgui.ini), so the panel with the help must be another name, of the same title, tall enough for its
+    lines."""
+    window = HelpWindow()
+    viewer = WindowViewer(sim, window)
+    viewer.panel(viewer.current_stats())
+    name, height = window.panels[-1]
+    assert needed_px(window.texts) <= height * 720
+    assert viewer.advance()  # key h
+    viewer.panel(viewer.current_stats())
+    help_name, help_height = window.panels[-1]
+    assert HELP[-1] in window.texts
+    assert needed_px(window.texts) <= help_height * 720 <= 720, (needed_px(window.texts), help_height * 720)
+    assert help_name != name and help_name.split("###")[0] == name.split("###")[0] == window_module.PANEL_TITLE
+
+
+@pytest.mark.slow
 def test_statistics_are_recomputed_at_most_every_interval_while_running(monkeypatch):
     monkeypatch.setattr(window_module, "STATS_INTERVAL_S", 1e9)
     sim = Simulation(small_scene())
@@ -168,3 +296,11 @@ def test_ggui_shows_a_packed_image_as_its_own_set_image_does():
     theirs = np.round(window.get_image_buffer_as_numpy()[..., :3] * 255).astype(np.uint8)
     assert np.array_equal(ours, theirs)
     assert tuple(ours[5, 45]) == (250, 10, 10) and tuple(ours[50, 5]) == (20, 40, 60)
+
+
+def test_the_window_says_what_it_waits_for_before_the_first_picture():
+    # Drawn twice: Dear ImGui does not draw a window in the frame it first lays it out.
+    window = DrawingWindow()
+    window_module.show_waiting(window, (0.9, 0.9, 0.8), ["compiling kernels ..."])
+    assert window.shown == 2 and window.texts == ["compiling kernels ..."] * 2
+    assert window.background == (0.9, 0.9, 0.8)

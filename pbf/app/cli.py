@@ -8,8 +8,9 @@
 Everything the user gives is checked before Taichi starts and before anything is written: the
 options (each either takes effect or is refused, none is ignored), the scene with its overrides,
 the backend and every output path. A failure prints one line to stderr and returns 2. Only then does
-it build a Simulation and a viewer (window, headless frames or statistics) and hand both to the one
-loop of ``pbf.app.loop``.
+it start the backend, try the window (or say in one line why there is none), say that the kernels
+compile, build a Simulation and a viewer (window, headless frames or statistics) and hand both to the
+one loop of ``pbf.app.loop``, saying how long the start took once the first frame is shown.
 """
 
 import argparse
@@ -17,6 +18,7 @@ import difflib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 from pbf import scene as schema
@@ -139,7 +141,9 @@ def build_parser() -> Parser:
     view.add_argument("--camera", metavar="X,Y,Z", help="eye position, m")
     view.add_argument("--look-at", metavar="X,Y,Z", help="point at the image centre, m")
     view.add_argument("--fov", metavar="DEG", help="vertical field of view, degrees")
-    view.add_argument("--colour-by", choices=("speed", "density"), help="particle colour")
+    view.add_argument(
+        "--colour-by", choices=("speed", "density"), help="particle colour, with its legend on headless frames"
+    )
     view.add_argument("--colour-map", metavar="NAME", help="Matplotlib colour map, e.g. viridis")
     view.add_argument(
         "--style",
@@ -258,9 +262,15 @@ def view_overrides(args) -> dict[str, str]:
 
 def load(args) -> schema.Scene:
     """The scene with the view options and then the --set overrides applied (--set wins); an error
-    in a value from the command line names the option it came from."""
+    in a value from the command line names the option it came from. --colour-by also turns on the
+    headless frames' legend (colours alone say nothing of what they measure), where the scene draws
+    particles and no --set says otherwise."""
     try:
-        return schema.load_scene(args.scene, [*args.view, *args.set])
+        scene = schema.load_scene(args.scene, [*args.view, *args.set])
+        legend_set = any(assignment.split("=", 1)[0].strip() == "render.legend" for assignment in args.set)
+        if args.colour_by is not None and scene.render.style == "particles" and not legend_set:
+            scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set])
+        return scene
     except schema.SceneError as error:
         raise schema.attribute(error, command_line_keys(args)) from None
 
@@ -325,30 +335,54 @@ def frame_writer(sim, args, frames, out, video):
     return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
-def choose_viewer(sim, args, out, video):
+def try_window(scene, args):
+    """The GGUI window the options ask for, or None (headless: asked for, or no window can open here, which
+    is said in one line)."""
+    if args.headless or args.stats_only:
+        return None
+    from pbf.app import window
+
+    try:
+        gui_window = window.open_window(f"pbf: {scene.name}", scene.render.width_px, scene.render.height_px)
+    except window.WindowUnavailable as reason:
+        print(f"[pbf] no window: {reason}; rendering headless instead")
+        return None
+    window.show_waiting(gui_window, scene.render.background_rgb, [COMPILING.removeprefix("[pbf] ")])
+    return gui_window
+
+
+def choose_viewer(sim, args, gui_window, out, video):
     """The viewer the options ask for, and the frames to run (None: until the window closes)."""
     frames = args.frames or HEADLESS_FRAMES
     if args.stats_only:
         from pbf.app import loop
 
         return loop.StatsViewer(sim, frames), frames
-    if not args.headless:
+    if gui_window is not None:
         from pbf.app import window
 
-        try:
-            viewer = window.WindowViewer(
-                sim, window.open_window(f"pbf: {sim.scene.name}", sim.scene.render.width_px, sim.scene.render.height_px)
-            )
-        except window.WindowUnavailable as reason:
-            print(
-                f"[pbf] no window ({reason}); rendering the initial state and {frames} frames headless into "
-                f"{out}/ instead"
-            )
-        else:
-            if args.out is not None:
-                print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
-            return viewer, args.frames
-    return frame_writer(sim, args, frames, out, video), frames
+        if args.out is not None:
+            print(f"[pbf] the window opened: nothing is written to --out {out} (it is for headless runs)")
+        return window.WindowViewer(sim, gui_window), args.frames
+    viewer = frame_writer(sim, args, frames, out, video)
+    steps = f"{frames} step{'s' if frames > 1 else ''}"
+    print(f"[pbf] rendering {frames + 1} frames (the start and {steps}) into {out}/")
+    return viewer, frames
+
+
+def scene_line(sim) -> str:
+    """The scene's particles (now, and what its emitters will add), Δt and iterations."""
+    count = f"{sim.particle_count:,} particles"
+    if sim.model.capacity > sim.particle_count:
+        count += f" now, up to {sim.model.capacity:,} from its emitters;"
+    else:
+        count += ","
+    return f"[pbf] {sim.scene.name}: {count} Δt = {sim.dt_s * 1e3:.2f} ms, {sim.control.iterations} iterations"
+
+
+COMPILING = "[pbf] compiling kernels (first run only; later starts use Taichi's offline cache) ..."
+"""Said before the first kernel compiles: on a first run the solver's and the renderer's kernels take
+seconds to compile (docs/BENCHMARKS.md, "The window"), and nothing else would show meanwhile."""
 
 
 def report_written(sim, args, viewer) -> None:
@@ -384,9 +418,13 @@ def main(argv=None) -> int:
         return 2
     from pbf.app import loop
     from pbf.app.headless import FrameWriter
-    from pbf.solver import BackendError, Simulation
+    from pbf.solver import BackendError, Simulation, start_backend
 
     try:
+        start_backend(args.arch)  # the start line; the window needs the backend running
+        gui_window = try_window(scene, args)
+        print(COMPILING, flush=True)
+        started = time.perf_counter()
         sim = Simulation(scene, arch=args.arch)  # derives the Model and checks memory before Taichi allocates
     except schema.SceneError as error:
         print(f"error: {schema.attribute(error, command_line_keys(args))}", file=sys.stderr)
@@ -394,23 +432,19 @@ def main(argv=None) -> int:
     except BackendError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    more = f" (up to {sim.model.capacity:,} with its emitters)" if sim.model.capacity > sim.particle_count else ""
-    print(
-        f"[pbf] {scene.name}: {sim.particle_count:,} particles{more}, Δt = {sim.dt_s * 1e3:.2f} ms, "
-        f"{sim.control.iterations} iterations"
-    )
+    print(scene_line(sim), flush=True)
     try:
-        viewer, frames = choose_viewer(sim, args, out, video)
+        viewer, frames = choose_viewer(sim, args, gui_window, out, video)
     except outputs.OutputError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(
-        "[pbf] preparing the solver's kernels (compiled on a first run, loaded from Taichi's cache after) ...",
-        end=" ",
-        flush=True,
-    )
-    print(f"ready in {loop.warm_up(sim):.1f} s")
-    loop.run(sim, viewer, frames)
+    loop.warm_up(sim)  # the step's kernels before the first picture rather than after it
+
+    def ready():
+        done = "" if args.stats_only else " and the first frame drawn"
+        print(f"[pbf] kernels ready{done} in {time.perf_counter() - started:.1f} s", flush=True)
+
+    loop.run(sim, viewer, frames, first_shown=ready)
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)
     return 0

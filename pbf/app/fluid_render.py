@@ -24,10 +24,11 @@ a quarter of the pixels costs an eighth); only the composition is at full resolu
 4. *Shade.* Schlick's Fresnel term mixes the reflection of a sky gradient with the refracted view of
    a tiled floor (Snell's law, n = 1.33), tinted by Beer–Lambert absorption along the thickness:
    T = exp(−σ d) per colour channel, the absorbed part replaced by the colour of deep water.
-5. *Compose* at full resolution. A pixel is water where the bilinear interpolation of the coarse
-   pixels' coverage (1 water, 0 not) reaches ½, so silhouettes are smooth curves rather than 2-pixel
-   steps; its colour and depth are interpolated from the coarse pixels that are water. Elsewhere it
-   shows the view without water (floor and sky), computed once per camera and kept.
+5. *Compose* at full resolution. A pixel's share of water is the bilinear interpolation of the
+   coarse pixels' coverage (1 water, 0 not), and it blends the water's colour, interpolated from the
+   coarse pixels that are water, over the view without water (floor and sky, computed once per
+   camera and kept): silhouettes are anti-aliased curves rather than 2-pixel steps. Where the share
+   reaches ½ the pixel has the water's depth, against which the lines are drawn.
 
 Everything reads positions as Taichi fields and writes an (H, W, 3) uint8 image; nothing here
 changes the simulation.
@@ -38,13 +39,14 @@ import math
 import numpy as np
 import taichi as ti
 
-from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
 
 vec3 = ti.types.vector(3, ti.f32)
 
 FAR = 1e30
 """Depth of a pixel no water covers, m."""
+NEAR_M = 1e-3
+"""Line segments are clipped this far in front of the eye."""
 COARSE = 2
 """The surface passes run at 1/COARSE of the image's width and height."""
 SPLAT_RADIUS_SPACINGS = 0.75
@@ -67,6 +69,15 @@ WATER_IOR = 1.33
 FRESNEL_F0 = 0.02
 """Reflectance of water at normal incidence, ((n − 1)/(n + 1))² (Schlick 1994)."""
 ZENITH_RGB = (0.42, 0.6, 0.85)
+SUN_DIRECTION = tuple(c / math.sqrt(0.5**2 + 0.6**2 + 1.0**2) for c in (-0.5, 0.6, -1.0))
+"""Towards the sky's sun: behind the scene and up, where the default camera (in front, to the right,
+above) sees it mirrored in a level surface near the middle of the image."""
+SUN_GLOW = 4.0
+"""Brightness of the sun's glow over the sky's (the water mirrors it by Fresnel's 2-10% at these angles)."""
+SUN_GLOW_POWER = 24.0
+"""Sharpness of the glow: it falls to half about 14° from the sun."""
+SPECULAR_EXPONENT = 256.0
+"""Blinn-Phong exponent of the sun's highlight on a smooth surface (lowered where the surface is rough)."""
 FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 """The two colours of the floor's tiles."""
 
@@ -131,10 +142,12 @@ class FluidRenderer:
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
-        self.segment_count = len(points) // 2
-        self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
-        if len(points):
-            self.segments.from_numpy(points)
+        self.segment_points = points.reshape(-1, 2, 3).astype(np.float64)
+        """The line segments' end points, m (a few: the container's edges)."""
+        self.screen_segments = ti.Vector.field(6, ti.f32, shape=max(1, len(self.segment_points)))
+        """Per segment on screen, for the view of the last draw: (column, row, 1/depth) of each end."""
+        self.line_steps = ti.field(ti.i32, shape=max(1, len(self.segment_points)))
+        """Pixels each segment spans along its longer screen axis (0: not in view)."""
 
     # ------------------------------------------------------------------ camera and environment
 
@@ -148,20 +161,49 @@ class FluidRenderer:
 
     @ti.func
     def _sky(self, d):
-        """The sky along unit direction d: horizon colour below, blending to blue at the zenith."""
-        return self.horizon + (ti.Vector(ZENITH_RGB) - self.horizon) * ti.sqrt(ti.max(d.y, 0.0))
+        """The sky along unit direction d: horizon colour below, blending to blue at the zenith, with the
+        glow of a low sun behind the scene (as the default camera sees it), which a calm water surface
+        mirrors as a bright sheen: without it the sky it reflects is as blue as the water."""
+        sky = self.horizon + (ti.Vector(ZENITH_RGB) - self.horizon) * ti.sqrt(ti.max(d.y, 0.0))
+        glow = ti.max(d.dot(ti.Vector(SUN_DIRECTION)), 0.0) ** SUN_GLOW_POWER
+        return sky + SUN_GLOW * glow * (d.y > 0.0)
 
     @ti.func
-    def _environment(self, origin, d):
+    def _tiles(self, x, width):
+        """Mean over [x − width/2, x + width/2] (in tiles) of the square wave that is 1 on odd tiles:
+        (F(x + w/2) − F(x − w/2)) / w with F(x) = ⌊x/2⌋ + max(x − 2⌊x/2⌋ − 1, 0) its integral, the
+        point value where the window is far below a tile."""
+        value = ti.cast(ti.cast(ti.floor(x), ti.i32) & 1, ti.f32)
+        if width > 1e-3:
+            a, b = x - 0.5 * width, x + 0.5 * width
+            upper = ti.floor(0.5 * b) + ti.max(b - 2.0 * ti.floor(0.5 * b) - 1.0, 0.0)
+            lower = ti.floor(0.5 * a) + ti.max(a - 2.0 * ti.floor(0.5 * a) - 1.0, 0.0)
+            value = (upper - lower) / width
+        return value
+
+    @ti.func
+    def _environment(self, origin, d, spread, travelled):
         """What a ray from ``origin`` along unit ``d`` sees without water: the tiled floor plane, fading
-        into the horizon with distance, or the sky."""
+        into the horizon with distance, or the sky. ``spread`` is the angle one pixel spans (radians)
+        and ``travelled`` how far its ray came from the eye to ``origin`` (m): the floor is averaged
+        over the pixel's footprint on it (a box filter of the checkerboard), so tiles smaller than a
+        pixel blend to their mean instead of aliasing into moiré."""
         colour = self._sky(d)
         if d.y < -1e-6:
             t = (self.floor_y - origin.y) / d.y
             if t > 0.0:
                 hit = origin + t * d
-                tile = ti.cast(ti.floor(hit.x / self.tile) + ti.floor(hit.z / self.tile), ti.i32) & 1
-                floor = ti.Vector(FLOOR_RGB[0]) * (1 - tile) + ti.Vector(FLOOR_RGB[1]) * tile
+                # The footprint is an ellipse t·spread across the ray and t·spread/|d.y| along its track
+                # on the floor; the box filter takes its extent along x and along z.
+                across = (travelled + t) * spread
+                along = across / ti.max(-d.y, 1e-3)
+                track = ti.Vector([d.x, d.z])
+                track = track / ti.max(track.norm(), 1e-12)
+                width_x = ti.sqrt((along * track[0]) ** 2 + (across * track[1]) ** 2) / self.tile
+                width_z = ti.sqrt((along * track[1]) ** 2 + (across * track[0]) ** 2) / self.tile
+                odd_x, odd_z = self._tiles(hit.x / self.tile, width_x), self._tiles(hit.z / self.tile, width_z)
+                tile = odd_x + odd_z - 2.0 * odd_x * odd_z  # the mean of odd_x XOR odd_z (the box is separable)
+                floor = ti.Vector(FLOOR_RGB[0]) * (1.0 - tile) + ti.Vector(FLOOR_RGB[1]) * tile
                 fade = 1.0 / (1.0 + t / (20.0 * self.tile))  # the floor greys out into the horizon
                 colour = floor * fade + self.horizon * (1.0 - fade)
         return colour
@@ -170,7 +212,8 @@ class FluidRenderer:
     def _environment_image(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
         for row, col in self.background:
             ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
-            colour = self._environment(eye, ray.normalized())
+            # A pixel spans 1/focal in the image plane at unit depth: 1/(focal |ray|²) radians off axis.
+            colour = self._environment(eye, ray.normalized(), 1.0 / (focal * ray.norm_sqr()), 0.0)
             self.background[row, col] = ti.cast(ti.min(colour, 1.0) * 255.0 + 0.5, ti.u8)
 
     # ------------------------------------------------------------------ the coarse surface passes
@@ -362,20 +405,43 @@ class FluidRenderer:
                 normal = self.normal[row, col]
                 direction = self._ray(row, col, right, up, forward, focal, self.coarse_width, self.coarse_height)
                 point = eye + z * direction
+                # The floor seen in and through the water is averaged over two coarse pixels' angle: the
+                # colours are interpolated between coarse pixels, and a footprint of one would leave a
+                # tile's edge as steps of a coarse pixel.
+                spread = 2.0 / (focal * direction.norm_sqr())
+                travelled = z * direction.norm()
                 direction = direction.normalized()
                 cosine = ti.max(-normal.dot(direction), 0.0)
                 grazing = 1.0 - cosine
                 fresnel = FRESNEL_F0 + (1.0 - FRESNEL_F0) * grazing * grazing * grazing * grazing * grazing
-                reflected = self._environment(point, direction + 2.0 * cosine * normal)
+                reflected = self._environment(point, direction + 2.0 * cosine * normal, spread, travelled)
                 eta = 1.0 / WATER_IOR
                 k = 1.0 - eta * eta * (1.0 - cosine * cosine)
                 refracted = (eta * direction + (eta * cosine - ti.sqrt(ti.max(k, 0.0))) * normal).normalized()
                 transmittance = ti.exp(-self.absorption * self.thickness[row, col])
-                transmitted = self._environment(point, refracted) * transmittance + self.water * (1.0 - transmittance)
+                transmitted = self._environment(point, refracted, spread, travelled) * transmittance + self.water * (
+                    1.0 - transmittance
+                )
+                # Blinn-Phong, its exponent lowered where the normals within the pixel's neighbourhood
+                # disagree (Toksvig 2005, "Mipmapping normal maps": with n̄ the mean of the unit normals,
+                # s' = |n̄| s / (|n̄| + s (1 − |n̄|))) and scaled by (s' + 8)/(s + 8) to keep its energy: a
+                # bumpy patch of spray then shows a dim broad sheen instead of single bright pixels.
+                mean_normal = ti.Vector([0.0, 0.0, 0.0])
+                for dr, dc in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+                    r, c = row + dr, col + dc
+                    if 0 <= r < self.coarse_height and 0 <= c < self.coarse_width:
+                        mean_normal += self.normal[r, c]
+                count = 0.0
+                for dr, dc in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+                    r, c = row + dr, col + dc
+                    if 0 <= r < self.coarse_height and 0 <= c < self.coarse_width:
+                        count += self.normal[r, c].norm_sqr()  # 1 for water, 0 for none
+                agreement = ti.min(mean_normal.norm() / ti.max(count, 1.0), 1.0)
+                exponent = agreement * SPECULAR_EXPONENT / (agreement + SPECULAR_EXPONENT * (1.0 - agreement))
                 halfway = (light - direction).normalized()
-                specular = ti.max(normal.dot(halfway), 0.0)
-                for _ in ti.static(range(8)):  # a Phong exponent of 256, by squaring
-                    specular *= specular
+                specular = (
+                    ti.pow(ti.max(normal.dot(halfway), 0.0), exponent) * (exponent + 8.0) / (SPECULAR_EXPONENT + 8.0)
+                )
                 self.colour[row, col] = (1.0 - fresnel) * transmitted + fresnel * reflected + 0.8 * specular
 
     @ti.kernel
@@ -399,23 +465,83 @@ class FluidRenderer:
                     coverage += w
                     depth += w * sample
                     colour += w * self.colour[r0 + dr, c0 + dc]
+            # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
+            # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
+            # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
+            share = coverage
+            background = ti.cast(self.background[row, col], ti.f32) / 255.0
+            water = background
+            if coverage > 0.0:
+                water = ti.min(colour / coverage, 1.0)
+            blended = share * water + (1.0 - share) * background
+            self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
+            self.image_depth[row, col] = FAR
             if coverage >= 0.5:
-                self.image[row, col] = ti.cast(ti.min(colour / coverage, 1.0) * 255.0 + 0.5, ti.u8)
                 self.image_depth[row, col] = depth / coverage
-            else:
-                self.image[row, col] = self.background[row, col]
-                self.image_depth[row, col] = FAR
+
+    def _project_segments(self, view, focal: float) -> None:
+        """The segments clipped to the space in front of the eye and projected to the image, into
+        ``screen_segments``, with the steps along each one's longer screen axis (a handful of points,
+        on the host, once per camera)."""
+        right, up, forward = view.basis()
+        ends = np.zeros(self.screen_segments.shape + (6,), np.float32)
+        steps = np.zeros(self.line_steps.shape, np.int32)
+        for s, (a, b) in enumerate(self.segment_points - view.eye):
+            depth_a, depth_b = a @ forward, b @ forward
+            if depth_a < NEAR_M and depth_b < NEAR_M:
+                continue  # behind the eye: no steps
+            if depth_a < NEAR_M or depth_b < NEAR_M:  # clip at the near plane
+                t = (NEAR_M - depth_a) / (depth_b - depth_a)
+                a, b = (a + t * (b - a), b) if depth_a < NEAR_M else (a, a + t * (b - a))
+            row = []
+            for p in (a, b):
+                depth = p @ forward
+                row += [0.5 * self.width + focal * (p @ right) / depth, 0.5 * self.height - focal * (p @ up) / depth]
+                row.append(1.0 / depth)
+            ends[s] = row
+            # One step per pixel along the longer axis, clipped to the image (a far-off end point would
+            # otherwise ask for millions of steps); 0 when the segment misses the image.
+            axis = 0 if abs(row[3] - row[0]) >= abs(row[4] - row[1]) else 1
+            size = (self.width, self.height)[axis]
+            low = max(math.floor(min(row[axis], row[axis + 3])), 0)
+            high = min(math.floor(max(row[axis], row[axis + 3])), size - 1)
+            steps[s] = max(high - low + 1, 0)
+        self.screen_segments.from_numpy(ends)
+        self.line_steps.from_numpy(steps)
 
     @ti.kernel
-    def _lines(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
-        for s in range(self.segment_count):
-            a, b = self.segments[2 * s], self.segments[2 * s + 1]
-            samples = 2 * (self.width + self.height)
-            for k in range(samples + 1):
-                p = a + (b - a) * (k / samples) - eye
-                row, col, depth, inside = to_pixel(p, right, up, forward, focal, self.width, self.height)
-                if inside and depth < self.image_depth[row, col]:
-                    self.image[row, col] = ti.cast(self.line_colour * 255.0 + 0.5, ti.u8)
+    def _lines(self):
+        """The segments over the image, anti-aliased: a pixel takes the line's colour by the share of it
+        a line one pixel wide covers (1 − the distance from its centre to the segment), where the
+        segment is nearer than the water there (depth interpolated as 1/depth, which is linear on the
+        screen). Each segment is a parallel loop over its steps along its longer axis, three pixels
+        across each step, so no two threads touch one pixel; the segments follow one another, so
+        where two cross the later one blends over the earlier, the same way on every run."""
+        for s in ti.static(range(self.screen_segments.shape[0])):
+            for k in range(self.line_steps[s] * 3):
+                ends = self.screen_segments[s]
+                a, b = ti.Vector([ends[0], ends[1]]), ti.Vector([ends[3], ends[4]])
+                along = b - a
+                axis = 0 if ti.abs(along[0]) >= ti.abs(along[1]) else 1
+                other = 1 - axis
+                step = ti.max(ti.floor(ti.min(a[axis], b[axis])), 0.0) + k // 3
+                # Where the segment crosses the middle of this step, and the pixels on either side.
+                t = ti.min(ti.max((step + 0.5 - a[axis]) / ti.select(along[axis] != 0.0, along[axis], 1.0), 0.0), 1.0)
+                across = ti.floor(a[other] + t * along[other]) + (k % 3 - 1)
+                pixel = ti.Vector([step, across]) if axis == 0 else ti.Vector([across, step])
+                col, row = ti.cast(pixel[0], ti.i32), ti.cast(pixel[1], ti.i32)
+                if 0 <= col < self.width and 0 <= row < self.height:
+                    centre = pixel + 0.5
+                    nearest = 0.0
+                    if along.norm_sqr() > 0.0:
+                        nearest = ti.min(ti.max((centre - a).dot(along) / along.norm_sqr(), 0.0), 1.0)
+                    distance = (a + nearest * along - centre).norm()
+                    depth = 1.0 / ((1.0 - nearest) * ends[2] + nearest * ends[5])
+                    if distance < 1.0 and depth < self.image_depth[row, col]:
+                        share = 1.0 - distance
+                        colour = ti.cast(self.image[row, col], ti.f32) / 255.0
+                        blended = share * self.line_colour + (1.0 - share) * colour
+                        self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
 
     @ti.kernel
     def _pack(self, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
@@ -446,8 +572,9 @@ class FluidRenderer:
         focal = view.focal_px(self.height)
         coarse_focal = view.focal_px(self.coarse_height)
         key = (tuple(view.eye), tuple(view.target), view.fov_deg)
-        if key != self.background_view:
+        if key != self.background_view:  # the view without water and the lines: once per camera
             self._environment_image(eye, right, up, forward, focal)
+            self._project_segments(view, focal)
             self.background_view = key
         self._clear()
         if count and self.per_item:
@@ -483,5 +610,5 @@ class FluidRenderer:
         self._normals(eye, right, up, forward, coarse_focal)
         self._shade(eye, right, up, forward, coarse_focal, ti.Vector(np.asarray(light_direction, np.float32)))
         self._compose()
-        if self.segment_count:
-            self._lines(eye, right, up, forward, focal)
+        if len(self.segment_points):
+            self._lines()

@@ -35,7 +35,11 @@ class FrameWriter:
             fps = 1.0 / sim.scene.time.frame_dt_s
             self.writer = imageio.get_writer(video, fps=fps, codec="libx264", quality=8, macro_block_size=2)
         self.paths: list[Path] = []
-        self.progress = tqdm(total=frames + 1, desc=f"{sim.scene.name}: frames", unit="frame", disable=not progress)
+        self.total = frames + 1
+        """The start and ``frames`` steps."""
+        self.show_progress = progress
+        self.progress = None
+        """The progress bar, from the second frame on: the command line says when the first is written."""
 
     def running(self) -> bool:
         return True
@@ -73,9 +77,19 @@ class FrameWriter:
                     self.sim.velocities(),
                     self.sim.time_s,
                 )
-        self.progress.update()
+        if number == 1:
+            self.progress = tqdm(
+                total=self.total,
+                initial=1,
+                desc=f"{self.sim.scene.name}: frames",
+                unit="frame",
+                disable=not self.show_progress,
+            )
+        if self.progress is not None:
+            self.progress.update()
 
     def close(self) -> None:
-        self.progress.close()
+        if self.progress is not None:
+            self.progress.close()
         if self.writer is not None:
             self.writer.close()

@@ -8,6 +8,7 @@ frame (draws it, writes it to files, or prints statistics) and says when to stop
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 
@@ -25,12 +26,15 @@ class Viewer(Protocol):
         """Release what the viewer holds (files, progress bars); called however the loop ends."""
 
 
-def run(sim, viewer: Viewer, frames: int | None = None) -> None:
+def run(sim, viewer: Viewer, frames: int | None = None, first_shown: Callable[[], None] | None = None) -> None:
     """Show the current state, then step and show until the viewer stops or ``frames`` frames were
-    stepped (None: until the viewer stops)."""
+    stepped (None: until the viewer stops). ``first_shown`` is called once the first frame is shown
+    (the command line says then how long the start took)."""
     stepped = 0
     try:
         viewer.show()
+        if first_shown is not None:
+            first_shown()
         while viewer.running() and (frames is None or stepped < frames):
             if viewer.advance():
                 sim.step()
@@ -67,7 +71,9 @@ class StatsViewer:
         self.sim = sim
         self.frames = frames
         self.frames_per_report = max(1, round(1.0 / sim.scene.time.frame_dt_s))
-        self.started = time.perf_counter()
+        self.started: float | None = None
+        """When the first frame was shown: the kernels are ready by then (``warm_up``), so the rate at the end
+        is the stepping's own."""
 
     def running(self) -> bool:
         return True
@@ -77,11 +83,14 @@ class StatsViewer:
 
     def show(self) -> None:
         frame = self.sim.frame
+        if self.started is None:
+            self.started = time.perf_counter()
         if frame and (frame % self.frames_per_report == 0 or frame == self.frames):
             print(stats_line(self.sim))
 
     def close(self) -> None:
-        elapsed = time.perf_counter() - self.started
-        print(
-            f"[pbf] {self.sim.frame} frames in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s, JIT included)"
-        )
+        if self.started is None:
+            return
+        elapsed = max(time.perf_counter() - self.started, 1e-9)
+        frames = f"{self.sim.frame} frame{'' if self.sim.frame == 1 else 's'}"
+        print(f"[pbf] {frames} in {elapsed:.1f} s ({self.sim.frame / elapsed:.1f} frames/s)")

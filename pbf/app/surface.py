@@ -7,6 +7,15 @@ smooths it with the feature-weighted Laplacian of Löschner, Böttcher, Jeske & 
 Laplacian smoothing for surface reconstruction of particle-based fluids"). The parameters come from
 the scene's ``[surface]`` table in particle spacings. The mesh is written as binary PLY or as OBJ
 (text: the format has no binary form) for Blender, Houdini or ParaView.
+
+Why the kernel is narrow (0.8 spacings, support 1.6) and the walls are mirrored: the colour field is
+normalised per particle (m_j/ρ_j), so every particle counts as inside however few neighbours it has,
+and the iso surface wraps each one at the kernel's reach. A wide kernel wraps a splash's rough
+surface, its one-particle sheets and its spray in an envelope well above the water's volume
+(docs/BENCHMARKS.md, "Surfaces"); a narrow one follows the particles. It also reaches less far past
+water against a wall, where clamping used to hide what smoothing takes, so the particles within a
+kernel's reach of a wall are mirrored across it (as the solver's wall mirror does): the field is that
+of water continuing through the wall, and the mesh meets the wall flat once clamped.
 """
 
 from __future__ import annotations
@@ -34,6 +43,15 @@ class Mesh:
     triangles: np.ndarray
     """(m, 3) int32 indices into ``vertices``."""
 
+    def is_closed(self) -> bool:
+        """Closed and consistently oriented: every directed edge appears once, and its reverse once
+        (a watertight surface whose enclosed volume is meaningful)."""
+        t = self.triangles.astype(np.int64)
+        edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        keys = edges[:, 0] * len(self.vertices) + edges[:, 1]
+        reverse = edges[:, 1] * len(self.vertices) + edges[:, 0]
+        return len(np.unique(keys)) == len(keys) and bool(np.isin(reverse, keys).all())
+
     def enclosed_volume_m3(self) -> float:
         """Σ over triangles of (a · (b × c)) / 6: the signed volume the surface encloses (divergence
         theorem), exact for a closed mesh, positive when the normals point out."""
@@ -53,11 +71,13 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
     if not np.isfinite(positions).all():
         raise ValueError("positions: some particle positions are not finite; the simulation has blown up")
     settings = scene.surface
+    support_m = 2.0 * settings.smoothing_length_spacings * scene.fluid.spacing_m
+    lower, upper = scene.container.min_m, scene.container.max_m
     # pysplashsurf takes lengths in multiples of the particle radius it is given. The colour field
     # does not depend on the particles' mass (m_j/ρ_j = 1/Σ_k W_jk), so passing the spacing as the
     # "radius" makes the table's values in spacings the arguments as they stand.
     surface, _ = pysplashsurf.reconstruction_pipeline(
-        positions,
+        with_wall_images(positions, lower, upper, support_m),
         particle_radius=scene.fluid.spacing_m,
         rest_density=scene.fluid.rest_density_kg_m3,
         smoothing_length=settings.smoothing_length_spacings,
@@ -65,17 +85,52 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
         iso_surface_threshold=settings.iso_level,
         mesh_smoothing_iters=settings.smoothing_iterations or None,
         mesh_smoothing_weights=True,
+        mesh_smoothing_weights_normalization=smoothing_weight_normalization(settings.smoothing_length_spacings),
         # splashsurf's parallel subdomains stitch in a varying order: the mesh differs from run to
         # run (vertex order and the last bits of positions). One thread on one global grid does not.
         multi_threading=not settings.deterministic,
         subdomain_grid=not settings.deterministic,
     )
     vertices = surface.mesh.vertices
-    # The colour field reaches a little past the outermost particles, so water at rest against a wall
-    # would poke through it by about 0.1 spacing. Clamping moves those vertices onto the wall and
-    # keeps every triangle, so the mesh stays closed.
-    vertices = np.clip(vertices, scene.container.min_m, scene.container.max_m).astype(np.float32)
+    # The water's wall images carry the surface through the walls. Clamping moves the vertices beyond
+    # a wall onto it and keeps every triangle (those wholly outside become slivers on the wall), so
+    # the mesh stays closed and meets the wall flat.
+    vertices = np.clip(vertices, lower, upper).astype(np.float32)
     return Mesh(vertices, surface.mesh.triangles.astype(np.int32))
+
+
+SMOOTHING_WEIGHT_NEIGHBOURS = 3.0
+"""Löschner et al.'s smoothing weight of a vertex is its weighted count of nearby particles over this
+normalisation, at most 1: where the water is thinner the mesh is smoothed less, so that droplets keep
+their size. splashsurf's default, 13, is for wider kernels; with 0.8 spacings it spares so much of a
+surface that a ball of particles meshes with bumps of 0.17 spacing (its radius's standard deviation;
+0.13 at 6.7), and 3 brings them under 0.1 spacing (``tests/test_surface.py``). It scales with the
+kernel's volume, like the count it normalises."""
+
+SMOOTHING_WEIGHT_LENGTH_SPACINGS = 0.8
+"""The smoothing length at which ``SMOOTHING_WEIGHT_NEIGHBOURS`` holds."""
+
+
+def smoothing_weight_normalization(smoothing_length_spacings: float) -> float:
+    """The count of neighbours at which a vertex is smoothed fully, scaled to the kernel's volume."""
+    return SMOOTHING_WEIGHT_NEIGHBOURS * (smoothing_length_spacings / SMOOTHING_WEIGHT_LENGTH_SPACINGS) ** 3
+
+
+def with_wall_images(positions: np.ndarray, lower, upper, reach_m: float) -> np.ndarray:
+    """``positions`` followed by their mirror images across each container wall they are within
+    ``reach_m`` of (one axis after the other, so that a particle in a corner has its images across
+    both walls and the corner itself): the colour field inside the container is then that of water
+    continuing through the walls. Deterministic: the images follow in a fixed order."""
+    points = positions
+    for axis in range(3):
+        images = [points]
+        for wall, inward in ((lower[axis], 1.0), (upper[axis], -1.0)):
+            near = points[inward * (points[:, axis] - wall) < reach_m]
+            mirrored = near.copy()
+            mirrored[:, axis] = 2.0 * wall - near[:, axis]
+            images.append(mirrored)
+        points = np.concatenate(images)
+    return np.ascontiguousarray(points, dtype=np.float32)
 
 
 BODY_SPHERE_RINGS = 12

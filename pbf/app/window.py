@@ -1,6 +1,7 @@
 """The interactive window (Taichi GGUI): orbit camera, keys, a panel of live figures and sliders.
 
-Mouse: left drag on the water pushes it (``pbf.app.interact``), right drag orbits around the
+Mouse: left drag on the water pushes it (``pbf.app.interact``; an amber ring marks the hand's reach
+where the cursor meets the water, and the hand while it holds), right drag orbits around the
 target, shift + right drag (or middle drag) zooms. Keys (``KEYS``): W/A/S/D move the target
 forward, left, back and right, Q/E down and up; space pauses and resumes, n steps one frame while
 paused, h shows the help, Tab hides the panel, r resets, f turns the emitters on and off, m the wave maker, v
@@ -18,9 +19,13 @@ would cost more than the whole surface render. The panel shows the simulation's 
 milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 
+import contextlib
+import ctypes
+import ctypes.util
 import math
 import os
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -28,10 +33,12 @@ import numpy as np
 import taichi as ti
 from taichi.ui.utils import get_field_info
 
+from pbf.app.fluid_render import FAR
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
 from pbf.app.render import (
+    EMPTY,
     LIGHT_DIRECTION,
     BodyPoints,
     ParticleColours,
@@ -47,7 +54,13 @@ a window 720 pixels high (``WindowViewer.panel_rect`` sizes it by its lines for 
 ROW_PX = 22
 """The height of one line of the panel at GGUI's default font (0.455 of a 720-pixel window holds its 15)."""
 PANEL_ROWS = 15
+PANEL_TITLE = "pbf (h: help, Tab: hide)"
 """The panel's lines without the help: text, sliders and the title bar."""
+MARKER_RGB = (255, 200, 0)
+"""The ring that marks where the mouse meets the water (and, while dragging, the hand): amber, apart from
+the colour maps' blues and reds and from both backgrounds."""
+MARKER_WORD = MARKER_RGB[0] | (MARKER_RGB[1] << 8) | (MARKER_RGB[2] << 16) | 0xFF000000
+"""The ring's colour as a packed RGBA word (``pbf.app.render.pack_rgba``)."""
 STATS_INTERVAL_S = 0.1
 """The panel's statistics are recomputed at most this often while the simulation runs (a reduction
 over every particle; ten times a second is as often as figures can be read)."""
@@ -132,16 +145,88 @@ centres on pixel centres, where both give the same colours; nearest saves 2.4 ms
 1280 × 720 (docs/BENCHMARKS.md, "The window"). Set before the driver starts, unless the user set it."""
 
 
+TAICHI_WINDOW_NOISE = ("RHI Error",)
+"""The beginnings of the lines Taichi's C++ side writes to stderr when GGUI cannot start Vulkan ("RHI Error:
+Can not create Vulkan instance"); WindowUnavailable says the same in the program's own words."""
+NO_VULKAN = (
+    "no Vulkan driver for the window (on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' "
+    "gives a software one)"
+)
+"""The reason given for Taichi's "Vulkan must be available for GGUI"."""
+
+
+@contextlib.contextmanager
+def stderr_caught(caught: list[str]):
+    """Run the body with file descriptor 2 (where Taichi's C++ logger writes, past Python's sys.stderr)
+    sent to a temporary file; its lines are appended to ``caught`` afterwards."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            caught.extend(sink.read().decode(errors="replace").splitlines(keepends=True))
+
+
+def unreachable_display() -> str | None:
+    """Why the X display that $DISPLAY names cannot be opened, or None (it can, or there is no X library to
+    ask, or no DISPLAY). GGUI's GLFW, given a display it cannot open, prints "cannot initialize GLFW" and
+    ends the process, so the display is tried first with Xlib's ``XOpenDisplay``."""
+    display = os.environ.get("DISPLAY")
+    library = ctypes.util.find_library("X11") if display and sys.platform.startswith("linux") else None
+    if library is None:
+        return None
+    try:
+        x11 = ctypes.CDLL(library)
+    except OSError:
+        return None
+    x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    with stderr_caught([]):  # Xlib may say why on stderr; the reason below says it once
+        handle = x11.XOpenDisplay(None)
+    if not handle:
+        return f"the display DISPLAY={display} cannot be opened"
+    x11.XCloseDisplay(handle)
+    return None
+
+
 def open_window(title: str, width: int, height: int, vsync: bool = True):
-    """A GGUI window, or WindowUnavailable with the reason in one line."""
+    """A GGUI window, or WindowUnavailable with the reason in one line. Taichi's own error lines about a
+    window that cannot open are dropped (the reason replaces them); anything else it writes passes."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise WindowUnavailable("no display: DISPLAY is not set")
+        raise WindowUnavailable("DISPLAY is not set")
+    unreachable = unreachable_display()
+    if unreachable is not None:
+        raise WindowUnavailable(unreachable)
     for name, value in LAVAPIPE_SETTINGS.items():
         os.environ.setdefault(name, value)
+    caught: list[str] = []
     try:
-        return ti.ui.Window(title, (width, height), vsync=vsync)
+        with stderr_caught(caught):
+            return ti.ui.Window(title, (width, height), vsync=vsync)
     except RuntimeError as error:
-        raise WindowUnavailable(str(error).strip().splitlines()[-1]) from None
+        reason = str(error).strip().splitlines()[-1]
+        caught = [line for line in caught if not line.startswith(TAICHI_WINDOW_NOISE)]
+        raise WindowUnavailable(NO_VULKAN if "Vulkan must be available" in reason else reason) from None
+    finally:
+        sys.stderr.write("".join(caught))
+
+
+def show_waiting(gui_window, background_rgb, lines) -> None:
+    """Present one frame of the scene's background with ``lines`` in a small panel, so that the window says
+    what it waits for (the kernels compiling) instead of standing black until the first picture."""
+    for _ in range(2):  # Dear ImGui lays out a window it has not seen before in a first frame it does not draw
+        gui_window.get_canvas().set_background_color(tuple(float(c) for c in background_rgb))
+        height = (len(lines) + 2) * ROW_PX / gui_window.get_window_shape()[1]
+        with gui_window.get_gui().sub_window("pbf", 0.01, 0.01, 0.5, height) as gui:
+            for line in lines:
+                gui.text(line)
+        gui_window.show()
 
 
 class WindowViewer:
@@ -171,6 +256,9 @@ class WindowViewer:
         self.quit = False
         self.drag = None
         self.hand = Hand(sim)
+        self.cursor: tuple[float, float] | None = None
+        """The cursor in window fractions (origin bottom left) where it may touch the water: inside the
+        window and off the panel; None elsewhere."""
         self.fps = 0.0
         self.last_frame: float | None = None
         self.sim_ms: float | None = None
@@ -266,6 +354,7 @@ class WindowViewer:
         width, height = window.get_window_shape()
         left, top, panel_width, panel_height = self.panel_rect()
         over_panel = self.panel_shown and left <= x <= left + panel_width and top <= 1.0 - y <= top + panel_height
+        self.cursor = (x, y) if 0.0 <= x < 1.0 and 0.0 <= y < 1.0 and not over_panel else None
         if window.is_pressed(ti.ui.LMB):
             if self.hand.holding:
                 self.hand.drag(self.camera.view(), x, y, width / height, seconds)
@@ -292,11 +381,19 @@ class WindowViewer:
         rows = PANEL_ROWS + (len(HELP) + 1 if self.help_shown else 0)
         return left, top, width, min(1.0 - 2 * top, rows * ROW_PX / self.window.get_window_shape()[1])
 
+    def panel_name(self) -> str:
+        """The panel's GGUI name: its title and, after ``###``, what Dear ImGui (under GGUI) tells its windows
+        apart by. ImGui takes a window's size from ``sub_window`` only the first time it meets the name, and
+        remembers it (in imgui.ini, across runs too), so a panel grown for the help under the same name would
+        keep its first size and need scrolling: each height the panel takes is a window of its own name."""
+        height_px = round(self.panel_rect()[3] * self.window.get_window_shape()[1])
+        return f"{PANEL_TITLE}###pbf panel {height_px} px"
+
     def panel(self, stats: dict) -> None:
         if not self.panel_shown:
             return
         control = self.sim.control
-        with self.window.get_gui().sub_window("pbf (h: help, Tab: hide)", *self.panel_rect()) as gui:
+        with self.window.get_gui().sub_window(self.panel_name(), *self.panel_rect()) as gui:
             gui.text(f"{self.sim.scene.name}  ·  {stats['backend']}  ·  {'paused' if self.paused else 'running'}")
             gui.text(f"{self.fps:5.1f} fps   t = {stats['time_s']:.2f} s")
             for line in timing_lines(self.sim_ms, self.draw_ms, self.show_ms):
@@ -346,7 +443,45 @@ class WindowViewer:
             if self.body_points is not None:
                 positions, colours, count = self.body_points.combine(positions, colours, count)
             packed = renderer.draw(view, positions, colours, count, particles.radius_m)
+        self.mark(packed, renderer, view, particles.count)
         show_packed(self.window.get_canvas(), packed)
+
+    def cursor_depth(self, renderer, count: int) -> float | None:
+        """The view depth (m) of the water drawn under the cursor, None where there is none: one pixel of the
+        renderer's depth (the surface's) or of its nearest-hit keys (the spheres': view depth bits and
+        particle id, a body's points after the water's ``count``)."""
+        if self.cursor is None:
+            return None
+        width, height = renderer.width, renderer.height
+        col, row_up = min(int(self.cursor[0] * width), width - 1), min(int(self.cursor[1] * height), height - 1)
+        if self.surface:
+            depth = float(renderer.image_depth[height - 1 - row_up, col])
+            return depth if depth < FAR else None
+        key = int(renderer.keys[col, row_up])
+        if key == EMPTY or key & 0xFFFFFFFF >= count:
+            return None
+        return float(np.array([key >> 32], np.int32).view(np.float32)[0])
+
+    def mark(self, packed: np.ndarray, renderer, view: View, count: int) -> None:
+        """Ring in ``packed`` what a left press would take hold of: the hand's reach (``Hand.radius_m``) around
+        the water under the cursor, or around the hand while it holds the water; nothing over empty space,
+        where a press does nothing."""
+        width, height = renderer.width, renderer.height
+        right, up, forward = view.basis()
+        focal = view.focal_px(height)
+        if self.hand.holding:
+            offset = self.hand.point - view.eye
+            depth = float(offset @ forward)
+            if depth <= 0.0:
+                return
+            x = 0.5 * width + focal * float(offset @ right) / depth
+            y = 0.5 * height + focal * float(offset @ up) / depth
+        else:
+            depth = self.cursor_depth(renderer, count)
+            if depth is None or depth <= 0.0:
+                return
+            x, y = self.cursor[0] * width, self.cursor[1] * height
+        ring(packed, x, y, focal * self.hand.radius_m / depth, MARKER_WORD)
 
 
 def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | None) -> tuple[str, str]:
@@ -358,3 +493,15 @@ def timing_lines(sim_ms: float | None, draw_ms: float | None, show_ms: float | N
 
     render = None if draw_ms is None or show_ms is None else draw_ms + show_ms
     return f"sim {ms(sim_ms)} ms per frame", f"render {ms(render)} ms (draw {ms(draw_ms)} + show {ms(show_ms)})"
+
+
+def ring(packed: np.ndarray, x: float, y: float, radius_px: float, word: int) -> None:
+    """Set the pixels of a ring two pixels wide, of radius ``radius_px`` around (x, y) (pixels, y up), in a
+    (W, H) packed image to ``word``; what falls outside the image is left out."""
+    radius_px = max(radius_px, 3.0)
+    angles = np.linspace(0.0, 2.0 * np.pi, max(32, int(4 * np.pi * (radius_px + 1))), endpoint=False)
+    for r in (radius_px, radius_px + 1.0):
+        cols = np.floor(x + r * np.cos(angles)).astype(np.int64)
+        rows = np.floor(y + r * np.sin(angles)).astype(np.int64)
+        inside = (cols >= 0) & (cols < packed.shape[0]) & (rows >= 0) & (rows < packed.shape[1])
+        packed[cols[inside], rows[inside]] = word

@@ -144,7 +144,7 @@ class Bodies:
         """Principal moments of inertia along the body's axes, kg m²."""
         self.position = ti.Vector.field(3, ti.f32, shape=slots)
         self.quaternion = ti.Vector.field(4, ti.f32, shape=slots)
-        self.velocity = ti.Vector.field(3, ti.f32, shape=slots)
+        self.linear_velocity = ti.Vector.field(3, ti.f32, shape=slots)
         self.angular_velocity = ti.Vector.field(3, ti.f32, shape=slots)
         self.force = ti.Vector.field(3, ti.f32, shape=slots)
         """The fluid's reaction on the body over the last substep, N."""
@@ -189,7 +189,7 @@ class Bodies:
         self.position.from_numpy(_padded(state[:, 0:3]))
         quaternion = state[:, 3:7] / np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
         self.quaternion.from_numpy(_padded(quaternion.astype(np.float32), fill=(1.0, 0.0, 0.0, 0.0)))
-        self.velocity.from_numpy(_padded(state[:, 7:10]))
+        self.linear_velocity.from_numpy(_padded(state[:, 7:10]))
         self.angular_velocity.from_numpy(_padded(state[:, 10:13]))
         self.force.from_numpy(_padded(state[:, 13:16]))
         self.torque.from_numpy(_padded(state[:, 16:19]))
@@ -202,7 +202,7 @@ class Bodies:
             [
                 self.position.to_numpy()[:n],
                 self.quaternion.to_numpy()[:n],
-                self.velocity.to_numpy()[:n],
+                self.linear_velocity.to_numpy()[:n],
                 self.angular_velocity.to_numpy()[:n],
                 self.force.to_numpy()[:n],
                 self.torque.to_numpy()[:n],
@@ -216,7 +216,7 @@ class Bodies:
     def speed_limit_m_s(self) -> float:
         """The fastest any point of a body moves, |v| + |ω| r_bound (one small read from the device,
         once a frame): the CFL limit counts it, so no body crosses more than time.max_cfl spacings."""
-        v = np.linalg.norm(self.velocity.to_numpy()[: self.count], axis=1)
+        v = np.linalg.norm(self.linear_velocity.to_numpy()[: self.count], axis=1)
         w = np.linalg.norm(self.angular_velocity.to_numpy()[: self.count], axis=1)
         return float(np.max(v + w * self._bounding)) if self.count else 0.0
 
@@ -238,7 +238,7 @@ class Bodies:
             q2 = gap * gap / (radius * radius)
             if q2 < 1.0:
                 w = (1.0 - q2) ** 3
-                self.velocity[b] += w * (hand - self.velocity[b])
+                self.linear_velocity[b] += w * (hand - self.linear_velocity[b])
                 self.angular_velocity[b] *= 1.0 - w
 
     def grab(self, push, speed_limit_m_s: float) -> None:
@@ -269,13 +269,13 @@ class Bodies:
     def _advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
         for b in range(self.count):
             r = quaternion_matrix(self.quaternion[b])
-            v = self.velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
+            v = self.linear_velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
             inertia = self.inertia[b]
             w_body = r.transpose() @ self.angular_velocity[b]
             torque_body = r.transpose() @ self.torque[b]
             w_body += dt * (torque_body - w_body.cross(inertia * w_body)) / inertia  # Euler's equations
             w = r @ w_body
-            self.velocity[b] = v
+            self.linear_velocity[b] = v
             self.angular_velocity[b] = w
             self.position[b] += dt * v
             q = self.quaternion[b]
@@ -373,7 +373,7 @@ class Bodies:
 
     @ti.func
     def _apply(self, b, impulse, arm):
-        self.velocity[b] += self.inverse_mass[b] * impulse
+        self.linear_velocity[b] += self.inverse_mass[b] * impulse
         self.angular_velocity[b] += self._inverse_inertia(b, arm.cross(impulse))
 
     @ti.func
@@ -382,12 +382,12 @@ class Bodies:
         take away the velocity into the wall (no bounce) and, within Coulomb's cone, the sliding."""
         self.position[b] += depth * normal
         arm = point + depth * normal - self.position[b]  # the point moved with the body
-        approach = (self.velocity[b] + self.angular_velocity[b].cross(arm)).dot(normal)
+        approach = (self.linear_velocity[b] + self.angular_velocity[b].cross(arm)).dot(normal)
         if approach < 0.0:
             rn = arm.cross(normal)
             j = -approach / (self.inverse_mass[b] + rn.dot(self._inverse_inertia(b, rn)))
             self._apply(b, j * normal, arm)
-            slide = self.velocity[b] + self.angular_velocity[b].cross(arm)
+            slide = self.linear_velocity[b] + self.angular_velocity[b].cross(arm)
             slide -= slide.dot(normal) * normal
             speed = slide.norm()
             if speed > 1e-9:
@@ -404,9 +404,9 @@ class Bodies:
         self.position[b] -= depth * mb / (ma + mb) * normal
         ra, rb = point - self.position[a], point - self.position[b]
         relative = (
-            self.velocity[a]
+            self.linear_velocity[a]
             + self.angular_velocity[a].cross(ra)
-            - self.velocity[b]
+            - self.linear_velocity[b]
             - self.angular_velocity[b].cross(rb)
         )
         approach = relative.dot(normal)
@@ -417,9 +417,9 @@ class Bodies:
             self._apply(a, j * normal, ra)
             self._apply(b, -j * normal, rb)
             relative = (
-                self.velocity[a]
+                self.linear_velocity[a]
                 + self.angular_velocity[a].cross(ra)
-                - self.velocity[b]
+                - self.linear_velocity[b]
                 - self.angular_velocity[b].cross(rb)
             )
             slide = relative - relative.dot(normal) * normal
@@ -614,7 +614,7 @@ class Bodies:
                 local = self.rotation[b].transpose() @ (p - centre)
                 near = ti.max(ti.abs(local) - self.half[b], 0.0).norm() < self.kernel_radius
             if near:
-                v += self.velocity[b] + self.angular_velocity[b].cross(p - centre)
+                v += self.linear_velocity[b] + self.angular_velocity[b].cross(p - centre)
         return v
 
     # ------------------------------------------------------------------ the reaction

@@ -38,24 +38,74 @@ from pbf.scene import SCENES_DIR, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study import sweep as speed_error
-from pbf.study.common import StageTimer, TransferCounter, dam_break, stage_breakdown, timed
+from pbf.study.common import StageTimer, TransferCounter, dam_break, timed
 
 COUNTED_FRAMES = 10
 """``sizes``: frames whose launches and reads are counted, after the timed ones."""
+STAGE_SUBSTEPS = 9
+"""``sizes``: substeps of one stage-breakdown round, all from the state the timed frames end in."""
+STAGE_ROUNDS = 5
+"""``sizes``: rounds of the stage breakdown, each the same substeps timed whole and then stage by stage."""
+
+
+def stage_pass(sim: Simulation, substeps: int, rounds: int, bar=None) -> dict:
+    """The stage breakdown beside the same substeps untimed, so that the two can be compared.
+
+    Each round restores the state it started from and runs ``substeps`` substeps at the last Δt twice:
+    first whole, with the device synchronised once before and once after (``untimed``: what the
+    substeps cost), then with ``StageTimer``, which synchronises the device around every stage and
+    times each. Rounds alternate the two, so noise falls on both alike. Returns medians over the rounds
+    of each stage's ms per substep (``stages``), of their sum (``stages_sum``) and of the untimed ms
+    per substep (``untimed``). The sum gains the synchronisations' cost (little on the CPU; on a GPU,
+    where launches are queued, no stage overlaps the next any more) and lacks the host's work between
+    stages, which no stage encloses: it may come out larger or smaller than the untimed figure."""
+    start, dt, previous = sim.snapshot(), sim.dt_s, sim.hook
+    per_stage: dict[str, list[float]] = {}
+    sums, untimed = [], []
+    try:
+        for _ in range(rounds):
+            sim.restore(start)
+            untimed.append(timed(lambda: [sim.substep(dt) for _ in range(substeps)]) * 1e3 / substeps)
+            sim.restore(start)
+            sim.hook = timer = StageTimer()
+            for _ in range(substeps):
+                sim.substep(dt)
+            sim.hook = previous
+            means = {name: sum(timer.ms[name]) / substeps for name in timer.medians()}
+            for name, ms in means.items():
+                per_stage.setdefault(name, []).append(ms)
+            sums.append(sum(means.values()))
+            if bar is not None:
+                bar.update()
+    finally:
+        sim.hook = previous
+        sim.restore(start)
+    return {
+        "stages": {name: statistics.median(ms) for name, ms in per_stage.items()},
+        "stages_sum": statistics.median(sums),
+        "untimed": statistics.median(untimed),
+    }
 
 
 def run_size(
     particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(), device_decisions: bool = False
 ) -> dict:
-    with decisions_on_device(device_decisions):
-        sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
     substep_ms, mean_errors, max_errors = [], [], []
     dt_ms = []
-    # On stderr, so that the table on stdout stays clean; the first frames compile the kernels.
-    with tqdm(total=warmup_frames + frames, desc=f"{sim.particle_count:,} particles", unit="frame") as bar:
+    counted = min(frames, COUNTED_FRAMES)
+    # On stderr, so that the table on stdout stays clean. Every part of a size is on the bar (building
+    # and settling the scene compiles the kernels: seconds with nothing else to show).
+    total = 1 + warmup_frames + frames + STAGE_ROUNDS + counted
+    with tqdm(total=total, desc=f"{particles:,} particles", unit="part") as bar:
+        bar.set_postfix_str("compiling")
+        with decisions_on_device(device_decisions):
+            sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
+        bar.update()
+        bar.set_postfix_str("warm-up frames")
         for _ in range(warmup_frames):
             sim.step()
             bar.update()
+        bar.set_postfix_str("timed frames")
         for _ in range(frames):
             # Whole frames, so the CFL limit may add substeps as in a real run; per substep = frame / substeps.
             frame_ms = timed(sim.step) * 1e3
@@ -65,12 +115,15 @@ def run_size(
             mean_errors.append(stats["mean_density_error"])
             max_errors.append(stats["max_density_error"])
             bar.update()
-    stages = stage_breakdown(sim, 9)
-    substeps = 0
-    with TransferCounter() as counter:
-        for _ in range(min(frames, COUNTED_FRAMES)):
-            sim.step()
-            substeps += sim.frame_substeps
+        bar.set_postfix_str("stage breakdown")
+        stages = stage_pass(sim, STAGE_SUBSTEPS, STAGE_ROUNDS, bar)
+        bar.set_postfix_str("counting launches and reads")
+        substeps = 0
+        with TransferCounter() as counter:
+            for _ in range(counted):
+                sim.step()
+                substeps += sim.frame_substeps
+                bar.update()
     median_ms = statistics.median(substep_ms)
     return {
         "particles": sim.particle_count,
@@ -100,9 +153,24 @@ def sizes(args) -> list[dict]:
             f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
             f"{r['launches_per_substep']:>16.1f}"
         )
-    print("\nstage breakdown, median ms per substep:")
+    print(
+        f"\nstage breakdown, ms per substep: {STAGE_SUBSTEPS} substeps from the state the timed frames end in, "
+        f"medians of {STAGE_ROUNDS} rounds that time them whole (untimed: one device sync at each end) and "
+        f"stage by stage (each stage between two device syncs):"
+    )
     for r in rows:
-        print(f"  {r['particles']:,}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stages_ms"].items()))
+        parts = r["stages_ms"]
+        print(
+            f"  {r['particles']:,}: "
+            + ", ".join(f"{k} {v:.2f}" for k, v in parts["stages"].items())
+            + f"; sum {parts['stages_sum']:.2f}, the same substeps untimed {parts['untimed']:.2f}"
+        )
+    print(
+        "  The sum differs from the untimed substeps by the syncs around each stage (on a GPU no stage's "
+        "launches overlap the next's then) and the host's work between stages; the table's ms/substep is "
+        "over the timed frames before this state, with each frame's CFL check, so it is near the untimed "
+        "figure, not equal to it."
+    )
     if args.csv:
         args.csv.parent.mkdir(parents=True, exist_ok=True)
         with args.csv.open("w", newline="") as f:
