@@ -522,16 +522,22 @@ class FluidRenderer:
                 ends = self.screen_segments[s]
                 a, b = ti.Vector([ends[0], ends[1]]), ti.Vector([ends[3], ends[4]])
                 along = b - a
-                axis = 0 if ti.abs(along[0]) >= ti.abs(along[1]) else 1
-                other = 1 - axis
-                step = ti.max(ti.floor(ti.min(a[axis], b[axis])), 0.0) + k // 3
+                # The longer axis is "major"; components picked with selects, not a runtime index into
+                # a vector (which Taichi's SPIR-V code generator does not compile).
+                x_major = ti.abs(along[0]) >= ti.abs(along[1])
+                a_major, a_minor = ti.select(x_major, a[0], a[1]), ti.select(x_major, a[1], a[0])
+                b_major = ti.select(x_major, b[0], b[1])
+                along_major, along_minor = b_major - a_major, ti.select(x_major, along[1], along[0])
+                step = ti.max(ti.floor(ti.min(a_major, b_major)), 0.0) + k // 3
                 # Where the segment crosses the middle of this step, and the pixels on either side.
-                t = ti.min(ti.max((step + 0.5 - a[axis]) / ti.select(along[axis] != 0.0, along[axis], 1.0), 0.0), 1.0)
-                across = ti.floor(a[other] + t * along[other]) + (k % 3 - 1)
-                pixel = ti.Vector([step, across]) if axis == 0 else ti.Vector([across, step])
-                col, row = ti.cast(pixel[0], ti.i32), ti.cast(pixel[1], ti.i32)
+                t = 0.0
+                if along_major != 0.0:
+                    t = ti.min(ti.max((step + 0.5 - a_major) / along_major, 0.0), 1.0)
+                across = ti.floor(a_minor + t * along_minor) + (k % 3 - 1)
+                col = ti.cast(ti.select(x_major, step, across), ti.i32)
+                row = ti.cast(ti.select(x_major, across, step), ti.i32)
                 if 0 <= col < self.width and 0 <= row < self.height:
-                    centre = pixel + 0.5
+                    centre = ti.Vector([col + 0.5, row + 0.5])
                     nearest = 0.0
                     if along.norm_sqr() > 0.0:
                         nearest = ti.min(ti.max((centre - a).dot(along) / along.norm_sqr(), 0.0), 1.0)

@@ -168,10 +168,12 @@ class Bodies:
             self.half[b] = bodies.half_extents_m[b]
             self.inverse_mass[b] = 1.0 / bodies.masses_kg[b]
             self.inertia[b] = bodies.inertia_kg_m2[b]
-        self._bounding = np.array(
-            [np.linalg.norm(h) if s == "box" else h[0] for s, h in zip(bodies.shapes, bodies.half_extents_m)],
-            np.float64,
-        )
+        self.bounding = ti.field(ti.f32, shape=slots)
+        """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
+        self.fastest = ti.field(ti.f32, shape=())
+        for b in range(self.count):
+            half = bodies.half_extents_m[b]
+            self.bounding[b] = float(np.linalg.norm(half)) if bodies.shapes[b] == "box" else half[0]
         self.held = False
         """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
 
@@ -216,9 +218,17 @@ class Bodies:
     def speed_limit_m_s(self) -> float:
         """The fastest any point of a body moves, |v| + |ω| r_bound (one small read from the device,
         once a frame): the CFL limit counts it, so no body crosses more than time.max_cfl spacings."""
-        v = np.linalg.norm(self.linear_velocity.to_numpy()[: self.count], axis=1)
-        w = np.linalg.norm(self.angular_velocity.to_numpy()[: self.count], axis=1)
-        return float(np.max(v + w * self._bounding)) if self.count else 0.0
+        return float(self._speed_limit()) if self.count else 0.0
+
+    @ti.kernel
+    def _speed_limit(self) -> ti.f32:
+        # A maximum over a handful of bodies, once a frame: the atomic into one address is not in the
+        # substep, and a maximum does not depend on the order.
+        self.fastest[None] = 0.0
+        for b in range(self.count):
+            speed = self.linear_velocity[b].norm() + self.angular_velocity[b].norm() * self.bounding[b]
+            ti.atomic_max(self.fastest[None], speed)
+        return self.fastest[None]
 
     def advance(self, dt: float, gravity) -> None:
         """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
