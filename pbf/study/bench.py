@@ -19,8 +19,8 @@ throughout: the machines are shared and noisy.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
-tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions`` or
-``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
+tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions``,
+``--threads`` or ``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
 each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
 
@@ -383,6 +383,16 @@ def sweep(args):
     return points
 
 
+def _thread_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 256:
+        raise argparse.ArgumentTypeError(f"expected a whole number of threads from 1 to 256, got {text!r}")
+    return value
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms", "presets", "compare"), default="sizes")
@@ -439,14 +449,22 @@ def main(argv=None):
     parser.add_argument(
         "--csv", type=Path, default=None, help="write the table as CSV (sweep default: docs/speed_vs_error.csv)"
     )
+    parser.add_argument(
+        "--threads",
+        type=_thread_count,
+        metavar="N",
+        default=None,
+        help="the CPU backend's threads (default: one per core); another count rounds sums differently",
+    )
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
     if args.mode == "compare":
         return compare(args.tables)
-    args.backend = start_backend(args.arch, quiet=True, fast_compile=args.fast_compile)
+    args.backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
     args.variant = "+".join(
-        ["fast compile"] * args.fast_compile
+        [f"{args.threads} threads"] * (args.threads is not None)
+        + ["fast compile"] * args.fast_compile
         + ["device decisions"] * args.device_decisions
         + [f"perturbed {args.perturb}"] * (args.perturb is not None)
     )
