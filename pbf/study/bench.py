@@ -19,8 +19,9 @@ throughout: the machines are shared and noisy.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
-tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions``,
-``--threads`` or ``--perturb``, which differ from it only as roundings do) and says, per preset and statistic, whether
+tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions`` or
+``--perturb``, which differ from it only as roundings do; ``--threads`` does not: the sums are trees
+in a fixed order, so every thread count gives the same bits) and says, per preset and statistic, whether
 each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
 
@@ -454,7 +455,7 @@ def main(argv=None):
         type=_thread_count,
         metavar="N",
         default=None,
-        help="the CPU backend's threads (default: one per core); another count rounds sums differently",
+        help="the CPU backend's threads (default: one per core)",
     )
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
