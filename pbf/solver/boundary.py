@@ -434,35 +434,20 @@ class Boundaries:
         return q, q - before, pusher
 
     @ti.func
-    def project_start(self, p, i):
-        """:meth:`project` for particle i's x* as a substep predicts it; with bodies, the bodies' push
-        starts the record their reaction reads (``Bodies.record_start``)."""
+    def project_recorded(self, p, i, stage: ti.template(), amount):
+        """:meth:`project` for particle i's x* where a substep moves it: ``stage`` is "start" (x* as
+        predicted), "iteration" (after a Jacobi iteration of weight ``amount``) or "between" (stepped
+        back by ``amount``). With bodies, their push goes on the record their reaction reads
+        (``Bodies.record_start``, ``record_iteration``, ``record_between``); without, it is :meth:`project`."""
         q = p
         if ti.static(self.with_bodies):
             q, pushed, pusher = self._project_pushed(p)
-            self.bodies.record_start(i, pushed, pusher)
-        else:
-            q = self.project(p)
-        return q
-
-    @ti.func
-    def project_iteration(self, p, i, weight):
-        """:meth:`project` for particle i's x* after a Jacobi iteration of ``weight``, recorded alike."""
-        q = p
-        if ti.static(self.with_bodies):
-            q, pushed, pusher = self._project_pushed(p)
-            self.bodies.record_iteration(i, pushed, pusher, weight)
-        else:
-            q = self.project(p)
-        return q
-
-    @ti.func
-    def project_between(self, p, i, fraction):
-        """:meth:`project` for particle i's x* stepped back by ``fraction``, recorded alike."""
-        q = p
-        if ti.static(self.with_bodies):
-            q, pushed, pusher = self._project_pushed(p)
-            self.bodies.record_between(i, pushed, pusher, fraction)
+            if ti.static(stage == "start"):
+                self.bodies.record_start(i, pushed, pusher)
+            elif ti.static(stage == "iteration"):
+                self.bodies.record_iteration(i, pushed, pusher, amount)
+            else:
+                self.bodies.record_between(i, pushed, pusher, amount)
         else:
             q = self.project(p)
         return q

@@ -365,8 +365,8 @@ class DensityConstraint:
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
         dx *= ti.min(1.0, self.max_correction / (dx.norm() + 1e-12))
         corrected = xi + h * dx
-        moved = self.boundaries.project_iteration(
-            ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)), i, weight
+        moved = self.boundaries.project_recorded(
+            ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)), i, "iteration", weight
         )
         if from_second:
             first[i] = moved
@@ -447,7 +447,7 @@ class DensityConstraint:
         newer, older = first[i], second[i]
         if newer_in_second:
             newer, older = second[i], first[i]
-        first[i] = self.boundaries.project_between(newer + fraction * (older - newer), i, fraction)
+        first[i] = self.boundaries.project_recorded(newer + fraction * (older - newer), i, "between", fraction)
         self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
 
     @ti.kernel

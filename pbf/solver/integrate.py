@@ -60,7 +60,7 @@ class Integrator:
         for i in range(self.state.active[None]):
             v = self.state.v[i] + dt * gravity
             self.state.v[i] = v
-            self.predicted.first[i] = self.boundaries.project_start(self.state.x[i] + dt * v, i)
+            self.predicted.first[i] = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
 
     @ti.kernel
     def damp(self, factor: ti.f32):
@@ -71,7 +71,7 @@ class Integrator:
     @ti.kernel
     def _predict(self, x_pred: ti.template(), dt: ti.f32):
         for i in range(self.state.active[None]):
-            x_pred[i] = self.boundaries.project_start(self.state.x[i] + dt * self.state.v[i], i)
+            x_pred[i] = self.boundaries.project_recorded(self.state.x[i] + dt * self.state.v[i], i, "start", 1.0)
 
     def predict(self, dt: float) -> None:
         """x* ← x + Δt v (line 3), kept inside the boundaries so the grid never sees a lost particle."""
