@@ -117,3 +117,13 @@ def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
 
 def test_every_preset_has_a_moment_in_the_gallery():
     assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
+
+
+def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
+    from pbf.study import bench
+
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(["--threads", "0"])
+    assert exit_.value.code == 2 and "--threads: expected a whole number of threads from 1 to 256, got '0'" in (
+        capsys.readouterr().err
+    )

@@ -40,15 +40,21 @@ class StandInWindow:
         return (1280, 720)
 
 
+def grab_the_pool(sim):
+    """A window over ``sim`` looking down at the pool's surface near its left end (x to the right of
+    the image), the left button pressed at the centre: the ray hits the water and the hand grabs."""
+    window = StandInWindow()
+    viewer = WindowViewer(sim, window)
+    viewer.camera = OrbitCamera.from_view(View(np.array([0.2, 0.5, 0.6]), np.array([0.2, 0.1, 0.15]), 45.0))
+    window.pressed = {ti.ui.LMB}
+    viewer.handle_input(1 / 60)
+    return window, viewer
+
+
 @pytest.mark.slow
 def test_dragging_pushes_the_water_under_the_cursor_and_nothing_else():
     sim, reference = Simulation(POOL), Simulation(POOL)
-    window = StandInWindow()
-    viewer = WindowViewer(sim, window)
-    # Looking down at the pool's surface near its left end, x to the right of the image.
-    viewer.camera = OrbitCamera.from_view(View(np.array([0.2, 0.5, 0.6]), np.array([0.2, 0.1, 0.15]), 45.0))
-    window.pressed = {ti.ui.LMB}
-    viewer.handle_input(1 / 60)  # press: the ray hits the water, the hand grabs
+    window, viewer = grab_the_pool(sim)
     assert viewer.hand.holding and sim.control.push is None
     grabbed = viewer.hand.point.copy()
     window.cursor = (0.53, 0.5)  # drag to the right
@@ -145,11 +151,7 @@ def test_a_slow_drag_carries_the_water_under_the_hand_along():
     # flick: after 40 frames the particles that started within half the hand's radius have followed
     # it by most of its way (94% here), while water a hand's width and more away has barely moved.
     sim = Simulation(POOL)
-    window = StandInWindow()
-    viewer = WindowViewer(sim, window)
-    viewer.camera = OrbitCamera.from_view(View(np.array([0.2, 0.5, 0.6]), np.array([0.2, 0.1, 0.15]), 45.0))
-    window.pressed = {ti.ui.LMB}
-    viewer.handle_input(1 / 60)
+    window, viewer = grab_the_pool(sim)
     start, before = viewer.hand.point.copy(), sim.positions()
     near = np.linalg.norm(before - start, axis=1) < 0.5 * viewer.hand.radius_m
     far = np.linalg.norm(before - start, axis=1) > 0.3

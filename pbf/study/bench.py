@@ -463,6 +463,8 @@ def main(argv=None):
     if args.mode == "compare":
         return compare(args.tables)
     args.backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
+    if args.threads is not None and args.backend != "cpu":
+        parser.error(f"--threads: sets the CPU backend's threads; the backend here is {args.backend}")
     args.variant = "+".join(
         [f"{args.threads} threads"] * (args.threads is not None)
         + ["fast compile"] * args.fast_compile
