@@ -210,6 +210,21 @@ class SphereRenderer:
             t = b - ti.sqrt(disc)
         return t
 
+    @ti.func
+    def _pixel_key(self, i, centre, radius, c, r, right, up, forward, focal):
+        """The depth key of sphere i (eye-relative ``centre``, ``radius``) at pixel (column c,
+        row r from the top), or EMPTY where the pixel's ray misses it; both splats test pixels with it.
+        The ray eye + t·ray (its forward component 1, so t is the view depth) meets the sphere where
+        t² |ray|² − 2 t ray·c + |c|² − r² = 0."""
+        ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward + up * ((0.5 * self.height - r - 0.5) / focal)
+        a, b = ray.norm_sqr(), ray.dot(centre)
+        disc = b * b - a * (centre.norm_sqr() - radius * radius)
+        key = ti.i64(EMPTY)
+        if disc >= 0.0:
+            t = (b - ti.sqrt(disc)) / a
+            key = (ti.cast(ti.bit_cast(t, ti.i32), ti.i64) << 32) | ti.cast(i, ti.i64)
+        return key
+
     @ti.kernel
     def _clear(self):
         for x, y in self.keys:
@@ -270,7 +285,6 @@ class SphereRenderer:
                 # each column's span of that disc (a column is contiguous in ``keys``).
                 extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
                 c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
-                c2 = centre.norm_sqr() - radius * radius
                 # No hit on this sphere is nearer than depth − r: a pixel whose key is already
                 # nearer than that (with a margin for rounding) cannot change.
                 nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
@@ -281,20 +295,12 @@ class SphereRenderer:
                         ti.max(0, ti.cast(row - half, ti.i32)),
                         ti.min(self.height, ti.cast(row + half, ti.i32) + 1),
                     )
-                    column_ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward
                     for r in range(r0, r1):
                         y = self.height - 1 - r
                         if self.keys[c, y] > nearest:
-                            # The ray eye + t·ray (ray's forward component 1, so t is the view depth)
-                            # meets the sphere where t² |ray|² − 2 t ray·c + |c|² − r² = 0.
-                            ray = column_ray + up * ((0.5 * self.height - r - 0.5) / focal)
-                            a, b = ray.norm_sqr(), ray.dot(centre)
-                            disc = b * b - a * c2
-                            if disc >= 0.0:
-                                t = (b - ti.sqrt(disc)) / a
-                                key = (ti.cast(ti.bit_cast(t, ti.i32), ti.i64) << 32) | ti.cast(i, ti.i64)
-                                if key < self.keys[c, y]:
-                                    ti.atomic_min(self.keys[c, y], key)
+                            key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
+                            if key < self.keys[c, y]:
+                                ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
     def _splat_items(
@@ -338,18 +344,9 @@ class SphereRenderer:
             half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
             in_disc = ti.max(0, ti.cast(row - half, ti.i32)) <= r < ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
             if in_disc and self.keys[c, y] > nearest:
-                ray = (
-                    right * ((c + 0.5 - 0.5 * self.width) / focal)
-                    + forward
-                    + up * ((0.5 * self.height - r - 0.5) / focal)
-                )
-                a, b = ray.norm_sqr(), ray.dot(centre)
-                disc = b * b - a * (centre.norm_sqr() - radius * radius)
-                if disc >= 0.0:
-                    t = (b - ti.sqrt(disc)) / a
-                    key = (ti.cast(ti.bit_cast(t, ti.i32), ti.i64) << 32) | ti.cast(i, ti.i64)
-                    if key < self.keys[c, y]:
-                        ti.atomic_min(self.keys[c, y], key)
+                key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
+                if key < self.keys[c, y]:
+                    ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
     def _shade(
