@@ -127,3 +127,20 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
     assert exit_.value.code == 2 and "--threads: expected a whole number of threads from 1 to 256, got '0'" in (
         capsys.readouterr().err
     )
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["sizes", "--perturb", "1"], "--perturb: applies to the presets mode only, not to sizes"),
+        (["sizes", "--presets", "pour"], "--presets: applies to the presets mode only, not to sizes"),
+        (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
+        (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
+    ],
+)
+def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):
+    from pbf.study import bench
+
+    with pytest.raises(SystemExit) as exit_:
+        bench.main(argv)
+    assert exit_.value.code == 2 and message in capsys.readouterr().err

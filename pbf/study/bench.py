@@ -246,16 +246,22 @@ def terms(args) -> list[dict]:
 PERTURBATION_M = 1e-7
 """``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
 PERTURBATION_G = 2e-7
-"""``--perturb``: gravity scaled by 1 + this × seed, a float32 rounding or two of it (for the scenes
-that start empty and fill from a nozzle, whose positions there are none to move)."""
+"""``--perturb``: gravity scaled by 1 + this × seed, a float32 rounding or two of it: it reaches the
+scenes that settle before t = 0 (whose settled start a move of the positions after it would not
+change) and those that start empty and fill from a nozzle (with no positions to move)."""
 
 
-def perturb(sim, seed: int) -> None:
-    """Rounding-sized noise in the start positions and in gravity: a run that differs as a rounding does."""
-    start = sim.snapshot()
-    noise = np.random.default_rng(seed).normal(0.0, PERTURBATION_M, start.positions_m.shape)
-    sim.restore(replace(start, positions_m=(start.positions_m + noise).astype(np.float32)))
-    sim.control.gravity_m_s2 = tuple(g * (1.0 + PERTURBATION_G * seed) for g in sim.control.gravity_m_s2)
+def perturbed(scene, seed: int):
+    """The scene with gravity off by a rounding or two (``PERTURBATION_G``): from its settling
+    (``time.settle_s``) on, a run of it differs as one that rounds differently does."""
+    return replace(scene, gravity_m_s2=tuple(g * (1.0 + PERTURBATION_G * seed) for g in scene.gravity_m_s2))
+
+
+def jiggle(sim, rng: np.random.Generator) -> None:
+    """Every particle's position moved by rounding-sized noise (``PERTURBATION_M`` per coordinate)."""
+    state = sim.snapshot()
+    noise = rng.normal(0.0, PERTURBATION_M, state.positions_m.shape)
+    sim.restore(replace(state, positions_m=(state.positions_m + noise).astype(np.float32)))
 
 
 PRESET_STATISTICS = (
@@ -272,15 +278,19 @@ def presets(args) -> list[dict]:
     """Each preset for ``--frames`` frames from its start: statistics averaged over the second half."""
     rows = []
     for name in args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml")):
+        scene = load_scene(name, args.set)
         with decisions_on_device(args.device_decisions):
-            sim = Simulation(load_scene(name, args.set), quiet=True)
-        if args.perturb is not None:
-            perturb(sim, args.perturb)
+            sim = Simulation(scene if args.perturb is None else perturbed(scene, args.perturb), quiet=True)
+        if args.perturb is not None:  # and the start's positions (the settled ones, where it settles)
+            jiggle(sim, np.random.default_rng(args.perturb))
+        rng = np.random.default_rng([args.perturb or 0, 1])
         samples, reads, launches, substeps, seconds = [], 0, 0, 0, 0.0
         for frame in tqdm(range(args.frames), desc=f"{name}, {sim.particle_count:,} particles", unit="frame"):
             with TransferCounter() as counter:
                 seconds += timed(sim.step)
             reads, launches = reads + counter.reads, launches + counter.launches
+            if args.perturb_each_frame:
+                jiggle(sim, rng)
             substeps += sim.frame_substeps
             if frame >= args.frames // 2:
                 samples.append(sim.stats())
@@ -414,6 +424,12 @@ def main(argv=None):
         "gravity off by 2e-7 × SEED",
     )
     parser.add_argument(
+        "--perturb-each-frame",
+        action="store_true",
+        help="presets, with --perturb: the positions moved by such noise again after every frame, "
+        "as a backend that rounds differently departs all along",
+    )
+    parser.add_argument(
         "--sizes", type=int, nargs="+", default=None, help="particle counts (default: 8000 64000; terms: 8000)"
     )
     parser.add_argument(
@@ -460,6 +476,15 @@ def main(argv=None):
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
+    for option, given, mode in (
+        ("--presets", args.presets, "presets"),
+        ("--perturb", args.perturb is not None, "presets"),
+        ("tables", args.tables, "compare"),
+    ):
+        if given and args.mode != mode:
+            parser.error(f"{option}: applies to the {mode} mode only, not to {args.mode}")
+    if args.perturb_each_frame and args.perturb is None:
+        parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
     if args.mode == "compare":
         return compare(args.tables)
     args.backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
@@ -470,6 +495,7 @@ def main(argv=None):
         + ["fast compile"] * args.fast_compile
         + ["device decisions"] * args.device_decisions
         + [f"perturbed {args.perturb}"] * (args.perturb is not None)
+        + ["each frame"] * args.perturb_each_frame
     )
     device = describe(running_device())
     print(
