@@ -217,7 +217,8 @@ def test_the_outline_of_the_water_is_anti_aliased():
     renderer.smooth_depth.from_numpy(np.where(inside, 1.0, FAR).astype(np.float32))
     renderer.colour.from_numpy(np.ones(inside.shape + (3,), np.float32))
     renderer.background.from_numpy(np.zeros((H, W, 3), np.uint8))
-    renderer._compose()
+    camera = [ti.Vector([0.0, 0.0, 0.0]), ti.Vector([1.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0])]
+    renderer._compose(*camera, ti.Vector([0.0, 0.0, -1.0]), 100.0, ti.Vector([0.0, 1.0, 0.0]))  # no bodies: unused
     share = renderer.image.to_numpy()[..., 0] / 255.0
     assert np.all(np.diff(share, axis=1) <= 1e-6)
     partial = (share > 0.1) & (share < 0.9)
@@ -267,3 +268,53 @@ def test_a_level_surface_mirrors_the_sky(monkeypatch):
     _, unlit = render(pool, view)  # a new renderer compiles its kernels with the glow off
     assert top.sum() > 2000
     assert (luminance(lit) - luminance(unlit))[top].mean() > 10.0
+
+
+def test_bodies_are_drawn_in_the_air_and_through_the_water():
+    # A box above a pool and a ball under its surface. The box's centre shows the body's colour (wood:
+    # red over green over blue); the ball, seen through the water, turns the water there warmer than the
+    # same pool without it (the water's own colour is blue-green).
+    from dataclasses import replace
+
+    from pbf.app.render import SceneRenderer
+    from pbf.scene import load_scene
+    from pbf.solver import Simulation
+
+    scene = load_scene(
+        {
+            "name": "bodies in view",
+            "container": {"max_m": [0.4, 0.4, 0.4]},
+            "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.4, 0.15, 0.4]}]},
+            "bodies": [
+                {"size_m": [0.05, 0.03, 0.05], "density_kg_m3": 500, "position_m": [0.12, 0.3, 0.2]},
+                {
+                    "shape": "sphere",
+                    "size_m": [0.05, 0.05, 0.05],
+                    "density_kg_m3": 900,
+                    "position_m": [0.28, 0.08, 0.2],
+                },
+            ],
+            "camera": {"position_m": [0.2, 0.3, 0.9], "look_at_m": [0.2, 0.15, 0.2]},
+        }
+    )
+    images, views = {}, {}
+    for name, variant in (("with", scene), ("without", replace(scene, bodies=()))):
+        renderer = SceneRenderer(Simulation(variant, quiet=True), W, H, style="surface")
+        images[name], views[name] = renderer.frame().astype(int), renderer.view
+
+    def pixel(point):
+        view = views["with"]
+        right, up, forward = view.basis()
+        offset = np.asarray(point) - view.eye
+        focal = view.focal_px(H)
+        return (
+            int(0.5 * H - focal * (offset @ up) / (offset @ forward)),
+            int(0.5 * W + focal * (offset @ right) / (offset @ forward)),
+        )
+
+    box = images["with"][pixel([0.12, 0.3, 0.25])]  # the box's front face
+    assert box[0] > box[1] > box[2] and box[0] > 100
+    assert (np.abs(images["without"][pixel([0.12, 0.3, 0.25])] - box) > 40).any()  # sky or floor there before
+    row, col = pixel([0.28, 0.08, 0.25])  # the ball's front, under the surface
+    ball, water = images["with"][row, col], images["without"][row, col]
+    assert ball[0] - ball[2] > water[0] - water[2] + 20

@@ -80,6 +80,8 @@ SPECULAR_EXPONENT = 256.0
 """Blinn-Phong exponent of the sun's highlight on a smooth surface (lowered where the surface is rough)."""
 FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 """The two colours of the floor's tiles."""
+BODY_AMBIENT = 0.35
+"""A rigid body's brightness on its faces turned from the light, of its lit colour."""
 
 
 @ti.data_oriented
@@ -99,10 +101,14 @@ class FluidRenderer:
         horizon_rgb,
         line_rgb=(0.0, 0.0, 0.0),
         segments=None,
+        bodies=None,
+        body_rgb=None,
     ):
         """The floor is the plane y = ``floor_y_m`` in square tiles of ``tile_m``; ``absorption_per_m``
         is Beer–Lambert's σ for red, green and blue; ``water_rgb`` the colour of deep water;
-        ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue)."""
+        ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue). ``bodies``: a
+        simulation's rigid bodies (``pbf.solver.bodies.Bodies``), drawn as solids of ``body_rgb``
+        from its device fields as they stand at each draw."""
         self.width, self.height = int(width_px), int(height_px)
         self.coarse_width, self.coarse_height = self.width // COARSE, self.height // COARSE
         self.spacing = float(spacing_m)
@@ -116,6 +122,9 @@ class FluidRenderer:
         self.water = ti.Vector([float(c) for c in water_rgb])
         self.horizon = ti.Vector([float(c) for c in horizon_rgb])
         self.line_colour = ti.Vector([float(c) for c in line_rgb])
+        self.solids = bodies if bodies is not None and bodies.count else None
+        self.with_solids = self.solids is not None
+        self.body_colour = ti.Vector([float(c) for c in body_rgb or (0.0, 0.0, 0.0)])
         coarse = (self.coarse_height, self.coarse_width)
         self.depth = ti.field(ti.f32, shape=coarse)
         """View depth (distance along the camera's forward axis) of the nearest sphere, m; FAR if none."""
@@ -207,6 +216,44 @@ class FluidRenderer:
                 fade = 1.0 / (1.0 + t / (20.0 * self.tile))  # the floor greys out into the horizon
                 colour = floor * fade + self.horizon * (1.0 - fade)
         return colour
+
+    @ti.func
+    def _hit_solid(self, origin, d):
+        """The nearest rigid body along the ray origin + t d, t > 0: (t, the body's unit normal there);
+        t = FAR where it meets none. A box by the slab method in its own frame, a sphere by the
+        quadratic; the axes are a static loop (no runtime index into a vector: SPIR-V)."""
+        nearest, normal = FAR, ti.Vector([0.0, 1.0, 0.0])
+        solids = self.solids
+        for b in range(solids.count):
+            centre = solids.position[b]
+            half = solids.half[b]
+            if solids.sphere[b]:
+                offset = origin - centre
+                a, half_b = d.norm_sqr(), offset.dot(d)
+                disc = half_b * half_b - a * (offset.norm_sqr() - half[0] * half[0])
+                if disc >= 0.0:
+                    t = (-half_b - ti.sqrt(disc)) / a
+                    if 1e-6 < t < nearest:
+                        nearest, normal = t, (offset + t * d) / half[0]
+            else:
+                rotation = solids.rotation[b]
+                o, local = rotation.transpose() @ (origin - centre), rotation.transpose() @ d
+                enter, leave, face = -FAR, FAR, ti.Vector([0.0, 1.0, 0.0])
+                for axis in ti.static(range(3)):
+                    step = ti.select(ti.abs(local[axis]) > 1e-12, local[axis], 1e-12)
+                    t1, t2 = (-half[axis] - o[axis]) / step, (half[axis] - o[axis]) / step
+                    if ti.min(t1, t2) > enter:
+                        enter = ti.min(t1, t2)
+                        face = ti.Vector([float(axis == 0), float(axis == 1), float(axis == 2)]) * -ti.math.sign(step)
+                    leave = ti.min(leave, ti.max(t1, t2))
+                if enter <= leave and 1e-6 < enter < nearest:
+                    nearest, normal = enter, rotation @ face
+        return nearest, normal
+
+    @ti.func
+    def _solid_colour(self, normal, light):
+        """A body's colour lit from unit ``light`` (towards the light), with an ambient part."""
+        return self.body_colour * (BODY_AMBIENT + (1.0 - BODY_AMBIENT) * ti.max(normal.dot(light), 0.0))
 
     @ti.kernel
     def _environment_image(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
@@ -418,10 +465,15 @@ class FluidRenderer:
                 eta = 1.0 / WATER_IOR
                 k = 1.0 - eta * eta * (1.0 - cosine * cosine)
                 refracted = (eta * direction + (eta * cosine - ti.sqrt(ti.max(k, 0.0))) * normal).normalized()
-                transmittance = ti.exp(-self.absorption * self.thickness[row, col])
-                transmitted = self._environment(point, refracted, spread, travelled) * transmittance + self.water * (
-                    1.0 - transmittance
-                )
+                path = self.thickness[row, col]
+                behind = self._environment(point, refracted, spread, travelled)
+                if ti.static(self.with_solids):  # a body under the surface, seen through the water
+                    hit, hit_normal = self._hit_solid(point, refracted)
+                    if hit < FAR:
+                        path = ti.min(path, hit)
+                        behind = self._solid_colour(hit_normal, light)
+                transmittance = ti.exp(-self.absorption * path)
+                transmitted = behind * transmittance + self.water * (1.0 - transmittance)
                 # Blinn-Phong, its exponent lowered where the normals within the pixel's neighbourhood
                 # disagree (Toksvig 2005, "Mipmapping normal maps": with n̄ the mean of the unit normals,
                 # s' = |n̄| s / (|n̄| + s (1 − |n̄|))) and scaled by (s' + 8)/(s + 8) to keep its energy: a
@@ -445,10 +497,17 @@ class FluidRenderer:
                 self.colour[row, col] = (1.0 - fresnel) * transmitted + fresnel * reflected + 0.8 * specular
 
     @ti.kernel
-    def _compose(self):
+    def _compose(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, light: vec3):
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
-        depth interpolated from the coarse pixels of water; elsewhere the background."""
+        depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
+        where one is nearer than the water."""
         for row, col in self.image:
+            solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(self.with_solids):
+                ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
+                hit_normal = ti.Vector([0.0, 1.0, 0.0])
+                solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
+                solid_colour = self._solid_colour(hit_normal, light)
             # The four coarse pixels around this pixel's centre, and their bilinear weights.
             y = (row + 0.5) / COARSE - 0.5
             x = (col + 0.5) / COARSE - 0.5
@@ -461,7 +520,7 @@ class FluidRenderer:
             for dr, dc in ti.static(ti.ndrange(2, 2)):
                 w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
                 sample = self.smooth_depth[r0 + dr, c0 + dc]
-                if sample < FAR:
+                if sample < solid:  # water, and nearer than any body here
                     coverage += w
                     depth += w * sample
                     colour += w * self.colour[r0 + dr, c0 + dc]
@@ -470,12 +529,14 @@ class FluidRenderer:
             # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
             share = coverage
             background = ti.cast(self.background[row, col], ti.f32) / 255.0
+            if solid < FAR:
+                background = solid_colour
             water = background
             if coverage > 0.0:
                 water = ti.min(colour / coverage, 1.0)
             blended = share * water + (1.0 - share) * background
             self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
-            self.image_depth[row, col] = FAR
+            self.image_depth[row, col] = solid
             if coverage >= 0.5:
                 self.image_depth[row, col] = depth / coverage
 
@@ -613,8 +674,9 @@ class FluidRenderer:
                 self._filter(
                     source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness, False
                 )
+        light = ti.Vector(np.asarray(light_direction, np.float32))
         self._normals(eye, right, up, forward, coarse_focal)
-        self._shade(eye, right, up, forward, coarse_focal, ti.Vector(np.asarray(light_direction, np.float32)))
-        self._compose()
+        self._shade(eye, right, up, forward, coarse_focal, light)
+        self._compose(eye, right, up, forward, focal, light)
         if len(self.segment_points):
             self._lines()

@@ -465,11 +465,13 @@ def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
         horizon_rgb=scene.render.background_rgb,
         line_rgb=scene.render.container_rgb,
         segments=scene_edges(scene),
+        bodies=sim.bodies,
+        body_rgb=BODY_RGB,
     )
 
 
 BODY_RGB = (0.85, 0.55, 0.25)
-"""The colour of rigid bodies in particle frames (wood)."""
+"""The colour of rigid bodies (wood), in particle and surface frames."""
 
 
 @ti.data_oriented
