@@ -138,12 +138,11 @@ def test_archimedes_a_floating_box_settles_at_its_draft():
     assert np.mean(drafts) == pytest.approx(density / 1000, rel=DRAFT_TOLERANCE)
 
 
-DRAFT_TOLERANCE = 0.1
-"""The draft's measured error here is +6.6% (2.4 spacings of draft; docs/VALIDATION.md, Floating bodies):
-the first layer of water under the box sits closer to it than a lattice's half spacing, and thinner,
-as the collision keeps it only 0.2 r from the box; with the collision at r the error is below 1% but a
-box hitting water stops dead (docs/BODIES.md). The margin is for the frames' bobbing (0.014 of the
-height rms) and the compile's rounding."""
+DRAFT_TOLERANCE = 0.03
+"""Archimedes within 3%: measured 0.0% here, 1.5-1.8% at 300, 700 and 900 kg/m³ (2.4 spacings of
+draft; docs/VALIDATION.md, Floating bodies). With the collision at 0.2 r while the box floats, the
+first layer of water under it sat closer than a lattice's half spacing and the error was +6.6%; the
+test fails on that code."""
 
 
 @pytest.mark.slow
@@ -162,13 +161,18 @@ def test_momentum_passes_between_a_box_and_the_water():
     mass = sim.model.particle_mass_kg
     body_mass = 1000 * 0.1 * 0.12 * 0.12
     start = body_mass * 0.5
-    totals = []
+    totals, speeds = [], []
     for _ in range(24):  # 0.4 s: the box has gone 0.08 m into the water
         sim.step()
         row = sim.bodies.state()[0]
+        speeds.append(row[7])
         # The water's, the box's, and the reaction of the last substep, which the box takes next (explicit).
         totals.append(mass * sim.velocities()[:, 0].sum() + body_mass * row[7] + row[13] * sim.last_dt_s)
     assert row[7] < 0.3  # the water did slow the box (to 0.22 m/s)
+    # ... and did not stop it dead at the impact (0.15 s): sharing its momentum with an added mass of
+    # about 0.7 times the water it displaces leaves it 0.3 m/s; 0.30 measured, 0.04 with the collision
+    # at the full particle radius while the box moves (pbf.solver.bodies.COLLISION_MOVING).
+    assert speeds[8] > 0.2
     assert np.max(np.abs(np.array(totals) - start)) < MOMENTUM_TOLERANCE * start
 
 
