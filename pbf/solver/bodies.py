@@ -247,7 +247,9 @@ class Bodies:
 
     def advance(self, dt: float, gravity) -> None:
         """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
-        if not self.held:
+        if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
+            self.reach.fill(COLLISION_AT_REST * self.particle_radius)
+        else:
             self._advance(dt, gravity)
 
     @ti.kernel
