@@ -177,9 +177,9 @@ def test_momentum_passes_between_a_box_and_the_water():
 
 
 MOMENTUM_TOLERANCE = 0.05
-"""The share of the box's momentum that may be lost or gained in any frame: measured at most 0.7% (the
+"""The share of the box's momentum that may be lost or gained in any frame: measured at most 0.5% (the
 pressure's reaction is taken at the particles' positions at the end of the substep, not where each
-iteration moved them; ``benchmarks/bodies.py collision``); without the collision's reaction the total
+iteration moved them; ``benchmarks/bodies.py momentum``); without the collision's reaction the total
 grew by a fifth, 25% at worst (docs/VALIDATION.md, Floating bodies)."""
 
 
