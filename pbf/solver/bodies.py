@@ -37,10 +37,10 @@ whole velocity at once is where it overshoots: hence COLLISION_FRACTION.
 Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
 sphere point that lies inside a wall, an obstacle or another body, with the penetration removed by
 moving the bodies apart (in inverse proportion to their masses); one serial pass over the few bodies,
-so the order, and the bits, are fixed. Boxes meet boxes corner-on-face only: an edge crossing an edge
-with no corner inside is missed. A body moves at most time.max_cfl spacings a substep (its speed
-counts in the CFL limit, ``speed_limit_m_s``) and is at least two spacings thick, so it cannot pass
-through a wall or another body in one substep.
+so the order, and the bits, are fixed. Boxes meet boxes at the corners of one inside the other, and,
+where no corner is inside, edge across edge (``_edge_contacts``). A body moves at most time.max_cfl
+spacings a substep (its speed counts in the CFL limit, ``speed_limit_m_s``) and is at least two
+spacings thick, so it cannot pass through a wall or another body in one substep.
 """
 
 import math
@@ -124,6 +124,23 @@ def quaternion_matrix_np(q) -> np.ndarray:
             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+@ti.func
+def _closest_on_segments(p0, d1, q0, d2):
+    """The closest points of the segments p0 + s d1 and q0 + t d2, s and t in [0, 1] (Ericson 2005,
+    "Real-Time Collision Detection", §5.1.9), for segments that are not parallel."""
+    r = p0 - q0
+    a, e, f = d1.dot(d1), d2.dot(d2), d2.dot(r)
+    c, b = d1.dot(r), d1.dot(d2)
+    denominator = a * e - b * b
+    s = ti.min(ti.max((b * f - c * e) / denominator, 0.0), 1.0)
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, ti.min(ti.max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, ti.min(ti.max((b - c) / a, 0.0), 1.0)
+    return p0 + s * d1, q0 + t * d2
 
 
 @ti.data_oriented
@@ -507,6 +524,7 @@ class Bodies:
                 point = self.position[box] + r @ closest
                 self._pair_contact(s, box, point, r @ normal_local, depth)
         else:
+            corners = 0
             for k in range(16):  # the corners of a inside b, then those of b inside a
                 inner, outer = a, b
                 if k >= 8:
@@ -517,6 +535,55 @@ class Bodies:
                 if (ti.abs(local) < self.half[outer]).all():
                     n, depth = self._box_exit(local, self.half[outer])
                     self._pair_contact(inner, outer, corner, r @ n, depth)
+                    corners += 1
+            if corners == 0:  # no corner inside: the boxes can still meet edge across edge
+                self._edge_contacts(a, b)
+
+    @ti.func
+    def _edge(self, b, k):
+        """Edge k (0-11) of box b in world coordinates: its two ends. Edges 4a to 4a + 3 run along the
+        box's axis a, at the four sign combinations of the other two half extents."""
+        axis = k // 4
+        first = ti.select(k & 1, 1.0, -1.0)
+        second = ti.select(k & 2, 1.0, -1.0)
+        half = self.half[b]
+        start, end = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        for i in ti.static(range(3)):  # a static index per component: no runtime index into a vector
+            across = ti.select(i == (axis + 1) % 3, first, second) * half[i]
+            start[i] = ti.select(i == axis, -half[i], across)
+            end[i] = ti.select(i == axis, half[i], across)
+        r = self.rotation[b]
+        return self.position[b] + r @ start, self.position[b] + r @ end
+
+    @ti.func
+    def _edge_contacts(self, a, b):
+        """Boxes a and b that meet edge across edge, no corner of either inside the other: for every pair
+        of edges that are not parallel, the closest points p (on a's edge) and q (on b's); where p lies
+        inside b and q inside a the edges cross through each other's volume. The normal is their edges'
+        cross product, turned from b to a, and the depth the boxes' overlap along it (separating axis
+        test: the two boxes' projected half widths less the distance between their centres)."""
+        for k in range(144):
+            p0, p1 = self._edge(a, k // 12)
+            q0, q1 = self._edge(b, k % 12)
+            d1, d2 = p1 - p0, q1 - q0
+            axis = d1.cross(d2)
+            if axis.norm_sqr() > 1e-12 * d1.norm_sqr() * d2.norm_sqr():
+                p, q = _closest_on_segments(p0, d1, q0, d2)
+                rb, ra = self.rotation[b], self.rotation[a]
+                inside_b = (ti.abs(rb.transpose() @ (p - self.position[b])) < self.half[b]).all()
+                inside_a = (ti.abs(ra.transpose() @ (q - self.position[a])) < self.half[a]).all()
+                if inside_b and inside_a:
+                    normal = axis.normalized()
+                    gap = (self.position[a] - self.position[b]).dot(normal)
+                    if gap < 0.0:
+                        normal, gap = -normal, -gap
+                    depth = (
+                        (ti.abs(ra.transpose() @ normal) * self.half[a]).sum()
+                        + (ti.abs(rb.transpose() @ normal) * self.half[b]).sum()
+                        - gap
+                    )
+                    if depth > 0.0:
+                        self._pair_contact(a, b, 0.5 * (p + q), normal, depth)
 
     # ------------------------------------------------------------------ the boundary the fluid sees
 
