@@ -4,8 +4,9 @@ reaction sums over). With ``momentum``: the momentum a box passes to water at re
 wall within reach (tests/test_bodies.py's scene). With ``archimedes``: boxes of 300-900 kg/m³ let go
 at their draft in a settled pool (the Archimedes test's scene), their drafts against the level the
 water's volume gives and against the level its pressure gives. With ``collision``: the draft of the
-500 kg/m³ box and the speed of the box the momentum scene drives into water, for collision distances
-from 0.2 to 1 particle radius (``pbf.solver.bodies.COLLISION_FRACTION``). Prints a table.
+500 kg/m³ box and the speed of the box the momentum scene drives into water, for fixed collision
+distances from 0.2 to 1 particle radius and for the distance that shrinks from r as the body moves
+(``pbf.solver.bodies.collision_reach``, at two rates). Prints a table.
 
     PYTHONPATH=$PWD python benchmarks/bodies.py [frames]
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum
@@ -150,10 +151,16 @@ def collision() -> None:
         "| collision distance | draft / height, 500 kg/m³ (expected 0.5) | box v_x at 0.15 s | at 0.4 s "
         "| total P / P0, worst frame |\n|---|---|---|---|---|"
     )
-    kept = bodies.COLLISION_FRACTION
+    names = ("COLLISION_AT_REST", "COLLISION_MOVING", "COLLISION_GIVE")
+    kept = [getattr(bodies, name) for name in names]
+    variants = [(f"{f:g} r", (f, f, 0.0)) for f in (0.2, 0.5, 0.75, 1.0)] + [
+        (f"r − {give:g} u Δt, at least 0.2 r{' (shipped)' if give == kept[2] else ''}", (1.0, 0.2, give))
+        for give in (1.0, 2.0, 4.0)
+    ]
     try:
-        for fraction in (0.2, 0.5, 0.75, 1.0):
-            bodies.COLLISION_FRACTION = fraction
+        for label, values in variants:
+            for name, value in zip(names, values):
+                setattr(bodies, name, value)
             draft = _floating(500.0)["volume"]
             sim, mass, body_mass, start = _momentum_scene()
             speeds, worst = {}, 0.0
@@ -162,9 +169,10 @@ def collision() -> None:
                 water, box, flight = _momenta(sim, mass, body_mass)
                 worst = max(worst, abs(water + box + flight - start) / start)
                 speeds[frame] = box / body_mass
-            print(f"| {fraction:g} r | {draft:.3f} | {speeds[8]:.3f} | {speeds[23]:.3f} | {1 + worst:.3f} |")
+            print(f"| {label} | {draft:.3f} | {speeds[8]:.3f} | {speeds[23]:.3f} | {1 + worst:.3f} |", flush=True)
     finally:
-        bodies.COLLISION_FRACTION = kept
+        for name, value in zip(names, kept):
+            setattr(bodies, name, value)
 
 
 def _momentum_scene():

@@ -138,12 +138,11 @@ def test_archimedes_a_floating_box_settles_at_its_draft():
     assert np.mean(drafts) == pytest.approx(density / 1000, rel=DRAFT_TOLERANCE)
 
 
-DRAFT_TOLERANCE = 0.1
-"""The draft's measured error here is +6.6% (2.4 spacings of draft; docs/VALIDATION.md, Floating bodies):
-the first layer of water under the box sits closer to it than a lattice's half spacing, and thinner,
-as the collision keeps it only 0.2 r from the box; with the collision at r the error is below 1% but a
-box hitting water stops dead (docs/BODIES.md). The margin is for the frames' bobbing (0.014 of the
-height rms) and the compile's rounding."""
+DRAFT_TOLERANCE = 0.03
+"""Archimedes within 3%: measured 0.0% here, 1.5-1.8% at 300, 700 and 900 kg/m³ (2.4 spacings of
+draft; docs/VALIDATION.md, Floating bodies). With the collision at 0.2 r while the box floats, the
+first layer of water under it sat closer than a lattice's half spacing and the error was +6.6%; the
+test fails on that code."""
 
 
 @pytest.mark.slow
@@ -162,20 +161,25 @@ def test_momentum_passes_between_a_box_and_the_water():
     mass = sim.model.particle_mass_kg
     body_mass = 1000 * 0.1 * 0.12 * 0.12
     start = body_mass * 0.5
-    totals = []
+    totals, speeds = [], []
     for _ in range(24):  # 0.4 s: the box has gone 0.08 m into the water
         sim.step()
         row = sim.bodies.state()[0]
+        speeds.append(row[7])
         # The water's, the box's, and the reaction of the last substep, which the box takes next (explicit).
         totals.append(mass * sim.velocities()[:, 0].sum() + body_mass * row[7] + row[13] * sim.last_dt_s)
     assert row[7] < 0.3  # the water did slow the box (to 0.22 m/s)
+    # ... and did not stop it dead at the impact (0.15 s): sharing its momentum with an added mass of
+    # about 0.7 times the water it displaces leaves it 0.3 m/s; 0.30 measured, 0.04 with the collision
+    # at the full particle radius while the box moves (pbf.solver.bodies.COLLISION_MOVING).
+    assert speeds[8] > 0.2
     assert np.max(np.abs(np.array(totals) - start)) < MOMENTUM_TOLERANCE * start
 
 
 MOMENTUM_TOLERANCE = 0.05
-"""The share of the box's momentum that may be lost or gained in any frame: measured at most 0.7% (the
+"""The share of the box's momentum that may be lost or gained in any frame: measured at most 0.5% (the
 pressure's reaction is taken at the particles' positions at the end of the substep, not where each
-iteration moved them; ``benchmarks/bodies.py collision``); without the collision's reaction the total
+iteration moved them; ``benchmarks/bodies.py momentum``); without the collision's reaction the total
 grew by a fifth, 25% at worst (docs/VALIDATION.md, Floating bodies)."""
 
 
@@ -207,3 +211,31 @@ def test_the_hand_carries_a_body_it_touches():
     sim.control.push = None
     sim.step(2)
     assert sim.body_states()[0, 7] > 0.4  # thrown: it flies on
+
+
+@pytest.mark.slow
+def test_boxes_meeting_edge_across_edge_do_not_pass_into_each_other():
+    # Two cubes turned 45° about crossed axes, so that the top of the lower one is a ridge along z and
+    # the bottom of the upper one a ridge along x: the upper one, moving down, meets the lower one edge
+    # across edge, with no corner of either inside the other until the ridges are 0.05 m deep into each
+    # other. No gravity; the water is in a corner, away from both.
+    half = (0.05, 0.05, 0.05)
+    ridge = 0.05 * np.sqrt(2.0)  # a ridge's height above its cube's centre
+    scene = pool(
+        [
+            box(half, 500, [0.2, 0.12, 0.2], orientation_deg=[0, 0, 45]),
+            box(half, 500, [0.2, 0.30, 0.2], orientation_deg=[45, 0, 0], velocity_m_s=[0, -0.3, 0]),
+        ],
+        depth=0.05,
+        gravity_m_s2=[0, 0, 0],
+    )
+    scene["fluid"]["blocks"] = [{"min_m": [0, 0, 0], "max_m": [0.1, 0.05, 0.1]}]
+    sim = Simulation(scene, quiet=True)
+    gaps = []
+    for _ in range(20):  # 0.33 s: the ridges meet at 0.13 s
+        sim.step()
+        lower, upper = sim.bodies.state()[:, 1]
+        gaps.append(upper - lower)
+    # With corner-on-face contacts alone the upper cube sank 0.05 m into the lower one before a corner
+    # caught it; the ridges may overlap by a few millimetres within a substep's resolution.
+    assert min(gaps) > 2 * ridge - 0.005

@@ -5,7 +5,8 @@ the ghost fluid inside it, ρ/ρ0 and its gradient ∇ψ_b, exactly as it sees t
 the obstacles, and the divergence pre-correction sees its velocity v + ω × (p − c). A box's ghost is
 the obstacles' 27-term ghost of an axis-aligned box (``GhostTables.box``) in the body's frame, its
 gradient rotated back; a sphere's is the half-space table at d = |p − c| − R along the radius. The
-collision (Algorithm 1, line 15) pushes a particle out of the body grown by the particle radius.
+collision (Algorithm 1, line 15) pushes a particle out of the body grown by the particle radius, less
+while the body moves (``collision_reach``).
 
 The reaction. The ghost moves particle i by h² λ̂_i ∇ψ_b(x_i) in each iteration and the divergence
 pass changes its velocity by h² Δt Λ_i ∇ψ_b; over a substep that is the force −V p_i ∇ψ_b(x_i) on
@@ -36,10 +37,10 @@ whole velocity at once is where it overshoots: hence COLLISION_FRACTION.
 Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
 sphere point that lies inside a wall, an obstacle or another body, with the penetration removed by
 moving the bodies apart (in inverse proportion to their masses); one serial pass over the few bodies,
-so the order, and the bits, are fixed. Boxes meet boxes corner-on-face only: an edge crossing an edge
-with no corner inside is missed. A body moves at most time.max_cfl spacings a substep (its speed
-counts in the CFL limit, ``speed_limit_m_s``) and is at least two spacings thick, so it cannot pass
-through a wall or another body in one substep.
+so the order, and the bits, are fixed. Boxes meet boxes at the corners of one inside the other, and,
+where no corner is inside, edge across edge (``_edge_contacts``). A body moves at most time.max_cfl
+spacings a substep (its speed counts in the CFL limit, ``speed_limit_m_s``) and is at least two
+spacings thick, so it cannot pass through a wall or another body in one substep.
 """
 
 import math
@@ -62,14 +63,26 @@ fluid's reaction of the last substep (the next step starts from it)."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
 FRICTION = 0.4
 """Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
-COLLISION_FRACTION = 0.2
-"""The collision keeps particle centres this fraction of the particle radius outside a body, less than at
-the walls, so that the ghost's pressure, which grows as water comes near, meets a moving body rather
-than the collision, which hands the water in the way the body's whole velocity in one substep: with
-the full radius a box of water's density running into water at 0.5 m/s stopped dead (0.04 m/s in one
-substep) where sharing its momentum with an added mass of 0.7 times the water it displaces gives 0.3
-m/s (0.34 m/s at 0.2 r). The cost: a floating box sits 6.6% too deep, against 0.6% too shallow with
-the full radius (docs/VALIDATION.md, Floating bodies)."""
+COLLISION_AT_REST = 1.0
+"""The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
+at the walls: the first layer of water under a floating box then sits half a spacing from it, where
+the ghost's lattice stands, and the box floats at its draft (within 2%; 5-8% too deep with the
+collision at COLLISION_MOVING throughout; docs/VALIDATION.md, Floating bodies)."""
+COLLISION_MOVING = 0.2
+"""The least fraction of r, for a body that moves: the ghost's pressure, which grows as water comes
+near, must meet a moving body rather than the collision, which hands the water in the way the body's
+whole velocity in one substep. A box of water's density running into water at 0.5 m/s keeps 0.34 m/s
+after the impact at 0.2 r (an added mass of 0.7 times the water it displaces gives 0.3 m/s), and
+stops dead at r (0.04 m/s)."""
+COLLISION_GIVE = 1.0
+"""The collision distance is r (COLLISION_AT_REST) less this many times the distance the body's fastest
+point moves in a substep, and at least COLLISION_MOVING r. At 1 the grown body's surface at the end of
+a substep stands no further out than a resting body's stood at its start: a moving body does not sweep
+the water with its collision (its ghost's pressure moves it), and a floating box's bobbing (a few
+cm/s, 0.03 r a substep) leaves the distance near r. The box of the momentum test keeps 0.30 m/s after
+its impact, what an added mass of 0.7 times the water it displaces gives; at 2 and 4 it kept 0.32 and
+0.34 m/s, as at 0.2 r, the drafts the same, but the floating box, whose collision distance then
+followed its bobbing more, moved at up to 0.064 m/s against 0.052 (benchmarks/bodies.py collision)."""
 CONTACT_SWEEPS = 8
 """Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
 corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
@@ -113,6 +126,23 @@ def quaternion_matrix_np(q) -> np.ndarray:
     )
 
 
+@ti.func
+def _closest_on_segments(p0, d1, q0, d2):
+    """The closest points of the segments p0 + s d1 and q0 + t d2, s and t in [0, 1] (Ericson 2005,
+    "Real-Time Collision Detection", §5.1.9), for segments that are not parallel."""
+    r = p0 - q0
+    a, e, f = d1.dot(d1), d2.dot(d2), d2.dot(r)
+    c, b = d1.dot(r), d1.dot(d2)
+    denominator = a * e - b * b
+    s = ti.min(ti.max((b * f - c * e) / denominator, 0.0), 1.0)
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, ti.min(ti.max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, ti.min(ti.max((b - c) / a, 0.0), 1.0)
+    return p0 + s * d1, q0 + t * d2
+
+
 @ti.data_oriented
 class Bodies:
     """The rigid bodies: their state on the device, the boundary interface the fluid sees (``ghost``,
@@ -126,7 +156,7 @@ class Bodies:
         self.tables = tables
         self.obstacles = obstacles
         self.count = bodies.count
-        self.radius = params.particle_radius_m * COLLISION_FRACTION
+        self.particle_radius = params.particle_radius_m
         self.wall_margin = 0.99 * params.particle_radius_m
         """How far inside the container a way out of a body must lead: the walls' collision distance, a
         little less so that rounding does not shut a way flush with it."""
@@ -168,6 +198,9 @@ class Bodies:
             self.half[b] = bodies.half_extents_m[b]
             self.inverse_mass[b] = 1.0 / bodies.masses_kg[b]
             self.inertia[b] = bodies.inertia_kg_m2[b]
+        self.reach = ti.field(ti.f32, shape=slots)
+        """Each body's collision distance this substep, m (:meth:`collision_reach`)."""
+        self.reach.fill(COLLISION_AT_REST * self.particle_radius)
         self.bounding = ti.field(ti.f32, shape=slots)
         """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
         self.fastest = ti.field(ti.f32, shape=())
@@ -226,13 +259,14 @@ class Bodies:
         # substep, and a maximum does not depend on the order.
         self.fastest[None] = 0.0
         for b in range(self.count):
-            speed = self.linear_velocity[b].norm() + self.angular_velocity[b].norm() * self.bounding[b]
-            ti.atomic_max(self.fastest[None], speed)
+            ti.atomic_max(self.fastest[None], self.fastest_point(b))
         return self.fastest[None]
 
     def advance(self, dt: float, gravity) -> None:
         """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
-        if not self.held:
+        if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
+            self.reach.fill(COLLISION_AT_REST * self.particle_radius)
+        else:
             self._advance(dt, gravity)
 
     @ti.kernel
@@ -297,6 +331,21 @@ class Bodies:
         # grows with the bodies squared, a few dozen, not with the particles.
         for _ in range(1):
             self._contacts()
+        for b in range(self.count):
+            self.reach[b] = self.collision_reach(b, dt)
+
+    @ti.func
+    def collision_reach(self, b, dt):
+        """How far outside body b the collision keeps particle centres this substep: r at rest, less
+        the distance the body's fastest point moves in Δt (times COLLISION_GIVE), at least
+        COLLISION_MOVING r (the constants say why)."""
+        r = self.particle_radius
+        return ti.max(COLLISION_MOVING * r, COLLISION_AT_REST * r - COLLISION_GIVE * self.fastest_point(b) * dt)
+
+    @ti.func
+    def fastest_point(self, b):
+        """|v| + |ω| r_bound: no point of body b moves faster, m/s."""
+        return self.linear_velocity[b].norm() + self.angular_velocity[b].norm() * self.bounding[b]
 
     @ti.func
     def _contacts(self):
@@ -475,6 +524,7 @@ class Bodies:
                 point = self.position[box] + r @ closest
                 self._pair_contact(s, box, point, r @ normal_local, depth)
         else:
+            corners = 0
             for k in range(16):  # the corners of a inside b, then those of b inside a
                 inner, outer = a, b
                 if k >= 8:
@@ -485,6 +535,55 @@ class Bodies:
                 if (ti.abs(local) < self.half[outer]).all():
                     n, depth = self._box_exit(local, self.half[outer])
                     self._pair_contact(inner, outer, corner, r @ n, depth)
+                    corners += 1
+            if corners == 0:  # no corner inside: the boxes can still meet edge across edge
+                self._edge_contacts(a, b)
+
+    @ti.func
+    def _edge(self, b, k):
+        """Edge k (0-11) of box b in world coordinates: its two ends. Edges 4a to 4a + 3 run along the
+        box's axis a, at the four sign combinations of the other two half extents."""
+        axis = k // 4
+        first = ti.select(k & 1, 1.0, -1.0)
+        second = ti.select(k & 2, 1.0, -1.0)
+        half = self.half[b]
+        start, end = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        for i in ti.static(range(3)):  # a static index per component: no runtime index into a vector
+            across = ti.select(i == (axis + 1) % 3, first, second) * half[i]
+            start[i] = ti.select(i == axis, -half[i], across)
+            end[i] = ti.select(i == axis, half[i], across)
+        r = self.rotation[b]
+        return self.position[b] + r @ start, self.position[b] + r @ end
+
+    @ti.func
+    def _edge_contacts(self, a, b):
+        """Boxes a and b that meet edge across edge, no corner of either inside the other: for every pair
+        of edges that are not parallel, the closest points p (on a's edge) and q (on b's); where p lies
+        inside b and q inside a the edges cross through each other's volume. The normal is their edges'
+        cross product, turned from b to a, and the depth the boxes' overlap along it (separating axis
+        test: the two boxes' projected half widths less the distance between their centres)."""
+        for k in range(144):
+            p0, p1 = self._edge(a, k // 12)
+            q0, q1 = self._edge(b, k % 12)
+            d1, d2 = p1 - p0, q1 - q0
+            axis = d1.cross(d2)
+            if axis.norm_sqr() > 1e-12 * d1.norm_sqr() * d2.norm_sqr():
+                p, q = _closest_on_segments(p0, d1, q0, d2)
+                rb, ra = self.rotation[b], self.rotation[a]
+                inside_b = (ti.abs(rb.transpose() @ (p - self.position[b])) < self.half[b]).all()
+                inside_a = (ti.abs(ra.transpose() @ (q - self.position[a])) < self.half[a]).all()
+                if inside_b and inside_a:
+                    normal = axis.normalized()
+                    gap = (self.position[a] - self.position[b]).dot(normal)
+                    if gap < 0.0:
+                        normal, gap = -normal, -gap
+                    depth = (
+                        (ti.abs(ra.transpose() @ normal) * self.half[a]).sum()
+                        + (ti.abs(rb.transpose() @ normal) * self.half[b]).sum()
+                        - gap
+                    )
+                    if depth > 0.0:
+                        self._pair_contact(a, b, 0.5 * (p + q), normal, depth)
 
     # ------------------------------------------------------------------ the boundary the fluid sees
 
@@ -524,8 +623,8 @@ class Bodies:
 
     @ti.func
     def push_out(self, p):
-        """p moved out of every body grown by the collision distance, through the nearest face (a box)
-        or along the radius (a sphere); and the last body that moved it (−1: none)."""
+        """p moved out of every body grown by its collision distance (:meth:`collision_reach`), through
+        the nearest face (a box) or along the radius (a sphere); and the last body that moved it (−1: none)."""
         q = p
         pusher = -1
         for b in range(self.count):
@@ -533,7 +632,7 @@ class Bodies:
             if self.sphere[b]:
                 offset = q - centre
                 distance = offset.norm()
-                reach = self.half[b][0] + self.radius
+                reach = self.half[b][0] + self.reach[b]
                 if distance < reach:
                     direction = ti.Vector([0.0, 1.0, 0.0])
                     if distance > 1e-12:
@@ -543,7 +642,7 @@ class Bodies:
             else:
                 r = self.rotation[b]
                 local = r.transpose() @ (q - centre)
-                grown = self.half[b] + self.radius
+                grown = self.half[b] + self.reach[b]
                 if (ti.abs(local) < grown).all():
                     q = self._exit(q, centre, r, local, grown)
                     pusher = b
