@@ -523,7 +523,8 @@ class Bodies:
                     normal_local, depth = n, radius + inside
                 point = self.position[box] + r @ closest
                 self._pair_contact(s, box, point, r @ normal_local, depth)
-        else:
+        elif (self.position[a] - self.position[b]).norm() < self.bounding[a] + self.bounding[b]:
+            # (two boxes whose bounding spheres are apart cannot touch: no corner or edge test)
             corners = 0
             for k in range(16):  # the corners of a inside b, then those of b inside a
                 inner, outer = a, b
