@@ -6,7 +6,7 @@ at their draft in a settled pool (the Archimedes test's scene), their drafts aga
 water's volume gives and against the level its pressure gives. With ``collision``: the draft of the
 500 kg/m³ box and the speed of the box the momentum scene drives into water, for fixed collision
 distances from 0.2 to 1 particle radius and for the distance that shrinks from r as the body moves
-(``pbf.solver.bodies.collision_reach``, at two rates). Prints a table.
+(``pbf.solver.bodies.collision_reach``, at three rates). Prints a table.
 
     PYTHONPATH=$PWD python benchmarks/bodies.py [frames]
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum

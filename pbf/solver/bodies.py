@@ -66,7 +66,7 @@ FRICTION = 0.4
 COLLISION_AT_REST = 1.0
 """The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
 at the walls: the first layer of water under a floating box then sits half a spacing from it, where
-the ghost's lattice stands, and the box floats at its draft (within 2%; 5-8% too deep with the
+the ghost's lattice stands, and the box floats at its draft (within 1.2%; 5-8% too deep with the
 collision at COLLISION_MOVING throughout; docs/VALIDATION.md, Floating bodies)."""
 COLLISION_MOVING = 0.2
 """The least fraction of r, for a body that moves: the ghost's pressure, which grows as water comes
@@ -81,8 +81,9 @@ a substep stands no further out than a resting body's stood at its start: a movi
 the water with its collision (its ghost's pressure moves it), and a floating box's bobbing (a few
 cm/s, 0.03 r a substep) leaves the distance near r. The box of the momentum test keeps 0.30 m/s after
 its impact, what an added mass of 0.7 times the water it displaces gives; at 2 and 4 it kept 0.32 and
-0.34 m/s, as at 0.2 r, the drafts the same, but the floating box, whose collision distance then
-followed its bobbing more, moved at up to 0.064 m/s against 0.052 (benchmarks/bodies.py collision)."""
+0.34 m/s, as at 0.2 r, the drafts the same (benchmarks/bodies.py collision), but the floating box,
+whose collision distance then followed its bobbing more, moved faster than the 0.06 m/s that
+tests/test_bodies.py's box at rest is held to (0.064 m/s at 2, against 0.052 at 1)."""
 CONTACT_SWEEPS = 8
 """Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
 corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
