@@ -270,6 +270,7 @@ def test_a_level_surface_mirrors_the_sky(monkeypatch):
     assert (luminance(lit) - luminance(unlit))[top].mean() > 10.0
 
 
+@pytest.mark.slow
 def test_bodies_are_drawn_in_the_air_and_through_the_water():
     # A box above a pool and a ball under its surface. The box's centre shows the body's colour (wood:
     # red over green over blue); the ball, seen through the water, turns the water there warmer than the
