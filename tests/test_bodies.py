@@ -139,10 +139,10 @@ def test_archimedes_a_floating_box_settles_at_its_draft():
 
 
 DRAFT_TOLERANCE = 0.03
-"""Archimedes within 3%: measured 0.0% here, 1.5-1.8% at 300, 700 and 900 kg/m³ (2.4 spacings of
-draft; docs/VALIDATION.md, Floating bodies). With the collision at 0.2 r while the box floats, the
-first layer of water under it sat closer than a lattice's half spacing and the error was +6.6%; the
-test fails on that code."""
+"""Archimedes within 3%: measured −0.2% here, 0.7-1.2% at 300, 700 and 900 kg/m³ (2.4 spacings of
+draft; ``benchmarks/bodies.py archimedes``, docs/VALIDATION.md, Floating bodies). With the collision
+at 0.2 r while the box floats, the first layer of water under it sat closer than a lattice's half
+spacing and the error was +6.6%; the test fails on that code."""
 
 
 @pytest.mark.slow
