@@ -144,3 +144,26 @@ def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):
     with pytest.raises(SystemExit) as exit_:
         bench.main(argv)
     assert exit_.value.code == 2 and message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_kernel_arguments_ndarrays_compile_once_for_every_size(capsys):
+    """The premise of sizes and constants as data: a kernel whose arrays are ndarrays and whose
+    constants are a struct compiles once for every particle count and spacing, one on fields with
+    baked constants for each (Taichi's offline cache key, pinned Taichi 1.7.4)."""
+    compiled = script("kernel_arguments").cache_check("cpu")
+    assert compiled["fields"][0] > 0 and compiled["fields"][1] > 0, compiled
+    assert compiled["ndarrays"][0] > 0 and compiled["ndarrays"][1] == 0, compiled
+    assert compiled["arguments"][1] == 0, compiled
+
+
+@pytest.mark.slow
+def test_bench_start_counts_the_kernels_a_start_compiles(tmp_path):
+    from pbf.study import start
+
+    cold = start.one_start("dam_break", tmp_path, "cpu", [])
+    warm = start.one_start("dam_break", tmp_path, "cpu", [])
+    assert not cold["error"] and not warm["error"], (cold, warm)
+    assert cold["compiled"] > 10, cold  # the solver's kernels, each one file in the cache
+    assert warm["compiled"] == 0, warm  # the same start again: everything from the cache
+    assert warm["ready_s"] < cold["ready_s"], (cold, warm)

@@ -135,3 +135,46 @@ def test_ten_thousand_steps_at_rest():
     rms = math.sqrt(2 * sim.stats()["kinetic_energy_j"] / (sim.model.particle_mass_kg * sim.particle_count))
     assert rms < 0.01 * math.sqrt(G * height)
     assert abs(sim.positions()[:, 1].mean() - settled) < 1e-3 * height
+
+
+def one_iteration_dam_break(particles: int):
+    """The seed dam break scaled to ``particles``, one plain Jacobi iteration a substep (no error
+    target) and one substep asked per frame: the CFL limit alone decides how many a frame takes."""
+    from pbf.study.common import dam_break
+
+    return dam_break(particles, 1, ["solver.target_density_error=0", "time.substeps=1"])
+
+
+def peak_of_one_iteration_run(particles: int, frames: int) -> tuple[float, float]:
+    """The largest mean density error and fastest speed over the frames of the run above."""
+    sim = Simulation(one_iteration_dam_break(particles), arch="cpu", quiet=True)
+    worst_error, fastest = 0.0, 0.0
+    for _ in range(frames):
+        sim.step()
+        figures = sim.stats()
+        worst_error = max(worst_error, figures["mean_density_error"])
+        fastest = max(fastest, figures["max_speed_m_s"])
+    assert_sane(sim, energy_bound_j=10.0 * potential_energy_j(sim) + 1.0)
+    return worst_error, fastest
+
+
+def test_one_iteration_a_substep_holds_the_dam_breaks_impact():
+    # Against compression piling up faster than one iteration removes it: at two spacings a substep
+    # (the preset's time.max_cfl) the seed scene's impact read 146-328% mean density error and its
+    # particles flew at 12-374 m/s; with the travel per substep scaled to the iterations
+    # (pbf.scene.timestep.CFL_FULL_ITERATIONS) it reads under 10% at the impact. 25% is a pile a
+    # quarter denser than water on average: a collapse, not a solve. The fall from 0.6 m reaches
+    # 3.4 m/s and the splash about three times that.
+    worst_error, fastest = peak_of_one_iteration_run(8000, 30)
+    assert worst_error < 0.25, worst_error
+    assert fastest < 12.0, fastest
+
+
+@pytest.mark.slow
+def test_one_iteration_a_substep_holds_the_64000_particle_dam_break():
+    # The case that blew up: 26%, 122% and 274% mean error at frames 9-13, then 10³-10⁹ m/s. With the
+    # travel scaled to one iteration it peaks under 10% at the impact and its spray stays under
+    # 12 m/s (the preset's own solver reads 9-11 m/s at this size).
+    worst_error, fastest = peak_of_one_iteration_run(64000, 24)
+    assert worst_error < 0.25, worst_error
+    assert fastest < 15.0, fastest

@@ -12,7 +12,7 @@ from pbf.scene.fluid import Fluid
 from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_container, _check_obstacles, block_counts
 from pbf.scene.schema import SceneError, Vec3, _at_most_tables, _line, _show, _table_values, key
 from pbf.scene.solver import Solver, Viscosity, Vorticity, _check_solver
-from pbf.scene.timestep import Time, _check_settle, _check_time
+from pbf.scene.timestep import Time, _check_settle, _check_time, travel_spacings
 from pbf.scene.view import Camera, Render, Surface, _check_camera, _check_render
 from pbf.scene.wave_maker import WaveMaker, _check_wave_maker
 
@@ -76,12 +76,19 @@ class Scene:
         exact integer."""
         return sum(math.prod(block_counts(b, self.fluid.spacing_m)) for b in self.fluid.blocks)
 
+    def travel_per_substep_m(self, iterations: int | None = None) -> float:
+        """The most a particle may travel in one substep of ``iterations`` Jacobi iterations (default:
+        solver.iterations): time.max_cfl spacings, less under 4 iterations
+        (``pbf.scene.timestep.travel_spacings``)."""
+        iterations = self.solver.iterations if iterations is None else iterations
+        return travel_spacings(self.time.max_cfl, iterations) * self.fluid.spacing_m
+
     @property
     def fastest_followed_m_s(self) -> float:
         """The fastest speed a frame's substeps can follow: time.max_substeps substeps of at most
-        time.max_cfl spacings each (``Simulation.substeps_needed``)."""
+        :meth:`travel_per_substep_m` each (``Simulation.substeps_needed``)."""
         t = self.time
-        return t.max_substeps * t.max_cfl * self.fluid.spacing_m / t.frame_dt_s
+        return t.max_substeps * self.travel_per_substep_m() / t.frame_dt_s
 
     @property
     def emitted_count(self) -> int:

@@ -269,7 +269,11 @@ def _cpu_device() -> Device:
 
 
 def start_backend(
-    arch: str | None = None, quiet: bool = False, cpu_threads: int | None = None, fast_compile: bool = False
+    arch: str | None = None,
+    quiet: bool = False,
+    cpu_threads: int | None = None,
+    fast_compile: bool = False,
+    kernel_profiler: bool = False,
 ) -> str:
     """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto"; see the module docstring) and
     return the backend's name: "cpu", "cuda", "vulkan" or "metal". ``cpu_threads`` caps the CPU
@@ -278,7 +282,8 @@ def start_backend(
     cent slower; the test suite, which builds many short-lived Simulations, uses it. The arithmetic
     is the same up to rounding, not bit for bit: the seed scene's positions differ by 3e-8 m after
     one frame and, the splash being chaotic, by up to 0.8 m after 60. Each mode is deterministic by
-    itself.
+    itself. ``kernel_profiler`` starts Taichi's kernel profiler, which records every offloaded task
+    (``pbf.study.launches`` counts them).
 
     Taichi can only run one backend per process: a second call with a different explicit request
     raises BackendError; a matching, "auto" or (on a GPU backend) "gpu" request returns the backend
@@ -302,6 +307,7 @@ def start_backend(
         log_level=ti.WARN,
         advanced_optimization=not fast_compile,
         **threads,
+        **({"kernel_profiler": True} if kernel_profiler else {}),
     )
     try:
         _init(**_options)

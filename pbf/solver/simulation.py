@@ -311,8 +311,8 @@ class Simulation:
             row = int(np.argmax(speeds))
             raise ValueError(
                 f"restore: particle {row} moves at {float(speeds[row]):.6g} m/s, faster than the "
-                f"{fastest:.6g} m/s this scene's frames can follow (time.max_substeps × time.max_cfl × "
-                f"fluid.spacing_m / time.frame_dt_s)"
+                f"{fastest:.6g} m/s this scene's frames can follow (time.max_substeps × time.max_cfl (less "
+                f"under 4 solver.iterations) × fluid.spacing_m / time.frame_dt_s)"
             )
 
     def _checked_layers(self, layers, count: int) -> list[int]:
@@ -378,17 +378,21 @@ class Simulation:
 
     def substeps_needed(self) -> int:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
-        time.max_cfl spacings in one substep (no tunnelling into the pile at a wall, no blow-up)."""
+        time.max_cfl spacings in one substep, less under 4 iterations (``Scene.travel_per_substep_m``:
+        no tunnelling into the pile at a wall, no compression piling up faster than the iterations
+        remove it)."""
         t = self.scene.time
         speed = (
             max(self.diagnostics.max_speed(), self.boundaries.speed_limit_m_s())
             + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
         )
-        needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / (t.max_cfl * self.scene.fluid.spacing_m)))
+        travel = self.scene.travel_per_substep_m(self.control.iterations)
+        needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / travel))
         if needed > t.max_substeps:
             warnings.warn(
                 f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
-                f"time.max_cfl = {t.max_cfl}; capped at time.max_substeps = {t.max_substeps}",
+                f"{travel / self.scene.fluid.spacing_m:.3g} spacings a substep (time.max_cfl = {t.max_cfl} at "
+                f"{self.control.iterations} iterations); capped at time.max_substeps = {t.max_substeps}",
                 RuntimeWarning,
                 stacklevel=3,
             )
@@ -405,9 +409,10 @@ class Simulation:
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
-            self.integrator.push(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
+            hand_limit_m_s = self.scene.travel_per_substep_m(control.iterations) / dt
+            self.integrator.push(control.push, hand_limit_m_s)
             if self.bodies is not None:  # and the bodies it touches
-                self.bodies.grab(control.push, self.scene.time.max_cfl * self.scene.fluid.spacing_m / dt)
+                self.bodies.grab(control.push, hand_limit_m_s)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)

@@ -5,6 +5,8 @@
     python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
     python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
     python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
+    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4]   (kernel calls, tasks per substep)
+    python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared]   (see pbf.study.start)
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
@@ -16,6 +18,12 @@ times one substep of the same state, stage by stage, with each optional term (vo
 XSPH, s_corr, wall density) switched off in turn, in interleaved rounds, and reports what each
 costs. Stages are timed by a hook inside the step (``pbf.study.common.StageTimer``). Medians
 throughout: the machines are shared and noisy.
+
+``counts`` runs substeps of the seed scene at a fixed iteration count, on the host's decisions and on
+the device's (as GPU backends take them), and of the shipped preset with its error target, under
+Taichi's kernel profiler, and prints the Python kernel calls and the offloaded tasks per substep
+(``pbf.study.launches``). ``start`` times cold and warm starts of every preset in fresh processes
+(``pbf.study.start``).
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
@@ -373,6 +381,27 @@ def compare(paths: list[Path]) -> list[dict]:
     return verdicts
 
 
+def counts(args) -> list:
+    """``counts``: kernel calls and offloaded tasks per substep (``pbf.study.launches``)."""
+    from pbf.solver.backend import decisions_on_device
+    from pbf.study import launches
+
+    rows = []
+    for particles in args.sizes or [8000]:
+        fixed = dam_break(particles, args.iterations, ["solver.target_density_error=0", *args.set])
+        for name, scene, on_device in (
+            (f"{particles:,}, {args.iterations} iterations", fixed, False),
+            (f"{particles:,}, {args.iterations} its., device decisions", fixed, True),
+            (f"{particles:,}, the preset's error target", dam_break(particles, 10, args.set), False),
+        ):
+            with decisions_on_device(on_device or args.device_decisions):
+                sim = Simulation(scene, arch=args.backend, quiet=True)
+            sim.step(2)  # past the compile of every kernel variant the counted substeps use
+            rows.append((name, launches.count_substeps(sim, COUNTED_FRAMES)))
+    print(launches.table(rows))
+    return rows
+
+
 def _overrides(scene) -> list[str]:
     return [
         f"fluid.spacing_m={scene.fluid.spacing_m!r}",
@@ -416,9 +445,11 @@ def _thread_count(text: str) -> int:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", nargs="?", choices=("sizes", "sweep", "terms", "presets", "compare"), default="sizes")
+    modes = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start")
+    parser.add_argument("mode", nargs="?", choices=modes, default="sizes")
     parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
-    parser.add_argument("--presets", nargs="+", default=None, help="presets: which (default: all)")
+    parser.add_argument("--presets", nargs="+", default=None, help="presets, start: which (default: all)")
+    parser.add_argument("--no-shared", action="store_true", help="start: leave out the starts in one shared cache")
     parser.add_argument(
         "--device-decisions",
         action="store_true",
@@ -486,18 +517,30 @@ def main(argv=None):
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
     args = parser.parse_args(argv)
-    for option, given, mode in (
-        ("--presets", args.presets, "presets"),
-        ("--perturb", args.perturb is not None, "presets"),
-        ("tables", args.tables, "compare"),
+    for option, given, modes in (
+        ("--presets", args.presets, ("presets", "start")),
+        ("--no-shared", args.no_shared, ("start",)),
+        ("--perturb", args.perturb is not None, ("presets",)),
+        ("tables", args.tables, ("compare",)),
     ):
-        if given and args.mode != mode:
-            parser.error(f"{option}: applies to the {mode} mode only, not to {args.mode}")
+        if given and args.mode not in modes:
+            parser.error(f"{option}: applies to the {' and '.join(modes)} mode only, not to {args.mode}")
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
     if args.mode == "compare":
         return compare(args.tables)
-    args.backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
+    if args.mode == "start":  # each start a process of its own: this one starts no backend
+        from pbf.study import start
+
+        presets = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
+        return start.run(presets, args.arch, not args.no_shared, args.csv)
+    args.backend = start_backend(
+        args.arch,
+        quiet=True,
+        cpu_threads=args.threads,
+        fast_compile=args.fast_compile,
+        kernel_profiler=args.mode == "counts",
+    )
     if args.threads is not None and args.backend != "cpu":
         parser.error(f"--threads: sets the CPU backend's threads; the backend here is {args.backend}")
     args.variant = "+".join(
@@ -525,6 +568,8 @@ def main(argv=None):
         return terms(args)
     if args.mode == "presets":
         return presets(args)
+    if args.mode == "counts":
+        return counts(args)
     args.sizes = args.sizes or [8000, 64000]
     return sizes(args)
 

@@ -1,0 +1,133 @@
+"""How long a user waits before the first frame: cold and warm starts of every preset, each a fresh process.
+
+    python -m pbf.study.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
+
+A start is what a user runs: ``pbf PRESET --stats-only --frames 1`` in a new process, timed from the
+process's launch to its exit (``wall``) and by the program's own "kernels ready in" line (``ready``:
+building the Simulation, settling and the first frame's kernels). Taichi's offline cache keeps each
+compiled kernel as one ``.tic`` file, named by a hash of the kernel's IR, argument types and the fields
+it touches, so the files a start adds to the cache folder are the kernels it had to compile; a start
+that adds none was served entirely from the cache.
+
+Per preset, in a cache folder of its own, emptied first:
+
+* ``cold``: the first start (every kernel compiled);
+* ``warm``: the same start again (everything from the cache);
+* ``spacing``: the same preset with ``fluid.spacing_m`` 10% larger, another particle count and grid
+  (what a user changing one key in a file waits for).
+
+Then, unless ``--no-shared``, every preset once more in order in one fresh shared folder (``shared``):
+what a preset costs after the ones before it have run, e.g. ``drop_into_pool`` after ``dam_break``.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+SPACING_FACTOR = 1.1
+"""``spacing``: the preset's spacing times this (fewer particles, so the variant is never the slower run)."""
+READY = re.compile(r"kernels ready(?: and the first frame drawn)? in ([0-9.]+) s")
+TIMEOUT_S = 1200
+"""One start may take this long before it is reported as failed (a cold start of bodies under load)."""
+LAUNCH = "import sys; from pbf.app.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def cached_kernels(folder: Path) -> set[str]:
+    """The compiled kernels in a Taichi offline cache folder (one ``.tic`` file each, at any depth)."""
+    return {path.name for path in folder.rglob("*.tic")}
+
+
+def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str]) -> dict:
+    """One start of ``preset`` in a fresh process whose offline cache is ``folder``: its wall time, its
+    "kernels ready" time and the kernels it compiled (files it added to the folder)."""
+    before = cached_kernels(folder)
+    command = [sys.executable, "-c", LAUNCH, preset, "--stats-only", "--frames", "1"]
+    command += ["--arch", arch] if arch else []
+    for override in overrides:
+        command += ["--set", override]
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(folder))
+    began = time.perf_counter()
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return {"wall_s": float("nan"), "ready_s": float("nan"), "compiled": -1, "error": f"over {TIMEOUT_S} s"}
+    wall = time.perf_counter() - began
+    ready = READY.search(done.stdout)
+    error = "" if done.returncode == 0 and ready else (done.stderr.strip().splitlines() or ["no output"])[-1]
+    return {
+        "wall_s": wall,
+        "ready_s": float(ready.group(1)) if ready else float("nan"),
+        "compiled": len(cached_kernels(folder) - before),
+        "error": error,
+    }
+
+
+def spacing_override(preset: str) -> str:
+    """``fluid.spacing_m=...`` for the ``spacing`` start: the preset's spacing times SPACING_FACTOR."""
+    from pbf.scene import load_scene
+
+    return f"fluid.spacing_m={load_scene(preset).fluid.spacing_m * SPACING_FACTOR:.6g}"
+
+
+def cell(result: dict) -> str:
+    """A table cell: ready time and kernels compiled, or why the start failed."""
+    if result["error"]:
+        return f"failed: {result['error'][:60]}"
+    return f"{result['ready_s']:.1f} s ({result['compiled']})"
+
+
+def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | None) -> list[dict]:
+    """Every start of the module docstring, printed as a table as they finish; returns the rows."""
+    rows = []
+    root = Path(tempfile.mkdtemp(prefix="pbf-start-"))
+    try:
+        print("ready time of each start, in brackets the kernels it compiled (0: all from the cache)")
+        print(f"{'preset':<20} {'cold':>16} {'warm':>16} {'spacing x1.1':>16}", flush=True)
+        for preset in presets:
+            folder = root / preset
+            folder.mkdir()
+            row = {"preset": preset}
+            for name, overrides in (("cold", []), ("warm", []), ("spacing", [spacing_override(preset)])):
+                row[name] = one_start(preset, folder, arch, overrides)
+            cells = " ".join(f"{cell(row[name]):>16}" for name in ("cold", "warm", "spacing"))
+            print(f"{preset:<20} {cells}", flush=True)
+            rows.append(row)
+        if shared:
+            folder = root / "shared"
+            folder.mkdir()
+            print("\nevery preset in order, one shared cache folder, emptied first")
+            for row in rows:
+                row["shared"] = one_start(row["preset"], folder, arch, [])
+                print(f"{row['preset']:<20} {cell(row['shared']):>16}", flush=True)
+        ready = [row[name]["ready_s"] for row in rows for name in ("cold",) if not row[name]["error"]]
+        warm = [row["warm"]["ready_s"] for row in rows if not row["warm"]["error"]]
+        if ready and warm:
+            print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    if csv_path is not None:
+        write_csv(rows, csv_path)
+    return rows
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    """One line per preset and start: ready and wall seconds, kernels compiled, error."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(["preset", "start", "ready_s", "wall_s", "compiled", "error"])
+        for row in rows:
+            for name in ("cold", "warm", "spacing", "shared"):
+                if name in row:
+                    r = row[name]
+                    figures = [f"{r['ready_s']:.2f}", f"{r['wall_s']:.2f}", r["compiled"], r["error"]]
+                    writer.writerow([row["preset"], name, *figures])

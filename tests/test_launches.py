@@ -1,0 +1,58 @@
+"""The launches of a substep, counted by Taichi's kernel profiler (``python -m pbf.study.bench counts``).
+
+On a GPU every offloaded task is a launch of its own, so at small particle counts the count sets the
+cost of a substep; a change that adds kernels or one-thread tasks fails here. The ceilings are the
+counts of today's solver (docs/BENCHMARKS.md, "Launches per substep"): lower them as the substep is
+fused, never raise them without a measurement that says why.
+"""
+
+import re
+import subprocess
+import sys
+
+import pytest
+
+CEILINGS = {
+    # case: (Python kernel calls, offloaded tasks, serial tasks, tasks inside the iterations)
+    "8,000, 4 iterations": (8, 43, 18, 24),
+    "8,000, 4 its., device decisions": (9, 51, 21, 24),
+}
+"""At 4 fixed iterations: the host's decisions (the CPU path) and the device's (GPU backends)."""
+
+
+@pytest.fixture(scope="module")
+def counts() -> dict:
+    """The table of ``bench counts`` by case, from a process of its own (the profiler is chosen at
+    ``ti.init``, and this suite's runtime runs without it)."""
+    done = subprocess.run(
+        [sys.executable, "-m", "pbf.study.bench", "counts", "--arch", "cpu", "--threads", "1"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    rows = {}
+    for line in done.stdout.splitlines():
+        match = re.match(r"(\S.*?)\s{2,}([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)$", line)
+        if match:
+            rows[match.group(1)] = tuple(float(value) for value in match.groups()[1:])
+    return rows
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(CEILINGS))
+def test_substep_launches_stay_within_todays_counts(counts, case):
+    calls, tasks, serial, iteration, _ = counts[case]
+    most_calls, most_tasks, most_serial, most_iteration = CEILINGS[case]
+    assert calls <= most_calls, f"{case}: {calls} kernel calls per substep, at most {most_calls}"
+    assert tasks <= most_tasks, f"{case}: {tasks} offloaded tasks per substep, at most {most_tasks}"
+    assert serial <= most_serial, f"{case}: {serial} serial tasks per substep, at most {most_serial}"
+    assert iteration <= most_iteration, f"{case}: {iteration} tasks in the iterations, at most {most_iteration}"
+
+
+@pytest.mark.slow
+def test_the_iterations_repeat_per_iteration(counts):
+    """The count inside the iterations is per iteration: 4 iterations launch 4 times one iteration's
+    tasks (a miscount of the profiler's records would break this first)."""
+    _, _, _, iteration, serial_there = counts["8,000, 4 iterations"]
+    assert iteration % 4 == 0 and serial_there % 4 == 0, (iteration, serial_there)
