@@ -106,11 +106,34 @@ class FieldVariant:
         return self.density.to_numpy()
 
 
+Constants = ti.types.struct(inverse_h=ti.f32, sigma=ti.f32, count=ti.i32)
+
+
+@ti.data_oriented
+class ConstantsVariant(FieldVariant):
+    """Fields as today, the constants as a struct argument: what constants as data cost alone."""
+
+    def __init__(self, x, starts, neighbours, h, volume):
+        super().__init__(x, starts, neighbours, h, volume)
+        self.constants = Constants(inverse_h=self.inverse_h, sigma=self.sigma, count=len(x))
+
+    @ti.kernel
+    def _run(self, c: Constants):
+        for i in range(c.count):
+            xi = self.x[i]
+            rho = cubic(0.0, c.inverse_h, c.sigma)
+            for k in range(self.start[i], self.start[i + 1]):
+                rho += cubic((xi - self.x[self.neighbours[k]]).norm_sqr(), c.inverse_h, c.sigma)
+            self.density[i] = rho
+
+    def run(self):
+        self._run(self.constants)
+
+
 vec3_array = ti.types.ndarray(dtype=ti.math.vec3, ndim=1)
 f32_array = ti.types.ndarray(dtype=ti.f32, ndim=1)
 i32_array = ti.types.ndarray(dtype=ti.i32, ndim=1)
 Arrays = ti.types.argpack(x=vec3_array, start=i32_array, neighbours=i32_array, density=f32_array)
-Constants = ti.types.struct(inverse_h=ti.f32, sigma=ti.f32, count=ti.i32)
 
 
 @ti.func
@@ -174,7 +197,14 @@ class PlainArgumentsVariant(NdarrayVariant):
         plain_density(a.x, a.start, a.neighbours, a.density, c.inverse_h, c.sigma)
 
 
-VARIANTS = {"fields": FieldVariant, "ndarrays": NdarrayVariant, "arguments": PlainArgumentsVariant}
+VARIANTS = {
+    "fields": FieldVariant,
+    "constants": ConstantsVariant,
+    "ndarrays": NdarrayVariant,
+    "arguments": PlainArgumentsVariant,
+}
+"""Today's fields with baked constants; the same fields with the constants as a struct argument; the
+arrays as ndarrays in an argpack with the constants as a struct; the same as loose arguments."""
 
 
 def build(variant: str, particles: int, spacing: float):
