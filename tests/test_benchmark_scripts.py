@@ -167,3 +167,22 @@ def test_bench_start_counts_the_kernels_a_start_compiles(tmp_path):
     assert cold["compiled"] > 10, cold  # the solver's kernels, each one file in the cache
     assert warm["compiled"] == 0, warm  # the same start again: everything from the cache
     assert warm["ready_s"] < cold["ready_s"], (cold, warm)
+
+
+def test_traffic_model_counts_a_lattice():
+    """The bytes model's counts on the seed block before it falls: a cubic lattice at h = 2 spacings
+    has 32 sites within h of an interior particle (fewer at the block's faces) and the 5 × 5 × 5 cells
+    a particle visits hold at most 125; without lists a substep streams less and gathers more."""
+    from pbf import Simulation
+    from pbf.study import traffic
+
+    sim = Simulation("dam_break", arch="cpu", quiet=True)
+    neighbours, candidates, cells = traffic.measured_counts(sim)
+    assert 20.0 < neighbours < 32.0, neighbours
+    assert neighbours < candidates <= 125.0, candidates
+    assert cells == sim.model.grid.cell_count / sim.particle_count
+    lists = traffic.by_stage(traffic.passes("lists", neighbours, candidates, cells), 4)
+    walk = traffic.by_stage(traffic.passes("cells", neighbours, candidates, cells), 4)
+    assert "neighbour lists" not in walk
+    assert sum(s for s, _ in lists.values()) > sum(s for s, _ in walk.values())
+    assert sum(g for _, g in lists.values()) < sum(g for _, g in walk.values())

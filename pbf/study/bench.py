@@ -7,6 +7,7 @@
     python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
     python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4]   (kernel calls, tasks per substep)
     python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared]   (see pbf.study.start)
+    python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
@@ -23,7 +24,9 @@ throughout: the machines are shared and noisy.
 the device's (as GPU backends take them), and of the shipped preset with its error target, under
 Taichi's kernel profiler, and prints the Python kernel calls and the offloaded tasks per substep
 (``pbf.study.launches``). ``start`` times cold and warm starts of every preset in fresh processes
-(``pbf.study.start``).
+(``pbf.study.start``). ``traffic`` measures the neighbour and candidate counts of the seed scene
+in its splash and prints the bytes a substep moves per particle by stage, with neighbour lists and
+without (``pbf.study.traffic``), scaled to ``--particles``.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
@@ -402,6 +405,20 @@ def counts(args) -> list:
     return rows
 
 
+def traffic(args) -> str:
+    """``traffic``: the bytes-moved model (``pbf.study.traffic``) at the seed scene's counts in its splash."""
+    from pbf.study import traffic as model
+
+    particles = (args.sizes or [8000])[0]
+    sim = Simulation(dam_break(particles, args.iterations, args.set), arch=args.backend, quiet=True)
+    sim.step(args.warmup)  # into the splash: more neighbours at the walls and in the pile than at rest
+    neighbours, candidates, cells = model.measured_counts(sim)
+    print(f"counts of the {particles:,}-particle seed scene at frame {sim.frame}")
+    text = model.table(args.particles, args.iterations, round(neighbours, 1), round(candidates, 1), round(cells, 2))
+    print(text)
+    return text
+
+
 def _overrides(scene) -> list[str]:
     return [
         f"fluid.spacing_m={scene.fluid.spacing_m!r}",
@@ -445,7 +462,7 @@ def _thread_count(text: str) -> int:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    modes = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start")
+    modes = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start", "traffic")
     parser.add_argument("mode", nargs="?", choices=modes, default="sizes")
     parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
     parser.add_argument("--presets", nargs="+", default=None, help="presets, start: which (default: all)")
@@ -486,6 +503,9 @@ def main(argv=None):
         help="sweep: also stop iterating under this mean density error (0: no such points)",
     )
     parser.add_argument("--frames", type=int, default=60, help="timed frames per size or sweep point")
+    parser.add_argument(
+        "--particles", type=int, default=1_000_000, help="traffic: the particle count the bytes are scaled to"
+    )
     parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms)")
     parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
     parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
@@ -570,6 +590,8 @@ def main(argv=None):
         return presets(args)
     if args.mode == "counts":
         return counts(args)
+    if args.mode == "traffic":
+        return traffic(args)
     args.sizes = args.sizes or [8000, 64000]
     return sizes(args)
 
