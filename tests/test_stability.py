@@ -178,3 +178,29 @@ def test_one_iteration_a_substep_holds_the_64000_particle_dam_break():
     worst_error, fastest = peak_of_one_iteration_run(64000, 24)
     assert worst_error < 0.25, worst_error
     assert fastest < 15.0, fastest
+
+
+def test_a_speed_cap_holds_every_particle_and_bounds_the_substeps():
+    # time.max_speed_m_s caps |v| at the end of every substep (as FleX caps it), so the CFL limit sees
+    # at most the cap: the falling block at 1 m/s takes the preset's 2 substeps where, uncapped, its
+    # 2.9 m/s at impact would need more at a quarter of the preset's travel per substep.
+    capped = Simulation("dam_break", overrides=["time.max_speed_m_s=1.0", "time.max_cfl=0.5"], quiet=True)
+    free = Simulation("dam_break", overrides=["time.max_cfl=0.5"], quiet=True)
+    for sim in (capped, free):
+        sim.step(24)
+    speeds = np.linalg.norm(capped.velocities(), axis=1)
+    assert speeds.max() <= 1.0 * (1 + 1e-6), speeds.max()
+    assert np.linalg.norm(free.velocities(), axis=1).max() > 2.0
+    assert capped.substeps_needed() <= math.ceil((1.0 + G / 60) / 60 / (0.5 * 0.025))
+    assert free.substeps_needed() > capped.substeps_needed()
+
+
+def test_a_speed_cap_below_what_the_scene_drives_is_refused():
+    from pbf.scene import SceneError, load_scene
+
+    thrown = scene([{"min_m": [0.1, 0.1, 0.1], "max_m": [0.2, 0.2, 0.2], "velocity_m_s": [1.0, 0.0, 0.0]}])
+    thrown["time"] = {"max_speed_m_s": 0.5}
+    with pytest.raises(SceneError, match=r"time.max_speed_m_s.*fluid.blocks\[0\]"):
+        load_scene(thrown)
+    with pytest.raises(SceneError, match="time.max_speed_m_s.*wave maker"):
+        load_scene("wave_tank", ["time.max_speed_m_s=0.05"])

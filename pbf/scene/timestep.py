@@ -33,6 +33,12 @@ class Time:
         "quarter); a frame takes more substeps when it would go further",
     )
     max_substeps: int = key(64, _between(1, 1000), "cap on the substeps one frame may take (a warning when reached)")
+    max_speed_m_s: float = key(
+        0.0,
+        _between(0.0, 1e4),
+        "particle speeds capped at this at the end of every substep, so that the splash's fastest "
+        "drops do not set every particle's substeps (0: no cap); above the flow's own speeds",
+    )
     settle_s: float = key(
         0.0,
         _between(0.0, 60.0),
@@ -76,6 +82,12 @@ def _check_time(scene, source: str) -> None:
         )
     for i, block in enumerate(scene.fluid.blocks):
         speed = _length(block.velocity_m_s)
+        if t.max_speed_m_s > 0.0 and speed > t.max_speed_m_s:
+            raise SceneError(
+                f"{source}: key 'time.max_speed_m_s' = {_num(t.max_speed_m_s)} m/s would slow "
+                f"fluid.blocks[{i}] ({_num(speed)} m/s) in the first substep; allowed: 0 (no cap) or ≥ "
+                f"{_num(speed)} m/s"
+            )
         if not speed + fall <= followed:
             raise SceneError(
                 f"{source}: key 'fluid.blocks[{i}].velocity_m_s': {_num(speed)} m/s (plus "
@@ -83,7 +95,14 @@ def _check_time(scene, source: str) -> None:
                 f"a frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s, or "
                 f"raise time.max_substeps"
             )
+    cap = t.max_speed_m_s
     for i, emitter in enumerate(scene.emitters):
+        if cap > 0.0 and emitter.speed_m_s > cap:
+            raise SceneError(
+                f"{source}: key 'time.max_speed_m_s' = {_num(cap)} m/s would slow emitters[{i}]'s jet "
+                f"({_num(emitter.speed_m_s)} m/s) as it leaves the nozzle; allowed: 0 (no cap) or ≥ "
+                f"{_num(emitter.speed_m_s)} m/s"
+            )
         if not emitter.speed_m_s + fall <= followed:
             raise SceneError(
                 f"{source}: key 'emitters[{i}].speed_m_s' = {_num(emitter.speed_m_s)} m/s (plus "
@@ -91,6 +110,12 @@ def _check_time(scene, source: str) -> None:
                 f"frame's substeps can follow {limits}; allowed: ≤ {_num(followed - fall)} m/s"
             )
     piston = math.pi * scene.wave_maker.stroke_m / scene.wave_maker.period_s  # the piston's top speed, π S / T
+    if cap > 0.0 and piston > cap:
+        raise SceneError(
+            f"{source}: key 'time.max_speed_m_s' = {_num(cap)} m/s is slower than the wave maker's piston "
+            f"(up to π S / T = {_num(piston)} m/s), which the water in front of it must follow; allowed: 0 "
+            f"(no cap) or ≥ {_num(piston)} m/s"
+        )
     if not piston + fall <= followed:
         raise SceneError(
             f"{source}: key 'wave_maker.period_s' = {_num(scene.wave_maker.period_s)} s moves the piston "

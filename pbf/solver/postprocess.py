@@ -53,9 +53,10 @@ class VelocityPostprocess:
         impulse: ti.template(),
         pressure_per_impulse: ti.f32,
         first_of_frame: ti.i32,
+        max_speed: ti.f32,
     ):
-        """v from x* and x, ω (if confining), confinement and XSPH into v, then x ← x* and the substep's
-        pressure added to the frame's sum: one launch."""
+        """v from x* and x, ω (if confining), confinement and XSPH into v, capped at ``max_speed`` (m/s,
+        0: no cap), then x ← x* and the substep's pressure added to the frame's sum: one launch."""
         h = self.h
         inverse_dt = 1.0 / dt
         if ti.static(with_vorticity):
@@ -92,7 +93,12 @@ class VelocityPostprocess:
                     eta_norm = eta.norm()
                     if eta_norm > 0.0:
                         dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
-            self.state.v[i] = vi + dv
+            v = vi + dv
+            if max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
+                speed = v.norm()
+                if speed > max_speed:
+                    v *= max_speed / speed
+            self.state.v[i] = v
         for i in range(self.state.active[None]):
             self.state.x[i] = x_pred[i]
             # The pressure of this substep, from the position iterations' multiplier L and the
@@ -100,9 +106,12 @@ class VelocityPostprocess:
             pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
             self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
 
-    def run(self, x_pred, neighbours, dt, vorticity, xsph, impulse, pressure_per_impulse, first_of_frame):
+    def run(
+        self, x_pred, neighbours, dt, vorticity, xsph, impulse, pressure_per_impulse, first_of_frame, max_speed=0.0
+    ):
         """Lines 20-23 of Algorithm 1: v = (x* − x)/Δt, confinement (if ε > 0) and XSPH (if c > 0) on v,
-        then x = x*; and the pressure (Pa) of the multipliers ``impulse`` (L, per particle) and Λ, at
+        v capped at ``max_speed`` (m/s, ``time.max_speed_m_s``; 0: no cap), then x = x*; and the
+        pressure (Pa) of the multipliers ``impulse`` (L, per particle) and Λ, at
         ``pressure_per_impulse`` Pa per unit of L, added to ``State.pressure_sum`` (which starts again
         at the ``first_of_frame`` substep)."""
         self.finish(
@@ -116,4 +125,5 @@ class VelocityPostprocess:
             impulse,
             pressure_per_impulse,
             first_of_frame,
+            max_speed,
         )

@@ -382,8 +382,11 @@ class Simulation:
         no tunnelling into the pile at a wall, no compression piling up faster than the iterations
         remove it)."""
         t = self.scene.time
+        fastest = self.diagnostics.max_speed()
+        if t.max_speed_m_s > 0.0:  # capped at the end of every substep
+            fastest = min(fastest, t.max_speed_m_s)
         speed = (
-            max(self.diagnostics.max_speed(), self.boundaries.speed_limit_m_s())
+            max(fastest, self.boundaries.speed_limit_m_s())
             + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
         )
         travel = self.scene.travel_per_substep_m(self.control.iterations)
@@ -456,6 +459,7 @@ class Simulation:
                 self.density.lam_total,  # and the pressure, summed
                 self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
                 self.pressure_substeps == 0,
+                self.scene.time.max_speed_m_s,  # and v capped (0: not)
             )
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
