@@ -186,3 +186,10 @@ def test_traffic_model_counts_a_lattice():
     assert "neighbour lists" not in walk
     assert sum(s for s, _ in lists.values()) > sum(s for s, _ in walk.values())
     assert sum(g for _, g in lists.values()) < sum(g for _, g in walk.values())
+
+
+@pytest.mark.slow
+def test_speed_cap_prints_its_table(capsys):
+    script("speed_cap").main(["--particles", "8000", "--frames", "3", "--factors", "0", "2", "--divisor", "0"])
+    out = capsys.readouterr().out
+    assert "none" in out and "2 √(2gy)" in out
