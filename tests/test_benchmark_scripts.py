@@ -133,7 +133,7 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
     "argv, message",
     [
         (["sizes", "--perturb", "1"], "--perturb: applies to the presets mode only, not to sizes"),
-        (["sizes", "--presets", "pour"], "--presets: applies to the presets mode only, not to sizes"),
+        (["sizes", "--presets", "pour"], "--presets: applies to the presets and start modes only, not to sizes"),
         (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
     ],

@@ -544,7 +544,8 @@ def main(argv=None):
         ("tables", args.tables, ("compare",)),
     ):
         if given and args.mode not in modes:
-            parser.error(f"{option}: applies to the {' and '.join(modes)} mode only, not to {args.mode}")
+            named = f"the {' and '.join(modes)} mode{'s' if len(modes) > 1 else ''}"
+            parser.error(f"{option}: applies to {named} only, not to {args.mode}")
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
     if args.mode == "compare":
