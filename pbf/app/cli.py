@@ -417,7 +417,7 @@ def main(argv=None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     from pbf.app import loop
-    from pbf.app.headless import FrameWriter
+    from pbf.app.headless import ExportError, FrameWriter
     from pbf.solver import BackendError, Simulation, start_backend
 
     try:
@@ -444,7 +444,11 @@ def main(argv=None) -> int:
         done = "" if args.stats_only else " and the first frame drawn"
         print(f"[pbf] kernels ready{done} in {time.perf_counter() - started:.1f} s", flush=True)
 
-    loop.run(sim, viewer, frames, first_shown=ready)
+    try:
+        loop.run(sim, viewer, frames, first_shown=ready)
+    except ExportError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)
     return 0
