@@ -116,15 +116,15 @@ def build_parser() -> Parser:
     output.add_argument(
         "--out",
         default=None,
-        help="folder for PNG frames (default out/ + the scene file's name; also where the window "
-        "writes when none can open); a folder holding an earlier run's files is refused "
-        "unless --overwrite",
+        help="folder for PNG frames (default out/ + the scene file's name, or the next free out/NAME-2 … "
+        "when it holds an earlier run; also where the window writes when none can open); a folder "
+        "given here that holds an earlier run's files is refused unless --overwrite",
     )
     output.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an earlier run's files in --out (only frame_*.png, particles_*.ply/.npz and "
-        "surface_*.ply/.obj are removed) and an existing --video file",
+        help="replace an earlier run's files in --out, or in the default folder out/NAME (only "
+        "frame_*.png, particles_*.ply/.npz and surface_*.ply/.obj are removed), and an existing --video file",
     )
     output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
     output.add_argument(
@@ -304,20 +304,27 @@ def check_view(scene, args) -> None:
                 )
 
 
+DEFAULT_OUT_LABEL = "the default output folder (--out)"
+
+
 def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
-    """The frame folder and video the run may write, both checked (OutputError) before it starts;
-    (None, None) for --stats-only, which writes nothing. An earlier run's files in the folder are
-    refused unless --overwrite; a window run (which writes only if no window opens) checks the
-    folder again before that."""
+    """The frame folder and video the run may write, both checked (OutputError) before Taichi starts;
+    (None, None) for --stats-only, which writes nothing. A window run is checked as a headless one: it
+    writes there when no window can open, which is known only once Taichi has started. An earlier
+    run's files in a folder named by --out are refused unless --overwrite; without --out the run takes
+    the next free default folder (out/dam_break, out/dam_break-2 …), and --overwrite replaces the
+    first's."""
     check_view(scene, args)
     if args.stats_only:
         return None, None
-    overwrite = args.overwrite or not args.headless
     if args.out is not None:
-        out = outputs.check_folder(args.out, "--out", overwrite)
+        out = outputs.check_folder(args.out, "--out", args.overwrite)
     else:
         default = outputs.default_folder(scene.source)
-        out = outputs.check_folder(str(default), "the default output folder (--out)", overwrite)
+        free = default if args.overwrite else outputs.free_default_folder(default)
+        out = outputs.check_folder(str(free), DEFAULT_OUT_LABEL, args.overwrite)
+        if free != default:
+            args.taken_default = default
     video = outputs.check_video(args.video, "--video", args.overwrite) if args.video is not None else None
     return out, video
 
@@ -327,11 +334,14 @@ def frame_writer(sim, args, frames, out, video):
     otherwise such a folder is refused)."""
     from pbf.app.headless import FrameWriter
 
-    label = "--out" if args.out is not None else "the default output folder (--out)"
-    outputs.check_folder(str(out), label, args.overwrite)  # again: a window run that fell back to frames
+    label = "--out" if args.out is not None else DEFAULT_OUT_LABEL
+    outputs.check_folder(str(out), label, args.overwrite)  # again: files may have appeared since the start
     removed = outputs.clear_earlier(out)
     if removed:
         print(f"[pbf] removed {len(removed)} files of an earlier run from {out}/ ({removed[0].name} …)")
+    taken = getattr(args, "taken_default", None)
+    if taken is not None:
+        print(f"[pbf] {taken}/ holds an earlier run, kept: writing to {out}/ instead (--out names the folder)")
     return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
