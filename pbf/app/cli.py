@@ -272,7 +272,17 @@ def load(args) -> schema.Scene:
             scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set])
         return scene
     except schema.SceneError as error:
+        if args.scene in REFERENCES and "no such scene file" in str(error):
+            # `pbf keys` reads as a subcommand; the references are options, like --help.
+            raise UsageError(
+                f"{args.scene}: no such scene file or preset; {REFERENCES[args.scene]} is printed by "
+                f"--{args.scene} (pbf --{args.scene}, python run.py --{args.scene})"
+            ) from None
         raise schema.attribute(error, command_line_keys(args)) from None
+
+
+REFERENCES = {"keys": "the reference of every scene key", "list": "the list of presets"}
+"""The options that print a reference instead of running a scene, by the word a user may type for them."""
 
 
 def command_line_keys(args) -> dict[str, str]:
