@@ -355,9 +355,9 @@ def frame_writer(sim, args, frames, out, video):
     return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
-def try_window(scene, args):
+def try_window(scene, args, waiting: str):
     """The GGUI window the options ask for, or None (headless: asked for, or no window can open here, which
-    is said in one line)."""
+    is said in one line); it shows ``waiting`` until the first frame."""
     if args.headless or args.stats_only:
         return None
     from pbf.app import window
@@ -367,7 +367,7 @@ def try_window(scene, args):
     except window.WindowUnavailable as reason:
         print(f"[pbf] no window: {reason}; rendering headless instead")
         return None
-    window.show_waiting(gui_window, scene.render.background_rgb, [COMPILING.removeprefix("[pbf] ")])
+    window.show_waiting(gui_window, scene.render.background_rgb, [waiting.removeprefix("[pbf] ")])
     return gui_window
 
 
@@ -400,9 +400,35 @@ def scene_line(sim) -> str:
     return f"[pbf] {sim.scene.name}: {count} Δt = {sim.dt_s * 1e3:.2f} ms, {sim.control.iterations} iterations"
 
 
-COMPILING = "[pbf] compiling kernels (first run only; later starts use Taichi's offline cache) ..."
-"""Said before the first kernel compiles: on a first run the solver's and the renderer's kernels take
-seconds to compile (docs/BENCHMARKS.md, "The window"), and nothing else would show meanwhile."""
+COMPILING = "[pbf] compiling kernels (Taichi's offline cache holds none yet; later starts load them from it) ..."
+LOADING = "[pbf] loading kernels from Taichi's offline cache, compiling any it does not hold ..."
+UNCACHED = "[pbf] compiling kernels (Taichi's offline cache is off) ..."
+"""Said before the first kernel is prepared: compiling the solver's and the renderer's kernels takes
+seconds (docs/BENCHMARKS.md, "The window"), loading them far less, and nothing else would show
+meanwhile; the line after the first frame says how long it took."""
+
+
+def kernels_line(cache_on: bool, cache_folder: Path) -> str:
+    """What preparing the kernels will do: compile them all when Taichi's offline cache is off or holds
+    no kernel (a first run, or a fresh cache folder), else load those an earlier run compiled. Whether it
+    holds this scene's kernels for this backend cannot be known before asking Taichi for each, so a
+    cache with kernels in it is said to be loaded from, compiling what it lacks."""
+    if not cache_on:
+        return UNCACHED
+    try:
+        cached = next(cache_folder.rglob("*.tic"), None) is not None
+    except OSError:
+        cached = False
+    return LOADING if cached else COMPILING
+
+
+def kernel_cache() -> tuple[bool, Path]:
+    """Whether the running Taichi keeps an offline cache of compiled kernels, and its folder
+    (``TI_OFFLINE_CACHE``, ``TI_OFFLINE_CACHE_FILE_PATH``; by default ~/.cache/taichi/ticache)."""
+    import taichi as ti
+
+    config = ti.lang.impl.current_cfg()
+    return bool(config.offline_cache), Path(config.offline_cache_file_path)
 
 
 def report_written(sim, args, viewer) -> None:
@@ -442,8 +468,9 @@ def main(argv=None) -> int:
 
     try:
         start_backend(args.arch)  # the start line; the window needs the backend running
-        gui_window = try_window(scene, args)
-        print(COMPILING, flush=True)
+        preparing = kernels_line(*kernel_cache())  # before the window: its first frames show it
+        gui_window = try_window(scene, args, preparing)
+        print(preparing, flush=True)
         started = time.perf_counter()
         sim = Simulation(scene, arch=args.arch)  # derives the Model and checks memory before Taichi allocates
     except schema.SceneError as error:
