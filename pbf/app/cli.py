@@ -17,6 +17,7 @@ import argparse
 import difflib
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -431,6 +432,17 @@ def kernel_cache() -> tuple[bool, Path]:
     return bool(config.offline_cache), Path(config.offline_cache_file_path)
 
 
+def backend_message(text: str, option: str | None, variable: str | None) -> str:
+    """The solver's BackendError, worded for Python (``arch='cuda' was requested …; use arch='cpu' or
+    'auto'``), as the command line says it: the request as it was given, ``--arch cuda`` or
+    ``PBF_ARCH=cuda`` (``option``, else ``variable``), and the remedies as options."""
+    requested = (option or variable or "auto").lower()
+    given = f"--arch {option}" if option else f"{ARCH_VARIABLE}={variable}" if variable else "--arch auto"
+    text = text.replace(f"arch={requested!r}", given)
+    text = re.sub(r"\barch='(\w+)' or '(\w+)'", r"--arch \1 or --arch \2", text)
+    return re.sub(r"\barch='(\w+)'", r"--arch \1", text)
+
+
 def report_written(sim, args, viewer) -> None:
     from pbf.app import loop
 
@@ -477,7 +489,7 @@ def main(argv=None) -> int:
         print(f"error: {schema.attribute(error, command_line_keys(args))}", file=sys.stderr)
         return 2
     except BackendError as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {backend_message(str(error), args.arch, os.environ.get(ARCH_VARIABLE))}", file=sys.stderr)
         return 2
     print(scene_line(sim), flush=True)
     try:
