@@ -70,9 +70,17 @@ def test_headline_prints_its_table(capsys):
     headline.main(["--quick"])
     out = capsys.readouterr().out
     assert "machine: " in out and "on cpu" in out
-    rows = [line for line in out.splitlines() if line.startswith("| ") and "measure" not in line]
+    rows = [line for line in out.splitlines() if line.startswith("| ") and not line.startswith("| measure ")]
     assert len(rows) == 6
     assert "8,000 particles" in rows[0] and "s per simulated second" in rows[0]
+    assert "nan" not in out.lower(), out
+    assert rows[5].endswith("| not measured in --quick (the run ends before the waves reach the gauge) |"), rows[5]
+
+
+def test_headline_says_why_a_figure_was_not_measured():
+    assert headline.wave_value(0.7912, quick=False) == "0.79 of linear theory (Biésel)"
+    assert headline.wave_value(float("nan"), quick=True).startswith("not measured in --quick")
+    assert "nan" not in headline.wave_value(float("nan"), quick=False)
 
 
 @pytest.mark.slow
