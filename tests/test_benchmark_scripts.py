@@ -123,6 +123,37 @@ def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
     assert out.stat().st_size > 1000 and "wrote" in capsys.readouterr().out
 
 
+def test_the_pictures_scripts_write_out_unless_told_docs():
+    # The docs' pictures are tracked files: a run of the scripts must not replace them unasked.
+    gallery = script("gallery")
+    assert gallery.parse([]).out == Path("out/presets.png")
+    assert gallery.parse(["--docs"]).out == BENCHMARKS.parent / "docs" / "presets.png"
+    with pytest.raises(SystemExit):
+        gallery.parse(["--docs", "--out", "x.png"])
+    text = (BENCHMARKS / "screenshots.sh").read_text()
+    assert "out=${1:-out/window_tour.png}" in text and "--docs) out=docs/window_tour.png" in text
+
+
+def test_screenshots_says_what_is_missing(tmp_path):
+    # Without Xvfb the script used to wait and say only "no window appeared".
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    run = subprocess.run(
+        [shutil.which("bash"), str(BENCHMARKS / "screenshots.sh")],
+        env={"PATH": str(empty), "HOME": str(tmp_path)},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert run.returncode == 1
+    for tool in ("xvfb", "xdotool", "imagemagick"):
+        assert f"apt-get install {tool})" in run.stderr, run.stderr
+    assert "pip install -e ." in run.stderr
+    assert "no window appeared" not in run.stderr
+    assert list(tmp_path.iterdir()) == [empty]
+
+
 def test_every_preset_has_a_moment_in_the_gallery():
     assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
 
