@@ -8,9 +8,11 @@
 Everything the user gives is checked before Taichi starts and before anything is written: the
 options (each either takes effect or is refused, none is ignored), the scene with its overrides,
 the backend and every output path. A failure prints one line to stderr and returns 2. Only then does
-it start the backend, try the window (or say in one line why there is none), say that the kernels
-compile, build a Simulation and a viewer (window, headless frames or statistics) and hand both to the
-one loop of ``pbf.app.loop``, saying how long the start took once the first frame is shown.
+it start the backend, try the window (or say in one line why there is none), say whether the kernels
+compile or load from Taichi's offline cache, build a Simulation and a viewer (window, headless frames
+or statistics) and hand both to the one loop of ``pbf.app.loop``, saying how long the start took once
+the first frame is shown. A frame whose files cannot be made (its surface mesh) ends the run with one
+line and status 1, the frames before it whole.
 """
 
 import argparse
@@ -401,12 +403,12 @@ def scene_line(sim) -> str:
     return f"[pbf] {sim.scene.name}: {count} Δt = {sim.dt_s * 1e3:.2f} ms, {sim.control.iterations} iterations"
 
 
+# Said before the first kernel is prepared (``kernels_line`` picks one): compiling the solver's and the
+# renderer's kernels takes seconds (docs/BENCHMARKS.md, "The window"), loading them far less, and nothing
+# else would show meanwhile; the line after the first frame says how long it took.
 COMPILING = "[pbf] compiling kernels (Taichi's offline cache holds none yet; later starts load them from it) ..."
 LOADING = "[pbf] loading kernels from Taichi's offline cache, compiling any it does not hold ..."
 UNCACHED = "[pbf] compiling kernels (Taichi's offline cache is off) ..."
-"""Said before the first kernel is prepared: compiling the solver's and the renderer's kernels takes
-seconds (docs/BENCHMARKS.md, "The window"), loading them far less, and nothing else would show
-meanwhile; the line after the first frame says how long it took."""
 
 
 def kernels_line(cache_on: bool, cache_folder: Path) -> str:
