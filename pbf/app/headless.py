@@ -62,7 +62,13 @@ class FrameWriter:
             try:
                 meshes[surface_name(number, fmt)] = reconstruct(self.sim.positions(), self.sim.scene)
             except SurfaceError as error:
-                kept = f"frames 0-{number - 1} are complete in {self.out_dir}/" if number else "no frame was written"
+                kept = (
+                    f"frames 0-{number - 1} are complete in {self.out_dir}/"
+                    if number > 1
+                    else f"frame 0 is complete in {self.out_dir}/"
+                    if number
+                    else "no frame was written"
+                )
                 raise ExportError(
                     f"frame {number} (t = {self.sim.time_s:.3f} s): the surface mesh could not be made ({error}); "
                     f"{kept}; --set surface.deterministic=false may mesh it another way"
