@@ -1,6 +1,7 @@
 """Every preset's headless frame at a moment that shows its action, as one contact sheet.
 
-    python benchmarks/gallery.py                       # docs/presets.png (about 10 min on 2 cores)
+    python benchmarks/gallery.py                       # out/presets.png (about 10 min on 2 cores)
+    python benchmarks/gallery.py --docs                # docs/presets.png, the README's picture
     python benchmarks/gallery.py --presets pour --out out/gallery.png --size 320x180
 
 Each preset runs from its start, as shipped, to the time in ``MOMENTS`` and is rendered by the
@@ -59,19 +60,35 @@ def frame_of(name: str, width: int, height: int):
     return SceneRenderer(sim, width, height).frame(), sim.particle_count, frames * sim.scene.time.frame_dt_s
 
 
-def main(argv=None) -> None:
+OUT = Path("out/presets.png")
+"""Where the sheet goes by default: not the tracked docs/presets.png, which only --docs replaces."""
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "presets.png"
+
+
+def parse(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     available = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
     parser.add_argument(
         "--presets", nargs="+", choices=available, default=None, help="which (default: all but dam_break_large)"
     )
-    parser.add_argument("--out", type=Path, default=Path("docs/presets.png"), help="the sheet (PNG)")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--out", type=Path, default=OUT, help=f"the sheet (PNG; default {OUT})")
+    where.add_argument(
+        "--docs", action="store_true", help=f"replace the README's picture, {DOCS.relative_to(DOCS.parents[1])}"
+    )
     parser.add_argument("--size", type=size, default=(480, 270), help="each frame, WxH pixels (default 480x270)")
     parser.add_argument("--columns", type=int, choices=range(1, 7), default=3, metavar="1-6", help="frames per row")
     args = parser.parse_args(argv)
+    if args.docs:
+        args.out = DOCS
     if args.out.suffix.lower() != ".png":
         parser.error(f"--out: expected a .png file, got {str(args.out)!r}")
-    names = args.presets or [n for n in available if n != "dam_break_large"]
+    return args
+
+
+def main(argv=None) -> None:
+    args = parse(argv)
+    names = args.presets or sorted(p.stem for p in SCENES_DIR.glob("*.toml") if p.stem != "dam_break_large")
     width, height = args.size
     shots = [(name, *frame_of(name, width, height)) for name in tqdm(names, desc="presets", unit="preset")]
     rows = math.ceil(len(shots) / args.columns)

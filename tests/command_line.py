@@ -9,10 +9,10 @@ from pbf.app import cli
 RUN = Path(__file__).resolve().parent.parent / "run.py"
 
 
-def run_cli(*args, cwd, env=None) -> subprocess.CompletedProcess:
+def run_cli(*args, cwd, env=None, timeout=120) -> subprocess.CompletedProcess:
     """``python run.py ARGS`` in a fresh process, in ``cwd`` (where a default out/ would appear)."""
     return subprocess.run(
-        [sys.executable, str(RUN), *map(str, args)], cwd=cwd, env=env, capture_output=True, text=True, timeout=120
+        [sys.executable, str(RUN), *map(str, args)], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
     )
 
 

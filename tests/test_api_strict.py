@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pbf import SceneError
-from pbf.scene import Solver, Time, from_dict, load_scene
+from pbf.scene import SCENES_DIR, Solver, Time, from_dict, load_scene
 from pbf.solver import Control, Model, Push, model
 from scenes import small_dam_break
 
@@ -183,6 +183,21 @@ def test_a_conflict_with_a_key_the_command_line_set_names_the_command_line():
         message.startswith("command line --set obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not agree with ")
         and "key 'time.max_cfl' = 2" in message
     )
+
+
+@pytest.mark.parametrize(
+    "key, table", [("obstacles.min_m=[0.1,0.3,0.1]", "obstacles"), ("emitters.rate_m3_s=1", "emitters")]
+)
+def test_a_list_of_tables_made_a_table_by_set_names_the_set(tmp_path, key, table):
+    # A scene without obstacles: --set obstacles.min_m=… makes 'obstacles' a table where a list of tables
+    # goes. The file never said 'obstacles', so the error is the command line's, not scene.toml's.
+    own = tmp_path / "scene.toml"
+    own.write_text((SCENES_DIR / "dam_break.toml").read_text())
+    with pytest.raises(SceneError) as refused:
+        load_scene(own, [key])
+    message = str(refused.value)
+    assert message.startswith(f"command line --set {key}: key '{table}': expected a list of tables"), message
+    assert "scene.toml" not in message
 
 
 @pytest.fixture(scope="module")

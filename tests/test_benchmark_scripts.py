@@ -70,9 +70,17 @@ def test_headline_prints_its_table(capsys):
     headline.main(["--quick"])
     out = capsys.readouterr().out
     assert "machine: " in out and "on cpu" in out
-    rows = [line for line in out.splitlines() if line.startswith("| ") and "measure" not in line]
+    rows = [line for line in out.splitlines() if line.startswith("| ") and not line.startswith("| measure ")]
     assert len(rows) == 6
     assert "8,000 particles" in rows[0] and "s per simulated second" in rows[0]
+    assert "nan" not in out.lower(), out
+    assert rows[5].endswith("| not measured in --quick (the run ends before the waves reach the gauge) |"), rows[5]
+
+
+def test_headline_says_why_a_figure_was_not_measured():
+    assert headline.wave_value(0.7912, quick=False) == "0.79 of linear theory (Biésel)"
+    assert headline.wave_value(float("nan"), quick=True).startswith("not measured in --quick")
+    assert "nan" not in headline.wave_value(float("nan"), quick=False)
 
 
 @pytest.mark.slow
@@ -113,6 +121,37 @@ def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
     out = tmp_path / "sheet.png"
     gallery.main(["--presets", "martin_moyce", "--out", str(out), "--size", "64x36", "--columns", "1"])
     assert out.stat().st_size > 1000 and "wrote" in capsys.readouterr().out
+
+
+def test_the_pictures_scripts_write_out_unless_told_docs():
+    # The docs' pictures are tracked files: a run of the scripts must not replace them unasked.
+    gallery = script("gallery")
+    assert gallery.parse([]).out == Path("out/presets.png")
+    assert gallery.parse(["--docs"]).out == BENCHMARKS.parent / "docs" / "presets.png"
+    with pytest.raises(SystemExit):
+        gallery.parse(["--docs", "--out", "x.png"])
+    text = (BENCHMARKS / "screenshots.sh").read_text()
+    assert "out=${1:-out/window_tour.png}" in text and "--docs) out=docs/window_tour.png" in text
+
+
+def test_screenshots_says_what_is_missing(tmp_path):
+    # Without Xvfb the script used to wait and say only "no window appeared".
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    run = subprocess.run(
+        [shutil.which("bash"), str(BENCHMARKS / "screenshots.sh")],
+        env={"PATH": str(empty), "HOME": str(tmp_path)},
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert run.returncode == 1
+    for tool in ("xvfb", "xdotool", "imagemagick"):
+        assert f"apt-get install {tool})" in run.stderr, run.stderr
+    assert "pip install -e ." in run.stderr
+    assert "no window appeared" not in run.stderr
+    assert list(tmp_path.iterdir()) == [empty]
 
 
 def test_every_preset_has_a_moment_in_the_gallery():

@@ -2,7 +2,10 @@
 key of the schema must appear in it with its bounds."""
 
 import dataclasses
+import re
 from pathlib import Path
+
+import pytest
 
 from pbf.app.cli import main
 from pbf.scene import Fluid, Scene, Solver
@@ -35,3 +38,22 @@ def test_every_key_is_listed_with_its_range():
 def test_the_command_line_prints_it(capsys):
     assert main(["--keys"]) == 0
     assert capsys.readouterr().out == reference()
+
+
+def test_the_documented_command_prints_it(capsys):
+    # docs/KEYS.md says how it is made; that command must be one the command line runs.
+    documented = re.findall(r"`pbf ([^`]*?) > docs/KEYS.md`", KEYS_MD.read_text(encoding="utf-8"))
+    assert documented, "docs/KEYS.md names the command that writes it"
+    for command in documented:
+        capsys.readouterr()
+        assert main(command.split()) == 0, command
+        assert capsys.readouterr().out == reference()
+
+
+@pytest.mark.parametrize("word, option", [("keys", "--keys"), ("list", "--list")])
+def test_a_reference_typed_as_a_subcommand_names_its_option(capsys, word, option):
+    capsys.readouterr()
+    assert main([word]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {word}: no such scene file or preset;"), err
+    assert f"printed by {option}" in err[0]

@@ -126,7 +126,7 @@ def test_without_a_display_the_window_is_given_up_in_one_line(monkeypatch, capsy
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     args = cli.parse_args(["dam_break"])
-    assert cli.try_window(cli.load(args), args) is None
+    assert cli.try_window(cli.load(args), args, cli.COMPILING) is None
     assert capsys.readouterr().out == "[pbf] no window: DISPLAY is not set; rendering headless instead\n"
 
 
@@ -137,7 +137,7 @@ def test_a_display_that_cannot_be_opened_is_given_up_in_one_line(monkeypatch, ca
     if window.unreachable_display() is None:
         pytest.skip("no Xlib here to ask, or an X server answers on :4242")
     capsys.readouterr()
-    assert cli.try_window(cli.load(args), args) is None
+    assert cli.try_window(cli.load(args), args, cli.COMPILING) is None
     assert capsys.readouterr().out == (
         "[pbf] no window: the display DISPLAY=:4242 cannot be opened; rendering headless instead\n"
     )
@@ -160,10 +160,11 @@ def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path
     assert "RHI" not in result.stderr and "RHI" not in result.stdout, result.stderr
     lines = pbf_lines(result.stdout)
     assert lines[0].startswith("[pbf] Starting on cpu ("), result.stdout
+    assert lines[2] in (cli.COMPILING, cli.LOADING), result.stdout  # the cache held kernels or not
     assert lines[1:5] == [
         "[pbf] no window: no Vulkan driver for the window (on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers "
         "libvulkan1' gives a software one); rendering headless instead",
-        cli.COMPILING,
+        lines[2],
         "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
         f"[pbf] rendering 3 frames (the start and 2 steps) into {out}/",
     ], result.stdout
@@ -171,3 +172,32 @@ def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path
     assert lines[6:] == [f"[pbf] wrote 3 frames in {out}/"], result.stdout
     assert len(list(out.glob("frame_*.png"))) == 3
     assert "((" not in result.stdout and "))" not in result.stdout
+
+
+def test_the_kernels_line_says_whether_they_compile_or_load(tmp_path):
+    cache = tmp_path / "ticache"
+    assert cli.kernels_line(True, cache) == cli.COMPILING  # no cache folder yet: a first run
+    cache.mkdir()
+    (cache / "ticache.tcb").write_bytes(b"")  # Taichi's index alone holds no kernel
+    assert cli.kernels_line(True, cache) == cli.COMPILING
+    (cache / "T0123abcd.tic").write_bytes(b"")
+    assert cli.kernels_line(True, cache) == cli.LOADING
+    assert cli.kernels_line(False, cache) == cli.UNCACHED
+    assert "first run only" not in cli.LOADING + cli.COMPILING
+
+
+@pytest.mark.slow
+def test_a_first_start_says_it_compiles_and_the_next_that_it_loads(tmp_path):
+    # Every start used to say "compiling kernels (first run only ...)"; with an empty cache folder of its
+    # own, the first run compiles and fills it, and the second loads from it, faster.
+    env = os.environ | {"TI_OFFLINE_CACHE_FILE_PATH": str(tmp_path / "cache")}
+    argv = ["dam_break", "--stats-only", "--frames", "1", "--set", "fluid.spacing_m=0.1"]
+    said, took = [], []
+    for _ in range(2):
+        result = run_cli(*argv, cwd=tmp_path, env=env)
+        assert result.returncode == 0, result.stderr
+        lines = pbf_lines(result.stdout)
+        said.append(lines[1])
+        took.append(float(re.fullmatch(r"\[pbf\] kernels ready in (\d+\.\d) s", lines[3]).group(1)))
+    assert said == [cli.COMPILING, cli.LOADING]
+    assert took[1] < took[0], took

@@ -1,5 +1,7 @@
 """No option is silently ignored: each takes effect or is refused, before anything starts."""
 
+import os
+
 import pytest
 from command_line import assert_one_error, refused, run_cli
 
@@ -60,6 +62,54 @@ def test_a_bad_backend_variable_is_refused_before_the_scene_loads(here, capsys, 
         "PBF_ARCH=tpu: unknown backend; allowed: auto, cpu, gpu, cuda, vulkan, metal",
         cwd=here,
     )
+
+
+@pytest.mark.parametrize(
+    "text, option, variable, said",
+    [
+        (
+            "arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'",
+            "cuda",
+            None,
+            "--arch cuda was requested but no CUDA GPU is available; use --arch cpu or --arch auto",
+        ),
+        (
+            "arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'",
+            None,
+            "CUDA",
+            "PBF_ARCH=CUDA was requested but no CUDA GPU is available; use --arch cpu or --arch auto",
+        ),
+        (
+            "arch='metal' was requested but Metal exists only on macOS; use arch='cpu' or 'auto'",
+            "metal",
+            "cuda",
+            "--arch metal was requested but Metal exists only on macOS; use --arch cpu or --arch auto",
+        ),
+        (
+            "arch='vulkan': Taichi could not start vulkan: boom",
+            "vulkan",
+            None,
+            "--arch vulkan: Taichi could not start vulkan: boom",
+        ),
+    ],
+)
+def test_a_backend_refusal_names_the_option_or_variable_it_came_from(text, option, variable, said):
+    assert cli.backend_message(text, option, variable) == said
+
+
+@pytest.mark.parametrize("given", [["--arch", "cuda"], [f"{ENV_VAR}=cuda"]])
+def test_a_cuda_request_without_a_gpu_is_refused_in_the_command_lines_words(tmp_path, given):
+    env = {k: v for k, v in os.environ.items() if k != ENV_VAR}
+    argv = ["dam_break", "--stats-only", "--frames", "1", "--set", "fluid.spacing_m=0.1"]
+    if given[0].startswith(ENV_VAR):
+        env[ENV_VAR] = "cuda"
+    else:
+        argv += given
+    result = run_cli(*argv, cwd=tmp_path, env=env)
+    if result.returncode == 0:
+        pytest.skip("a CUDA GPU is here")
+    line = assert_one_error(result.stderr, f"{given[0] if len(given) == 1 else '--arch cuda'} was requested")
+    assert "arch='" not in line and "use --arch cpu or --arch auto" in line, line
 
 
 def test_the_command_line_names_the_solvers_backends():

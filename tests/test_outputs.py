@@ -69,7 +69,9 @@ def test_the_default_folder_is_the_scene_files_name_inside_out():
     assert outputs.default_folder("/a/.hidden.toml") == Path("out/hidden")
 
 
-def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path, monkeypatch, capsys):
+def test_a_rerun_takes_the_next_default_folder_and_overwrite_replaces_only_the_runs_files(
+    tmp_path, monkeypatch, capsys
+):
     monkeypatch.chdir(tmp_path)
     scene = (
         (Path(cli.schema.SCENES_DIR) / "dam_break.toml")
@@ -83,15 +85,21 @@ def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path,
         (earlier / outputs.frame_name(k)).write_bytes(b"old")
     (earlier / outputs.particles_name(3, "ply")).write_bytes(b"old")
     (earlier / "notes.txt").write_text("mine")
-    before = files_under(tmp_path)
-    # Without --overwrite nothing is deleted: one line naming the folder and the option.
+    before = files_under(earlier)
+    # The same folder named with --out: refused in one line naming the folder and the option.
     refused(
         capsys,
-        ["evil.toml", "--headless", "--frames", "1", *COARSE],
-        "'out/evil': holds 7 files of an earlier run (frame_00000.png …); add --overwrite",
+        ["evil.toml", "--headless", "--frames", "1", "--out", "out/evil", *COARSE],
+        "--out 'out/evil': holds 7 files of an earlier run (frame_00000.png …); add --overwrite",
         cwd=tmp_path,
     )
-    assert files_under(tmp_path) == before
+    # Without --out the run takes the next free name (the README's commands, run in order by a slow test,
+    # show the line that says so) and leaves the first alone.
+    args = cli.parse_args(["evil.toml", "--headless", "--frames", "1", *COARSE])
+    assert cli.plan_outputs(cli.load(args), args) == (Path("out/evil-2"), None)
+    assert args.taken_default == Path("out/evil")
+    assert files_under(earlier) == before
+    # --overwrite without --out replaces the first folder's run, and only its files.
     assert cli.main(["evil.toml", "--headless", "--frames", "1", "--overwrite", *COARSE]) == 0
     assert "removed 7 files of an earlier run from out/evil/" in capsys.readouterr().out
     assert sorted(p.name for p in earlier.iterdir()) == ["frame_00000.png", "frame_00001.png", "notes.txt"]
@@ -104,6 +112,32 @@ def test_a_rerun_is_refused_and_overwrite_replaces_only_the_runs_files(tmp_path,
         Path("out/evil/frame_00001.png"),
         Path("out/evil/notes.txt"),
     }
+
+
+def test_the_next_free_default_folder(tmp_path):
+    base = tmp_path / "out" / "dam_break"
+    assert outputs.free_default_folder(base) == base  # not there yet
+    base.mkdir(parents=True)
+    (base / "notes.txt").write_text("mine")
+    assert outputs.free_default_folder(base) == base  # no run's files in it
+    (base / outputs.frame_name(0)).write_bytes(b"")
+    second = tmp_path / "out" / "dam_break-2"
+    assert outputs.free_default_folder(base) == second
+    second.mkdir()
+    (second / outputs.surface_name(4, "obj")).write_bytes(b"")
+    assert outputs.free_default_folder(base) == tmp_path / "out" / "dam_break-3"
+
+
+def test_a_window_run_checks_the_folder_it_falls_back_to_before_taichi_starts(tmp_path):
+    # No display here: the window falls back to frames in --out, which holds a run. The refusal must come
+    # before the backend starts (its start line), as it does with --headless, not seconds later.
+    (tmp_path / "frames").mkdir()
+    (tmp_path / "frames" / outputs.frame_name(0)).write_bytes(b"theirs")
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    result = run_cli("dam_break", "--frames", "1", "--out", "frames", cwd=tmp_path, env=env)
+    assert result.returncode == 2
+    assert_one_error(result.stderr, "--out 'frames': holds 1 files of an earlier run", "add --overwrite")
+    assert "[pbf] Starting on" not in result.stdout, result.stdout
 
 
 def test_command_line_refuses_a_file_as_the_frame_folder(tmp_path):

@@ -9,10 +9,11 @@ import math
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from command_line import run_cli
 from plyfile import PlyData
 
 from pbf import Simulation
-from pbf.app import cli, loop
+from pbf.app import cli, headless, loop, surface
 from pbf.app.headless import FrameWriter
 from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
 from pbf.app.surface import Mesh, reconstruct, with_wall_images, write_mesh
@@ -287,3 +288,109 @@ def test_bad_surface_keys_write_nothing(tmp_path, capsys, assignment, key):
     assert cli.main(["dam_break", "--headless", "--export", "mesh", "--out", str(out), "--set", assignment]) == 2
     assert key in capsys.readouterr().err
     assert not out.exists()
+
+
+def tie_particles() -> np.ndarray:
+    """Three particles set around the grid point G = (0.4, 0.4, 0.4) (marching-cubes cells of half a
+    spacing) so that G's colour value, about 0.667, is below that of its three neighbours at +x, +y
+    and +z and above that of the cell's far corners: the configuration in which a value equal to the
+    iso level asks splashsurf's one-grid marching cubes for a vertex it never made."""
+    cell = 0.5 * SPACING
+    offsets = np.array([[1.5, -0.5, -0.5], [-0.5, 1.5, -0.5], [-0.5, -0.5, 1.5]])
+    return (0.4 + cell * offsets).astype(np.float32)
+
+
+def tie_level(particles: np.ndarray) -> float:
+    """The float32 iso level at which splashsurf (global grid, one thread: ``surface.deterministic``)
+    fails on ``particles``: G's colour value to the last bit. Found by trying the float32 values next to
+    the Python estimate, as splashsurf's float32 sums may differ from it in the last few thousand ulps."""
+    import pysplashsurf
+
+    estimate = np.array([0.66677], np.float32).view(np.int32)[0]
+    for level in (estimate + np.arange(-20_000, 20_000, dtype=np.int32)).view(np.float32):
+        try:
+            pysplashsurf.reconstruct_surface(
+                particles,
+                particle_radius=SPACING,
+                smoothing_length=0.8,
+                cube_size=0.5,
+                iso_surface_threshold=float(level),
+                multi_threading=False,
+                subdomain_grid=False,
+            )
+        except RuntimeError as error:
+            assert "Missing iso surface vertex" in str(error), error
+            return float(level)
+    pytest.fail("splashsurf meshed every level: if its marching cubes no longer fail on a tie, ISO_NUDGES can go")
+
+
+def test_a_colour_value_on_the_iso_level_is_meshed_with_the_level_nudged(monkeypatch):
+    # What --export mesh can meet in any frame: splashsurf's "Missing iso surface vertex at edge …. This
+    # is a bug." from a grid value equal to the level, which the retry at a nudged level gets past.
+    particles = tie_particles()
+    level = tie_level(particles)
+    scene = open_scene(iso_level=level)
+    monkeypatch.setattr(surface, "ISO_NUDGES", (0.0,))
+    with pytest.raises(surface.SurfaceError, match=r"^splashsurf failed at .*Missing iso surface vertex"):
+        reconstruct(particles, scene)
+    monkeypatch.undo()
+    mesh = reconstruct(particles, scene)
+    assert_closed(mesh)
+    # The nudge moves the surface by far less than a cell: the volume is that of the level just above.
+    above = reconstruct(particles, open_scene(iso_level=level * (1 + 1e-5)))
+    assert mesh.enclosed_volume_m3() == pytest.approx(above.enclosed_volume_m3(), rel=1e-3)
+
+
+def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_before_it_whole(
+    tmp_path, monkeypatch, capsys
+):
+    real = surface.reconstruct
+    calls = []
+
+    def failing_at_frame_2(positions, scene):
+        calls.append(len(calls))
+        if len(calls) == 3:
+            raise surface.SurfaceError("splashsurf failed at surface.iso_level 0.5: Missing iso surface vertex")
+        return real(positions, scene)
+
+    monkeypatch.setattr(headless, "reconstruct", failing_at_frame_2)
+    argv = ["--headless", "--frames", "4", "--out", str(tmp_path / "run"), "--export", "mesh", "--export", "npz"]
+    capsys.readouterr()
+    assert cli.main([*argv, "--set", "fluid.spacing_m=0.1", "--size", "32x32"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("error: frame 2 (t = 0.033 s): the surface mesh could not be made (splashsurf"), err
+    assert f"frames 0-1 are complete in {tmp_path / 'run'}/" in err[-1]
+    assert not any("Traceback" in line for line in err)
+    # Frames 0 and 1 with all their files; nothing of frame 2.
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [
+        f"{kind}_{k:05d}.{suffix}"
+        for kind, suffix in (("frame", "png"), ("particles", "npz"), ("surface", "ply"))
+        for k in range(2)
+    ]
+
+
+@pytest.mark.slow
+def test_the_readmes_mesh_export_of_the_seed_scene_runs_its_60_frames(tmp_path):
+    # The README's example as a user runs it: real compile settings and threads, in a fresh process.
+    result = run_cli(
+        "dam_break",
+        "--headless",
+        "--frames",
+        "60",
+        "--export",
+        "mesh",
+        "--style",
+        "surface",
+        "--out",
+        "run",
+        cwd=tmp_path,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    meshes = sorted((tmp_path / "run").glob("surface_*.ply"))
+    assert len(meshes) == 61
+    for path in meshes:
+        ply = PlyData.read(str(path))
+        vertices = np.stack([ply["vertex"][a] for a in "xyz"], axis=1)
+        mesh = Mesh(vertices, np.stack(ply["face"]["vertex_indices"]).astype(np.int32))
+        assert mesh.is_closed(), path.name

@@ -8,15 +8,18 @@
 Everything the user gives is checked before Taichi starts and before anything is written: the
 options (each either takes effect or is refused, none is ignored), the scene with its overrides,
 the backend and every output path. A failure prints one line to stderr and returns 2. Only then does
-it start the backend, try the window (or say in one line why there is none), say that the kernels
-compile, build a Simulation and a viewer (window, headless frames or statistics) and hand both to the
-one loop of ``pbf.app.loop``, saying how long the start took once the first frame is shown.
+it start the backend, try the window (or say in one line why there is none), say whether the kernels
+compile or load from Taichi's offline cache, build a Simulation and a viewer (window, headless frames
+or statistics) and hand both to the one loop of ``pbf.app.loop``, saying how long the start took once
+the first frame is shown. A frame whose files cannot be made (its surface mesh) ends the run with one
+line and status 1, the frames before it whole.
 """
 
 import argparse
 import difflib
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -116,15 +119,15 @@ def build_parser() -> Parser:
     output.add_argument(
         "--out",
         default=None,
-        help="folder for PNG frames (default out/ + the scene file's name; also where the window "
-        "writes when none can open); a folder holding an earlier run's files is refused "
-        "unless --overwrite",
+        help="folder for PNG frames (default out/ + the scene file's name, or the next free out/NAME-2 … "
+        "when it holds an earlier run; also where the window writes when none can open); a folder "
+        "given here that holds an earlier run's files is refused unless --overwrite",
     )
     output.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an earlier run's files in --out (only frame_*.png, particles_*.ply/.npz and "
-        "surface_*.ply/.obj are removed) and an existing --video file",
+        help="replace an earlier run's files in --out, or in the default folder out/NAME (only "
+        "frame_*.png, particles_*.ply/.npz and surface_*.ply/.obj are removed), and an existing --video file",
     )
     output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
     output.add_argument(
@@ -272,7 +275,17 @@ def load(args) -> schema.Scene:
             scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set])
         return scene
     except schema.SceneError as error:
+        if args.scene in REFERENCES and "no such scene file" in str(error):
+            # `pbf keys` reads as a subcommand; the references are options, like --help.
+            raise UsageError(
+                f"{args.scene}: no such scene file or preset; {REFERENCES[args.scene]} is printed by "
+                f"--{args.scene} (pbf --{args.scene}, python run.py --{args.scene})"
+            ) from None
         raise schema.attribute(error, command_line_keys(args)) from None
+
+
+REFERENCES = {"keys": "the reference of every scene key", "list": "the list of presets"}
+"""The options that print a reference instead of running a scene, by the word a user may type for them."""
 
 
 def command_line_keys(args) -> dict[str, str]:
@@ -304,20 +317,27 @@ def check_view(scene, args) -> None:
                 )
 
 
+DEFAULT_OUT_LABEL = "the default output folder (--out)"
+
+
 def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
-    """The frame folder and video the run may write, both checked (OutputError) before it starts;
-    (None, None) for --stats-only, which writes nothing. An earlier run's files in the folder are
-    refused unless --overwrite; a window run (which writes only if no window opens) checks the
-    folder again before that."""
+    """The frame folder and video the run may write, both checked (OutputError) before Taichi starts;
+    (None, None) for --stats-only, which writes nothing. A window run is checked as a headless one: it
+    writes there when no window can open, which is known only once Taichi has started. An earlier
+    run's files in a folder named by --out are refused unless --overwrite; without --out the run takes
+    the next free default folder (out/dam_break, out/dam_break-2 …), and --overwrite replaces the
+    first's."""
     check_view(scene, args)
     if args.stats_only:
         return None, None
-    overwrite = args.overwrite or not args.headless
     if args.out is not None:
-        out = outputs.check_folder(args.out, "--out", overwrite)
+        out = outputs.check_folder(args.out, "--out", args.overwrite)
     else:
         default = outputs.default_folder(scene.source)
-        out = outputs.check_folder(str(default), "the default output folder (--out)", overwrite)
+        free = default if args.overwrite else outputs.free_default_folder(default)
+        out = outputs.check_folder(str(free), DEFAULT_OUT_LABEL, args.overwrite)
+        if free != default:
+            args.taken_default = default
     video = outputs.check_video(args.video, "--video", args.overwrite) if args.video is not None else None
     return out, video
 
@@ -327,17 +347,20 @@ def frame_writer(sim, args, frames, out, video):
     otherwise such a folder is refused)."""
     from pbf.app.headless import FrameWriter
 
-    label = "--out" if args.out is not None else "the default output folder (--out)"
-    outputs.check_folder(str(out), label, args.overwrite)  # again: a window run that fell back to frames
+    label = "--out" if args.out is not None else DEFAULT_OUT_LABEL
+    outputs.check_folder(str(out), label, args.overwrite)  # again: files may have appeared since the start
     removed = outputs.clear_earlier(out)
     if removed:
         print(f"[pbf] removed {len(removed)} files of an earlier run from {out}/ ({removed[0].name} …)")
+    taken = getattr(args, "taken_default", None)
+    if taken is not None:
+        print(f"[pbf] {taken}/ holds an earlier run, kept: writing to {out}/ instead (--out names the folder)")
     return FrameWriter(sim, frames, out, video=video, export=args.export)
 
 
-def try_window(scene, args):
+def try_window(scene, args, waiting: str):
     """The GGUI window the options ask for, or None (headless: asked for, or no window can open here, which
-    is said in one line)."""
+    is said in one line); it shows ``waiting`` until the first frame."""
     if args.headless or args.stats_only:
         return None
     from pbf.app import window
@@ -347,7 +370,7 @@ def try_window(scene, args):
     except window.WindowUnavailable as reason:
         print(f"[pbf] no window: {reason}; rendering headless instead")
         return None
-    window.show_waiting(gui_window, scene.render.background_rgb, [COMPILING.removeprefix("[pbf] ")])
+    window.show_waiting(gui_window, scene.render.background_rgb, [waiting.removeprefix("[pbf] ")])
     return gui_window
 
 
@@ -380,9 +403,46 @@ def scene_line(sim) -> str:
     return f"[pbf] {sim.scene.name}: {count} Δt = {sim.dt_s * 1e3:.2f} ms, {sim.control.iterations} iterations"
 
 
-COMPILING = "[pbf] compiling kernels (first run only; later starts use Taichi's offline cache) ..."
-"""Said before the first kernel compiles: on a first run the solver's and the renderer's kernels take
-seconds to compile (docs/BENCHMARKS.md, "The window"), and nothing else would show meanwhile."""
+# Said before the first kernel is prepared (``kernels_line`` picks one): compiling the solver's and the
+# renderer's kernels takes seconds (docs/BENCHMARKS.md, "The window"), loading them far less, and nothing
+# else would show meanwhile; the line after the first frame says how long it took.
+COMPILING = "[pbf] compiling kernels (Taichi's offline cache holds none yet; later starts load them from it) ..."
+LOADING = "[pbf] loading kernels from Taichi's offline cache, compiling any it does not hold ..."
+UNCACHED = "[pbf] compiling kernels (Taichi's offline cache is off) ..."
+
+
+def kernels_line(cache_on: bool, cache_folder: Path) -> str:
+    """What preparing the kernels will do: compile them all when Taichi's offline cache is off or holds
+    no kernel (a first run, or a fresh cache folder), else load those an earlier run compiled. Whether it
+    holds this scene's kernels for this backend cannot be known before asking Taichi for each, so a
+    cache with kernels in it is said to be loaded from, compiling what it lacks."""
+    if not cache_on:
+        return UNCACHED
+    try:
+        cached = next(cache_folder.rglob("*.tic"), None) is not None
+    except OSError:
+        cached = False
+    return LOADING if cached else COMPILING
+
+
+def kernel_cache() -> tuple[bool, Path]:
+    """Whether the running Taichi keeps an offline cache of compiled kernels, and its folder
+    (``TI_OFFLINE_CACHE``, ``TI_OFFLINE_CACHE_FILE_PATH``; by default ~/.cache/taichi/ticache)."""
+    import taichi as ti
+
+    config = ti.lang.impl.current_cfg()
+    return bool(config.offline_cache), Path(config.offline_cache_file_path)
+
+
+def backend_message(text: str, option: str | None, variable: str | None) -> str:
+    """The solver's BackendError, worded for Python (``arch='cuda' was requested …; use arch='cpu' or
+    'auto'``), as the command line says it: the request as it was given, ``--arch cuda`` or
+    ``PBF_ARCH=cuda`` (``option``, else ``variable``), and the remedies as options."""
+    requested = (option or variable or "auto").lower()
+    given = f"--arch {option}" if option else f"{ARCH_VARIABLE}={variable}" if variable else "--arch auto"
+    text = text.replace(f"arch={requested!r}", given)
+    text = re.sub(r"\barch='(\w+)' or '(\w+)'", r"--arch \1 or --arch \2", text)
+    return re.sub(r"\barch='(\w+)'", r"--arch \1", text)
 
 
 def report_written(sim, args, viewer) -> None:
@@ -417,20 +477,21 @@ def main(argv=None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     from pbf.app import loop
-    from pbf.app.headless import FrameWriter
+    from pbf.app.headless import ExportError, FrameWriter
     from pbf.solver import BackendError, Simulation, start_backend
 
     try:
         start_backend(args.arch)  # the start line; the window needs the backend running
-        gui_window = try_window(scene, args)
-        print(COMPILING, flush=True)
+        preparing = kernels_line(*kernel_cache())  # before the window: its first frames show it
+        gui_window = try_window(scene, args, preparing)
+        print(preparing, flush=True)
         started = time.perf_counter()
         sim = Simulation(scene, arch=args.arch)  # derives the Model and checks memory before Taichi allocates
     except schema.SceneError as error:
         print(f"error: {schema.attribute(error, command_line_keys(args))}", file=sys.stderr)
         return 2
     except BackendError as error:
-        print(f"error: {error}", file=sys.stderr)
+        print(f"error: {backend_message(str(error), args.arch, os.environ.get(ARCH_VARIABLE))}", file=sys.stderr)
         return 2
     print(scene_line(sim), flush=True)
     try:
@@ -444,7 +505,11 @@ def main(argv=None) -> int:
         done = "" if args.stats_only else " and the first frame drawn"
         print(f"[pbf] kernels ready{done} in {time.perf_counter() - started:.1f} s", flush=True)
 
-    loop.run(sim, viewer, frames, first_shown=ready)
+    try:
+        loop.run(sim, viewer, frames, first_shown=ready)
+    except ExportError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
     if isinstance(viewer, FrameWriter):
         report_written(sim, args, viewer)
     return 0

@@ -12,7 +12,12 @@ from tqdm import tqdm
 from pbf.app.export import write_particles
 from pbf.app.outputs import bodies_name, frame_name, particles_name, surface_name
 from pbf.app.render import SceneRenderer
-from pbf.app.surface import body_mesh, reconstruct, write_mesh
+from pbf.app.surface import SurfaceError, body_mesh, reconstruct, write_mesh
+
+
+class ExportError(RuntimeError):
+    """A frame's files could not be made (the surface mesh); the message names the frame and what the
+    folder holds. The frames before it are complete: a frame's files are written only once all exist."""
 
 
 class FrameWriter:
@@ -49,6 +54,30 @@ class FrameWriter:
 
     def show(self) -> None:
         number = len(self.paths)
+        # The surface first: when splashsurf fails, nothing of this frame is written and the folder
+        # holds whole frames only (each with its PNG, particles and meshes).
+        meshes = {}
+        if "mesh" in self.exports:
+            fmt = self.sim.scene.surface.mesh_format
+            try:
+                meshes[surface_name(number, fmt)] = reconstruct(self.sim.positions(), self.sim.scene)
+            except SurfaceError as error:
+                kept = (
+                    f"frames 0-{number - 1} are complete in {self.out_dir}/"
+                    if number > 1
+                    else f"frame 0 is complete in {self.out_dir}/"
+                    if number
+                    else "no frame was written"
+                )
+                raise ExportError(
+                    f"frame {number} (t = {self.sim.time_s:.3f} s): the surface mesh could not be made ({error}); "
+                    f"{kept}; --set surface.deterministic=false may mesh it another way"
+                ) from None
+            bodies = self.sim.scene.bodies
+            if bodies:
+                meshes[bodies_name(number, fmt)] = body_mesh(
+                    [b.shape for b in bodies], [b.half_extents() for b in bodies], self.sim.body_states()
+                )
         image = self.renderer.frame()
         path = self.out_dir / frame_name(number)
         iio.imwrite(path, image)
@@ -57,19 +86,8 @@ class FrameWriter:
             self.writer.append_data(image)
         for name in self.exports:
             if name == "mesh":
-                write_mesh(
-                    self.out_dir / surface_name(number, self.sim.scene.surface.mesh_format),
-                    reconstruct(self.sim.positions(), self.sim.scene),
-                    self.sim.time_s,
-                )
-                bodies = self.sim.scene.bodies
-                if bodies:
-                    mesh = body_mesh(
-                        [b.shape for b in bodies], [b.half_extents() for b in bodies], self.sim.body_states()
-                    )
-                    write_mesh(
-                        self.out_dir / bodies_name(number, self.sim.scene.surface.mesh_format), mesh, self.sim.time_s
-                    )
+                for file_name, mesh in meshes.items():
+                    write_mesh(self.out_dir / file_name, mesh, self.sim.time_s)
             else:
                 write_particles(
                     self.out_dir / particles_name(number, name),

@@ -8,11 +8,12 @@ written: an empty path, the filesystem root, a file where a folder is needed (or
 file is), a parent that is a file, a place that cannot be written (tried by creating and removing
 a probe file there: permissions alone do not tell, /proc and read-only mounts refuse anyway).
 
-Nothing of the user's is deleted unasked: a folder holding files under these names (an earlier
-run's) and an existing video are refused, unless ``overwrite`` is given (the command line's
+Nothing of the user's is deleted unasked: a folder the user named holding files under these names (an
+earlier run's) and an existing video are refused, unless ``overwrite`` is given (the command line's
 ``--overwrite``); then only files under these names are removed, so that old and new frames never
-mix, and nothing else in the folder is touched. Pure standard library: the command line checks its
-outputs without starting Taichi.
+mix, and nothing else in the folder is touched. A run into the default folder instead takes the next
+free name (``out/dam_break-2`` …, ``free_default_folder``), so that the README's examples run one after
+another. Pure standard library: the command line checks its outputs without starting Taichi.
 """
 
 from __future__ import annotations
@@ -56,6 +57,28 @@ def default_folder(scene_path: str) -> Path:
     letters, digits, ``_``, ``-`` and ``.`` only, so no name can lead outside ``out/``."""
     stem = re.sub(r"[^\w.-]", "_", Path(scene_path).stem).lstrip(".")
     return Path("out") / (stem or "scene")
+
+
+MAX_DEFAULT_FOLDERS = 999
+"""How many numbered default folders (``out/dam_break-2`` … ``-999``) a run tries before it asks for --out."""
+
+
+def free_default_folder(base: Path) -> Path:
+    """``base`` (``out/dam_break``) if it holds no earlier run's files, else the first of ``base-2``,
+    ``base-3`` … that holds none (or does not exist yet): a run into the default folder never mixes
+    with, nor deletes, an earlier one's frames. OutputError when all of them are taken."""
+    for number in range(1, MAX_DEFAULT_FOLDERS + 1):
+        candidate = base if number == 1 else base.with_name(f"{base.name}-{number}")
+        try:
+            if not earlier_files(candidate):
+                return candidate
+        except OSError:
+            return candidate  # not a readable folder: check_folder says why, naming it
+    raise OutputError(
+        f"the default output folder (--out) {_shown(str(base))}: it and {base.name}-2 … "
+        f"{base.name}-{MAX_DEFAULT_FOLDERS} all hold earlier runs' files; give --out, or --overwrite "
+        f"to replace {base}'s"
+    )
 
 
 def _shown(text: str) -> str:

@@ -59,10 +59,29 @@ class Mesh:
         return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
+class SurfaceError(RuntimeError):
+    """splashsurf could not mesh a particle set, even at the nudged iso levels of ``ISO_NUDGES``; the
+    message is one line: its reason, without the Rust backtrace."""
+
+
+ISO_NUDGES = (0.0, 1e-6, -1e-6)
+"""Relative changes of ``surface.iso_level`` tried in turn when splashsurf fails. Its one-grid
+marching cubes (``deterministic``) counts a grid point whose colour value equals the iso level exactly
+as inside when it places the surface's vertices on the edges, and as outside when it classifies the
+cells' corners: where such a point has only inside neighbours in a cell, that cell's triangles ask for
+a vertex that was never made ("Missing iso surface vertex at edge …. This is a bug."). A float32 tie is
+rare, and where one falls depends on the positions' last bits, which differ from machine to machine.
+Moving the level by a millionth breaks the tie, moves the surface by far less than a cube (the colour
+field changes by about 1 across a spacing) and is itself deterministic. splashsurf's subdomains
+(``deterministic = false``, where the particles are many enough for it to keep them) compare alike in
+both places."""
+
+
 def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
     """The surface of the particles at ``positions`` ((n, 3) m) with the scene's ``[surface]``
     settings, its vertices clamped into the container. No particle gives an empty mesh; a single
-    particle gives a small closed droplet."""
+    particle gives a small closed droplet. SurfaceError when splashsurf fails at every level of
+    ``ISO_NUDGES``."""
     positions = np.ascontiguousarray(positions, dtype=np.float32)
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions: expected an (n, 3) array, got shape {positions.shape}")
@@ -73,16 +92,37 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
     settings = scene.surface
     support_m = 2.0 * settings.smoothing_length_spacings * scene.fluid.spacing_m
     lower, upper = scene.container.min_m, scene.container.max_m
+    particles = with_wall_images(positions, lower, upper, support_m)
+    reasons = []
+    for nudge in ISO_NUDGES:
+        try:
+            surface = _splashsurf(particles, scene, settings.iso_level * (1.0 + nudge))
+            break
+        except Exception as error:  # pysplashsurf raises RuntimeError with its Rust error chain
+            reasons.append(_reason(error))
+    else:
+        tried = ", ".join(f"{settings.iso_level * (1.0 + nudge):.7g}" for nudge in ISO_NUDGES)
+        raise SurfaceError(f"splashsurf failed at surface.iso_level {tried}: {reasons[0]}")
+    vertices = surface.mesh.vertices
+    # The water's wall images carry the surface through the walls. Clamping moves the vertices beyond
+    # a wall onto it and keeps every triangle (those wholly outside become slivers on the wall), so
+    # the mesh stays closed and meets the wall flat.
+    vertices = np.clip(vertices, lower, upper).astype(np.float32)
+    return Mesh(vertices, surface.mesh.triangles.astype(np.int32))
+
+
+def _splashsurf(particles: np.ndarray, scene: Scene, iso_level: float):
+    settings = scene.surface
     # pysplashsurf takes lengths in multiples of the particle radius it is given. The colour field
     # does not depend on the particles' mass (m_j/ρ_j = 1/Σ_k W_jk), so passing the spacing as the
     # "radius" makes the table's values in spacings the arguments as they stand.
     surface, _ = pysplashsurf.reconstruction_pipeline(
-        with_wall_images(positions, lower, upper, support_m),
+        particles,
         particle_radius=scene.fluid.spacing_m,
         rest_density=scene.fluid.rest_density_kg_m3,
         smoothing_length=settings.smoothing_length_spacings,
         cube_size=settings.cube_size_spacings,
-        iso_surface_threshold=settings.iso_level,
+        iso_surface_threshold=iso_level,
         mesh_smoothing_iters=settings.smoothing_iterations or None,
         mesh_smoothing_weights=True,
         mesh_smoothing_weights_normalization=smoothing_weight_normalization(settings.smoothing_length_spacings),
@@ -91,12 +131,16 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
         multi_threading=not settings.deterministic,
         subdomain_grid=not settings.deterministic,
     )
-    vertices = surface.mesh.vertices
-    # The water's wall images carry the surface through the walls. Clamping moves the vertices beyond
-    # a wall onto it and keeps every triangle (those wholly outside become slivers on the wall), so
-    # the mesh stays closed and meets the wall flat.
-    vertices = np.clip(vertices, lower, upper).astype(np.float32)
-    return Mesh(vertices, surface.mesh.triangles.astype(np.int32))
+    return surface
+
+
+def _reason(error: Exception) -> str:
+    """splashsurf's error in one line: its innermost cause ("Missing iso surface vertex at edge 9. This
+    is a bug."), without the chain's other lines and the Rust backtrace it appends."""
+    text = str(error).split("Stack backtrace:", 1)[0]
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    causes = [line.split(":", 1)[1].strip() for line in lines if line.split(":", 1)[0].isdigit()]
+    return (causes[-1] if causes else lines[0] if lines else type(error).__name__)[:200]
 
 
 SMOOTHING_WEIGHT_NEIGHBOURS = 3.0

@@ -12,7 +12,7 @@ One module per table, each holding its dataclass beside the checks of its keys: 
 vorticity), ``wave_maker``, ``bodies`` (rigid boxes and spheres), ``view`` (camera, render, surface: the
 application's). ``schema`` is the
 machinery they share, ``root`` the whole scene, ``files`` the TOML files and overrides, ``reference``
-the key reference generated from the keys' own docs (``pbf keys``, docs/KEYS.md).
+the key reference generated from the keys' own docs (``pbf --keys``, docs/KEYS.md).
 
 This package imports nothing of the solver, the application or the studies: the values the solver
 derives from a scene (particle mass, grid, the memory and index checks) are ``pbf.solver.model``'s.

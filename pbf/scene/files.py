@@ -222,11 +222,13 @@ def attribute(error: SceneError, labels: dict[str, str]) -> SceneError:
     maps to a label (``{"solver.iterations": "command line --set solver.iterations=0"}``): the
     user typed that value, not the file. Otherwise ``error`` itself."""
     key = error.key
+    # The key itself or a table inside it came from the command line, or the command line made the
+    # table by setting a key in it (--set obstacles.min_m=… makes 'obstacles' a table, not a list).
     label = next(
         (
             label
             for dotted, label in labels.items()
-            if key is not None and re.match(re.escape(dotted) + r"($|[.\[])", key)
+            if key is not None and (re.match(re.escape(dotted) + r"($|[.\[])", key) or dotted.startswith(key + "."))
         ),
         None,
     )

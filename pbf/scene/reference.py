@@ -1,5 +1,5 @@
 """The key reference, generated from the schema's own declarations: each key's dotted name, type,
-default, allowed values and doc line, table by table. ``pbf keys`` prints it and docs/KEYS.md is its
+default, allowed values and doc line, table by table. ``pbf --keys`` prints it and docs/KEYS.md is its
 output (``tests/test_keys_reference.py`` fails when the file is stale)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pbf.scene.schema import _num, _show
 
 HEADER = """# Scene keys
 
-Every key a scene file may set, generated from the schema (`pbf keys > docs/KEYS.md`; a test fails
+Every key a scene file may set, generated from the schema (`pbf --keys > docs/KEYS.md`; a test fails
 when this file is stale). Units are in the names; each number's range is checked at load, and an
 error names the file (or the command line's `--set`), the key and what is allowed. Tables of
 `[[...]]` form are lists: each entry takes the keys listed under it.

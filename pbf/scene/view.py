@@ -89,7 +89,7 @@ class Surface:
     mesh_format: str = key("ply", _one_of("ply", "obj"), "file format of --export mesh: binary PLY or text OBJ")
     deterministic: bool = key(
         True,
-        doc="one thread, no subdomains: the same mesh on every run "
+        doc="one thread, no subdomains: the same mesh for the same particles on every run "
         "(splashsurf's parallel subdomains vary from run to run); false is faster",
     )
     absorption_per_m: Vec3 = key(
