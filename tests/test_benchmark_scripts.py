@@ -116,7 +116,7 @@ def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
 
 
 def test_every_preset_has_a_moment_in_the_gallery():
-    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
+    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "pbf" / "scenes").glob("*.toml")}
 
 
 def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
