@@ -12,13 +12,18 @@ a quarter of the pixels costs an eighth); only the composition is at full resolu
    spheres overlap. The chords are added as fixed-point integers, so the sum does not depend on the
    order the threads add them in and the image is the same on every run.
 2. *Smooth.* The narrow-range filter, separably along rows then columns: a Gaussian over the pixels
-   within a few spacings (its width in pixels shrinks with depth), in which samples more than the
-   threshold μ behind the centre belong to another layer or the background and are left out, and
-   samples more than μ in front are clamped to μ in front. We take the samples in pairs about the
-   centre and leave a pair out whole, and widen the range by μ around each pair taken, so that a
-   surface seen at a slant is smoothed over the filter's whole width without being pulled forward or
-   back. Silhouettes stay where the particles are; the bumps of single particles go. The thickness
-   gets a plain Gaussian.
+   within a few spacings (its width in pixels shrinks with depth), in which a sample more than the
+   threshold μ off the surface, behind it (another layer, the background) or in front of it (a drop),
+   belongs to another surface. We take the samples in pairs about the centre and put in place of a
+   sample off the surface its partner's mirror image about the centre (a pair with both off is left
+   out), so that every pixel of a surface keeps the Gaussian's full weight and a slope stays balanced.
+   From the second round on, the range at each tap is centred on the plane through the centre with
+   the slope of its nearest neighbours, so that a surface seen at a slant is smoothed over the
+   filter's whole width. The range never depends on the samples taken: a rule that clamped samples
+   in front into it and widened it around each pair let one pixel of a row take in a layer that the
+   next left out, and the pass along the other axis spread each such jump into a band, covering
+   splashes with axis-aligned rectangles. Silhouettes stay where the particles are; the bumps of
+   single particles go. The thickness gets a plain Gaussian.
 3. *Normals* from the smoothed depth by finite differences, taking on each axis the smaller of the
    forward and backward difference so that normals do not bend over edges (van der Laan et al., §4).
 4. *Shade.* Schlick's Fresnel term mixes the reflection of a sky gradient with the refracted view of
@@ -62,7 +67,8 @@ ROUND_SIGMA_SPACINGS = FILTER_SIGMA_SPACINGS / math.sqrt(FILTER_ROUNDS)
 FILTER_MAX_RADIUS_PX = 24
 """Widest filter, in coarse pixels each side: bounds the cost of water close to the camera."""
 THRESHOLD_SPACINGS = 1.0
-"""The narrow range μ: a sample this far behind the centre pixel is another layer."""
+"""The narrow range μ: a sample this far off the surface (behind or in front of the centre pixel, or of
+its plane) belongs to another surface."""
 THICKNESS_STEPS_PER_SPACING = 4096
 """Fixed-point resolution of the thickness sum (integer atomics are order-independent)."""
 WATER_IOR = 1.33
@@ -353,9 +359,12 @@ class FluidRenderer:
         thickness_unit: ti.f32,
         thickness_out: ti.template(),
         with_thickness: ti.template(),
+        follow_slope: ti.template(),
     ):
         """One separable pass of the narrow-range filter along (step_row, step_col), and of a plain
-        Gaussian over the thickness when ``with_thickness``."""
+        Gaussian over the thickness when ``with_thickness``. ``follow_slope``: the range is centred on
+        the plane through the centre pixel with the slope of its nearest neighbours along the pass (for
+        a smoothed input; on the splat's raw depth one pixel's slope is the bumps of single spheres)."""
         mu = THRESHOLD_SPACINGS * self.spacing
         for row, col in depth_in:
             z = depth_in[row, col]
@@ -378,7 +387,18 @@ class FluidRenderer:
                 thickness_weights, thicknesses = 1.0, 0.0
                 if ti.static(with_thickness):
                     thicknesses = thickness_in[row, col] * thickness_unit
-                far, near = z + mu, z - mu
+                # The surface's change of depth per pixel along the pass, from the nearest pair (or the one
+                # neighbour) within the range: the range at tap k is centred on z ± k · slope.
+                slope = 0.0
+                if ti.static(follow_slope) and reach >= 1:
+                    after, before = depth_in[row + step_row, col + step_col], depth_in[row - step_row, col - step_col]
+                    after_in, before_in = ti.abs(after - z) <= mu, ti.abs(before - z) <= mu
+                    if after_in and before_in:
+                        slope = 0.5 * (after - before)
+                    elif after_in:
+                        slope = after - z
+                    elif before_in:
+                        slope = z - before
                 w, ratio = 1.0, decay
                 for k in range(1, reach + 1):
                     w *= ratio
@@ -389,14 +409,20 @@ class FluidRenderer:
                     if ti.static(with_thickness):
                         thickness_weights += 2.0 * w
                         thicknesses += w * (thickness_in[r_a, c_a] + thickness_in[r_b, c_b]) * thickness_unit
-                    # A pair with a sample beyond the range behind (background, or a layer behind this
-                    # one) is left out whole, so that a slope's samples stay balanced about the centre;
-                    # samples in front of the range are clamped to it. The range then grows by μ around
-                    # the samples taken, which lets the filter follow a slope over its whole width.
-                    if a <= far and b <= far:
-                        a, b = ti.max(a, near), ti.max(b, near)
-                        far = ti.max(far, ti.max(a, b) + mu)
-                        near = ti.min(near, ti.min(a, b) - mu)
+                    # A sample more than μ off the plane (behind it: the background or a layer behind; in
+                    # front: a drop or a layer in front) is another surface. Its partner's mirror image
+                    # about the centre takes its place, so that every pixel of a surface keeps the full
+                    # Gaussian's weight and a slope stays balanced about the centre; a pair with both
+                    # samples off is left out. The range is the same at every pixel, neither clamped nor
+                    # grown from the samples: a decision that jumped from one pixel to the next along this
+                    # pass (a layer let in here, left out there) was spread along the other axis by the
+                    # next pass, which covered splashes with axis-aligned rectangles of different shades.
+                    a_in, b_in = ti.abs(a - (z + k * slope)) <= mu, ti.abs(b - (z - k * slope)) <= mu
+                    if a_in or b_in:
+                        if not a_in:
+                            a = 2.0 * z - b
+                        if not b_in:
+                            b = 2.0 * z - a
                         weights += 2.0 * w
                         depths += w * (a + b)
                 depth_out[row, col] = depths / weights
@@ -662,9 +688,19 @@ class FluidRenderer:
             self.quantum,
             self.thickness_pass,
             True,
+            False,
         )
         self._filter(
-            self.depth_pass, self.smooth_depth, 1, 0, coarse_focal, self.thickness_pass, 1.0, self.thickness, True
+            self.depth_pass,
+            self.smooth_depth,
+            1,
+            0,
+            coarse_focal,
+            self.thickness_pass,
+            1.0,
+            self.thickness,
+            True,
+            False,
         )
         for _ in range(FILTER_ROUNDS - 1):
             for source, target, step_row, step_col in (
@@ -672,7 +708,7 @@ class FluidRenderer:
                 (self.depth_pass, self.smooth_depth, 1, 0),
             ):
                 self._filter(
-                    source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness, False
+                    source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness, False, True
                 )
         light = ti.Vector(np.asarray(light_direction, np.float32))
         self._normals(eye, right, up, forward, coarse_focal)
