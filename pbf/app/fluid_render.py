@@ -505,15 +505,13 @@ class FluidRenderer:
                 # s' = |n̄| s / (|n̄| + s (1 − |n̄|))) and scaled by (s' + 8)/(s + 8) to keep its energy: a
                 # bumpy patch of spray then shows a dim broad sheen instead of single bright pixels.
                 mean_normal = ti.Vector([0.0, 0.0, 0.0])
-                for dr, dc in ti.static(ti.ndrange((-1, 2), (-1, 2))):
-                    r, c = row + dr, col + dc
-                    if 0 <= r < self.coarse_height and 0 <= c < self.coarse_width:
-                        mean_normal += self.normal[r, c]
                 count = 0.0
                 for dr, dc in ti.static(ti.ndrange((-1, 2), (-1, 2))):
                     r, c = row + dr, col + dc
                     if 0 <= r < self.coarse_height and 0 <= c < self.coarse_width:
-                        count += self.normal[r, c].norm_sqr()  # 1 for water, 0 for none
+                        around = self.normal[r, c]
+                        mean_normal += around
+                        count += around.norm_sqr()  # 1 for water, 0 for none
                 agreement = ti.min(mean_normal.norm() / ti.max(count, 1.0), 1.0)
                 exponent = agreement * SPECULAR_EXPONENT / (agreement + SPECULAR_EXPONENT * (1.0 - agreement))
                 halfway = (light - direction).normalized()
@@ -554,14 +552,17 @@ class FluidRenderer:
             # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
             # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
             share = coverage
-            background = ti.cast(self.background[row, col], ti.f32) / 255.0
-            if solid < FAR:
-                background = solid_colour
-            water = background
-            if coverage > 0.0:
-                water = ti.min(colour / coverage, 1.0)
-            blended = share * water + (1.0 - share) * background
-            self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
+            if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
+                self.image[row, col] = self.background[row, col]
+            else:
+                background = ti.cast(self.background[row, col], ti.f32) / 255.0
+                if solid < FAR:
+                    background = solid_colour
+                water = background
+                if coverage > 0.0:
+                    water = ti.min(colour / coverage, 1.0)
+                blended = share * water + (1.0 - share) * background
+                self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
             self.image_depth[row, col] = solid
             if coverage >= 0.5:
                 self.image_depth[row, col] = depth / coverage

@@ -1,0 +1,140 @@
+"""The headless frame's cost without the simulation: the renderer and the PNG writer alone on a fixed
+state, both styles, as frames a second and CPU milliseconds a frame.
+
+    python -m pbf.study.frames                      # the seed scene at t = 1 s, 1280×720
+    python -m pbf.study.frames --size 1920x1080 --arch cuda
+
+The scene is stepped to ``--at-frame`` once; then the two styles are drawn alternately, frame after
+frame (so that a busy machine slows both alike), and the medians are reported. Drawing counts until
+the image is on the host (``SceneRenderer.frame``: the device synchronised by its one copy). Writing
+is PNG encoding at several zlib levels (size and time, one thread), and the threaded writer
+(``pbf.app.writer.FrameFiles``) writing ``--repeats`` frames of each style into a temporary folder,
+its rate the throughput with its default threads. CPU milliseconds are the process's CPU time (all
+threads) over the frames: on a GPU backend they are what the host spends, on the CPU backend they
+include the kernels' threads.
+
+This study's subject is the application's renderer and writer, so it imports ``pbf.app`` (the other
+studies measure the solver only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+STYLES = ("particles", "surface")
+LEVELS = (1, 3, 6)
+"""zlib levels compared: the writer's (1), a middle one, and Pillow's default (6)."""
+
+
+def size(text: str) -> tuple[int, int]:
+    width, _, height = text.partition("x")
+    try:
+        return int(width), int(height)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected WIDTHxHEIGHT, e.g. 1280x720") from None
+
+
+def timed_frames(renderers: dict, repeats: int) -> dict:
+    """Per style: (wall seconds, CPU seconds) of each of ``repeats`` frames, the styles alternating."""
+    times = {style: [] for style in renderers}
+    for _ in range(repeats):
+        for style, renderer in renderers.items():
+            wall, cpu = time.perf_counter(), time.process_time()
+            renderer.frame()
+            times[style].append((time.perf_counter() - wall, time.process_time() - cpu))
+    return times
+
+
+def encoded(image, level: int, repeats: int, folder: Path) -> tuple[float, float, int]:
+    """Median wall and CPU seconds of one PNG of ``image`` at zlib ``level``, and its size in bytes."""
+    from pbf.app.writer import write_png
+
+    path = folder / f"level{level}.png"
+    walls, cpus = [], []
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        write_png(path, image, level)
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus), path.stat().st_size
+
+
+def threaded(images: list, folder: Path) -> tuple[float, float, int]:
+    """Seconds and CPU seconds the threaded writer takes to write ``images`` (submit to close), and its
+    threads."""
+    from pbf.app.writer import FrameFiles
+
+    files = FrameFiles()
+    wall, cpu = time.perf_counter(), time.process_time()
+    for number, image in enumerate(images):
+        files.submit(folder / f"frame_{number:05d}.png", image.copy())
+    files.close()
+    return time.perf_counter() - wall, time.process_time() - cpu, files.workers
+
+
+def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
+    rate = 1.0 / wall_s if wall_s > 0 else float("inf")
+    return f"| {label} | {rate:,.1f} | {wall_s * 1e3:.1f} | {cpu_s * 1e3:.1f} | {extra} |"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
+    parser.add_argument("--scene", default="dam_break", help="preset or TOML file (default: dam_break)")
+    parser.add_argument("--at-frame", type=int, default=60, help="frames stepped before timing (default: 60)")
+    parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
+    parser.add_argument("--repeats", type=int, default=20, help="frames timed per style (default: 20)")
+    parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
+    args = parser.parse_args(argv)
+
+    from pbf.app.render import SceneRenderer
+    from pbf.solver import Simulation, start_backend
+
+    backend = start_backend(args.arch)
+    sim = Simulation(args.scene, quiet=True)
+    sim.step(args.at_frame)
+    width, height = args.size or (sim.scene.render.width_px, sim.scene.render.height_px)
+    renderers = {style: SceneRenderer(sim, width, height, style=style) for style in STYLES}
+    images = {style: renderer.frame() for style, renderer in renderers.items()}  # compiles
+    timed_frames(renderers, 2)  # and warms the caches
+    times = timed_frames(renderers, args.repeats)
+
+    print(
+        f"{sim.scene.name} at t = {sim.time_s:.2f} s, {sim.particle_count:,} particles, {width}×{height}, "
+        f"{backend}; medians of {args.repeats} frames, the styles alternating"
+    )
+    print()
+    print("| stage | frames/s | wall ms/frame | CPU ms/frame | |")
+    print("|---|---:|---:|---:|---|")
+    medians = {}
+    for style in STYLES:
+        wall = statistics.median(t[0] for t in times[style])
+        cpu = statistics.median(t[1] for t in times[style])
+        medians[style] = wall
+        print(row(f"draw, {style}", wall, cpu, "to a host array"))
+    with tempfile.TemporaryDirectory() as folder:
+        for style in STYLES:
+            for level in LEVELS:
+                wall, cpu, size_bytes = encoded(images[style], level, max(3, args.repeats // 4), Path(folder))
+                print(row(f"PNG level {level}, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB, one thread"))
+        for style in STYLES:
+            with tempfile.TemporaryDirectory() as frames:
+                wall, cpu, workers = threaded([images[style]] * args.repeats, Path(frames))
+                print(
+                    row(
+                        f"writer, {style}",
+                        wall / args.repeats,
+                        cpu / args.repeats,
+                        f"{workers} thread{'s' if workers > 1 else ''}, in order, level 1",
+                    )
+                )
+    print()
+    print(f"The surface takes {medians['surface'] / medians['particles']:.2f}× the particles' time to draw.")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
