@@ -107,6 +107,25 @@ def test_window_benchmark_runs_under_a_virtual_display():
 
 
 @pytest.mark.slow
+def test_window_benchmark_runs_offscreen_without_a_display():
+    # GGUI's offscreen window (show_window=False) on Mesa's software Vulkan: the window's loop,
+    # simulation, drawing and panel, timed with no X server at all.
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "window.py"), "--offscreen", "--arch", "cpu"]
+        + ["--frames", "2", "--warmup", "1", "--rounds", "1", "--variants", "window,surface"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**env, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    if "no window:" in run.stderr + run.stdout:
+        pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
+    assert run.returncode == 0, run.stderr
+    assert "offscreen" in run.stdout and "| window | " in run.stdout and "| surface | " in run.stdout
+
+
+@pytest.mark.slow
 def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
     gallery = script("gallery")
     monkeypatch.setitem(gallery.MOMENTS, "martin_moyce", 0.05)  # a few frames
