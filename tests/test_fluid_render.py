@@ -347,7 +347,7 @@ def test_a_splash_has_no_axis_aligned_blocks():
     # range grown by each pair taken) spread each jump along the other axis, and the splash was covered
     # with rectangles of different shades: 0.31% of its water's pixels on such steps (runs of 6 coarse
     # pixels, 12 in the image), against 0.05% once the range follows the surface's slope and keeps to it
-    # (0.38% and 0.10% with Taichi's advanced optimisation, another splash).
+    # (0.38% and 0.08% with Taichi's advanced optimisation, another splash).
     from pbf.app.render import View, fluid_renderer
     from pbf.solver import Simulation
 

@@ -118,3 +118,14 @@ def test_an_interrupted_run_writes_every_frame_drawn(tmp_path):
         loop.run(sim, viewer, 10)
     assert sorted(p.name for p in tmp_path.iterdir()) == [f"frame_{k:05d}.png" for k in range(4)]
     assert len({iio.imread(p).tobytes() for p in tmp_path.iterdir()}) == 4  # four different, readable frames
+
+
+def test_png_files_decode_to_the_image():
+    # The Sub filter subtracts modulo 256: noise (every difference, wrapping both ways) and a smooth
+    # ramp, odd sizes, decoded by Pillow (through imageio) to the same bytes.
+    rng = np.random.default_rng(7)
+    noise = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    ramp = np.broadcast_to(np.arange(53, dtype=np.uint8)[None, :, None] * 5, (37, 53, 3)).copy()
+    for image in (noise, ramp):
+        for level in (0, 1, 9):
+            assert np.array_equal(iio.imread(writer.png_bytes(image, level), extension=".png"), image)

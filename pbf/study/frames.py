@@ -7,7 +7,7 @@ state, both styles, as frames a second and CPU milliseconds a frame.
 The scene is stepped to ``--at-frame`` once; then the two styles are drawn alternately, frame after
 frame (so that a busy machine slows both alike), and the medians are reported. Drawing counts until
 the image is on the host (``SceneRenderer.frame``: the device synchronised by its one copy). Writing
-is PNG encoding at several zlib levels (size and time, one thread), and the threaded writer
+is PNG encoding at several zlib levels and as Pillow writes it (size and time, one thread), and the threaded writer
 (``pbf.app.writer.FrameFiles``) writing ``--repeats`` frames of each style into a temporary folder,
 its rate the throughput with its default threads. CPU milliseconds are the process's CPU time (all
 threads) over the frames: on a GPU backend they are what the host spends, on the CPU backend they
@@ -27,7 +27,9 @@ from pathlib import Path
 
 STYLES = ("particles", "surface")
 LEVELS = (1, 3, 6)
-"""zlib levels compared: the writer's (1), a middle one, and Pillow's default (6)."""
+"""zlib levels of the writer's encoder compared: its own (1), a middle one, and Pillow's default (6);
+beside them Pillow's PNG at its defaults (five filters tried per row, level 6), as frames were written
+before."""
 
 
 def size(text: str) -> tuple[int, int]:
@@ -49,15 +51,23 @@ def timed_frames(renderers: dict, repeats: int) -> dict:
     return times
 
 
-def encoded(image, level: int, repeats: int, folder: Path) -> tuple[float, float, int]:
+def pillow_png(path: Path, image, level: int) -> None:
+    """Pillow's PNG at its defaults (``level`` is ignored): how frames were written before."""
+    from PIL import Image
+
+    Image.fromarray(image).save(path, format="PNG")
+
+
+def encoded(image, level: int, repeats: int, folder: Path, encoder=None) -> tuple[float, float, int]:
     """Median wall and CPU seconds of one PNG of ``image`` at zlib ``level``, and its size in bytes."""
     from pbf.app.writer import write_png
 
+    encoder = encoder or write_png
     path = folder / f"level{level}.png"
     walls, cpus = [], []
     for _ in range(repeats):
         wall, cpu = time.perf_counter(), time.process_time()
-        write_png(path, image, level)
+        encoder(path, image, level)
         walls.append(time.perf_counter() - wall)
         cpus.append(time.process_time() - cpu)
     return statistics.median(walls), statistics.median(cpus), path.stat().st_size
@@ -116,10 +126,13 @@ def main(argv=None) -> int:
         medians[style] = wall
         print(row(f"draw, {style}", wall, cpu, "to a host array"))
     with tempfile.TemporaryDirectory() as folder:
+        repeats = max(3, args.repeats // 4)
         for style in STYLES:
             for level in LEVELS:
-                wall, cpu, size_bytes = encoded(images[style], level, max(3, args.repeats // 4), Path(folder))
-                print(row(f"PNG level {level}, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB, one thread"))
+                wall, cpu, size_bytes = encoded(images[style], level, repeats, Path(folder))
+                print(row(f"PNG, Sub filter, level {level}, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB"))
+            wall, cpu, size_bytes = encoded(images[style], 6, repeats, Path(folder), pillow_png)
+            print(row(f"PNG, Pillow's defaults, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB"))
         for style in STYLES:
             with tempfile.TemporaryDirectory() as frames:
                 wall, cpu, workers = threaded([images[style]] * args.repeats, Path(frames))
