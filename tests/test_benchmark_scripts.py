@@ -126,6 +126,16 @@ def test_window_benchmark_runs_offscreen_without_a_display():
 
 
 @pytest.mark.slow
+def test_frames_study_prints_its_table(capsys):
+    from pbf.study import frames
+
+    assert frames.main(["--at-frame", "1", "--repeats", "2", "--size", "64x36", "--arch", "cpu"]) == 0
+    out = capsys.readouterr().out
+    for stage in ("draw, particles", "draw, surface", "PNG, Sub filter, level 1, surface", "writer, particles"):
+        assert f"| {stage} |" in out, stage
+
+
+@pytest.mark.slow
 def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
     gallery = script("gallery")
     monkeypatch.setitem(gallery.MOMENTS, "martin_moyce", 0.05)  # a few frames
