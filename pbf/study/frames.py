@@ -13,6 +13,13 @@ its rate the throughput with its default threads. CPU milliseconds are the proce
 threads) over the frames: on a GPU backend they are what the host spends, on the CPU backend they
 include the kernels' threads.
 
+``--whole N`` adds the whole frame of a headless run, simulation included, in one process: from the
+same state, N frames stepped and written each way (simulation only; the frame drawn and written with
+Pillow's PNG on the main thread, as before; with our PNG on the main thread; with the threaded
+writer), the ways alternating round by round (``--rounds``), medians:
+
+    python -m pbf.study.frames --whole 15 --rounds 5
+
 This study's subject is the application's renderer and writer, so it imports ``pbf.app`` (the other
 studies measure the solver only).
 """
@@ -86,6 +93,41 @@ def threaded(images: list, folder: Path) -> tuple[float, float, int]:
     return time.perf_counter() - wall, time.process_time() - cpu, files.workers
 
 
+WAYS = ("simulation only", "Pillow's PNG on the main thread (before)", "our PNG on the main thread", "threaded writer")
+
+
+def whole_frames(sim, renderer, frames: int, rounds: int, folder: Path) -> dict:
+    """Per way of writing: (wall seconds, CPU seconds) a frame of each round, simulation included, every
+    round from the same state."""
+    import taichi as ti
+
+    from pbf.app.writer import FrameFiles, write_png
+
+    start = sim.snapshot()
+    times = {way: [] for way in WAYS}
+    for _ in range(rounds):
+        for way in WAYS:
+            sim.restore(start)
+            files = FrameFiles() if way == "threaded writer" else None
+            wall, cpu = time.perf_counter(), time.process_time()
+            for number in range(frames):
+                sim.step()
+                if way == "simulation only":
+                    continue
+                image, path = renderer.frame(), folder / f"frame_{number:05d}.png"
+                if files is not None:
+                    files.submit(path, image)
+                elif way.startswith("Pillow"):
+                    pillow_png(path, image, 6)
+                else:
+                    write_png(path, image)
+            if files is not None:
+                files.close()
+            ti.sync()
+            times[way].append(((time.perf_counter() - wall) / frames, (time.process_time() - cpu) / frames))
+    return times
+
+
 def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
     rate = 1.0 / wall_s if wall_s > 0 else float("inf")
     return f"| {label} | {rate:,.1f} | {wall_s * 1e3:.1f} | {cpu_s * 1e3:.1f} | {extra} |"
@@ -98,6 +140,11 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=20, help="frames timed per style (default: 20)")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
+    parser.add_argument(
+        "--whole", type=int, default=0, help="also time N whole frames (simulation, draw, write) each way"
+    )
+    parser.add_argument("--rounds", type=int, default=5, help="rounds of --whole, the ways alternating (default: 5)")
+    parser.add_argument("--style", choices=STYLES, default="particles", help="the style --whole draws")
     args = parser.parse_args(argv)
 
     from pbf.app.render import SceneRenderer
@@ -146,6 +193,24 @@ def main(argv=None) -> int:
                 )
     print()
     print(f"The surface takes {medians['surface'] / medians['particles']:.2f}× the particles' time to draw.")
+    if args.whole:
+        with tempfile.TemporaryDirectory() as folder:
+            times = whole_frames(sim, renderers[args.style], args.whole, args.rounds, Path(folder))
+        print()
+        print(
+            f"Whole frames from t = {args.at_frame * sim.scene.time.frame_dt_s:.2f} s, {args.style}: "
+            f"{args.whole} frames a round, {args.rounds} rounds, the ways alternating, medians"
+        )
+        print()
+        print("| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |")
+        print("|---|---:|---:|---:|---:|")
+        wall = {way: statistics.median(t[0] for t in times[way]) for way in WAYS}
+        cpu = {way: statistics.median(t[1] for t in times[way]) for way in WAYS}
+        base = WAYS[0]
+        for way in WAYS:
+            added = "" if way == base else f"{(wall[way] - wall[base]) * 1e3:.1f}"
+            cpu_added = "" if way == base else f"{(cpu[way] - cpu[base]) * 1e3:.1f}"
+            print(f"| {way} | {wall[way] * 1e3:.1f} | {added} | {cpu[way] * 1e3:.1f} | {cpu_added} |")
     return 0
 
 
