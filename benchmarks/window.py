@@ -20,6 +20,14 @@ process of its own; "sim" is then the wait for it, "sim in its process" its own 
 cpu`` that of the other process: on a 2-core machine the frame rate cannot exceed 2000 / (their sum),
 whatever overlaps.
 
+``--offscreen`` runs the same loop without a display: GGUI draws into an offscreen image
+(``ti.ui.Window(..., show_window=False)``; Vulkan, but no X server), and a frame's ``show`` is
+drawing it and reading it back to the host (``get_image_buffer_as_numpy``: Taichi 1.7.4 has no present
+without a surface), a copy a shown window does not make. ``--arch`` picks the simulation's and the
+renderer's backend (GGUI itself always draws with Vulkan). On a machine with a GPU and no display:
+
+    python benchmarks/window.py --offscreen --arch cuda --frames 300 --rounds 3 --variants window,surface,paused
+
 ``--start`` measures instead how long ``python run.py`` takes from its launch to the first frame, in
 the window and headless, with an empty Taichi kernel cache (a first run: ``TI_OFFLINE_CACHE_FILE_PATH``
 and Mesa's shader cache pointed at empty folders) and again with the cache that run filled, in
@@ -118,7 +126,19 @@ class Clock:
         self.spent[phase] = (w + 1e3 * wall_s, c + 1e3 * cpu_s)
 
 
-def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> dict:
+def make_offscreen(gui_window) -> None:
+    """A window without a display as the viewer uses one: its ``show`` draws the frame (GGUI draws it
+    when its image is read), and its input, which GGUI refuses without a display, is none: no key, no
+    button, the cursor in the middle (the benchmark gives no input either)."""
+    gui_window.show = lambda: gui_window.get_image_buffer_as_numpy()
+    gui_window.get_events = lambda *kind: []
+    gui_window.is_pressed = lambda *keys: False
+    gui_window.get_cursor_pos = lambda: (0.5, 0.5)
+
+
+def measure(
+    name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES, offscreen: bool = False, arch: str | None = None
+) -> dict:
     """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
     import taichi as ti
@@ -126,14 +146,20 @@ def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> 
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
     from pbf.solver import Simulation, start_backend
 
-    start_backend(quiet=True, cpu_threads=settings.get("cpu_threads"))
+    start_backend(arch, quiet=True, cpu_threads=settings.get("cpu_threads"))
     sim = Simulation(scene, quiet=True)
     try:
         gui_window = window.open_window(
-            "pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px, vsync=settings.get("vsync", True)
+            "pbf benchmark",
+            sim.scene.render.width_px,
+            sim.scene.render.height_px,
+            vsync=settings.get("vsync", True) and not offscreen,
+            show_window=not offscreen,
         )
     except window.WindowUnavailable as reason:
         raise SystemExit(f"no window: {reason}") from None
+    if offscreen:
+        make_offscreen(gui_window)
     viewer = window.WindowViewer(sim, gui_window)
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
@@ -172,7 +198,8 @@ def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> 
             if settings.get("gc") == "freeze":
                 gc.collect()
                 gc.freeze()
-            x_start, cpu_start, wall_start = x_server_cpu_s(), time.process_time(), time.perf_counter()
+            x_start = None if offscreen else x_server_cpu_s()
+            cpu_start, wall_start = time.process_time(), time.perf_counter()
             other_start = process_cpu_s(other.process.pid) if other else None
         clock.spent = {}
         wall, cpu = time.perf_counter(), time.process_time()
@@ -183,7 +210,7 @@ def measure(name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES) -> 
         if frame >= warmup:
             rows.append(dict(clock.spent))
     elapsed = time.perf_counter() - wall_start
-    x_end = x_server_cpu_s()
+    x_end = None if offscreen else x_server_cpu_s()
     other_end = process_cpu_s(other.process.pid) if other else None
     if other:
         for row, step_ms in zip(rows, other.step_ms[-len(rows) :]):
@@ -316,6 +343,13 @@ def draw_through_set_image(viewer) -> None:
         window.show_packed = show_packed
 
 
+def backend_name(arch: str | None) -> str:
+    """The backend the runs used, as the start line names it (started here only to be named)."""
+    from pbf.solver import start_backend
+
+    return start_backend(arch, quiet=True)
+
+
 def table(results: dict[str, list[dict]]) -> str:
     def cell(rows, key):
         values = [r[key] for r in rows if r[key] is not None]
@@ -417,6 +451,10 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--warmup", type=int, default=WARMUP_FRAMES, help=f"frames before the measured ones (default {WARMUP_FRAMES})"
     )
+    parser.add_argument(
+        "--offscreen", action="store_true", help="draw offscreen (GGUI's show_window=False): Vulkan, no display"
+    )
+    parser.add_argument("--arch", default=None, help="the simulation's and renderer's backend (default: auto)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
     parser.add_argument(
         "--start", action="store_true", help="time python run.py's start to its first frame, cache empty and filled"
@@ -427,7 +465,8 @@ def main(argv=None) -> None:
             f"--frames {args.frames}, --rounds {args.rounds}, --warmup {args.warmup}: allowed at least 1, 1 and 0"
         )
     if args.one:
-        print(json.dumps(measure(args.one, args.frames, args.scene, args.warmup)), flush=True)
+        result = measure(args.one, args.frames, args.scene, args.warmup, args.offscreen, args.arch)
+        print(json.dumps(result), flush=True)
         return
     if args.start:
         load = os.getloadavg()[0]
@@ -455,6 +494,8 @@ def main(argv=None) -> None:
                     args.scene,
                     "--warmup",
                     str(args.warmup),
+                    *(["--offscreen"] if args.offscreen else []),
+                    *(["--arch", args.arch] if args.arch else []),
                 ],
                 capture_output=True,
                 text=True,
@@ -475,7 +516,11 @@ def main(argv=None) -> None:
                 file=sys.stderr,
                 flush=True,
             )
-    print(f"{args.scene}, {args.frames} frames × {args.rounds} rounds, medians (ms per frame; cpu: all threads)")
+    where = "offscreen (GGUI show_window=False; show = draw + read back)" if args.offscreen else "in a window"
+    print(
+        f"{args.scene}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend_name(args.arch)}, "
+        f"medians (ms per frame; cpu: all threads)"
+    )
     print(table(results))
 
 

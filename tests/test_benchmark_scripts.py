@@ -115,6 +115,36 @@ def test_window_benchmark_runs_under_a_virtual_display():
 
 
 @pytest.mark.slow
+def test_window_benchmark_runs_offscreen_without_a_display():
+    # GGUI's offscreen window (show_window=False) on Mesa's software Vulkan: the window's loop,
+    # simulation, drawing and panel, timed with no X server at all.
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "window.py"), "--offscreen", "--arch", "cpu"]
+        + ["--frames", "2", "--warmup", "1", "--rounds", "1", "--variants", "window,surface"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**env, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    if "no window:" in run.stderr + run.stdout:
+        pytest.skip(f"no Vulkan here: {(run.stderr + run.stdout).strip().splitlines()[-1]}")
+    assert run.returncode == 0, run.stderr
+    assert "offscreen" in run.stdout and "| window | " in run.stdout and "| surface | " in run.stdout
+
+
+@pytest.mark.slow
+def test_frames_study_prints_its_table(capsys):
+    from pbf.study import frames
+
+    argv = ["--at-frame", "1", "--repeats", "2", "--size", "64x36", "--arch", "cpu", "--whole", "1", "--rounds", "1"]
+    assert frames.main(argv) == 0
+    out = capsys.readouterr().out
+    for stage in ("draw, particles", "draw, surface", "PNG, Sub filter, level 1, surface", "threaded writer"):
+        assert f"| {stage} |" in out, stage
+
+
+@pytest.mark.slow
 def test_gallery_draws_a_sheet_of_presets(tmp_path, monkeypatch, capsys):
     gallery = script("gallery")
     monkeypatch.setitem(gallery.MOMENTS, "martin_moyce", 0.05)  # a few frames
@@ -155,7 +185,7 @@ def test_screenshots_says_what_is_missing(tmp_path):
 
 
 def test_every_preset_has_a_moment_in_the_gallery():
-    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
+    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "pbf" / "scenes").glob("*.toml")}
 
 
 def test_bench_refuses_a_thread_count_it_cannot_use(capsys):

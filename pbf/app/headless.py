@@ -1,18 +1,20 @@
 """The headless viewer: numbered PNG frames, an optional video and per-frame particle and surface
-mesh files, with a progress bar."""
+mesh files, with a progress bar. Each frame is drawn on the device and copied to the host once; its
+PNG and video encoding run in worker threads (``pbf.app.writer``) while the next frames are simulated
+and drawn."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import imageio.v2 as imageio
-import imageio.v3 as iio
 from tqdm import tqdm
 
 from pbf.app.export import write_particles
 from pbf.app.outputs import bodies_name, frame_name, particles_name, surface_name
 from pbf.app.render import SceneRenderer
 from pbf.app.surface import SurfaceError, body_mesh, reconstruct, write_mesh
+from pbf.app.writer import FrameFiles
 
 
 class ExportError(RuntimeError):
@@ -39,6 +41,8 @@ class FrameWriter:
             video.parent.mkdir(parents=True, exist_ok=True)
             fps = 1.0 / sim.scene.time.frame_dt_s
             self.writer = imageio.get_writer(video, fps=fps, codec="libx264", quality=8, macro_block_size=2)
+        self.files = FrameFiles(video=self.writer)
+        """The PNG and video encoders, in worker threads."""
         self.paths: list[Path] = []
         self.total = frames + 1
         """The start and ``frames`` steps."""
@@ -78,12 +82,10 @@ class FrameWriter:
                 meshes[bodies_name(number, fmt)] = body_mesh(
                     [b.shape for b in bodies], [b.half_extents() for b in bodies], self.sim.body_states()
                 )
-        image = self.renderer.frame()
+        image = self.renderer.frame()  # a fresh host array, handed over to the encoders
         path = self.out_dir / frame_name(number)
-        iio.imwrite(path, image)
+        self.files.submit(path, image)
         self.paths.append(path)
-        if self.writer is not None:
-            self.writer.append_data(image)
         for name in self.exports:
             if name == "mesh":
                 for file_name, mesh in meshes.items():
@@ -107,7 +109,12 @@ class FrameWriter:
             self.progress.update()
 
     def close(self) -> None:
-        if self.progress is not None:
-            self.progress.close()
-        if self.writer is not None:
-            self.writer.close()
+        """Write the frames still queued (also when the run was interrupted or failed: they are drawn),
+        then close the video."""
+        try:
+            self.files.close()
+        finally:
+            if self.progress is not None:
+                self.progress.close()
+            if self.writer is not None:
+                self.writer.close()

@@ -195,20 +195,24 @@ def unreachable_display() -> str | None:
     return None
 
 
-def open_window(title: str, width: int, height: int, vsync: bool = True):
+def open_window(title: str, width: int, height: int, vsync: bool = True, show_window: bool = True):
     """A GGUI window, or WindowUnavailable with the reason in one line. Taichi's own error lines about a
-    window that cannot open are dropped (the reason replaces them); anything else it writes passes."""
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise WindowUnavailable("DISPLAY is not set")
-    unreachable = unreachable_display()
-    if unreachable is not None:
-        raise WindowUnavailable(unreachable)
+    window that cannot open are dropped (the reason replaces them); anything else it writes passes.
+    ``show_window=False``: GGUI draws offscreen, needing Vulkan but no display (benchmarks/window.py
+    --offscreen); such a window's frames are drawn by ``get_image_buffer_as_numpy``, as its ``show``
+    (which presents) crashes in Taichi 1.7.4 without a surface."""
+    if show_window:
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise WindowUnavailable("DISPLAY is not set")
+        unreachable = unreachable_display()
+        if unreachable is not None:
+            raise WindowUnavailable(unreachable)
     for name, value in LAVAPIPE_SETTINGS.items():
         os.environ.setdefault(name, value)
     caught: list[str] = []
     try:
         with stderr_caught(caught):
-            return ti.ui.Window(title, (width, height), vsync=vsync)
+            return ti.ui.Window(title, (width, height), vsync=vsync, show_window=show_window)
     except RuntimeError as error:
         reason = str(error).strip().splitlines()[-1]
         caught = [line for line in caught if not line.startswith(TAICHI_WINDOW_NOISE)]

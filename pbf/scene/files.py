@@ -10,12 +10,16 @@ import re
 import sys
 import tomllib
 import typing
+from importlib import resources
 from pathlib import Path
 
 from pbf.scene.root import Scene
 from pbf.scene.schema import SceneError, _clip, _closest, _show, _table_values, echo
 
-SCENES_DIR = Path(__file__).resolve().parent.parent.parent / "scenes"
+SCENES_DIR = Path(str(resources.files("pbf") / "scenes"))
+"""The presets: package data inside ``pbf`` (``pbf/scenes/*.toml``), so that an editable install and a
+wheel find them the same way. ``importlib.resources`` names the installed package's own folder; the
+package is always installed as files (never zipped), so that folder is a real path for ``glob``."""
 
 MAX_SCENE_BYTES = 1 << 20
 """The largest scene file read (1 MiB; the presets are 1-2 kB): a bigger one is refused unread."""

@@ -8,6 +8,7 @@
     python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4]   (kernel calls, tasks per substep)
     python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared]   (see pbf.study.start)
     python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
+    python -m pbf.study.bench frames  [options of python -m pbf.study.frames]   (the renderers and writer alone)
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
 up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
@@ -40,6 +41,7 @@ import argparse
 import csv
 import platform
 import statistics
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -461,6 +463,11 @@ def _thread_count(text: str) -> int:
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["frames"]:  # the headless frames' own study, with its own options
+        from pbf.study import frames
+
+        return frames.main(argv[1:])
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     modes = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start", "traffic")
     parser.add_argument("mode", nargs="?", choices=modes, default="sizes")
