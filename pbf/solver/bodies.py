@@ -246,30 +246,43 @@ class Bodies:
 
     def load(self, state) -> None:
         """Set every body from a (count, STATE_WIDTH) array (:meth:`state`'s layout)."""
-        state = np.asarray(state, np.float32)
-        self.position.from_numpy(_padded(state[:, 0:3]))
-        quaternion = state[:, 3:7] / np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
-        self.quaternion.from_numpy(_padded(quaternion.astype(np.float32), fill=(1.0, 0.0, 0.0, 0.0)))
-        self.linear_velocity.from_numpy(_padded(state[:, 7:10]))
-        self.angular_velocity.from_numpy(_padded(state[:, 10:13]))
-        self.force.from_numpy(_padded(state[:, 13:16]))
-        self.torque.from_numpy(_padded(state[:, 16:19]))
-        self._update_rotation()
+        state = np.array(state, np.float32).reshape(self.count, STATE_WIDTH)
+        state[:, 3:7] /= np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
+        if self.count:
+            self._load(np.ascontiguousarray(state))
 
     def state(self) -> np.ndarray:
         """(count, STATE_WIDTH) float32 copy of every body's state (STATE_LAYOUT)."""
-        n = self.count
-        return np.concatenate(
-            [
-                self.position.to_numpy()[:n],
-                self.quaternion.to_numpy()[:n],
-                self.linear_velocity.to_numpy()[:n],
-                self.angular_velocity.to_numpy()[:n],
-                self.force.to_numpy()[:n],
-                self.torque.to_numpy()[:n],
-            ],
-            axis=1,
-        ).astype(np.float32)
+        state = np.zeros((self.count, STATE_WIDTH), np.float32)
+        if self.count:
+            self._store(state)
+        return state
+
+    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel of its
+    # own for its field (12 more compiles at the start, 0.5 s on 2 cores).
+
+    @ti.kernel
+    def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for b in range(self.count):
+            self.position[b] = ti.Vector([rows[b, i] for i in ti.static(range(0, 3))])
+            self.quaternion[b] = ti.Vector([rows[b, i] for i in ti.static(range(3, 7))])
+            self.linear_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(7, 10))])
+            self.angular_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(10, 13))])
+            self.force[b] = ti.Vector([rows[b, i] for i in ti.static(range(13, 16))])
+            self.torque[b] = ti.Vector([rows[b, i] for i in ti.static(range(16, 19))])
+            self.rotation[b] = quaternion_matrix(self.quaternion[b])
+
+    @ti.kernel
+    def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for b in range(self.count):
+            for i in ti.static(range(3)):
+                rows[b, i] = self.position[b][i]
+                rows[b, 7 + i] = self.linear_velocity[b][i]
+                rows[b, 10 + i] = self.angular_velocity[b][i]
+                rows[b, 13 + i] = self.force[b][i]
+                rows[b, 16 + i] = self.torque[b][i]
+            for i in ti.static(range(4)):
+                rows[b, 3 + i] = self.quaternion[b][i]
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
@@ -327,11 +340,6 @@ class Bodies:
         self._grab(push.point_m, velocity.tolist(), push.radius_m)
 
     # ------------------------------------------------------------------ the rigid step
-
-    @ti.kernel
-    def _update_rotation(self):
-        for b in range(self.count):
-            self.rotation[b] = quaternion_matrix(self.quaternion[b])
 
     @ti.func
     def _inverse_inertia(self, b, vector):
@@ -581,10 +589,14 @@ class Bodies:
                     if going:
                         direction, amount = slide / speed, speed
                 if going:
-                    da, db = ra.cross(direction), rb.cross(direction)
-                    k = ma + mb + da.dot(self._inverse_inertia(a, da))
-                    if pair:
-                        k += db.dot(self._inverse_inertia(b, db))
+                    k = ma + mb
+                    for side in range(2):  # Σ (r × d) · I⁻¹ (r × d) over the bodies, a first
+                        if side == 0 or pair:
+                            body, arm = a, ra
+                            if side == 1:
+                                body, arm = b, rb
+                            turn = arm.cross(direction)
+                            k += turn.dot(self._inverse_inertia(body, turn))
                     strength = amount / k  # into a: j along the normal, −min(jt, μ j) along the sliding
                     if phase == 0:
                         j = strength
@@ -721,19 +733,25 @@ class Bodies:
         axis = d1.cross(d2)
         if axis.norm_sqr() > 1e-12 * d1.norm_sqr() * d2.norm_sqr():
             p, q = _closest_on_segments(p0, d1, q0, d2)
-            rb, ra = self.rotation[b], self.rotation[a]
-            inside_b = (ti.abs(rb.transpose() @ (p - self.position[b])) < self.half[b]).all()
-            inside_a = (ti.abs(ra.transpose() @ (q - self.position[a])) < self.half[a]).all()
-            if inside_b and inside_a:
+            inside = True
+            for side in range(2):  # p inside b, then q inside a
+                body, at = b, p
+                if side == 1:
+                    body, at = a, q
+                inside = (
+                    inside
+                    and (ti.abs(self.rotation[body].transpose() @ (at - self.position[body])) < self.half[body]).all()
+                )
+            if inside:
                 normal = axis.normalized()
                 gap = (self.position[a] - self.position[b]).dot(normal)
                 if gap < 0.0:
                     normal, gap = -normal, -gap
-                depth = (
-                    (ti.abs(ra.transpose() @ normal) * self.half[a]).sum()
-                    + (ti.abs(rb.transpose() @ normal) * self.half[b]).sum()
-                    - gap
-                )
+                widths = 0.0  # the two boxes' half widths along the normal, a's first
+                for side in range(2):
+                    body = ti.select(side == 0, a, b)
+                    widths += (ti.abs(self.rotation[body].transpose() @ normal) * self.half[body]).sum()
+                depth = widths - gap
                 point, found = 0.5 * (p + q), depth > 0.0
         return found, point, normal, depth
 
@@ -795,22 +813,14 @@ class Bodies:
             for term in range(27):
                 # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
                 # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
-                sign = 1.0
-                valid = True
-                active = ti.Vector([0, 0, 0])
-                d = ti.Vector([0.0, 0.0, 0.0])
-                d_sign = ti.Vector([0.0, 0.0, 0.0])
-                for a in ti.static(range(3)):
-                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
-                    face = choice != 0
-                    valid = valid and not (face and outside[a])
-                    sign = ti.select(face, -sign, sign)
-                    active[a] = ti.select(face, 1, outside[a])
-                    d[a] = ti.select(face, ti.select(choice == 1, local[a] - lower[a], upper[a] - local[a]), far[a])
-                    d_sign[a] = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign[a])
-                    valid = valid and not (active[a] and d[a] >= h)
-                if valid:
+                choice = ti.Vector([term // 9, term // 3 % 3, term % 3])
+                face = choice != 0
+                active = face | outside
+                d = ti.select(face, ti.select(choice == 1, local - lower, upper - local), far)
+                if not ((face & outside).any() or (active & (d >= h)).any()):
                     value, slope = self._half_spaces(active, d)
+                    sign = ti.select(face.sum() % 2 == 1, -1.0, 1.0)
+                    d_sign = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign)
                     density += sign * value
                     gradient += sign * d_sign * slope
         return density, r @ gradient
@@ -857,25 +867,46 @@ class Bodies:
         q = p
         pusher = -1
         for b in range(self.count):
-            centre = self.position[b]
-            if self.sphere[b]:
-                offset = q - centre
-                distance = offset.norm()
-                reach = self.half[b][0] + self.reach[b]
-                if distance < reach:
-                    direction = ti.Vector([0.0, 1.0, 0.0])
-                    if distance > 1e-12:
-                        direction = offset / distance
-                    q = centre + reach * direction
-                    pusher = b
+            moved = False
+            if ti.static(self.has_spheres and self.has_boxes):
+                if self.sphere[b]:
+                    q, moved = self._push_out_of_sphere(q, b)
+                else:
+                    q, moved = self._push_out_of_box(q, b)
+            elif ti.static(self.has_spheres):
+                q, moved = self._push_out_of_sphere(q, b)
             else:
-                r = self.rotation[b]
-                local = r.transpose() @ (q - centre)
-                grown = self.half[b] + self.reach[b]
-                if (ti.abs(local) < grown).all():
-                    q = self._exit(q, centre, r, local, grown)
-                    pusher = b
+                q, moved = self._push_out_of_box(q, b)
+            if moved:
+                pusher = b
         return q, pusher
+
+    @ti.func
+    def _push_out_of_sphere(self, p, b):
+        q = p
+        centre = self.position[b]
+        offset = q - centre
+        distance = offset.norm()
+        reach = self.half[b][0] + self.reach[b]
+        moved = distance < reach
+        if moved:
+            direction = ti.Vector([0.0, 1.0, 0.0])
+            if distance > 1e-12:
+                direction = offset / distance
+            q = centre + reach * direction
+        return q, moved
+
+    @ti.func
+    def _push_out_of_box(self, p, b):
+        q = p
+        centre = self.position[b]
+        r = self.rotation[b]
+        local = r.transpose() @ (q - centre)
+        grown = self.half[b] + self.reach[b]
+        moved = (ti.abs(local) < grown).all()
+        if moved:
+            q = self._exit(q, centre, r, local, grown)
+        return q, moved
 
     @ti.func
     def _exit(self, p, centre, r, local, grown):
@@ -999,13 +1030,3 @@ class Bodies:
         the next :meth:`advance` applies it."""
         scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
         self._gather(x, lam_total, multiplier, active, scale / dt**2, scale, -self.particle_mass / dt**2)
-
-
-def _padded(values: np.ndarray, fill=None) -> np.ndarray:
-    """``values`` with at least one row (the fields have a slot even without bodies)."""
-    if len(values):
-        return np.ascontiguousarray(values, np.float32)
-    row = np.zeros((1, values.shape[1]), np.float32)
-    if fill is not None:
-        row[0] = fill
-    return row
