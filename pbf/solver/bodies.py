@@ -813,14 +813,22 @@ class Bodies:
             for term in range(27):
                 # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
                 # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
-                choice = ti.Vector([term // 9, term // 3 % 3, term % 3])
-                face = choice != 0
-                active = face | outside
-                d = ti.select(face, ti.select(choice == 1, local - lower, upper - local), far)
-                if not ((face & outside).any() or (active & (d >= h)).any()):
+                sign = 1.0
+                valid = True
+                active = ti.Vector([0, 0, 0])
+                d = ti.Vector([0.0, 0.0, 0.0])
+                d_sign = ti.Vector([0.0, 0.0, 0.0])
+                for a in ti.static(range(3)):
+                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
+                    face = choice != 0
+                    valid = valid and not (face and outside[a])
+                    sign = ti.select(face, -sign, sign)
+                    active[a] = ti.select(face, 1, outside[a])
+                    d[a] = ti.select(face, ti.select(choice == 1, local[a] - lower[a], upper[a] - local[a]), far[a])
+                    d_sign[a] = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign[a])
+                    valid = valid and not (active[a] and d[a] >= h)
+                if valid:
                     value, slope = self._half_spaces(active, d)
-                    sign = ti.select(face.sum() % 2 == 1, -1.0, 1.0)
-                    d_sign = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign)
                     density += sign * value
                     gradient += sign * d_sign * slope
         return density, r @ gradient
