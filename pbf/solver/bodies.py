@@ -798,7 +798,8 @@ class Bodies:
         selections instead of branches, and with one wall and one quadrant lookup at runtime axes
         instead of three of each: this code is inlined twice in each Jacobi iteration's kernel
         (``DensityConstraint.iterate``), whose compile time grows faster than its length (Taichi's
-        reaching-definition analysis), and the branches made it 3 s longer (docs/BODIES.md, Compile time)."""
+        reaching-definition analysis): with the branches that kernel took 10 s to compile, without them 6
+        (wall seconds on a busy 2-core machine; docs/BODIES.md, Compile time)."""
         h = self.kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
