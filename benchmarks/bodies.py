@@ -12,11 +12,23 @@ distances from 0.2 to 1 particle radius and for the distance that shrinks from r
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum
     PYTHONPATH=$PWD python benchmarks/bodies.py archimedes
     PYTHONPATH=$PWD python benchmarks/bodies.py collision
+    PYTHONPATH=$PWD python benchmarks/bodies.py compile [runs] [other checkout]
+    PYTHONPATH=$PWD python benchmarks/bodies.py kernels [scene]
+
+With ``compile``: the cold start (``run.py SCENE --stats-only --frames 1``'s "kernels ready in", a fresh
+process and a fresh Taichi offline cache each) of dam_break and floating_boxes, runs alternated,
+medians; with another checkout's root, its floating_boxes too (``git worktree add`` an earlier commit).
+With ``kernels``: each kernel's first call (its compile) in one process, CPU seconds, the largest first.
 """
 
+import os
+import re
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -203,6 +215,58 @@ def _rotation(q):
     return quaternion_matrix_np(q)
 
 
+def cold_start_s(root: Path, scene: str) -> float:
+    """``run.py scene``'s "kernels ready in" with an empty offline cache, in a fresh process."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": cache, "PYTHONPATH": str(root)}
+        command = [sys.executable, str(root / "run.py"), scene, "--stats-only", "--frames", "1", "--arch", "cpu"]
+        out = subprocess.run(command, capture_output=True, text=True, env=env, check=True).stdout
+    return float(re.search(r"kernels ready in ([0-9.]+) s", out).group(1))
+
+
+def compile_times(runs: int = 3, other: str | None = None) -> None:
+    here = Path(__file__).resolve().parents[1]
+    cases = [("dam_break", here), ("floating_boxes", here)]
+    if other:
+        cases.append(("floating_boxes", Path(other).resolve()))
+    times = {case: [] for case in cases}
+    for _ in range(runs):  # alternated, so that a busy spell of the machine falls on all of them
+        for scene, root in cases:
+            times[scene, root].append(cold_start_s(root, scene))
+    base = np.median(times[cases[0]])
+    print("| scene | code | cold start, median (s) | runs (s) | / dam_break |\n|---|---|---|---|---|")
+    for (scene, root), values in times.items():
+        runs_s = ", ".join(f"{v:.1f}" for v in values)
+        median = np.median(values)
+        print(f"| {scene} | {root} | {median:.1f} | {runs_s} | {median / base:.2f} |")
+
+
+def kernel_compile_times(scene: str = "floating_boxes", shown: int = 15) -> None:
+    import taichi.lang.kernel_impl as kernel_impl  # Taichi's own class: its first call of a kernel compiles it
+
+    first_calls = {}
+    call = kernel_impl.Kernel.__call__
+
+    def timed(kernel, *args, **kwargs):
+        compiled = len(kernel.compiled_kernels)
+        start = time.process_time()
+        result = call(kernel, *args, **kwargs)
+        if len(kernel.compiled_kernels) > compiled:
+            name = kernel.func.__qualname__
+            first_calls[name] = first_calls.get(name, 0.0) + time.process_time() - start
+        return result
+
+    kernel_impl.Kernel.__call__ = timed
+    start, cpu = time.perf_counter(), time.process_time()
+    sim = Simulation(load_scene(scene), quiet=True)
+    sim.step()
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    print(f"{scene}: {wall:.1f} s, {cpu:.1f} CPU s, of which first calls {sum(first_calls.values()):.1f} CPU s")
+    print("| kernel | first call, CPU s |\n|---|---|")
+    for name, seconds in sorted(first_calls.items(), key=lambda item: -item[1])[:shown]:
+        print(f"| {name} | {seconds:.2f} |")
+
+
 if __name__ == "__main__":
     if sys.argv[1:2] == ["momentum"]:
         momentum()
@@ -210,6 +274,10 @@ if __name__ == "__main__":
         archimedes()
     elif sys.argv[1:2] == ["collision"]:
         collision()
+    elif sys.argv[1:2] == ["compile"]:
+        compile_times(int(sys.argv[2]) if len(sys.argv) > 2 else 3, sys.argv[3] if len(sys.argv) > 3 else None)
+    elif sys.argv[1:2] == ["kernels"]:
+        kernel_compile_times(*sys.argv[2:3])
 
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)

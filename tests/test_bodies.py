@@ -239,3 +239,67 @@ def test_boxes_meeting_edge_across_edge_do_not_pass_into_each_other():
     # With corner-on-face contacts alone the upper cube sank 0.05 m into the lower one before a corner
     # caught it; the ridges may overlap by a few millimetres within a substep's resolution.
     assert min(gaps) > 2 * ridge - 0.005
+
+
+def test_a_box_body_sees_the_obstacles_ghost_of_a_box():
+    # Bodies._box_ghost is GhostTables.box (the obstacles' 27-term expansion) rewritten without branches
+    # for its compile time: the same ghost, in the body's frame, at points all around the box.
+    import taichi as ti
+
+    from pbf.solver.boundary import Boundaries
+    from pbf.solver.model import Model
+
+    half = (0.1, 0.06, 0.08)
+    model = Model.from_scene(load_scene(pool([box(half, 500, [0.2, 0.3, 0.2], orientation_deg=[10, 20, 5])])))
+    bodies = Boundaries(model.boundary, model.capacity).bodies
+    bodies.load(bodies.initial_state())
+    rng = np.random.default_rng(1)
+    n = 4000
+    points = ti.Vector.field(3, ti.f32, shape=n)
+    points.from_numpy((np.array([0.2, 0.3, 0.2]) + rng.uniform(-0.17, 0.17, (n, 3))).astype(np.float32))
+    ghosts = ti.Vector.field(4, ti.f32, shape=(n, 2))
+
+    @ti.kernel
+    def both():
+        for i in range(n):
+            density, gradient = bodies.ghost(points[i])
+            ghosts[i, 0] = ti.Vector([density, gradient[0], gradient[1], gradient[2]])
+            r = bodies.rotation[0]
+            local = r.transpose() @ (points[i] - bodies.position[0])
+            value, slope = bodies.tables.box(local, -bodies.half[0], bodies.half[0])
+            slope = r @ slope
+            ghosts[i, 1] = ti.Vector([value, slope[0], slope[1], slope[2]])
+
+    both()
+    ours, obstacles = ghosts.to_numpy()[:, 0], ghosts.to_numpy()[:, 1]
+    assert (obstacles[:, 0] > 0).sum() > n / 4  # many points within h of the box, inside and out
+    assert np.allclose(ours, obstacles, rtol=1e-5, atol=1e-4)
+
+
+@pytest.mark.slow
+def test_a_box_and_a_sphere_come_to_rest_on_an_obstacle_and_on_each_other():
+    # The contacts of every kind in one scene (Bodies._contacts): a box and a sphere landing on an
+    # obstacle (corners in a fixed box; a sphere's closest point), a sphere on the floor and one
+    # dropped on it (two spheres), the container's walls. The water is in a corner, away from them.
+    scene = pool(
+        [
+            box((0.04, 0.03, 0.04), 2000, [0.09, 0.3, 0.12], orientation_deg=[0, 20, 0]),
+            {"shape": "sphere", "size_m": [0.04, 0, 0], "density_kg_m3": 1500, "position_m": [0.24, 0.42, 0.12]},
+            {"shape": "sphere", "size_m": [0.035, 0, 0], "density_kg_m3": 1800, "position_m": [0.1, 0.3, 0.32]},
+            {"shape": "sphere", "size_m": [0.035, 0, 0], "density_kg_m3": 1200, "position_m": [0.1, 0.42, 0.33]},
+        ],
+        depth=0.05,
+        obstacles=[{"min_m": [0.02, 0.0, 0.02], "max_m": [0.3, 0.12, 0.22]}],
+    )
+    scene["container"]["max_m"] = [0.4, 0.5, 0.4]
+    scene["fluid"]["blocks"] = [{"min_m": [0.25, 0, 0.25], "max_m": [0.4, 0.05, 0.4]}]
+    sim = Simulation(scene, quiet=True)
+    sim.step(45)
+    for _ in range(15):  # a quarter of a second: each stays where it landed
+        sim.step()
+        rows = sim.bodies.state()
+        assert rows[0, 1] == pytest.approx(0.12 + 0.03, abs=0.2 * SPACING)  # the box on the obstacle
+        assert rows[1, 1] == pytest.approx(0.12 + 0.04, abs=0.2 * SPACING)  # the sphere on the obstacle
+        assert rows[2, 1] == pytest.approx(0.035, abs=0.2 * SPACING)  # a sphere on the floor
+        # The sphere dropped on it rolls off to the floor, or rests on it: never inside it.
+        assert np.linalg.norm(rows[3, 0:3] - rows[2, 0:3]) > 0.07 - 0.2 * SPACING

@@ -89,6 +89,20 @@ CONTACT_SWEEPS = 8
 corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
 
 
+CORNERS = 8
+"""A box's corners; candidates of a body against an obstacle (a sphere uses the first)."""
+CONTAINER_CANDIDATES = 6 * CORNERS
+"""Candidates of a body against the container: per corner, below and above each axis's walls."""
+EDGE_PAIRS = 12 * 12
+"""Edge-across-edge candidates of two boxes."""
+
+
+@ti.func
+def _component(vector, axis):
+    """vector[axis] for a runtime axis, by selection (no runtime index into a local vector)."""
+    return ti.select(axis == 0, vector[0], ti.select(axis == 1, vector[1], vector[2]))
+
+
 @ti.func
 def quaternion_multiply(a, b):
     """The Hamilton product a b of quaternions (w, x, y, z)."""
@@ -208,6 +222,17 @@ class Bodies:
         for b in range(self.count):
             half = bodies.half_extents_m[b]
             self.bounding[b] = float(np.linalg.norm(half)) if bodies.shapes[b] == "box" else half[0]
+        self.has_spheres = "sphere" in bodies.shapes
+        self.has_boxes = "box" in bodies.shapes or not bodies.shapes
+        pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
+        self.pairs = len(pairs)
+        self.pair_first = ti.field(ti.i32, shape=max(1, self.pairs))
+        self.pair_second = ti.field(ti.i32, shape=max(1, self.pairs))
+        """The pairs of bodies a < b in order, for :meth:`_contacts`' one loop over bodies and pairs."""
+        for k, (a, b) in enumerate(pairs):
+            self.pair_first[k], self.pair_second[k] = a, b
+        self.static_candidates = CONTAINER_CANDIDATES + CORNERS * obstacles.count
+        """Candidates of each body against the container and the obstacles (:meth:`_static_candidate`)."""
         self.held = False
         """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
 
@@ -221,30 +246,43 @@ class Bodies:
 
     def load(self, state) -> None:
         """Set every body from a (count, STATE_WIDTH) array (:meth:`state`'s layout)."""
-        state = np.asarray(state, np.float32)
-        self.position.from_numpy(_padded(state[:, 0:3]))
-        quaternion = state[:, 3:7] / np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
-        self.quaternion.from_numpy(_padded(quaternion.astype(np.float32), fill=(1.0, 0.0, 0.0, 0.0)))
-        self.linear_velocity.from_numpy(_padded(state[:, 7:10]))
-        self.angular_velocity.from_numpy(_padded(state[:, 10:13]))
-        self.force.from_numpy(_padded(state[:, 13:16]))
-        self.torque.from_numpy(_padded(state[:, 16:19]))
-        self._update_rotation()
+        state = np.array(state, np.float32).reshape(self.count, STATE_WIDTH)
+        state[:, 3:7] /= np.linalg.norm(state[:, 3:7], axis=1, keepdims=True)
+        if self.count:
+            self._load(np.ascontiguousarray(state))
 
     def state(self) -> np.ndarray:
         """(count, STATE_WIDTH) float32 copy of every body's state (STATE_LAYOUT)."""
-        n = self.count
-        return np.concatenate(
-            [
-                self.position.to_numpy()[:n],
-                self.quaternion.to_numpy()[:n],
-                self.linear_velocity.to_numpy()[:n],
-                self.angular_velocity.to_numpy()[:n],
-                self.force.to_numpy()[:n],
-                self.torque.to_numpy()[:n],
-            ],
-            axis=1,
-        ).astype(np.float32)
+        state = np.zeros((self.count, STATE_WIDTH), np.float32)
+        if self.count:
+            self._store(state)
+        return state
+
+    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel of its
+    # own for its field (12 more compiles at the start, 0.5 s on 2 cores).
+
+    @ti.kernel
+    def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for b in range(self.count):
+            self.position[b] = ti.Vector([rows[b, i] for i in ti.static(range(0, 3))])
+            self.quaternion[b] = ti.Vector([rows[b, i] for i in ti.static(range(3, 7))])
+            self.linear_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(7, 10))])
+            self.angular_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(10, 13))])
+            self.force[b] = ti.Vector([rows[b, i] for i in ti.static(range(13, 16))])
+            self.torque[b] = ti.Vector([rows[b, i] for i in ti.static(range(16, 19))])
+            self.rotation[b] = quaternion_matrix(self.quaternion[b])
+
+    @ti.kernel
+    def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for b in range(self.count):
+            for i in ti.static(range(3)):
+                rows[b, i] = self.position[b][i]
+                rows[b, 7 + i] = self.linear_velocity[b][i]
+                rows[b, 10 + i] = self.angular_velocity[b][i]
+                rows[b, 13 + i] = self.force[b][i]
+                rows[b, 16 + i] = self.torque[b][i]
+            for i in ti.static(range(4)):
+                rows[b, 3 + i] = self.quaternion[b][i]
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
@@ -268,7 +306,11 @@ class Bodies:
         if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
             self.reach.fill(COLLISION_AT_REST * self.particle_radius)
         else:
+            # Three launches, not one kernel: Taichi's compile time grows faster than a kernel's length,
+            # and the contacts alone are most of it (docs/BODIES.md, Compile time).
             self._advance(dt, gravity)
+            self._resolve_contacts()
+            self._update_reach(dt)
 
     @ti.kernel
     def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
@@ -299,11 +341,6 @@ class Bodies:
 
     # ------------------------------------------------------------------ the rigid step
 
-    @ti.kernel
-    def _update_rotation(self):
-        for b in range(self.count):
-            self.rotation[b] = quaternion_matrix(self.quaternion[b])
-
     @ti.func
     def _inverse_inertia(self, b, vector):
         """I_b⁻¹ vector in world axes: R diag(1/I) Rᵀ vector."""
@@ -328,10 +365,16 @@ class Bodies:
             q = q.normalized()
             self.quaternion[b] = q
             self.rotation[b] = quaternion_matrix(q)
+
+    @ti.kernel
+    def _resolve_contacts(self):
         # One thread takes the contacts in a fixed order (a top-level loop of one iteration): their work
         # grows with the bodies squared, a few dozen, not with the particles.
         for _ in range(1):
             self._contacts()
+
+    @ti.kernel
+    def _update_reach(self, dt: ti.f32):
         for b in range(self.count):
             self.reach[b] = self.collision_reach(b, dt)
 
@@ -350,15 +393,50 @@ class Bodies:
 
     @ti.func
     def _contacts(self):
+        """Every contact, CONTACT_SWEEPS times over, in a fixed order: each body against the container
+        (its corners, or a sphere's six extreme points, below then above each wall) and the obstacles,
+        then each pair of bodies (a box's corners inside the other box, then, where none is, its edges
+        across the other's). Each candidate is tested where the contacts before it left the bodies,
+        and resolved at once (sequential impulses).
+
+        The candidates are numbered and walked by runtime loops (``slot``: a body against what stands
+        still, then a pair of bodies; ``m``: the candidate), and the resolution (:meth:`_resolve`) is
+        written once in the loop's body: Taichi inlines every ``ti.func`` call, and with a call per
+        wall, axis and kind of pair (unrolled by ``ti.static``) the impulse code was inlined 16 times
+        and the rigid step took 100 s to compile on 2 cores (docs/BODIES.md, Compile time)."""
         for _sweep in range(CONTACT_SWEEPS):
-            for b in range(self.count):
-                self._container_contacts(b)
-                if ti.static(self.obstacles.count > 0):
-                    for o in range(self.obstacles.count):
-                        self._obstacle_contacts(b, o)
-            for a in range(self.count):
-                for b in range(a + 1, self.count):
-                    self._pair_contacts(a, b)
+            for slot in range(self.count + self.pairs):
+                a, b = slot, -1  # a body against the container and the obstacles
+                candidates = self.static_candidates
+                if slot >= self.count:  # a pair, a < b
+                    a, b = self.pair_first[slot - self.count], self.pair_second[slot - self.count]
+                    candidates = self._pair_candidates(a, b)
+                corners = 0
+                for m in range(candidates):
+                    found = False
+                    first, second = a, b
+                    point = ti.Vector([0.0, 0.0, 0.0])
+                    normal = ti.Vector([0.0, 0.0, 0.0])
+                    depth = 0.0
+                    if b < 0:
+                        found, point, normal, depth = self._static_candidate(a, m)
+                    elif m < 2 * CORNERS or corners == 0:  # edges only where no corner is inside
+                        found, first, second, point, normal, depth = self._pair_candidate(a, b, m)
+                    if found:
+                        self._resolve(first, second, point, normal, depth)
+                        if m < 2 * CORNERS:
+                            corners += 1
+
+    @ti.func
+    def _pair_candidates(self, a, b):
+        """How many candidates bodies a and b have (:meth:`_pair_candidate`): one unless both are boxes;
+        none for two boxes whose bounding spheres are apart (no corner or edge test)."""
+        candidates = 1
+        if not (self.sphere[a] or self.sphere[b]):
+            candidates = 0
+            if (self.position[a] - self.position[b]).norm() < self.bounding[a] + self.bounding[b]:
+                candidates = 2 * CORNERS + EDGE_PAIRS
+        return candidates
 
     @ti.func
     def _corner(self, b, k):
@@ -367,29 +445,91 @@ class Bodies:
         return self.position[b] + self.rotation[b] @ (signs * self.half[b])
 
     @ti.func
-    def _container_contacts(self, b):
-        if self.sphere[b]:
-            radius = self.half[b][0]
-            for a in ti.static(range(3)):
-                normal = ti.Vector([1.0 if i == a else 0.0 for i in range(3)])
-                below = self.lower[a] - (self.position[b][a] - radius)
-                if below > 0.0:
-                    self._static_contact(b, self.position[b] - radius * normal, normal, below)
-                above = self.position[b][a] + radius - self.upper[a]
-                if above > 0.0:
-                    self._static_contact(b, self.position[b] + radius * normal, -normal, above)
+    def _static_candidate(self, b, m):
+        """Candidate m of body b against what does not move: whether it touches, the point, the outward
+        normal of the wall and the depth. m < CONTAINER_CANDIDATES: the container, at a box's corner
+        m // 6 (a sphere: m < 6 only, its extreme point), along axis m // 2 % 3, below its lower wall
+        (m even) or above its upper (m odd); then CORNERS per obstacle (a sphere: the first only, its
+        closest point). A scene of boxes alone compiles no sphere code, and the other way round."""
+        found = False
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        if ti.static(self.has_spheres and self.has_boxes):
+            if self.sphere[b]:
+                found, point, normal, depth = self._sphere_static_candidate(b, m)
+            else:
+                found, point, normal, depth = self._box_static_candidate(b, m)
+        elif ti.static(self.has_spheres):
+            found, point, normal, depth = self._sphere_static_candidate(b, m)
         else:
-            for k in range(8):
-                for a in ti.static(range(3)):
-                    normal = ti.Vector([1.0 if i == a else 0.0 for i in range(3)])
-                    corner = self._corner(b, k)
-                    below = self.lower[a] - corner[a]
-                    if below > 0.0:
-                        self._static_contact(b, corner, normal, below)
-                    corner = self._corner(b, k)
-                    above = corner[a] - self.upper[a]
-                    if above > 0.0:
-                        self._static_contact(b, corner, -normal, above)
+            found, point, normal, depth = self._box_static_candidate(b, m)
+        return found, point, normal, depth
+
+    @ti.func
+    def _box_static_candidate(self, b, m):
+        found = False
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        if m < CONTAINER_CANDIDATES:
+            axis, above = m // 2 % 3, m % 2
+            unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
+            point = self._corner(b, m // 6)
+            if above:
+                depth, normal = _component(point, axis) - _component(self.upper, axis), -unit
+            else:
+                depth, normal = _component(self.lower, axis) - _component(point, axis), unit
+            found = depth > 0.0
+        if ti.static(self.obstacles.count > 0):
+            if m >= CONTAINER_CANDIDATES:
+                o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
+                lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
+                centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+                point = self._corner(b, k)
+                local = point - centre
+                if (ti.abs(local) < half).all():
+                    normal, depth = self._box_exit(local, half)
+                    found = True
+        return found, point, normal, depth
+
+    @ti.func
+    def _sphere_static_candidate(self, b, m):
+        found = False
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        radius = self.half[b][0]
+        if m < 6:
+            axis, above = m // 2 % 3, m % 2
+            unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
+            centre = _component(self.position[b], axis)
+            if above:
+                depth = centre + radius - _component(self.upper, axis)
+                point, normal = self.position[b] + radius * unit, -unit
+            else:
+                depth = _component(self.lower, axis) - (centre - radius)
+                point, normal = self.position[b] - radius * unit, unit
+            found = depth > 0.0
+        if ti.static(self.obstacles.count > 0):
+            if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
+                o = (m - CONTAINER_CANDIDATES) // CORNERS
+                lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
+                centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+                c = self.position[b]
+                closest = ti.max(lower, ti.min(c, upper))
+                gap = c - closest
+                distance = gap.norm()
+                if distance < radius:
+                    normal = ti.Vector([0.0, 1.0, 0.0])
+                    depth = radius - distance
+                    if distance > 1e-9:
+                        normal = gap / distance
+                    else:
+                        n, inside = self._box_exit(c - centre, half)
+                        normal, depth = n, radius + inside
+                    point, found = c - radius * normal, True
+        return found, point, normal, depth
 
     @ti.func
     def _box_exit(self, local, half):
@@ -405,95 +545,100 @@ class Bodies:
         return normal, best
 
     @ti.func
-    def _obstacle_contacts(self, b, o):
-        lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
-        centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-        if self.sphere[b]:
-            radius = self.half[b][0]
-            c = self.position[b]
-            closest = ti.max(lower, ti.min(c, upper))
-            gap = c - closest
-            distance = gap.norm()
-            if distance < radius:
-                normal = ti.Vector([0.0, 1.0, 0.0])
-                depth = radius - distance
-                if distance > 1e-9:
-                    normal = gap / distance
-                else:
-                    normal, inside = self._box_exit(c - centre, half)
-                    depth = radius + inside
-                self._static_contact(b, c - radius * normal, normal, depth)
-        else:
-            for k in range(8):
-                corner = self._corner(b, k)
-                local = corner - centre
-                if (ti.abs(local) < half).all():
-                    normal, depth = self._box_exit(local, half)
-                    self._static_contact(b, corner, normal, depth)
-
-    @ti.func
     def _apply(self, b, impulse, arm):
         self.linear_velocity[b] += self.inverse_mass[b] * impulse
         self.angular_velocity[b] += self._inverse_inertia(b, arm.cross(impulse))
 
     @ti.func
-    def _static_contact(self, b, point, normal, depth):
-        """Body b's ``point`` lies ``depth`` inside a fixed wall of outward ``normal``: move it out, and
-        take away the velocity into the wall (no bounce) and, within Coulomb's cone, the sliding."""
-        self.position[b] += depth * normal
-        arm = point + depth * normal - self.position[b]  # the point moved with the body
-        approach = (self.linear_velocity[b] + self.angular_velocity[b].cross(arm)).dot(normal)
-        if approach < 0.0:
-            rn = arm.cross(normal)
-            j = -approach / (self.inverse_mass[b] + rn.dot(self._inverse_inertia(b, rn)))
-            self._apply(b, j * normal, arm)
-            slide = self.linear_velocity[b] + self.angular_velocity[b].cross(arm)
-            slide -= slide.dot(normal) * normal
-            speed = slide.norm()
-            if speed > 1e-9:
-                t = slide / speed
-                rt = arm.cross(t)
-                jt = ti.min(speed / (self.inverse_mass[b] + rt.dot(self._inverse_inertia(b, rt))), FRICTION * j)
-                self._apply(b, -jt * t, arm)
+    def _resolve(self, a, b, point, normal, depth):
+        """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a. With b < 0, a's
+        ``point`` lies inside a fixed wall of outward ``normal``: a moves out by the depth. Else a's and
+        b's surfaces overlap there and each moves apart in inverse proportion to its mass. Then the
+        velocity into the contact is taken away (no bounce), and, within Coulomb's cone, the sliding:
+        two impulses along a direction (the normal, then the sliding's), one loop over them, each on
+        one or two bodies (the impulse code once in the kernel)."""
+        pair = b >= 0
+        other = ti.max(b, 0)  # (a valid index where there is no other body; its terms are left out)
+        ma = self.inverse_mass[a]
+        mb = 0.0
+        contact = point + depth * normal  # the point moved with the body (against a wall)
+        if pair:
+            mb = self.inverse_mass[other]
+            self.position[a] += depth * ma / (ma + mb) * normal
+            self.position[b] -= depth * mb / (ma + mb) * normal
+            contact = point
+        else:
+            self.position[a] += depth * normal
+        ra, rb = contact - self.position[a], point - self.position[other]
+        going = True
+        j = 0.0
+        for phase in range(2):  # 0: the normal impulse; 1: friction, after an approach only
+            if going:
+                relative = self.linear_velocity[a] + self.angular_velocity[a].cross(ra)
+                if pair:
+                    relative = relative - self.linear_velocity[b] - self.angular_velocity[b].cross(rb)
+                direction, amount = normal, 0.0
+                if phase == 0:
+                    approach = relative.dot(normal)
+                    going = approach < 0.0
+                    amount = -approach
+                else:
+                    slide = relative - relative.dot(normal) * normal
+                    speed = slide.norm()
+                    going = speed > 1e-9
+                    if going:
+                        direction, amount = slide / speed, speed
+                if going:
+                    k = ma + mb
+                    for side in range(2):  # Σ (r × d) · I⁻¹ (r × d) over the bodies, a first
+                        if side == 0 or pair:
+                            body, arm = a, ra
+                            if side == 1:
+                                body, arm = b, rb
+                            turn = arm.cross(direction)
+                            k += turn.dot(self._inverse_inertia(body, turn))
+                    strength = amount / k  # into a: j along the normal, −min(jt, μ j) along the sliding
+                    if phase == 0:
+                        j = strength
+                    else:
+                        strength = -ti.min(strength, FRICTION * j)
+                    for side in range(2):
+                        if side == 0 or pair:
+                            body, impulse, arm = a, strength * direction, ra
+                            if side == 1:
+                                body, impulse, arm = b, -strength * direction, rb
+                            self._apply(body, impulse, arm)
 
     @ti.func
-    def _pair_contact(self, a, b, point, normal, depth):
-        """Body a's and b's surfaces overlap by ``depth`` at ``point``; ``normal`` points from b to a."""
-        ma, mb = self.inverse_mass[a], self.inverse_mass[b]
-        self.position[a] += depth * ma / (ma + mb) * normal
-        self.position[b] -= depth * mb / (ma + mb) * normal
-        ra, rb = point - self.position[a], point - self.position[b]
-        relative = (
-            self.linear_velocity[a]
-            + self.angular_velocity[a].cross(ra)
-            - self.linear_velocity[b]
-            - self.angular_velocity[b].cross(rb)
-        )
-        approach = relative.dot(normal)
-        if approach < 0.0:
-            na, nb = ra.cross(normal), rb.cross(normal)
-            k = ma + mb + na.dot(self._inverse_inertia(a, na)) + nb.dot(self._inverse_inertia(b, nb))
-            j = -approach / k
-            self._apply(a, j * normal, ra)
-            self._apply(b, -j * normal, rb)
-            relative = (
-                self.linear_velocity[a]
-                + self.angular_velocity[a].cross(ra)
-                - self.linear_velocity[b]
-                - self.angular_velocity[b].cross(rb)
-            )
-            slide = relative - relative.dot(normal) * normal
-            speed = slide.norm()
-            if speed > 1e-9:
-                t = slide / speed
-                ta, tb = ra.cross(t), rb.cross(t)
-                kt = ma + mb + ta.dot(self._inverse_inertia(a, ta)) + tb.dot(self._inverse_inertia(b, tb))
-                jt = ti.min(speed / kt, FRICTION * j)
-                self._apply(a, -jt * t, ra)
-                self._apply(b, jt * t, rb)
+    def _pair_candidate(self, a, b, m):
+        """Candidate m of bodies a and b: whether they overlap there, the body the normal points to and
+        the other, the point, the normal and the depth. Two spheres or a sphere and a box: one
+        candidate. Two boxes: m < 16 the corners of a inside b, then those of b inside a; then edge
+        (m − 16) // 12 of a across edge (m − 16) % 12 of b (:meth:`_edge_candidate`)."""
+        found = False
+        first, second = a, b
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        if ti.static(self.has_spheres and self.has_boxes):
+            if self.sphere[a] or self.sphere[b]:
+                found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
+            else:
+                found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
+        elif ti.static(self.has_spheres):
+            found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
+        else:
+            found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
+        return found, first, second, point, normal, depth
 
     @ti.func
-    def _pair_contacts(self, a, b):
+    def _sphere_pair_candidate(self, a, b):
+        """Two spheres, or a sphere and a box: their one candidate."""
+        found = False
+        first, second = a, b
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
         if self.sphere[a] and self.sphere[b]:
             gap = self.position[a] - self.position[b]
             distance = gap.norm()
@@ -502,8 +647,8 @@ class Bodies:
                 normal = ti.Vector([0.0, 1.0, 0.0])
                 if distance > 1e-9:
                     normal = gap / distance
-                self._pair_contact(a, b, self.position[b] + self.half[b][0] * normal, normal, reach - distance)
-        elif self.sphere[a] or self.sphere[b]:
+                point, depth, found = self.position[b] + self.half[b][0] * normal, reach - distance, True
+        else:
             s, box = a, b
             if self.sphere[b]:
                 s, box = b, a
@@ -522,24 +667,32 @@ class Bodies:
                 else:
                     n, inside = self._box_exit(local, half)
                     normal_local, depth = n, radius + inside
-                point = self.position[box] + r @ closest
-                self._pair_contact(s, box, point, r @ normal_local, depth)
-        elif (self.position[a] - self.position[b]).norm() < self.bounding[a] + self.bounding[b]:
-            # (two boxes whose bounding spheres are apart cannot touch: no corner or edge test)
-            corners = 0
-            for k in range(16):  # the corners of a inside b, then those of b inside a
-                inner, outer = a, b
-                if k >= 8:
-                    inner, outer = b, a
-                corner = self._corner(inner, k % 8)
-                r = self.rotation[outer]
-                local = r.transpose() @ (corner - self.position[outer])
-                if (ti.abs(local) < self.half[outer]).all():
-                    n, depth = self._box_exit(local, self.half[outer])
-                    self._pair_contact(inner, outer, corner, r @ n, depth)
-                    corners += 1
-            if corners == 0:  # no corner inside: the boxes can still meet edge across edge
-                self._edge_contacts(a, b)
+                point, normal = self.position[box] + r @ closest, r @ normal_local
+                first, second, found = s, box, True
+        return found, first, second, point, normal, depth
+
+    @ti.func
+    def _box_pair_candidate(self, a, b, m):
+        """Two boxes: a corner of one inside the other (m < 16), or an edge across an edge."""
+        found = False
+        first, second = a, b
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        if m < 2 * CORNERS:
+            inner, outer = a, b
+            if m >= CORNERS:
+                inner, outer = b, a
+            point = self._corner(inner, m % CORNERS)
+            r = self.rotation[outer]
+            local = r.transpose() @ (point - self.position[outer])
+            if (ti.abs(local) < self.half[outer]).all():
+                n, inside = self._box_exit(local, self.half[outer])
+                normal, depth = r @ n, inside
+                first, second, found = inner, outer, True
+        else:
+            found, point, normal, depth = self._edge_candidate(a, b, m - 2 * CORNERS)
+        return found, first, second, point, normal, depth
 
     @ti.func
     def _edge(self, b, k):
@@ -558,58 +711,151 @@ class Bodies:
         return self.position[b] + r @ start, self.position[b] + r @ end
 
     @ti.func
-    def _edge_contacts(self, a, b):
-        """Boxes a and b that meet edge across edge, no corner of either inside the other: for every pair
-        of edges that are not parallel, the closest points p (on a's edge) and q (on b's); where p lies
+    def _edge_candidate(self, a, b, k):
+        """Edge k // 12 of box a across edge k % 12 of box b, no corner of either inside the other: the
+        closest points p (on a's edge) and q (on b's) of edges that are not parallel; where p lies
         inside b and q inside a the edges cross through each other's volume. The normal is their edges'
         cross product, turned from b to a, and the depth the boxes' overlap along it (separating axis
         test: the two boxes' projected half widths less the distance between their centres)."""
-        for k in range(144):
-            p0, p1 = self._edge(a, k // 12)
-            q0, q1 = self._edge(b, k % 12)
-            d1, d2 = p1 - p0, q1 - q0
-            axis = d1.cross(d2)
-            if axis.norm_sqr() > 1e-12 * d1.norm_sqr() * d2.norm_sqr():
-                p, q = _closest_on_segments(p0, d1, q0, d2)
-                rb, ra = self.rotation[b], self.rotation[a]
-                inside_b = (ti.abs(rb.transpose() @ (p - self.position[b])) < self.half[b]).all()
-                inside_a = (ti.abs(ra.transpose() @ (q - self.position[a])) < self.half[a]).all()
-                if inside_b and inside_a:
-                    normal = axis.normalized()
-                    gap = (self.position[a] - self.position[b]).dot(normal)
-                    if gap < 0.0:
-                        normal, gap = -normal, -gap
-                    depth = (
-                        (ti.abs(ra.transpose() @ normal) * self.half[a]).sum()
-                        + (ti.abs(rb.transpose() @ normal) * self.half[b]).sum()
-                        - gap
-                    )
-                    if depth > 0.0:
-                        self._pair_contact(a, b, 0.5 * (p + q), normal, depth)
+        found = False
+        point = ti.Vector([0.0, 0.0, 0.0])
+        normal = ti.Vector([0.0, 0.0, 0.0])
+        depth = 0.0
+        p0, p1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        q0, q1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+        for side in range(2):  # a's edge, then b's: the edge code once in the kernel
+            start, end = self._edge(ti.select(side == 0, a, b), ti.select(side == 0, k // 12, k % 12))
+            if side == 0:
+                p0, p1 = start, end
+            else:
+                q0, q1 = start, end
+        d1, d2 = p1 - p0, q1 - q0
+        axis = d1.cross(d2)
+        if axis.norm_sqr() > 1e-12 * d1.norm_sqr() * d2.norm_sqr():
+            p, q = _closest_on_segments(p0, d1, q0, d2)
+            inside = True
+            for side in range(2):  # p inside b, then q inside a
+                body, at = b, p
+                if side == 1:
+                    body, at = a, q
+                inside = (
+                    inside
+                    and (ti.abs(self.rotation[body].transpose() @ (at - self.position[body])) < self.half[body]).all()
+                )
+            if inside:
+                normal = axis.normalized()
+                gap = (self.position[a] - self.position[b]).dot(normal)
+                if gap < 0.0:
+                    normal, gap = -normal, -gap
+                widths = 0.0  # the two boxes' half widths along the normal, a's first
+                for side in range(2):
+                    body = ti.select(side == 0, a, b)
+                    widths += (ti.abs(self.rotation[body].transpose() @ normal) * self.half[body]).sum()
+                depth = widths - gap
+                point, found = 0.5 * (p + q), depth > 0.0
+        return found, point, normal, depth
 
     # ------------------------------------------------------------------ the boundary the fluid sees
 
     @ti.func
     def _ghost_of(self, p, b):
-        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
+        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m). A scene of boxes alone (or of
+        spheres alone) compiles one branch only (``has_spheres``, ``has_boxes``)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
-        if self.sphere[b]:
-            offset = p - centre
-            distance = offset.norm()
-            surface = distance - self.half[b][0]
-            if surface < self.kernel_radius:
-                value, slope = self.tables.wall(surface)
-                density = value
-                gradient = slope * offset / ti.max(distance, 1e-12)
+        if ti.static(self.has_spheres and self.has_boxes):
+            if self.sphere[b]:
+                density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
+            else:
+                density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
+        elif ti.static(self.has_spheres):
+            density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
         else:
-            r = self.rotation[b]
-            half = self.half[b]
-            value, slope = self.tables.box(r.transpose() @ (p - centre), -half, half)
-            density = value
-            gradient = r @ slope
+            density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
         return density, gradient
+
+    @ti.func
+    def _sphere_ghost(self, p, centre, radius):
+        """A sphere's ghost: the half-space table at the distance from its surface, along the radius."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        offset = p - centre
+        distance = offset.norm()
+        surface = distance - radius
+        if surface < self.kernel_radius:
+            value, slope = self.tables.wall(surface)
+            density = value
+            gradient = slope * offset / ti.max(distance, 1e-12)
+        return density, gradient
+
+    @ti.func
+    def _box_ghost(self, p, centre, r, half):
+        """A box's ghost: ``GhostTables.box`` (the obstacles' 27-term expansion of a box into
+        half-spaces, quadrants and octants) at p in the body's frame, its gradient rotated back.
+
+        The same terms and the same arithmetic as ``GhostTables.box`` and ``half_spaces``, written with
+        selections instead of branches, and with one wall and one quadrant lookup at runtime axes
+        instead of three of each: this code is inlined twice in each Jacobi iteration's kernel
+        (``DensityConstraint.iterate``), whose compile time grows faster than its length (Taichi's
+        reaching-definition analysis): with the branches that kernel took 10 s to compile, without them 6
+        (wall seconds on a busy 2-core machine; docs/BODIES.md, Compile time)."""
+        h = self.kernel_radius
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        local = r.transpose() @ (p - centre)
+        lower, upper = -half, half
+        nearest = ti.max(ti.max(lower - local, local - upper), 0.0)
+        if nearest.norm() < h:
+            below, above = local < lower, local > upper
+            outside = below | above
+            far = ti.select(below, lower - local, ti.select(above, local - upper, 0.0))
+            far_sign = ti.select(below, -1.0, ti.select(above, 1.0, 0.0))
+            for term in range(27):
+                # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
+                # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
+                sign = 1.0
+                valid = True
+                active = ti.Vector([0, 0, 0])
+                d = ti.Vector([0.0, 0.0, 0.0])
+                d_sign = ti.Vector([0.0, 0.0, 0.0])
+                for a in ti.static(range(3)):
+                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
+                    face = choice != 0
+                    valid = valid and not (face and outside[a])
+                    sign = ti.select(face, -sign, sign)
+                    active[a] = ti.select(face, 1, outside[a])
+                    d[a] = ti.select(face, ti.select(choice == 1, local[a] - lower[a], upper[a] - local[a]), far[a])
+                    d_sign[a] = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign[a])
+                    valid = valid and not (active[a] and d[a] >= h)
+                if valid:
+                    value, slope = self._half_spaces(active, d)
+                    density += sign * value
+                    gradient += sign * d_sign * slope
+        return density, r @ gradient
+
+    @ti.func
+    def _half_spaces(self, active, d):
+        """``GhostTables.half_spaces`` with the wall or quadrant looked up once, at the active axes."""
+        value = 0.0
+        slope = ti.Vector([0.0, 0.0, 0.0])
+        count = active.sum()
+        if count == 0:
+            value = 1.0
+        elif count == 1:
+            a = ti.select(active[0], 0, ti.select(active[1], 1, 2))
+            wall, wall_slope = self.tables.wall(_component(d, a))
+            value = wall
+            slope = ti.Vector([ti.select(a == i, wall_slope, 0.0) for i in ti.static(range(3))])
+        elif count == 2:
+            left_out = ti.select(active[0] == 0, 0, ti.select(active[1] == 0, 1, 2))
+            a, b = ti.select(left_out == 0, 1, 0), ti.select(left_out == 2, 1, 2)
+            quadrant, g = self.tables.quadrant(_component(d, a), _component(d, b))
+            value = quadrant
+            slope = ti.Vector([ti.select(a == i, g[0], ti.select(b == i, g[1], 0.0)) for i in ti.static(range(3))])
+        else:
+            value, slope = self.tables.octant(d)
+        return value, slope
 
     @ti.func
     def ghost(self, p):
@@ -630,25 +876,46 @@ class Bodies:
         q = p
         pusher = -1
         for b in range(self.count):
-            centre = self.position[b]
-            if self.sphere[b]:
-                offset = q - centre
-                distance = offset.norm()
-                reach = self.half[b][0] + self.reach[b]
-                if distance < reach:
-                    direction = ti.Vector([0.0, 1.0, 0.0])
-                    if distance > 1e-12:
-                        direction = offset / distance
-                    q = centre + reach * direction
-                    pusher = b
+            moved = False
+            if ti.static(self.has_spheres and self.has_boxes):
+                if self.sphere[b]:
+                    q, moved = self._push_out_of_sphere(q, b)
+                else:
+                    q, moved = self._push_out_of_box(q, b)
+            elif ti.static(self.has_spheres):
+                q, moved = self._push_out_of_sphere(q, b)
             else:
-                r = self.rotation[b]
-                local = r.transpose() @ (q - centre)
-                grown = self.half[b] + self.reach[b]
-                if (ti.abs(local) < grown).all():
-                    q = self._exit(q, centre, r, local, grown)
-                    pusher = b
+                q, moved = self._push_out_of_box(q, b)
+            if moved:
+                pusher = b
         return q, pusher
+
+    @ti.func
+    def _push_out_of_sphere(self, p, b):
+        q = p
+        centre = self.position[b]
+        offset = q - centre
+        distance = offset.norm()
+        reach = self.half[b][0] + self.reach[b]
+        moved = distance < reach
+        if moved:
+            direction = ti.Vector([0.0, 1.0, 0.0])
+            if distance > 1e-12:
+                direction = offset / distance
+            q = centre + reach * direction
+        return q, moved
+
+    @ti.func
+    def _push_out_of_box(self, p, b):
+        q = p
+        centre = self.position[b]
+        r = self.rotation[b]
+        local = r.transpose() @ (q - centre)
+        grown = self.half[b] + self.reach[b]
+        moved = (ti.abs(local) < grown).all()
+        if moved:
+            q = self._exit(q, centre, r, local, grown)
+        return q, moved
 
     @ti.func
     def _exit(self, p, centre, r, local, grown):
@@ -658,11 +925,11 @@ class Bodies:
         face when every way out is shut."""
         best, exit = 1e30, p
         nearest, fallback = 1e30, p
-        for a, side in ti.static(ti.ndrange(3, 2)):
+        for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times
+            a, side = face // 2, face % 2
             sign = 2.0 * side - 1.0
-            depth = grown[a] - sign * local[a]
-            out = local
-            out[a] = sign * grown[a]
+            depth = _component(grown, a) - sign * _component(local, a)
+            out = ti.Vector([ti.select(a == i, sign * grown[i], local[i]) for i in ti.static(range(3))])
             target = centre + r @ out
             if depth < nearest:
                 nearest, fallback = depth, target
@@ -772,13 +1039,3 @@ class Bodies:
         the next :meth:`advance` applies it."""
         scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
         self._gather(x, lam_total, multiplier, active, scale / dt**2, scale, -self.particle_mass / dt**2)
-
-
-def _padded(values: np.ndarray, fill=None) -> np.ndarray:
-    """``values`` with at least one row (the fields have a slot even without bodies)."""
-    if len(values):
-        return np.ascontiguousarray(values, np.float32)
-    row = np.zeros((1, values.shape[1]), np.float32)
-    if fill is not None:
-        row[0] = fill
-    return row
