@@ -53,6 +53,16 @@ def test_a_wheel_ships_the_presets_and_runs_one_by_name(tmp_path):
     ).stdout.split()
     assert all(Path(p).is_relative_to(environment) for p in where), where
     assert (Path(where[1]) / "dam_break.toml").is_file()
+    # Every preset of the checkout is found by name in the installed package and loads there (each
+    # `extends` included); running one shows the rest would run the same way.
+    presets = sorted(path.stem for path in (ROOT / "pbf" / "scenes").glob("*.toml"))
+    load_each = "import sys; from pbf.scene import load_scene; print(*[load_scene(n).name for n in sys.argv[1:]])"
+    loaded = run(
+        [python, "-c", load_each, *presets],
+        cwd=elsewhere,
+        env=clean,
+    ).stdout.split()
+    assert loaded == presets, (loaded, presets)
 
     command = [environment / "bin" / "pbf", "martin_moyce", "--headless", "--frames", "2", "--size", "64x36"]
     done = run(
