@@ -242,8 +242,9 @@ def test_boxes_meeting_edge_across_edge_do_not_pass_into_each_other():
 
 
 def test_a_box_body_sees_the_obstacles_ghost_of_a_box():
-    # Bodies._box_ghost is GhostTables.box (the obstacles' 27-term expansion) rewritten without branches
-    # for its compile time: the same ghost, in the body's frame, at points all around the box.
+    # A rotated box body's ghost is the obstacles' (GhostTables.box, the 27-term expansion) in the
+    # body's frame with its gradient rotated back; and beside a face, away from its edges, that
+    # expansion is the one wall's half-space ghost (the container's wall table) at the face's distance.
     import taichi as ti
 
     from pbf.solver.boundary import Boundaries
@@ -274,6 +275,26 @@ def test_a_box_body_sees_the_obstacles_ghost_of_a_box():
     ours, obstacles = ghosts.to_numpy()[:, 0], ghosts.to_numpy()[:, 1]
     assert (obstacles[:, 0] > 0).sum() > n / 4  # many points within h of the box, inside and out
     assert np.allclose(ours, obstacles, rtol=1e-5, atol=1e-4)
+
+    # Beside a face: outside along one axis only, every other coordinate h inside the box's edges.
+    rotation = bodies.rotation.to_numpy()[0].astype(np.float64)
+    local = (points.to_numpy().astype(np.float64) - bodies.position.to_numpy()[0]) @ rotation
+    h = bodies.kernel_radius
+    beyond = np.abs(local) - np.array(half)
+    face = (beyond > 0).sum(axis=1) == 1
+    face &= np.where(beyond > 0, True, beyond < -h).all(axis=1) & (beyond.max(axis=1) < h)
+    assert face.sum() > 20, face.sum()
+    distances = ti.field(ti.f32, shape=int(face.sum()))
+    distances.from_numpy(beyond.max(axis=1)[face].astype(np.float32))
+    walls = ti.field(ti.f32, shape=int(face.sum()))
+
+    @ti.kernel
+    def wall_values():
+        for k in range(distances.shape[0]):
+            walls[k] = bodies.tables.wall(distances[k])[0]
+
+    wall_values()
+    assert np.allclose(ours[face, 0], walls.to_numpy(), rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.slow

@@ -98,7 +98,7 @@ EDGE_PAIRS = 12 * 12
 
 
 @ti.func
-def _component(vector, axis):
+def component(vector, axis):
     """vector[axis] for a runtime axis, by selection (no runtime index into a local vector)."""
     return ti.select(axis == 0, vector[0], ti.select(axis == 1, vector[1], vector[2]))
 
@@ -477,9 +477,9 @@ class Bodies:
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
             point = self._corner(b, m // 6)
             if above:
-                depth, normal = _component(point, axis) - _component(self.upper, axis), -unit
+                depth, normal = component(point, axis) - component(self.upper, axis), -unit
             else:
-                depth, normal = _component(self.lower, axis) - _component(point, axis), unit
+                depth, normal = component(self.lower, axis) - component(point, axis), unit
             found = depth > 0.0
         if ti.static(self.obstacles.count > 0):
             if m >= CONTAINER_CANDIDATES:
@@ -503,12 +503,12 @@ class Bodies:
         if m < 6:
             axis, above = m // 2 % 3, m % 2
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
-            centre = _component(self.position[b], axis)
+            centre = component(self.position[b], axis)
             if above:
-                depth = centre + radius - _component(self.upper, axis)
+                depth = centre + radius - component(self.upper, axis)
                 point, normal = self.position[b] + radius * unit, -unit
             else:
-                depth = _component(self.lower, axis) - (centre - radius)
+                depth = component(self.lower, axis) - (centre - radius)
                 point, normal = self.position[b] - radius * unit, unit
             found = depth > 0.0
         if ti.static(self.obstacles.count > 0):
@@ -792,70 +792,9 @@ class Bodies:
     @ti.func
     def _box_ghost(self, p, centre, r, half):
         """A box's ghost: ``GhostTables.box`` (the obstacles' 27-term expansion of a box into
-        half-spaces, quadrants and octants) at p in the body's frame, its gradient rotated back.
-
-        The same terms and the same arithmetic as ``GhostTables.box`` and ``half_spaces``, written with
-        selections instead of branches, and with one wall and one quadrant lookup at runtime axes
-        instead of three of each: this code is inlined twice in each Jacobi iteration's kernel
-        (``DensityConstraint.iterate``), whose compile time grows faster than its length (Taichi's
-        reaching-definition analysis): with the branches that kernel took 10 s to compile, without them 6
-        (wall seconds on a busy 2-core machine; docs/BODIES.md, Compile time)."""
-        h = self.kernel_radius
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        local = r.transpose() @ (p - centre)
-        lower, upper = -half, half
-        nearest = ti.max(ti.max(lower - local, local - upper), 0.0)
-        if nearest.norm() < h:
-            below, above = local < lower, local > upper
-            outside = below | above
-            far = ti.select(below, lower - local, ti.select(above, local - upper, 0.0))
-            far_sign = ti.select(below, -1.0, ti.select(above, 1.0, 0.0))
-            for term in range(27):
-                # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
-                # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
-                sign = 1.0
-                valid = True
-                active = ti.Vector([0, 0, 0])
-                d = ti.Vector([0.0, 0.0, 0.0])
-                d_sign = ti.Vector([0.0, 0.0, 0.0])
-                for a in ti.static(range(3)):
-                    choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
-                    face = choice != 0
-                    valid = valid and not (face and outside[a])
-                    sign = ti.select(face, -sign, sign)
-                    active[a] = ti.select(face, 1, outside[a])
-                    d[a] = ti.select(face, ti.select(choice == 1, local[a] - lower[a], upper[a] - local[a]), far[a])
-                    d_sign[a] = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign[a])
-                    valid = valid and not (active[a] and d[a] >= h)
-                if valid:
-                    value, slope = self._half_spaces(active, d)
-                    density += sign * value
-                    gradient += sign * d_sign * slope
+        half-spaces, quadrants and octants) at p in the body's frame, its gradient rotated back."""
+        density, gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
         return density, r @ gradient
-
-    @ti.func
-    def _half_spaces(self, active, d):
-        """``GhostTables.half_spaces`` with the wall or quadrant looked up once, at the active axes."""
-        value = 0.0
-        slope = ti.Vector([0.0, 0.0, 0.0])
-        count = active.sum()
-        if count == 0:
-            value = 1.0
-        elif count == 1:
-            a = ti.select(active[0], 0, ti.select(active[1], 1, 2))
-            wall, wall_slope = self.tables.wall(_component(d, a))
-            value = wall
-            slope = ti.Vector([ti.select(a == i, wall_slope, 0.0) for i in ti.static(range(3))])
-        elif count == 2:
-            left_out = ti.select(active[0] == 0, 0, ti.select(active[1] == 0, 1, 2))
-            a, b = ti.select(left_out == 0, 1, 0), ti.select(left_out == 2, 1, 2)
-            quadrant, g = self.tables.quadrant(_component(d, a), _component(d, b))
-            value = quadrant
-            slope = ti.Vector([ti.select(a == i, g[0], ti.select(b == i, g[1], 0.0)) for i in ti.static(range(3))])
-        else:
-            value, slope = self.tables.octant(d)
-        return value, slope
 
     @ti.func
     def ghost(self, p):
@@ -928,7 +867,7 @@ class Bodies:
         for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times
             a, side = face // 2, face % 2
             sign = 2.0 * side - 1.0
-            depth = _component(grown, a) - sign * _component(local, a)
+            depth = component(grown, a) - sign * component(local, a)
             out = ti.Vector([ti.select(a == i, sign * grown[i], local[i]) for i in ti.static(range(3))])
             target = centre + r @ out
             if depth < nearest:

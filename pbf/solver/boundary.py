@@ -31,7 +31,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import sph
-from pbf.solver.bodies import Bodies
+from pbf.solver.bodies import Bodies, component
 from pbf.solver.model import BoundaryParams
 
 TABLE_SAMPLES = 512
@@ -108,44 +108,23 @@ class GhostTables:
         return value, gradient
 
     @ti.func
-    def half_spaces(self, active, d):
-        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
-        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1."""
-        value = 0.0
-        slope = ti.Vector([0.0, 0.0, 0.0])
-        count = active.sum()
-        if count == 0:
-            value = 1.0
-        elif count == 1:
-            for a in ti.static(range(3)):
-                if active[a]:
-                    value, slope[a] = self.wall(d[a])
-        elif count == 2:
-            for a, b in ti.static(((0, 1), (0, 2), (1, 2))):
-                if active[a] and active[b]:
-                    q, g = self.quadrant(d[a], d[b])
-                    value, slope[a], slope[b] = q, g[0], g[1]
-        else:
-            value, slope = self.octant(d)
-        return value, slope
-
-    @ti.func
     def box(self, p, lower, upper):
         """Ghost density ρ/ρ0 of the axis-aligned box lower–upper at p, and its gradient (1/m): the
-        27-term expansion of the module docstring (obstacles; bodies in their own frame)."""
+        27-term expansion of the module docstring (obstacles; bodies in their own frame).
+
+        Written with selections instead of branches, and with one wall and one quadrant lookup at the
+        active axes (:meth:`half_spaces`) instead of three of each: this code is inlined in
+        each Jacobi iteration's kernel, once per obstacle and body shape, and Taichi's compile time of a
+        kernel grows faster than its length (docs/BODIES.md, "Compile time")."""
         h = self.kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
         if nearest.norm() < h:
-            outside = ti.Vector([0, 0, 0])
-            far = ti.Vector([0.0, 0.0, 0.0])  # outside: distance to the slab; its derivative's sign
-            far_sign = ti.Vector([0.0, 0.0, 0.0])
-            for a in ti.static(range(3)):
-                if p[a] < lower[a]:
-                    outside[a], far[a], far_sign[a] = 1, lower[a] - p[a], -1.0
-                elif p[a] > upper[a]:
-                    outside[a], far[a], far_sign[a] = 1, p[a] - upper[a], 1.0
+            below, above = p < lower, p > upper
+            outside = below | above
+            far = ti.select(below, lower - p, ti.select(above, p - upper, 0.0))  # outside: distance to the slab
+            far_sign = ti.select(below, -1.0, ti.select(above, 1.0, 0.0))  # and its derivative's sign
             for term in range(27):
                 # Per axis, choice 0: the slab itself (outside: its half-space; inside: everything),
                 # 1 and 2: minus the half-space beyond the lower or upper face (inside only).
@@ -156,25 +135,43 @@ class GhostTables:
                 d_sign = ti.Vector([0.0, 0.0, 0.0])
                 for a in ti.static(range(3)):
                     choice = term // (9 if a == 0 else 3 if a == 1 else 1) % 3
-                    if choice == 0:
-                        if outside[a]:
-                            active[a], d[a], d_sign[a] = 1, far[a], far_sign[a]
-                    elif outside[a]:
-                        valid = False
-                    else:
-                        sign = -sign
-                        active[a] = 1
-                        if choice == 1:
-                            d[a], d_sign[a] = p[a] - lower[a], 1.0
-                        else:
-                            d[a], d_sign[a] = upper[a] - p[a], -1.0
-                    if active[a] and d[a] >= h:
-                        valid = False
+                    face = choice != 0
+                    valid = valid and not (face and outside[a])
+                    sign = ti.select(face, -sign, sign)
+                    active[a] = ti.select(face, 1, outside[a])
+                    d[a] = ti.select(face, ti.select(choice == 1, p[a] - lower[a], upper[a] - p[a]), far[a])
+                    d_sign[a] = ti.select(face, ti.select(choice == 1, 1.0, -1.0), far_sign[a])
+                    valid = valid and not (active[a] and d[a] >= h)
                 if valid:
                     value, slope = self.half_spaces(active, d)
                     density += sign * value
                     gradient += sign * d_sign * slope
         return density, gradient
+
+    @ti.func
+    def half_spaces(self, active, d):
+        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
+        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1.
+        The wall or the quadrant is looked up once, at the active axes chosen at run time."""
+        value = 0.0
+        slope = ti.Vector([0.0, 0.0, 0.0])
+        count = active.sum()
+        if count == 0:
+            value = 1.0
+        elif count == 1:
+            a = ti.select(active[0], 0, ti.select(active[1], 1, 2))
+            wall, wall_slope = self.wall(component(d, a))
+            value = wall
+            slope = ti.Vector([ti.select(a == i, wall_slope, 0.0) for i in ti.static(range(3))])
+        elif count == 2:
+            left_out = ti.select(active[0] == 0, 0, ti.select(active[1] == 0, 1, 2))
+            a, b = ti.select(left_out == 0, 1, 0), ti.select(left_out == 2, 1, 2)
+            quadrant, g = self.quadrant(component(d, a), component(d, b))
+            value = quadrant
+            slope = ti.Vector([ti.select(a == i, g[0], ti.select(b == i, g[1], 0.0)) for i in ti.static(range(3))])
+        else:
+            value, slope = self.octant(d)
+        return value, slope
 
 
 @ti.data_oriented
