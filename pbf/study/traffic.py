@@ -70,15 +70,15 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
     rows += [
         Pass(
             "iterations",
-            "λ: x*, denominator, L, L before in; λ, L, L before out; neighbours' x*",
-            VECTOR + 3 * SCALAR + 3 * SCALAR + visit_stream,
+            "λ: x*, denominator, L, L before in; λ, L, L before, the walls' gradient out; neighbours' x*",
+            VECTOR + 3 * SCALAR + 3 * SCALAR + VECTOR + visit_stream,
             visit_gather,
             True,
         ),
         Pass(
             "iterations",
-            "Δx: x*, λ, x^{k-1} in; x^{k+1} out; neighbours' x* and λ",
-            3 * VECTOR + SCALAR + visit_stream,
+            "Δx: x*, λ, the walls' gradient, x^{k-1} in; x^{k+1} out; neighbours' x* and λ",
+            4 * VECTOR + SCALAR + visit_stream,
             visit_gather + k * SCALAR,
             True,
         ),
