@@ -204,3 +204,15 @@ def test_a_speed_cap_below_what_the_scene_drives_is_refused():
         load_scene(thrown)
     with pytest.raises(SceneError, match="time.max_speed_m_s.*wave maker"):
         load_scene("wave_tank", ["time.max_speed_m_s=0.05"])
+    thrown_box = scene([{"min_m": [0.0, 0.0, 0.0], "max_m": [0.4, 0.1, 0.4]}], max_speed_m_s=0.5, max_cfl=0.5)
+    thrown_box["bodies"] = [
+        {
+            "shape": "box",
+            "size_m": [0.1, 0.1, 0.1],
+            "density_kg_m3": 500,
+            "position_m": [0.2, 0.25, 0.2],
+            "velocity_m_s": [1.0, 0.0, 0.0],
+        }
+    ]
+    with pytest.raises(SceneError, match=r"time.max_speed_m_s.*bodies\[0\]"):
+        load_scene(thrown_box)

@@ -116,6 +116,14 @@ def _check_time(scene, source: str) -> None:
             f"(up to π S / T = {_num(piston)} m/s), which the water in front of it must follow; allowed: 0 "
             f"(no cap) or ≥ {_num(piston)} m/s"
         )
+    for i, body in enumerate(scene.bodies):
+        speed = _length(body.velocity_m_s) + _length(body.angular_velocity_rad_s) * body.bounding_radius()
+        if cap > 0.0 and speed > cap:
+            raise SceneError(
+                f"{source}: key 'time.max_speed_m_s' = {_num(cap)} m/s is slower than bodies[{i}]'s fastest "
+                f"point ({_num(speed)} m/s, |v| + |ω| r), which the water must follow; allowed: 0 (no cap) or "
+                f"≥ {_num(speed)} m/s"
+            )
     if not piston + fall <= followed:
         raise SceneError(
             f"{source}: key 'wave_maker.period_s' = {_num(scene.wave_maker.period_s)} s moves the piston "
