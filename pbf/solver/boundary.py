@@ -32,7 +32,8 @@ import taichi as ti
 
 from pbf.solver import sph
 from pbf.solver.bodies import Bodies, component
-from pbf.solver.model import BoundaryParams
+from pbf.solver.constants import scene_constants
+from pbf.solver.model import BoundaryParams, allocation
 
 TABLE_SAMPLES = 512
 OVERLAP_SAMPLES = 32
@@ -44,7 +45,8 @@ class GhostTables:
     fluid lattice, by wall distance, with their gradients (``pbf.solver.sph``); shared by every boundary."""
 
     def __init__(self, spacing_m: float, kernel_radius_m: float, edges_and_corners: bool):
-        self.kernel_radius = kernel_radius_m
+        self.constants = scene_constants(kernel_radius=kernel_radius_m)
+        """h as data (``pbf.solver.constants``): the tables' distances are in h."""
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
@@ -66,7 +68,7 @@ class GhostTables:
     @ti.func
     def wall(self, distance):
         """Ghost density ρ_wall/ρ0 and its slope d(ρ_wall/ρ0)/dd at wall distance d (linear interpolation)."""
-        u = ti.max(distance, 0.0) / self.kernel_radius * (TABLE_SAMPLES - 1)
+        u = ti.max(distance, 0.0) / self.constants[None].kernel_radius * (TABLE_SAMPLES - 1)
         k = ti.min(ti.cast(u, ti.i32), TABLE_SAMPLES - 2)
         t = u - k
         density = (1 - t) * self.density_table[k] + t * self.density_table[k + 1]
@@ -76,7 +78,7 @@ class GhostTables:
     @ti.func
     def cell(self, distance):
         """Cell index and fraction of a wall distance on the overlap tables' grid."""
-        u = ti.min(ti.max(distance, 0.0) / self.kernel_radius, 1.0) * (OVERLAP_SAMPLES - 1)
+        u = ti.min(ti.max(distance, 0.0) / self.constants[None].kernel_radius, 1.0) * (OVERLAP_SAMPLES - 1)
         k = ti.min(ti.cast(u, ti.i32), OVERLAP_SAMPLES - 2)
         return k, u - k
 
@@ -116,7 +118,7 @@ class GhostTables:
         active axes (:meth:`half_spaces`) instead of three of each: this code is inlined in
         each Jacobi iteration's kernel, once per obstacle and body shape, and Taichi's compile time of a
         kernel grows faster than its length (docs/BODIES.md, "Compile time")."""
-        h = self.kernel_radius
+        h = self.constants[None].kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
@@ -180,18 +182,21 @@ class Container:
 
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
-        self.radius = params.particle_radius_m
-        self.lower = ti.Vector(list(params.lower_m))
-        self.upper = ti.Vector(list(params.upper_m))
-        self.kernel_radius = params.kernel_radius_m
+        self.constants = scene_constants(
+            radius=params.particle_radius_m,
+            lower=tuple(params.lower_m),
+            upper=tuple(params.upper_m),
+            kernel_radius=params.kernel_radius_m,
+            mirror_reach=params.kernel_radius_m - params.particle_radius_m,
+        )
+        """The particle radius r, the walls, h and h − r as data (``pbf.solver.constants``): a wall's
+        mirror images of the fluid come within h of a particle only if the particle is closer than
+        h − r to the wall, as no particle comes closer to it than r (the collision)."""
         self.with_wall_density = params.wall_density
         self.mirrored = params.wall_mirror
         """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``,
         ``pbf.solver.density``) rather than the tables: then the density constraint leaves out
         :meth:`ghost` and mirrors the fluid in the walls :meth:`mirror_walls` names."""
-        self.mirror_reach = params.kernel_radius_m - params.particle_radius_m
-        """A wall's mirror images of the fluid come within h of a particle only if the particle is closer
-        than this to the wall, as no particle comes closer to it than r (the collision)."""
         self.wave_maker = params.piston_stroke_m > 0.0
         """Whether the container's lower-x wall is a piston wave maker (compiled out when not)."""
         self.piston_stroke_m = params.piston_stroke_m
@@ -230,7 +235,7 @@ class Container:
     @ti.func
     def _lower(self):
         """The container's lower corner now (the piston moves its x)."""
-        lower = self.lower
+        lower = self.constants[None].lower
         if ti.static(self.wave_maker):
             lower[0] = self.piston_x[None]
         return lower
@@ -241,14 +246,16 @@ class Container:
         velocity = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wave_maker):
             below = p[0] - self.piston_x[None]
-            if below < self.kernel_radius and below <= self.upper[0] - p[0]:
+            c = self.constants[None]
+            if below < c.kernel_radius and below <= c.upper[0] - p[0]:
                 velocity[0] = self.piston_v[None]
         return velocity
 
     @ti.func
     def project(self, p):
         """p moved into the container shrunk by the particle radius."""
-        return ti.max(self._lower() + self.radius, ti.min(p, self.upper - self.radius))
+        c = self.constants[None]
+        return ti.max(self._lower() + c.radius, ti.min(p, c.upper - c.radius))
 
     @ti.func
     def mirror_walls(self, p):
@@ -257,12 +264,13 @@ class Container:
         near = ti.Vector([0, 0, 0])
         plane = ti.Vector([0.0, 0.0, 0.0])
         lower = self._lower()
+        c = self.constants[None]
         for axis in ti.static(range(3)):
             below = p[axis] - lower[axis]
-            above = self.upper[axis] - p[axis]
-            if ti.min(below, above) < self.mirror_reach:
+            above = c.upper[axis] - p[axis]
+            if ti.min(below, above) < c.mirror_reach:
                 near[axis] = 1
-                plane[axis] = self.upper[axis]
+                plane[axis] = c.upper[axis]
                 if below <= above:
                     plane[axis] = lower[axis]
         return near, plane
@@ -275,13 +283,14 @@ class Container:
         gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.with_wall_density):
             lower = self._lower()
+            c = self.constants[None]
             distance = ti.Vector([0.0, 0.0, 0.0])
             side = ti.Vector([0.0, 0.0, 0.0])  # +1: near the lower wall, −1: the upper, 0: neither
             for axis in ti.static(range(3)):
                 below = p[axis] - lower[axis]
-                above = self.upper[axis] - p[axis]
+                above = c.upper[axis] - p[axis]
                 distance[axis] = ti.min(below, above)
-                if distance[axis] < self.kernel_radius:
+                if distance[axis] < c.kernel_radius:
                     side[axis] = 1.0 if below <= above else -1.0
                     d, s = self.tables.wall(distance[axis])
                     density += d
@@ -307,21 +316,38 @@ class Obstacles:
 
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
-        self.radius = params.particle_radius_m
-        self.kernel_radius = params.kernel_radius_m
+        self.params = params
         self.with_wall_density = params.wall_density
         self.count = len(params.obstacles)
-        slots = max(1, self.count)
+        self.present = self.count > 0
+        """Whether the scene has obstacles: a switch that compiles their code in (their count is data)."""
+
+    def allocate(self) -> None:
+        """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``),
+        none without obstacles: allocated after every array all scenes have, so that theirs keep
+        their place in Taichi's cache keys whether a scene has obstacles or not."""
+        if not self.present:
+            return
+        params = self.params
+        radius, count = params.particle_radius_m, len(params.obstacles)
+        slots = allocation(count, 8)
+        self.constants = scene_constants(radius=radius, count=count)
+        """The particle radius and the obstacle count as data."""
+        lower, upper = np.zeros((slots, 3), np.float32), np.zeros((slots, 3), np.float32)
+        # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
+        exit_lower, exit_upper = np.zeros((slots, 3), np.int32), np.zeros((slots, 3), np.int32)
+        for k, (low, high) in enumerate(params.obstacles):
+            lower[k], upper[k] = low, high
+            exit_lower[k] = [int(low[a] - params.lower_m[a] > 2 * radius) for a in range(3)]
+            exit_upper[k] = [int(params.upper_m[a] - high[a] > 2 * radius) for a in range(3)]
         self.lower = ti.Vector.field(3, ti.f32, shape=slots)
         self.upper = ti.Vector.field(3, ti.f32, shape=slots)
-        # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
         self.exit_lower = ti.Vector.field(3, ti.i32, shape=slots)
         self.exit_upper = ti.Vector.field(3, ti.i32, shape=slots)
-        for k, (lower, upper) in enumerate(params.obstacles):
-            self.lower[k] = lower
-            self.upper[k] = upper
-            self.exit_lower[k] = [int(lower[a] - params.lower_m[a] > 2 * self.radius) for a in range(3)]
-            self.exit_upper[k] = [int(params.upper_m[a] - upper[a] > 2 * self.radius) for a in range(3)]
+        for field, values in zip(
+            (self.lower, self.upper, self.exit_lower, self.exit_upper), (lower, upper, exit_lower, exit_upper)
+        ):
+            field.from_numpy(values)
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Obstacles stand still."""
@@ -337,8 +363,8 @@ class Obstacles:
     def project(self, p):
         """p moved out of every obstacle grown by the particle radius."""
         q = p
-        if ti.static(self.count > 0):
-            for o in range(self.count):
+        if ti.static(self.present):
+            for o in range(self.constants[None].count):
                 q = self._push_out(q, o)
         return q
 
@@ -347,8 +373,9 @@ class Obstacles:
         """p moved out of obstacle o (grown by the particle radius) through the nearest open face.
         Obstacles are at least two spacings thick and a particle moves at most time.max_cfl spacings
         in a substep, so the nearest face is the one it came through."""
-        lower = self.lower[o] - self.radius
-        upper = self.upper[o] + self.radius
+        radius = self.constants[None].radius
+        lower = self.lower[o] - radius
+        upper = self.upper[o] + radius
         q = p
         if (p > lower).all() and (p < upper).all():
             best, axis, target = 1e30, 0, 0.0
@@ -366,8 +393,8 @@ class Obstacles:
         """The obstacles' ghost density ρ/ρ0 and its gradient (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_wall_density and self.count > 0):
-            for o in range(self.count):
+        if ti.static(self.with_wall_density and self.present):
+            for o in range(self.constants[None].count):
                 d, g = self._ghost_of(p, o)
                 density += d
                 gradient += g
@@ -384,7 +411,11 @@ class Boundaries:
     """Every boundary of the fluid in a fixed order (the container, then the obstacles): what the
     stages call. Each call visits the parts in that order, so sums come out the same bit for bit."""
 
-    def __init__(self, params: BoundaryParams, capacity: int = 1):
+    def __init__(self, params: BoundaryParams, capacity: int = 1, solids: bool = True):
+        """The ghost tables and the container; with ``solids`` also the obstacles' and bodies' arrays
+        (else :meth:`allocate_solids` later: ``Simulation`` allocates them after every array all
+        scenes have, so that those keep their places in Taichi's cache keys)."""
+        self.params = params
         self.tables = GhostTables(params.spacing_m, params.kernel_radius_m, params.wall_density)
         self.container = Container(params, self.tables)
         self.obstacles = Obstacles(params, self.tables)
@@ -393,8 +424,14 @@ class Boundaries:
         self.with_bodies = params.bodies.count > 0
         """The rigid bodies (``pbf.solver.bodies``), the last part; None in a scene without them, whose
         kernels then hold no code of theirs."""
-        if params.bodies.count:
-            self.bodies = Bodies(params, self.tables, self.obstacles, capacity)
+        if solids:
+            self.allocate_solids(capacity)
+
+    def allocate_solids(self, capacity: int) -> None:
+        """The obstacles' arrays, and the bodies (``capacity``: the per-particle arrays' length)."""
+        self.obstacles.allocate()
+        if self.with_bodies:
+            self.bodies = Bodies(self.params, self.tables, self.obstacles, capacity)
             self.parts += (self.bodies,)
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:

@@ -63,6 +63,7 @@ waves, which carry most of the density error, still converge.
 
 import taichi as ti
 
+from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import SCORR_N, DensityParams
 from pbf.solver.scan import TreeSum
@@ -82,23 +83,33 @@ class DensityConstraint:
 
     def __init__(self, params: DensityParams, boundaries, grid):
         particle_count = params.particle_count
-        # Compile-time constants of the kernels below (see pbf.solver.model).
         self.h = params.kernel_radius_m
-        self.volume = params.particle_volume_m3
-        self.relaxation = params.relaxation
-        self.omega = params.omega
-        self.scorr_k = params.scorr_k
-        self.inverse_w_dq = params.inverse_w_dq
-        self.max_correction = params.max_correction
+        """h on the host (``pressure_scale``); the kernels read it from :attr:`constants`."""
         self.boundaries = boundaries
         self.grid = grid
         self.wall_mirror = params.wall_mirror
-        self.surface_density = params.surface_density
+        """Whether the container's walls mirror the fluid: a switch that compiles the images' code in."""
+        self.with_scorr = params.scorr_k > 0.0
+        """Whether s_corr is added: a switch that compiles its term in (its strength k is data)."""
         g_below, g_top, psi_top = params.surface_calibration
-        self.surface_offset = g_below + SURFACE_RAMP[0] * (g_top - g_below)
-        self.surface_slope = 1.0 / ((SURFACE_RAMP[1] - SURFACE_RAMP[0]) * (g_top - g_below))
-        self.surface_top = psi_top
-        scratch = particle_count if params.surface_density else 1
+        self.constants = scene_constants(
+            h=params.kernel_radius_m,
+            volume=params.particle_volume_m3,
+            relaxation=params.relaxation,
+            omega=params.omega,
+            scorr_k=params.scorr_k,
+            inverse_w_dq=params.inverse_w_dq,
+            max_correction=params.max_correction,
+            surface_density=params.surface_density,
+            surface_offset=g_below + SURFACE_RAMP[0] * (g_top - g_below),
+            surface_slope=1.0 / ((SURFACE_RAMP[1] - SURFACE_RAMP[0]) * (g_top - g_below)),
+            surface_top=psi_top,
+        )
+        """The scene's constants as data (``pbf.solver.constants``): h (m), V (m³), ε̂, ω, k, 1/W(Δq),
+        the largest correction (in h), whether the surface ghost is on (a flag, not a switch: its pass
+        runs over no particles when off, so a scene with it and one without share the kernels) and its
+        smoothstep's offset, slope and ψ_top."""
+        scratch = particle_count
         self.surface = ti.field(ti.f32, shape=scratch)
         """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
         iteration."""
@@ -144,7 +155,7 @@ class DensityConstraint:
         each, one across each edge, one across the corner (with the fluid they fill the space around a
         lattice in a corner). With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the image's
         reflection (∂/∂x_j of W(x_i − x') is −R∇W)."""
-        h = self.h
+        h = self.constants[None].h
         w_sum = 0.0
         g_sum = ti.Vector([0.0, 0.0, 0.0])
         reflected_sum = ti.Vector([0.0, 0.0, 0.0])
@@ -192,19 +203,20 @@ class DensityConstraint:
     @ti.func
     def plain_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
         """:meth:`pair_sums` without mirror images."""
-        h = self.h
-        ratio = self.volume * kernel(0.0, h)
+        c = self.constants[None]
+        h, volume = c.h, c.volume
+        ratio = volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             if ti.static(gradients):
                 w, grad_w = kernel_and_gradient(xi - x[neighbours[k]], h)
-                ratio += self.volume * w
-                g = self.volume * h * grad_w
+                ratio += volume * w
+                g = volume * h * grad_w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
-                ratio += self.volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
+                ratio += volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
         return ratio, gradient_i, sum_sq
 
     @ti.func
@@ -212,10 +224,11 @@ class DensityConstraint:
         self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane, gradients: ti.template()
     ):
         """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
-        h = self.h
+        c = self.constants[None]
+        h, volume = c.h, c.volume
         w_self, g_self, _ = self.image_sums(xi, xi, near, plane, gradients)
-        ratio = self.volume * (kernel(0.0, h) + w_self)
-        own_images = self.volume * h * g_self
+        ratio = volume * (kernel(0.0, h) + w_self)
+        own_images = volume * h * g_self
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
@@ -223,12 +236,12 @@ class DensityConstraint:
             if ti.static(gradients):
                 w, grad_w = kernel_and_gradient(xi - xj, h)
                 w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, True)
-                ratio += self.volume * (w + w_images)
-                gradient_i += self.volume * h * (grad_w + g_images)
-                sum_sq += (self.volume * h * (grad_w + reflected)).norm_sqr()
+                ratio += volume * (w + w_images)
+                gradient_i += volume * h * (grad_w + g_images)
+                sum_sq += (volume * h * (grad_w + reflected)).norm_sqr()
             else:
                 w_images, _, _ = self.image_sums(xi, xj, near, plane, False)
-                ratio += self.volume * (kernel((xi - xj).norm_sqr(), h) + w_images)
+                ratio += volume * (kernel((xi - xj).norm_sqr(), h) + w_images)
         return ratio, gradient_i, sum_sq, own_images
 
     @ti.func
@@ -265,9 +278,10 @@ class DensityConstraint:
             else:
                 ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
             # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
-            colour = gradient_i + own_images + self.h * wall_gradient
-            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + self.relaxation
-            if ti.static(self.surface_density):
+            c = self.constants[None]
+            colour = gradient_i + own_images + c.h * wall_gradient
+            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + c.relaxation
+            if c.surface_density:
                 self.colour_gradient[i] = colour
         else:
             if from_second:
@@ -288,13 +302,15 @@ class DensityConstraint:
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
         if cap > SURFACE_SKIP:
+            c = self.constants[None]
+            h, volume = c.h, c.volume
             xi = x[i]
-            smoothed = self.volume * kernel(0.0, self.h) * self.colour_gradient[i]
+            smoothed = volume * kernel(0.0, h) * self.colour_gradient[i]
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                smoothed += self.volume * kernel((xi - x[j]).norm_sqr(), self.h) * self.colour_gradient[j]
-            u = ti.min(ti.max((smoothed.norm() - self.surface_offset) * self.surface_slope, 0.0), 1.0)
-            psi = ti.min(self.surface_top * u * u * (3.0 - 2.0 * u), cap)
+                smoothed += volume * kernel((xi - x[j]).norm_sqr(), h) * self.colour_gradient[j]
+            u = ti.min(ti.max((smoothed.norm() - c.surface_offset) * c.surface_slope, 0.0), 1.0)
+            psi = ti.min(c.surface_top * u * u * (3.0 - 2.0 * u), cap)
         return psi
 
     @ti.func
@@ -305,7 +321,7 @@ class DensityConstraint:
         if ti.static(measure):
             self.error[i] = ti.max(c, 0.0)
         c = ti.max(c, 0.0)  # only compressed particles push: no attraction at the free surface
-        lam = -self.omega * c / self.denominator[i]
+        lam = -self.constants[None].omega * c / self.denominator[i]
         self.lam[i] = lam
         # The multiplier the positions have moved by, combined as the positions are (see lam_total).
         earlier = ti.select(first_iteration, 0.0, self.lam_before[i])
@@ -318,7 +334,8 @@ class DensityConstraint:
         """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi, with ``solver.wall_mirror``
         also the pairs' mirror images with (λ̂_i + λ̂_j) and the particle's own with 2 λ̂_i (they move
         with it); Jacobi, so x is only read."""
-        h = self.h
+        c = self.constants[None]
+        h, volume = c.h, c.volume
         dx = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
             near, plane = self.boundaries.container.mirror_walls(xi)
@@ -326,11 +343,11 @@ class DensityConstraint:
                 # Unused results named, not "_": Taichi gives one "_" a single type, and a second "_"
                 # of another type (a float, then a vector) broke its compile without optimisation.
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, True)
-                dx = 2.0 * lam_i * self.volume * h * g_self
+                dx = 2.0 * lam_i * volume * h * g_self
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
                     w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, True)
-                    dx += self.pair_term(x, xi, lam_i, j) + (lam_i + self.lam[j]) * self.volume * h * g_images
+                    dx += self.pair_term(x, xi, lam_i, j) + (lam_i + self.lam[j]) * volume * h * g_images
             else:
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     dx += self.pair_term(x, xi, lam_i, neighbours[k])
@@ -342,11 +359,12 @@ class DensityConstraint:
     @ti.func
     def pair_term(self, x: ti.template(), xi, lam_i, j):
         """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12)."""
-        w, grad_w = kernel_and_gradient(xi - x[j], self.h)
+        c = self.constants[None]
+        w, grad_w = kernel_and_gradient(xi - x[j], c.h)
         s_corr = 0.0
-        if ti.static(self.scorr_k > 0.0):
-            s_corr = -self.scorr_k * (w * self.inverse_w_dq) ** ti.static(SCORR_N)
-        return (lam_i + self.lam[j] + s_corr) * self.volume * self.h * grad_w
+        if ti.static(self.with_scorr):
+            s_corr = -c.scorr_k * (w * c.inverse_w_dq) ** ti.static(SCORR_N)
+        return (lam_i + self.lam[j] + s_corr) * c.volume * c.h * grad_w
 
     @ti.func
     def jacobi_step(
@@ -354,7 +372,8 @@ class DensityConstraint:
     ):
         """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
         other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
-        h = self.h
+        c = self.constants[None]
+        h = c.h
         xi = self.own_position(first, second, from_second, i)
         lam_i = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
@@ -368,7 +387,7 @@ class DensityConstraint:
         dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi, from the λ pass
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
-        dx *= ti.min(1.0, self.max_correction / (dx.norm() + 1e-12))
+        dx *= ti.min(1.0, c.max_correction / (dx.norm() + 1e-12))
         corrected = xi + h * dx
         moved = self.boundaries.project_recorded(
             ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)), i, "iteration", weight
@@ -393,7 +412,7 @@ class DensityConstraint:
         """C_i and λ̂_i of particle i; with the surface ghost, in the first iteration only C_i (λ̂ waits
         for the ghost, which needs every ĝ_j: :meth:`surface_pass`)."""
         c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
-        if ti.static(self.surface_density):
+        if self.constants[None].surface_density:
             if first_iteration:
                 self.plain_error[i] = c
             else:
@@ -434,9 +453,8 @@ class DensityConstraint:
         2-core CPU, and reading a field from Python after a launch 40 µs more."""
         for i in range(self.grid.active[None]):
             self.multiplier_pass(first, second, from_second, i, neighbours, measure, first_iteration, weight)
-        if ti.static(self.surface_density):
-            for i in range(self.grid.active[None] * first_iteration):  # an empty loop after the first
-                self.surface_pass(first, i, neighbours, measure, first_iteration, weight)
+        for i in range(self.surface_count(first_iteration)):  # an empty loop after the first, or without it
+            self.surface_pass(first, i, neighbours, measure, first_iteration, weight)
         for i in range(self.grid.active[None]):
             self.jacobi_step(first, second, from_second, i, neighbours, weight)
         high, low = 0.0, 0.0
@@ -444,6 +462,12 @@ class DensityConstraint:
             self.error_sum.sum(self.error, 0, self.grid.active[None])
             high, low = self.error_sum.high[0], self.error_sum.low[0]
         return high, low, self.grid.active[None]
+
+    @ti.func
+    def surface_count(self, first_iteration):
+        """The particles the surface pass loops over: all in a substep's first iteration with the surface
+        ghost on, else none."""
+        return self.grid.active[None] * first_iteration * self.constants[None].surface_density
 
     @ti.func
     def between(self, first: ti.template(), second: ti.template(), newer_in_second, fraction, i):

@@ -47,10 +47,8 @@ class DivergenceCorrection:
         self.boundaries = boundaries
         self.grid = grid
         self.density = density
-        self.h = params.kernel_radius_m
-        self.volume = params.particle_volume_m3
-        self.omega = params.omega
-        self.relaxation = params.relaxation
+        self.constants = density.constants
+        """h, V, ω and ε̂ as data: the density constraint's (``DensityConstraint.constants``)."""
         self.denominator = ti.field(ti.f32, shape=params.particle_count)
         """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ at the fixed positions."""
         self.deficit = ti.field(ti.f32, shape=params.particle_count)
@@ -63,28 +61,29 @@ class DivergenceCorrection:
         """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
         min(C_i, 0) and the denominator of δλ̂_i."""
         xi = x[i]
-        h = self.h
+        c = self.constants[None]
+        h, volume = c.h, c.volume
         increment_i = self.increment[i]
         dv = ti.Vector([0.0, 0.0, 0.0])
-        ratio = self.volume * kernel(0.0, h)
+        ratio = volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             j = neighbours[k]
             if ti.static(start):
                 w, grad_w = kernel_and_gradient(xi - x[j], h)
-                g = self.volume * h * grad_w
-                ratio += self.volume * w
+                g = volume * h * grad_w
+                ratio += volume * w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
                 dv += (increment_i + self.increment[j]) * g
             else:
-                dv += (increment_i + self.increment[j]) * self.volume * h * kernel_gradient(xi - x[j], h)
+                dv += (increment_i + self.increment[j]) * volume * h * kernel_gradient(xi - x[j], h)
         wall, wall_gradient = self.boundaries.ghost(xi, False)
         dv += increment_i * h * wall_gradient
         if ti.static(start):
             self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
-            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + self.relaxation
+            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + c.relaxation
         return h_over_dt * dv
 
     @ti.kernel
@@ -93,27 +92,28 @@ class DivergenceCorrection:
         for i in range(self.state.active[None]):
             self.increment[i] = self.state.multiplier[i] * dt * dt
         for i in range(self.state.active[None]):
-            self.state.v[i] += self.velocity_change(x, i, neighbours, self.h / dt, True)
+            self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, True)
 
     @ti.kernel
     def iterate(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
         """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
-        h = self.h
         for i in range(self.state.active[None]):
+            constants = self.constants[None]
+            h, volume = constants.h, constants.volume
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                rate += self.volume * h * kernel_gradient(xi - x[j], h).dot(vi - self.state.v[j])
+                rate += volume * h * kernel_gradient(xi - x[j], h).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))
             carried = self.state.multiplier[i] * dt * dt
             c = dt / h * rate + self.deficit[i]
-            total = ti.min(carried - self.omega * c / self.denominator[i], 0.0)
+            total = ti.min(carried - constants.omega * c / self.denominator[i], 0.0)
             self.increment[i] = total - carried
             self.state.multiplier[i] = total / (dt * dt)
         for i in range(self.state.active[None]):
-            self.state.v[i] += self.velocity_change(x, i, neighbours, h / dt, False)
+            self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, False)
 
     def run(self, neighbours, dt: float, iterations: int) -> None:
         """Warm start with the last substep's Λ, then ``iterations`` Jacobi iterations on state.v at state.x."""

@@ -19,6 +19,8 @@ import numpy as np
 import taichi as ti
 
 from pbf.scene import Emitter
+from pbf.solver.constants import scene_constants
+from pbf.solver.model import allocation
 
 
 def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
@@ -46,12 +48,12 @@ class Emitters:
     the device, so an emitting substep reads nothing back (``Simulation.particle_count`` reads the
     count when asked)."""
 
-    def __init__(self, emitters, spacing_m: float, state, grid=None):
+    def __init__(self, emitters, spacing_m: float, state, grid=None, capacity: int | None = None):
         self.emitters = emitters
         self.spacing = spacing_m
         self.state = state
-        self.capacity = state.capacity
-        """Slots allocated: no append writes past them."""
+        self.capacity = state.capacity if capacity is None else min(int(capacity), state.capacity)
+        """The scene's particle budget: no append writes past it."""
         self.grid = grid
         """The neighbour grid (``pbf.solver.grid``) of the last sort, to find water at a nozzle; None: no check."""
         self.checks_water = grid is not None
@@ -61,10 +63,15 @@ class Emitters:
         self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]
         """Where each emitter's sites start in ``site_offsets``."""
         if self.offsets[-1]:
-            self.site_offsets = ti.Vector.field(3, ti.f32, self.offsets[-1])
+            # Sized by buckets and with the spacing and budget as data, so that the kernel compiles
+            # once for every scene with emitters (pbf.solver.model.allocation).
+            self.constants = scene_constants(spacing=spacing_m, capacity=self.capacity)
+            padded = np.zeros((allocation(self.offsets[-1], 64), 3), np.float32)
+            padded[: self.offsets[-1]] = np.concatenate(self.sites)
+            self.site_offsets = ti.Vector.field(3, ti.f32, len(padded))
             """Every nozzle's sites, emitter after emitter, from its centre (m)."""
-            self.site_offsets.from_numpy(np.concatenate(self.sites).astype(np.float32))
-            self.taken = ti.field(ti.i32, LAYERS_PER_LAUNCH * max(len(sites) for sites in self.sites))
+            self.site_offsets.from_numpy(padded)
+            self.taken = ti.field(ti.i32, allocation(LAYERS_PER_LAUNCH * max(len(sites) for sites in self.sites), 64))
             """Per (layer, site) of a launch: 1 where water already lies within half a spacing."""
             self.layer_taken = ti.field(ti.i32, LAYERS_PER_LAUNCH)
             """Per layer of a launch: 1 where any of its sites is taken (the layer is skipped)."""
@@ -88,7 +95,7 @@ class Emitters:
             (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1), (-grid.reach, grid.reach + 1)
         ):
             cell = c + ti.Vector([dx, dy, dz])
-            if all(cell >= 0) and all(cell < grid.resolution):
+            if all(cell >= 0) and all(cell < grid.constants[None].resolution):
                 linear = grid.linear(cell)
                 for slot in range(grid.cell_start[linear], grid.cell_start[linear + 1]):
                     if slot < self.state.active[None] and (self.state.x[slot] - p).norm_sqr() < radius * radius:
@@ -110,9 +117,10 @@ class Emitters:
         (travelled − j s) direction, each skipped where water already lies at one of its sites (a
         drowned nozzle). Every loop is parallel: over (layer, site), then over layers (each thread
         reading its layer's sites), then over (layer, site) again; the live count is moved last."""
-        radius = 0.5 * self.spacing
         for j, k in ti.ndrange(layers, sites):
-            p = centre + (travelled - j * self.spacing) * direction + self.site_offsets[first_site + k]
+            spacing = self.constants[None].spacing
+            radius = 0.5 * spacing
+            p = centre + (travelled - j * spacing) * direction + self.site_offsets[first_site + k]
             found = 0
             if ti.static(self.checks_water):
                 found = self._water_within(p, radius)
@@ -125,22 +133,24 @@ class Emitters:
         # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
         # scene (restore() also refuses emitted layers that could overflow the budget).
         for j, k in ti.ndrange(layers, sites):
+            spacing, capacity = self.constants[None].spacing, self.constants[None].capacity
             if self.layer_taken[j] == 0:
                 before = 0  # layers kept ahead of this one
                 for i in range(j):
                     before += 1 - self.layer_taken[i]
-                slot = ti.min(ti.max(self.state.active[None], 0), self.capacity) + before * sites + k
-                if slot < self.capacity:
-                    p = centre + (travelled - j * self.spacing) * direction + self.site_offsets[first_site + k]
+                slot = ti.min(ti.max(self.state.active[None], 0), capacity) + before * sites + k
+                if slot < capacity:
+                    p = centre + (travelled - j * spacing) * direction + self.site_offsets[first_site + k]
                     self.state.x[slot] = p
                     self.state.v[slot] = velocity
                     self.state.reset_new(slot)  # every other field at its initial value, the index in creation order
         for _ in range(1):  # after every append has read the old count
+            capacity = self.constants[None].capacity
             kept = 0
             for j in range(layers):
                 kept += 1 - self.layer_taken[j]
-            first = ti.min(ti.max(self.state.active[None], 0), self.capacity)
-            self.state.active[None] = ti.min(first + kept * sites, self.capacity)
+            first = ti.min(ti.max(self.state.active[None], 0), capacity)
+            self.state.active[None] = ti.min(first + kept * sites, capacity)
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
         """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its

@@ -26,6 +26,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver.backend import keeps_decisions_on_device
+from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan
 
@@ -44,20 +45,26 @@ an overflow recompiles nothing)."""
 class NeighbourGrid:
     def __init__(self, params: GridParams, active):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
+        allocated = params.allocated_particles or particle_count
         self.particle_count = particle_count
         self.active = active
         """The 0-D field of live particles (``State.active``): the first ``active[None]`` slots are sorted."""
-        self.kernel_radius = params.kernel_radius_m
-        self.lower = ti.Vector(list(params.lower_m))
         extent = np.asarray(params.upper_m, dtype=np.float64) - np.asarray(params.lower_m, dtype=np.float64)
-        self.resolution = ti.Vector(list(resolution))
         self.reach = reach
         """Cells per h: every neighbour within h lies within ``reach`` cells of a particle's own."""
         # Cells are at least h / reach wide (a 1e-4 margin keeps float32 rounding from making them
         # narrower), so every neighbour within h lies within reach cells along each axis.
-        self.inverse_cell_size = ti.Vector([float(r / e) for r, e in zip(resolution, extent)])
         assert all(e / r * reach >= params.kernel_radius_m * (1 + 1e-5) or r == 1 for e, r in zip(extent, resolution))
-        cell_count = params.cell_count
+        self.constants = scene_constants(
+            kernel_radius=params.kernel_radius_m,
+            lower=tuple(params.lower_m),
+            resolution=tuple(int(r) for r in resolution),
+            inverse_cell_size=tuple(float(r / e) for r, e in zip(resolution, extent)),
+            cell_count=params.cell_count,
+        )
+        """h, the grid's lower corner, cells per axis, 1 / cell size per axis and the cell count, as data."""
+        cell_count = params.allocated_cells
+        particle_count = allocated
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
         self.cell_start = ti.field(ti.i32, shape=cell_count + 1)
         self.cell_scan = ExclusiveScan(cell_count)
@@ -79,20 +86,22 @@ class NeighbourGrid:
         self.most_entries_in_frame = 0
         """The longest compact list of the checked builds since the last :meth:`settle_frame`."""
         self.neighbour_scan = ExclusiveScan(particle_count)
-        self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * particle_count)
+        self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
         """Flat neighbour list: the neighbours of sorted particle i are
         neighbours[neighbour_start[i] : neighbour_end[i]], itself excluded."""
 
     @ti.func
     def cell_of(self, p):
         """Integer cell coordinates of position p, clamped to the grid (monotone, so exactness holds)."""
-        c = ti.cast(ti.floor((p - self.lower) * self.inverse_cell_size), ti.i32)
-        return ti.max(0, ti.min(c, self.resolution - 1))
+        g = self.constants[None]
+        c = ti.cast(ti.floor((p - g.lower) * g.inverse_cell_size), ti.i32)
+        return ti.max(0, ti.min(c, g.resolution - 1))
 
     @ti.func
     def linear(self, c):
         # z fastest: the three cells (x, y, z-1..z+1) are one contiguous slot range after sorting.
-        return (c[0] * self.resolution[1] + c[1]) * self.resolution[2] + c[2]
+        resolution = self.constants[None].resolution
+        return (c[0] * resolution[1] + c[1]) * resolution[2] + c[2]
 
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
@@ -125,7 +134,7 @@ class NeighbourGrid:
             cell = self.linear(self.cell_of(x[i]))
             self.particle_cell[i] = cell
             self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
-        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
+        self.cell_scan.scan(self.cell_particles, self.cell_start, self.constants[None].cell_count)
         for i in range(self.active[None]):
             cell = self.particle_cell[i]
             self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
@@ -147,14 +156,15 @@ class NeighbourGrid:
                     self.sorted_from[b] = moving
 
     @ti.func
-    def column_range(self, c, dx: ti.template(), dy: ti.template()):
-        """Slots of the cells (c.x+dx, c.y+dy, c.z-reach..c.z+reach): contiguous because z varies fastest."""
+    def column_range(self, c, resolution, dx: ti.template(), dy: ti.template()):
+        """Slots of the cells (c.x+dx, c.y+dy, c.z-reach..c.z+reach) of a grid of ``resolution``:
+        contiguous because z varies fastest."""
         begin, end = 0, 0
         cx, cy = c[0] + dx, c[1] + dy
-        if 0 <= cx < self.resolution[0] and 0 <= cy < self.resolution[1]:
+        if 0 <= cx < resolution[0] and 0 <= cy < resolution[1]:
             z0 = ti.max(c[2] - self.reach, 0)
-            z1 = ti.min(c[2] + self.reach, self.resolution[2] - 1)
-            row = (cx * self.resolution[1] + cy) * self.resolution[2]
+            z1 = ti.min(c[2] + self.reach, resolution[2] - 1)
+            row = (cx * resolution[1] + cy) * resolution[2]
             begin = self.cell_start[row + z0]
             end = self.cell_start[row + z1 + 1]
         return begin, end
@@ -165,9 +175,10 @@ class NeighbourGrid:
         ``compact``, into the prefix-summed range neighbour_start[i] (second visit, only after an
         overflow), never past the list's end. A particle with more than SLOTS sets ``overflow``: a
         plain store of the same 1 by every such thread, no atomic into one address."""
-        h2 = self.kernel_radius**2
         capacity = neighbours.shape[0]
         for i in range(count):
+            g = self.constants[None]
+            h2 = g.kernel_radius * g.kernel_radius
             xi = x[i]
             c = self.cell_of(xi)
             begin = i * SLOTS
@@ -177,7 +188,7 @@ class NeighbourGrid:
                 limit = ti.min(self.neighbour_start[i + 1], capacity)
             k = begin
             for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
-                first, last = self.column_range(c, dx, dy)
+                first, last = self.column_range(c, g.resolution, dx, dy)
                 for j in range(first, last):
                     # Branch-free: write every candidate to the next free slot and advance only past
                     # neighbours. A branch on the distance test mispredicts on most candidates.

@@ -134,9 +134,8 @@ class JacobiIterations:
         # The passes of DensityConstraint.iterate, over no particles once done.
         for i in range(count):
             self.density.multiplier_pass(first, second, from_second, i, neighbours, measure, first_iteration, weight)
-        if ti.static(self.density.surface_density):
-            for i in range(count * first_iteration):
-                self.density.surface_pass(first, i, neighbours, measure, first_iteration, weight)
+        for i in range(self.density.surface_count(first_iteration) * running):
+            self.density.surface_pass(first, i, neighbours, measure, first_iteration, weight)
         for i in range(count):
             self.density.jacobi_step(first, second, from_second, i, neighbours, weight)
         if ti.static(measure):

@@ -2,14 +2,16 @@
 
 A :class:`Model` is frozen. It holds the counts, the particle mass and volume, the grid, and one
 parameter object per stage of the step (:class:`GridParams`, :class:`BoundaryParams`,
-:class:`DensityParams`, :class:`VelocityParams`). Every field of those objects is baked into the
-stage's kernels when they compile (Taichi reads a ``data_oriented`` object's Python scalars as
-constants), so changing one means a new Model. What may change between substeps travels apart, in
+:class:`DensityParams`, :class:`VelocityParams`). What may change between substeps travels apart, in
 :class:`Control`, and reaches the kernels as arguments.
 
 A parameter's path from a TOML file to a kernel: ``scene.load_scene`` validates the key into a frozen
 ``Scene``; ``Model.from_scene`` derives the stage's parameter object from it; the stage's constructor
-stores the object; its kernels read the fields as compile-time constants.
+writes its numbers into a field of scene constants (``pbf.solver.constants``) that its kernels read
+as data. Only the switches that remove code (a feature a scene does not use) and the sizes of the
+arrays enter the compiled kernels, and the sizes only as capacity buckets (:func:`allocation`): so
+Taichi's offline cache, which names a kernel by its code and the shapes of the fields it touches,
+serves every scene of the same features and buckets with the kernels one of them compiled.
 """
 
 from __future__ import annotations
@@ -56,6 +58,24 @@ BYTES_PER_PARTICLE = 600
 """Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its 64 neighbour slots at
 4 B (256 B, pbf.solver.grid.SLOTS); rounded up for the compact list that replaces them after an overflow."""
 BYTES_PER_CELL = 12
+PARTICLE_BUCKET_FLOOR = 2**14
+"""The smallest particle allocation (:func:`allocation`): every preset below it shares one compile, for
+at most 16,384 × 600 B ≈ 10 MB of memory."""
+CELL_BUCKET_FLOOR = 2**16
+"""The smallest grid allocation in cells (:func:`allocation`), 0.8 MB."""
+
+
+def allocation(count: int, floor: int) -> int:
+    """The number of entries allocated for ``count``: the next power of two, at least ``floor``.
+
+    A field's shape is part of the key Taichi's offline cache files a compiled kernel under, so
+    fields sized to the scene made every scene compile every kernel again. Sized by buckets, a scene
+    whose counts fall in the buckets of one run before starts from the cache, at the price of at most
+    twice the memory of the per-particle and per-cell arrays (the neighbour list, the largest, is sized
+    to the scene: it is an ndarray, whose shape is no part of the key)."""
+    return max(int(floor), 1 << max(int(count) - 1, 0).bit_length())
+
+
 """Grid memory per cell: count, start and a scan scratch, int32 each."""
 
 
@@ -73,6 +93,8 @@ class GridParams:
     """Cells per axis, each at least h / reach wide."""
     reach: int
     """Cells per h: every neighbour lies within ``reach`` cells of a particle's own."""
+    allocated_particles: int = 0
+    """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
 
     @classmethod
     def covering(
@@ -96,6 +118,11 @@ class GridParams:
     @property
     def cell_count(self) -> int:
         return math.prod(self.resolution)
+
+    @property
+    def allocated_cells(self) -> int:
+        """Per-cell arrays' length: :func:`allocation` of the cell count."""
+        return allocation(self.cell_count, CELL_BUCKET_FLOOR)
 
 
 @dataclass(frozen=True)
@@ -447,7 +474,9 @@ class Model:
 
     scene: Scene
     capacity: int
-    """Particles allocated: those of the blocks at the start and all that the emitters will add."""
+    """The scene's particles: those of the blocks at the start and all that the emitters will add."""
+    allocated: int
+    """The length of the per-particle arrays: ``capacity`` rounded up to its bucket (:func:`allocation`)."""
     particle_mass_kg: float
     """m = ρ0 / Σ_j W(x_j): the mass that puts the lattice at exactly ρ0 (see sph.lattice_density_sum)."""
     particle_volume_m3: float
@@ -466,15 +495,16 @@ class Model:
         spacing, h = scene.fluid.spacing_m, scene.kernel_radius_m
         n = scene.particle_capacity
         lower, upper = scene.container.min_m, scene.container.max_m
-        grid = GridParams.covering(n, lower, upper, h)
-        _check_memory(scene, n, grid.cell_count)
+        allocated = allocation(n, PARTICLE_BUCKET_FLOOR)
+        grid = dataclasses.replace(GridParams.covering(n, lower, upper, h), allocated_particles=allocated)
+        _check_memory(scene, n, grid.cell_count, allocated, grid.allocated_cells)
         mass = scene.fluid.rest_density_kg_m3 / sph.lattice_density_sum(spacing, h)
         volume = mass / scene.fluid.rest_density_kg_m3
         s = scene.solver
         gain = sph.jacobi_gain(h / spacing, s.expert.relaxation)
         omega = min(1.0, STABLE_GAIN / gain)
         density = DensityParams(
-            particle_count=n,
+            particle_count=allocated,
             kernel_radius_m=h,
             particle_volume_m3=volume,
             relaxation=s.expert.relaxation,
@@ -489,6 +519,7 @@ class Model:
         return cls(
             scene,
             n,
+            allocated,
             mass,
             volume,
             grid,
@@ -506,7 +537,7 @@ class Model:
                 BodyParams.from_scene(scene, volume),
             ),
             density,
-            VelocityParams(n, h, volume),
+            VelocityParams(allocated, h, volume),
             iteration_weights(s.expert, 1.0 - omega * gain),
         )
 
@@ -549,20 +580,22 @@ def _culprit(scene: Scene) -> tuple[str, str]:
     return "fluid.spacing_m", "use a larger spacing or smaller blocks"
 
 
-def _check_memory(scene: Scene, particles: int, cells: int) -> None:
+def _check_memory(scene: Scene, particles: int, cells: int, allocated: int, allocated_cells: int) -> None:
     """Refuse, before Taichi allocates anything, a scene whose particles and grid would not fit in
     memory, would outgrow the kernels' int32 indices, or whose s_corr would overflow float32. The
     figures are exact integers (and float64), so no count can wrap before it is compared. The message
-    names the key that makes the difference (``_culprit``)."""
-    need = particles * BYTES_PER_PARTICLE + cells * BYTES_PER_CELL
+    names the key that makes the difference (``_culprit``). The arrays are counted at their allocated
+    lengths (:func:`allocation`)."""
+    need = allocated * BYTES_PER_PARTICLE + allocated_cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:
-        if particles * BYTES_PER_PARTICLE >= cells * BYTES_PER_CELL:
+        if allocated * BYTES_PER_PARTICLE >= allocated_cells * BYTES_PER_CELL:
             culprit, remedy = _culprit(scene)
         else:
             culprit, remedy = "container.max_m", "use a smaller container or a larger spacing"
         raise SceneError(
-            f"{scene.source}: key '{culprit}': {particles:,} particles and {cells:,} grid cells need about "
+            f"{scene.source}: key '{culprit}': {particles:,} particles and {cells:,} grid cells (arrays for "
+            f"{allocated:,} and {allocated_cells:,}) need about "
             f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB {backend.memory_place()}; {remedy}"
         )
     _check_indices(scene, particles, cells)

@@ -17,6 +17,7 @@ v (nothing in that pass reads v): two particle loops fewer than update, smooth i
 
 import taichi as ti
 
+from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import VelocityParams
 from pbf.solver.sph import kernel_and_gradient, kernel_gradient
@@ -28,8 +29,8 @@ class VelocityPostprocess:
 
     def __init__(self, params: VelocityParams, state, grid):
         self.state = state
-        self.volume = params.particle_volume_m3
-        self.h = params.kernel_radius_m
+        self.constants = scene_constants(h=params.kernel_radius_m, volume=params.particle_volume_m3)
+        """h (m) and V (m³) as data (``pbf.solver.constants``)."""
         self.grid = grid
         self.omega = ti.Vector.field(3, ti.f32, shape=params.particle_count)
         self.omega_norm = ti.field(ti.f32, shape=params.particle_count)
@@ -57,20 +58,21 @@ class VelocityPostprocess:
     ):
         """v from x* and x, ω (if confining), confinement and XSPH into v, capped at ``max_speed`` (m/s,
         0: no cap), then x ← x* and the substep's pressure added to the frame's sum: one launch."""
-        h = self.h
         inverse_dt = 1.0 / dt
         if ti.static(with_vorticity):
             for i in range(self.state.active[None]):
+                h, volume = self.constants[None].h, self.constants[None].volume
                 xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                 omega = ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
-                    omega += self.volume * kernel_gradient(xi - x_pred[j], h).cross(
+                    omega += volume * kernel_gradient(xi - x_pred[j], h).cross(
                         self.velocity(x_pred, j, inverse_dt) - vi
                     )
                 self.omega[i] = omega
                 self.omega_norm[i] = omega.norm()
         for i in range(self.state.active[None]):
+            h, volume = self.constants[None].h, self.constants[None].volume
             xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
             dv = ti.Vector([0.0, 0.0, 0.0])
             if ti.static(with_vorticity or with_xsph):
@@ -85,9 +87,9 @@ class VelocityPostprocess:
                     j = neighbours[k]
                     w, grad_w = kernel_and_gradient(xi - x_pred[j], h)
                     if ti.static(with_xsph):
-                        smoothing += self.volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
+                        smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
                     if ti.static(with_vorticity):
-                        eta += self.volume * (self.omega_norm[j] - omega_i_norm) * grad_w
+                        eta += volume * (self.omega_norm[j] - omega_i_norm) * grad_w
                 dv = xsph * smoothing
                 if ti.static(with_vorticity):
                     eta_norm = eta.norm()

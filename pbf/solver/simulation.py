@@ -123,16 +123,15 @@ class Simulation:
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
-        self.state = State(model.capacity)
-        self.boundaries = Boundaries(model.boundary, model.capacity)
+        # Every array all scenes have first, each sized by its bucket and in the same order, then the
+        # arrays of the features a scene may lack (obstacles, bodies, emitters): Taichi's offline cache
+        # names a kernel by the shapes and the places of the fields it touches, so a scene of other
+        # sizes or constants, with or without those features, finds the kernels a run before compiled
+        # (pbf.solver.constants, pbf.solver.model.allocation).
+        self.state = State(model.allocated)
+        self.boundaries = Boundaries(model.boundary, solids=False)
         """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
-        self.bodies = self.boundaries.bodies
-        """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
-        if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
-            self.state.carry(self.bodies.shift)
-            self.state.carry(self.bodies.pusher)
         self.grid = NeighbourGrid(model.grid, self.state.active)
-        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
@@ -142,6 +141,13 @@ class Simulation:
         """The iterations' weights (solver.expert.acceleration), restarted at each substep."""
         self.iterations = JacobiIterations(self.density, self.weights, self.state.active, keeps_decisions_on_device())
         """The substep's Jacobi iterations, steered by the host (CPU) or on the device (GPU backends)."""
+        self.boundaries.allocate_solids(model.allocated)
+        self.bodies = self.boundaries.bodies
+        """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
+        if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
+            self.state.carry(self.bodies.shift)
+            self.state.carry(self.bodies.pusher)
+        self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
         resets restore it instead of settling again: 2 s of substeps at 64,000 particles)."""

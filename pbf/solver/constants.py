@@ -1,0 +1,49 @@
+"""A stage's scene constants as data: one () struct field its kernels read, instead of Python numbers.
+
+Taichi bakes a Python number that a kernel reads (``self.h`` of a ``data_oriented`` stage) into the
+kernel's code, and its offline cache names a compiled kernel by a hash of that code: every scene of
+another spacing, rest density or container compiled every kernel again. Read from a field, a constant
+is data, and one compile serves every scene (the fields' shapes are buckets, ``pbf.solver.model.allocation``).
+
+A kernel reads the constants it needs into locals once per particle (``c = self.constants[None]``,
+then ``c.h``): the compiler keeps them in registers through the neighbour loops and hoists what is
+derived from them (a kernel's normalisation from h) out of those loops, so the arithmetic per pair is
+what it was with the numbers baked in.
+"""
+
+import numbers
+
+import taichi as ti
+
+
+def _member_type(name: str, value):
+    if isinstance(value, bool) or isinstance(value, numbers.Integral):
+        return ti.i32
+    if isinstance(value, numbers.Real):
+        return ti.f32
+    components = tuple(value)
+    if len(components) in (2, 3, 4):
+        if all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in components):
+            return ti.types.vector(len(components), ti.i32)
+        return ti.types.vector(len(components), ti.f32)
+    raise TypeError(f"scene constant {name!r}: expected a number or 2-4 numbers, got {value!r}")
+
+
+def scene_constants(**values):
+    """A () struct field holding ``values`` (name → number, bool or a 2-4 vector): ints and bools as
+    int32, reals as float32. Read a member in a kernel as ``self.constants[None].name``.
+
+    Written in one launch: a write per member from Python would compile a kernel per member."""
+    types = {name: _member_type(name, value) for name, value in values.items()}
+    struct = ti.types.struct(**types)
+    field = struct.field(shape=())
+    _write(field, struct, values)
+    return field
+
+
+def _write(field, struct, values: dict) -> None:
+    @ti.kernel
+    def write(value: struct):
+        field[None] = value
+
+    write(struct(**{name: int(v) if isinstance(v, bool) else v for name, v in values.items()}))
