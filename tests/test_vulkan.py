@@ -35,7 +35,10 @@ CPU_VARIANTS = {
     "cpu, perturbed 2": ["--fast-compile", "--perturb", "2"],
 }
 REST_TOLERANCE = 0.05
-"""The pool at rest on Vulkan against the CPU: its statistics within 5% (0.7% apart, measured)."""
+"""The pool at rest on Vulkan against the CPU runs: its statistics within their range widened by 5%
+(the largest density error of three CPU runs spread over 0.00321-0.00352, Vulkan 0.00316-0.00321)."""
+REST_VARIANTS = ("cpu, optimised", "cpu, fast compile", "cpu, device decisions")
+"""The CPU runs that also run the pool at rest."""
 SNAPSHOT_FRAMES = 20
 """The rendered state: the seed scene after this many frames, mid-splash."""
 PIXEL_TOLERANCE = 8
@@ -73,6 +76,8 @@ def runs(tmp_path_factory):
     }
     for name, flags in CPU_VARIANTS.items():
         tasks = ["seed", "rest", "render"] if name == "cpu, optimised" else ["seed"]
+        if name in REST_VARIANTS and "rest" not in tasks:
+            tasks.append("rest")
         out = folder / f"{name.replace(', ', '_').replace(' ', '_')}.npz"
         results[name] = run_worker(out, "cpu", flags, tasks, env)
     return results
@@ -125,17 +130,22 @@ def test_grid_matches_brute_force(runs, checked):
 
 def test_a_pool_at_rest_stays_at_rest(runs):
     # A lattice over the seed scene's floor, touching every wall, after a third of a second: it settles
-    # by less than a tenth of its wave speed, and as on the CPU (a calm flow is not chaotic).
-    vulkan, cpu = runs["vulkan"], runs["cpu, optimised"]
+    # by less than a tenth of its wave speed, and as on the CPU (a calm flow is not chaotic, but its
+    # largest density error is one particle's: the CPU's own roundings spread it by 10%).
+    vulkan = runs["vulkan"]
     stats = dict(zip(STATISTICS, vulkan["rest_statistics"]))
     wave_speed = np.sqrt(9.81 * float(vulkan["rest_depth_m"]))
     assert stats["mean_density_error"] < 0.01 and stats["max_density_error"] < 0.05
     assert stats["max_speed_m_s"] < 0.1 * wave_speed
-    for name, value, expected in zip(STATISTICS, vulkan["rest_statistics"], cpu["rest_statistics"]):
-        assert value == pytest.approx(expected, rel=REST_TOLERANCE), name
-    assert np.percentile(vulkan["rest_speeds"], 99) == pytest.approx(
-        np.percentile(cpu["rest_speeds"], 99), rel=REST_TOLERANCE
-    )
+    cpu = np.stack([runs[name]["rest_statistics"] for name in REST_VARIANTS])
+    fastest = [np.percentile(runs[name]["rest_speeds"], 99) for name in REST_VARIANTS]
+    for k, name in enumerate(STATISTICS):
+        low, high = cpu[:, k].min(), cpu[:, k].max()
+        assert low * (1 - REST_TOLERANCE) <= vulkan["rest_statistics"][k] <= high * (1 + REST_TOLERANCE), (
+            f"{name}: vulkan {vulkan['rest_statistics'][k]:.6g}, the CPU runs {cpu[:, k]}"
+        )
+    speed = np.percentile(vulkan["rest_speeds"], 99)
+    assert min(fastest) * (1 - REST_TOLERANCE) <= speed <= max(fastest) * (1 + REST_TOLERANCE)
 
 
 def test_seed_scene_statistics_stay_within_the_cpus_own_spread(runs):

@@ -60,9 +60,8 @@ class NeighbourGrid:
             lower=tuple(params.lower_m),
             resolution=tuple(int(r) for r in resolution),
             inverse_cell_size=tuple(float(r / e) for r, e in zip(resolution, extent)),
-            cell_count=params.cell_count,
         )
-        """h, the grid's lower corner, cells per axis, 1 / cell size per axis and the cell count, as data."""
+        """h, the grid's lower corner, cells per axis and 1 / cell size per axis, as data."""
         cell_count = params.allocated_cells
         particle_count = allocated
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
@@ -134,7 +133,9 @@ class NeighbourGrid:
             cell = self.linear(self.cell_of(x[i]))
             self.particle_cell[i] = cell
             self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
-        self.cell_scan.scan(self.cell_particles, self.cell_start, self.constants[None].cell_count)
+        # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
+        # hold no particle and add nothing, and a count read at run time would cost a one-thread task.
+        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
         for i in range(self.active[None]):
             cell = self.particle_cell[i]
             self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
