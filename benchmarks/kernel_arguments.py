@@ -18,7 +18,10 @@ over neighbour lists, a lattice at the seed scene's h = 2 spacings):
    at another size and other constants, sharing one empty cache folder; the second's new cache
    files are the kernels it had to compile (0: served from the cache);
 2. the speed: both variants on the same particles in one process, alternating, median ms per call,
-   and whether they give the same bits.
+   and whether they give the same bits;
+3. the launch: the host's time to launch a kernel that does next to nothing, reading fields, and
+   taking an argpack of 1, 8 or 32 ndarrays (the solver's fused kernels would take 30 or more):
+   Taichi sets every ndarray of a pack anew at each launch, in Python.
 """
 
 import argparse
@@ -237,6 +240,45 @@ def cache_check(arch: str) -> dict:
     return compiled
 
 
+LAUNCH_PACKS = (1, 8, 32)
+"""Ndarrays per argpack in the launch measurement."""
+
+
+def launch_costs(rounds: int, calls: int = 500) -> dict:
+    """µs per launch of a kernel over one element: reading two fields, and taking argpacks of
+    LAUNCH_PACKS ndarrays (it reads two of them); medians of ``rounds`` alternating rounds."""
+    a, b = ti.field(ti.f32, shape=1), ti.field(ti.f32, shape=1)
+
+    @ti.kernel
+    def on_fields():
+        for i in range(1):
+            a[i] = b[i] + 1.0
+
+    launches = {"fields": on_fields}
+    for members in LAUNCH_PACKS:
+        pack_type = ti.types.argpack(**{f"a{k}": f32_array for k in range(members)})
+        pack = pack_type(**{f"a{k}": ti.ndarray(ti.f32, shape=1) for k in range(members)})
+
+        @ti.kernel
+        def on_pack(p: pack_type):
+            for i in range(1):
+                p.a0[i] = p.a0[i] + 1.0
+
+        launches[f"argpack of {members}"] = lambda kernel=on_pack, pack=pack: kernel(pack)
+    for launch in launches.values():
+        launch()
+    ti.sync()
+    times = {name: [] for name in launches}
+    for _ in range(rounds):
+        for name, launch in launches.items():
+            began = time.perf_counter()
+            for _ in range(calls):
+                launch()
+            ti.sync()
+            times[name].append((time.perf_counter() - began) * 1e6 / calls)
+    return {name: statistics.median(values) for name, values in times.items()}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--particles", type=int, default=64000)
@@ -274,6 +316,9 @@ def main(argv=None) -> None:
     for name, values in times.items():
         print(f"  {name:<9} {statistics.median(values):8.3f} ms  ({statistics.median(values) / base:.2f}x fields)")
     print(f"  the same bits as fields: {same}")
+    print(f"host time per launch of a kernel over one element, {args.arch}, medians of {args.rounds} rounds:")
+    for name, micros in launch_costs(args.rounds).items():
+        print(f"  {name:<15} {micros:7.1f} µs")
 
 
 if __name__ == "__main__":
