@@ -44,6 +44,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from pbf.app.constants import bucket, colour, scene_constants
 from pbf.app.splat import Footprints, per_item
 
 vec3 = ti.types.vector(3, ti.f32)
@@ -89,6 +90,11 @@ FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 """The two colours of the floor's tiles."""
 BODY_AMBIENT = 0.35
 """A rigid body's brightness on its faces turned from the light, of its lit colour."""
+SEGMENT_FLOOR = 16
+"""The fewest line segments the renderers allocate (``pbf.app.constants.bucket``): the container's 12
+edges fit, and with an obstacle's the next bucket, so most scenes share the line kernels' compile."""
+BODY_FLOOR = 8
+"""The fewest rigid bodies the renderers allocate poses for (``pbf.app.constants.bucket``)."""
 
 
 @ti.data_oriented
@@ -116,22 +122,49 @@ class FluidRenderer:
         ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue). ``bodies``: a
         simulation's rigid bodies (``pbf.solver.bodies.Bodies``), drawn as solids of ``body_rgb``
         from its device fields as they stand at each draw."""
+        # The image size stays in the kernels' code (a view setting, the same for most runs); what
+        # depends on the scene is data (``constants``, and fields sized by buckets), so that a scene of
+        # another spacing, container or colours finds these kernels compiled (``pbf.app.constants``).
         self.width, self.height = int(width_px), int(height_px)
         self.coarse_width, self.coarse_height = self.width // COARSE, self.height // COARSE
         self.spacing = float(spacing_m)
         self.radius = SPLAT_RADIUS_SPACINGS * self.spacing
-        # Each sphere's chord counts (particle volume / sphere volume): overlapping spheres then add
-        # up to the path length through the water they stand for.
-        self.chord_scale = particle_volume_m3 / (4.0 / 3.0 * math.pi * self.radius**3)
         self.quantum = self.spacing / THICKNESS_STEPS_PER_SPACING
-        self.floor_y, self.tile = float(floor_y_m), float(tile_m)
-        self.absorption = ti.Vector([float(c) for c in absorption_per_m])
-        self.water = ti.Vector([float(c) for c in water_rgb])
-        self.horizon = ti.Vector([float(c) for c in horizon_rgb])
-        self.line_colour = ti.Vector([float(c) for c in line_rgb])
+        """The thickness sum's step, m (a fixed-point unit)."""
         self.solids = bodies if bodies is not None and bodies.count else None
         self.with_solids = self.solids is not None
-        self.body_colour = ti.Vector([float(c) for c in body_rgb or (0.0, 0.0, 0.0)])
+        """Whether the kernels draw rigid bodies: a switch that removes code, so part of the compile."""
+        body_count = self.solids.count if self.with_solids else 0
+        self.constants = scene_constants(
+            spacing=self.spacing,
+            radius=self.radius,
+            # Each sphere's chord counts (particle volume / sphere volume): overlapping spheres then add
+            # up to the path length through the water they stand for.
+            chord_scale=particle_volume_m3 / (4.0 / 3.0 * math.pi * self.radius**3),
+            floor_y=float(floor_y_m),
+            # Reciprocals, multiplied by: a division by a number in the code compiled to that product,
+            # and a division by data would round otherwise and move pixels by a level.
+            inverse_quantum=1.0 / self.quantum,
+            inverse_tile=1.0 / float(tile_m),
+            inverse_fade=1.0 / (20.0 * float(tile_m)),
+            absorption=colour(absorption_per_m),
+            water=colour(water_rgb),
+            horizon=colour(horizon_rgb),
+            line_colour=colour(line_rgb),
+            body_colour=colour(body_rgb or (0.0, 0.0, 0.0)),
+            body_count=body_count,
+        )
+        """The scene's numbers the kernels read: spacing and splat radius (m), the chord's scale, the floor's
+        height (m), 1 / the thickness sum's step, 1 / the tile and 1 / the floor's fading distance (1/m),
+        the water's absorption (1/m), the colours, and the number of rigid bodies."""
+        slots = bucket(body_count, BODY_FLOOR)
+        self.solid_sphere = ti.field(ti.i32, shape=slots)
+        self.solid_half = ti.Vector.field(3, ti.f32, shape=slots)
+        self.solid_position = ti.Vector.field(3, ti.f32, shape=slots)
+        self.solid_rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)
+        """The rigid bodies' shapes and poses, copied from the solver's fields at each draw
+        (:meth:`_take_solids`) into fields of a bucket's size, so that the kernels that draw them do not
+        depend on the shapes of the solver's fields, which are sized by the scene's count of bodies."""
         coarse = (self.coarse_height, self.coarse_width)
         self.depth = ti.field(ti.f32, shape=coarse)
         """View depth (distance along the camera's forward axis) of the nearest sphere, m; FAR if none."""
@@ -160,9 +193,10 @@ class FluidRenderer:
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_points = points.reshape(-1, 2, 3).astype(np.float64)
         """The line segments' end points, m (a few: the container's edges)."""
-        self.screen_segments = ti.Vector.field(6, ti.f32, shape=max(1, len(self.segment_points)))
+        segment_slots = bucket(len(self.segment_points), SEGMENT_FLOOR)
+        self.screen_segments = ti.Vector.field(6, ti.f32, shape=segment_slots)
         """Per segment on screen, for the view of the last draw: (column, row, 1/depth) of each end."""
-        self.line_steps = ti.field(ti.i32, shape=max(1, len(self.segment_points)))
+        self.line_steps = ti.field(ti.i32, shape=segment_slots)
         """Pixels each segment spans along its longer screen axis (0: not in view)."""
 
     # ------------------------------------------------------------------ camera and environment
@@ -180,7 +214,8 @@ class FluidRenderer:
         """The sky along unit direction d: horizon colour below, blending to blue at the zenith, with the
         glow of a low sun behind the scene (as the default camera sees it), which a calm water surface
         mirrors as a bright sheen: without it the sky it reflects is as blue as the water."""
-        sky = self.horizon + (ti.Vector(ZENITH_RGB) - self.horizon) * ti.sqrt(ti.max(d.y, 0.0))
+        horizon = self.constants[None].horizon
+        sky = horizon + (ti.Vector(ZENITH_RGB) - horizon) * ti.sqrt(ti.max(d.y, 0.0))
         glow = ti.max(d.dot(ti.Vector(SUN_DIRECTION)), 0.0) ** SUN_GLOW_POWER
         return sky + SUN_GLOW * glow * (d.y > 0.0)
 
@@ -204,9 +239,11 @@ class FluidRenderer:
         and ``travelled`` how far its ray came from the eye to ``origin`` (m): the floor is averaged
         over the pixel's footprint on it (a box filter of the checkerboard), so tiles smaller than a
         pixel blend to their mean instead of aliasing into moiré."""
+        constants = self.constants[None]
+        per_tile = constants.inverse_tile
         colour = self._sky(d)
         if d.y < -1e-6:
-            t = (self.floor_y - origin.y) / d.y
+            t = (constants.floor_y - origin.y) / d.y
             if t > 0.0:
                 hit = origin + t * d
                 # The footprint is an ellipse t·spread across the ray and t·spread/|d.y| along its track
@@ -215,13 +252,13 @@ class FluidRenderer:
                 along = across / ti.max(-d.y, 1e-3)
                 track = ti.Vector([d.x, d.z])
                 track = track / ti.max(track.norm(), 1e-12)
-                width_x = ti.sqrt((along * track[0]) ** 2 + (across * track[1]) ** 2) / self.tile
-                width_z = ti.sqrt((along * track[1]) ** 2 + (across * track[0]) ** 2) / self.tile
-                odd_x, odd_z = self._tiles(hit.x / self.tile, width_x), self._tiles(hit.z / self.tile, width_z)
+                width_x = ti.sqrt((along * track[0]) ** 2 + (across * track[1]) ** 2) * per_tile
+                width_z = ti.sqrt((along * track[1]) ** 2 + (across * track[0]) ** 2) * per_tile
+                odd_x, odd_z = self._tiles(hit.x * per_tile, width_x), self._tiles(hit.z * per_tile, width_z)
                 tile = odd_x + odd_z - 2.0 * odd_x * odd_z  # the mean of odd_x XOR odd_z (the box is separable)
                 floor = ti.Vector(FLOOR_RGB[0]) * (1.0 - tile) + ti.Vector(FLOOR_RGB[1]) * tile
-                fade = 1.0 / (1.0 + t / (20.0 * self.tile))  # the floor greys out into the horizon
-                colour = floor * fade + self.horizon * (1.0 - fade)
+                fade = 1.0 / (1.0 + t * constants.inverse_fade)  # the floor greys out into the horizon
+                colour = floor * fade + constants.horizon * (1.0 - fade)
         return colour
 
     @ti.func
@@ -230,11 +267,10 @@ class FluidRenderer:
         t = FAR where it meets none. A box by the slab method in its own frame, a sphere by the
         quadratic; the axes are a static loop (no runtime index into a vector: SPIR-V)."""
         nearest, normal = FAR, ti.Vector([0.0, 1.0, 0.0])
-        solids = self.solids
-        for b in range(solids.count):
-            centre = solids.position[b]
-            half = solids.half[b]
-            if solids.sphere[b]:
+        for b in range(self.constants[None].body_count):
+            centre = self.solid_position[b]
+            half = self.solid_half[b]
+            if self.solid_sphere[b]:
                 offset = origin - centre
                 a, half_b = d.norm_sqr(), offset.dot(d)
                 disc = half_b * half_b - a * (offset.norm_sqr() - half[0] * half[0])
@@ -243,7 +279,7 @@ class FluidRenderer:
                     if 1e-6 < t < nearest:
                         nearest, normal = t, (offset + t * d) / half[0]
             else:
-                rotation = solids.rotation[b]
+                rotation = self.solid_rotation[b]
                 o, local = rotation.transpose() @ (origin - centre), rotation.transpose() @ d
                 enter, leave, face = -FAR, FAR, ti.Vector([0.0, 1.0, 0.0])
                 for axis in ti.static(range(3)):
@@ -257,10 +293,23 @@ class FluidRenderer:
                     nearest, normal = enter, rotation @ face
         return nearest, normal
 
+    @ti.kernel
+    def _take_solids(
+        self, sphere: ti.template(), half: ti.template(), position: ti.template(), rotation: ti.template()
+    ):
+        """The solver's bodies' shapes and poses into this renderer's fields. The one kernel here that
+        touches the solver's body fields (sized by the scene's count of bodies): a scene of another
+        count recompiles it alone."""
+        for b in range(self.constants[None].body_count):
+            self.solid_sphere[b] = sphere[b]
+            self.solid_half[b] = half[b]
+            self.solid_position[b] = position[b]
+            self.solid_rotation[b] = rotation[b]
+
     @ti.func
     def _solid_colour(self, normal, light):
         """A body's colour lit from unit ``light`` (towards the light), with an ambient part."""
-        return self.body_colour * (BODY_AMBIENT + (1.0 - BODY_AMBIENT) * ti.max(normal.dot(light), 0.0))
+        return self.constants[None].body_colour * (BODY_AMBIENT + (1.0 - BODY_AMBIENT) * ti.max(normal.dot(light), 0.0))
 
     @ti.kernel
     def _environment_image(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
@@ -280,9 +329,10 @@ class FluidRenderer:
 
     @ti.kernel
     def _splat(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
-        radius = self.radius
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
+            constants = self.constants[None]
+            radius, chord_scale, per_quantum = constants.radius, constants.chord_scale, constants.inverse_quantum
             centre = x[i] - eye
             depth = centre.dot(forward)
             if depth > radius * 1.01:
@@ -309,7 +359,7 @@ class FluidRenderer:
                         if disc > 0.0:
                             root = ti.sqrt(disc)
                             ti.atomic_min(self.depth[r, c], (b - root) / a)
-                            steps = 2.0 * root / ti.sqrt(a) * self.chord_scale / self.quantum
+                            steps = 2.0 * root / ti.sqrt(a) * chord_scale * per_quantum
                             ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
@@ -318,9 +368,9 @@ class FluidRenderer:
     ):
         """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
         (``pbf.app.splat``): the same tests and integer sums, so the same image."""
-        radius = self.radius
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
+            radius = self.constants[None].radius
             centre = x[i] - eye
             depth = centre.dot(forward)
             c0, c1, r0, r1 = 0, 0, 0, 0
@@ -334,6 +384,8 @@ class FluidRenderer:
         self.footprints.scan(count)
         for w in range(self.footprints.total(count)):
             i, c, r = self.footprints.item(w, count)
+            constants = self.constants[None]
+            radius = constants.radius
             centre = x[i] - eye
             # The per-particle loops visit only the disc of the bounding square; so does this.
             depth = centre.dot(forward)
@@ -349,7 +401,7 @@ class FluidRenderer:
             if in_disc and disc > 0.0:
                 root = ti.sqrt(disc)
                 ti.atomic_min(self.depth[r, c], (b - root) / a)
-                steps = 2.0 * root / ti.sqrt(a) * self.chord_scale / self.quantum
+                steps = 2.0 * root / ti.sqrt(a) * constants.chord_scale * constants.inverse_quantum
                 ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
@@ -370,14 +422,15 @@ class FluidRenderer:
         Gaussian over the thickness when ``with_thickness``. ``follow_slope``: the range is centred on
         the plane through the centre pixel with the slope of its nearest neighbours along the pass (for
         a smoothed input; on the splat's raw depth one pixel's slope is the bumps of single spheres)."""
-        mu = THRESHOLD_SPACINGS * self.spacing
         for row, col in depth_in:
+            spacing = self.constants[None].spacing
+            mu = THRESHOLD_SPACINGS * spacing
             z = depth_in[row, col]
             depth_out[row, col] = z
             if ti.static(with_thickness):
                 thickness_out[row, col] = thickness_in[row, col] * thickness_unit
             if z < FAR:
-                sigma = focal * ROUND_SIGMA_SPACINGS * self.spacing / z
+                sigma = focal * ROUND_SIGMA_SPACINGS * spacing / z
                 # Taps stop at 2σ (95% of the Gaussian) and at the image's edge: a pair with a tap
                 # outside would be left out anyway.
                 border = ti.min(col, self.coarse_width - 1 - col)
@@ -503,8 +556,8 @@ class FluidRenderer:
                     if hit < FAR:
                         path = ti.min(path, hit)
                         behind = self._solid_colour(hit_normal, light)
-                transmittance = ti.exp(-self.absorption * path)
-                transmitted = behind * transmittance + self.water * (1.0 - transmittance)
+                transmittance = ti.exp(-self.constants[None].absorption * path)
+                transmitted = behind * transmittance + self.constants[None].water * (1.0 - transmittance)
                 # Blinn-Phong, its exponent lowered where the normals within the pixel's neighbourhood
                 # disagree (Toksvig 2005, "Mipmapping normal maps": with n̄ the mean of the unit normals,
                 # s' = |n̄| s / (|n̄| + s (1 − |n̄|))) and scaled by (s' + 8)/(s + 8) to keep its energy: a
@@ -578,7 +631,7 @@ class FluidRenderer:
         on the host, once per camera)."""
         right, up, forward = view.basis()
         ends = np.zeros(self.screen_segments.shape + (6,), np.float32)
-        steps = np.zeros(self.line_steps.shape, np.int32)
+        steps = np.zeros(self.line_steps.shape, np.int32)  # 0 for the slots past the segments: not drawn
         for s, (a, b) in enumerate(self.segment_points - view.eye):
             depth_a, depth_b = a @ forward, b @ forward
             if depth_a < NEAR_M and depth_b < NEAR_M:
@@ -609,7 +662,9 @@ class FluidRenderer:
         segment is nearer than the water there (depth interpolated as 1/depth, which is linear on the
         screen). Each segment is a parallel loop over its steps along its longer axis, three pixels
         across each step, so no two threads touch one pixel; the segments follow one another, so
-        where two cross the later one blends over the earlier, the same way on every run."""
+        where two cross the later one blends over the earlier, the same way on every run. The loops are
+        unrolled over the segments' bucket (``SEGMENT_FLOOR``); a slot past the scene's segments has no
+        steps."""
         for s in ti.static(range(self.screen_segments.shape[0])):
             for k in range(self.line_steps[s] * 3):
                 ends = self.screen_segments[s]
@@ -639,7 +694,7 @@ class FluidRenderer:
                     if distance < 1.0 and depth < self.image_depth[row, col]:
                         share = 1.0 - distance
                         colour = ti.cast(self.image[row, col], ti.f32) / 255.0
-                        blended = share * self.line_colour + (1.0 - share) * colour
+                        blended = share * self.constants[None].line_colour + (1.0 - share) * colour
                         self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
 
     @ti.kernel
@@ -675,6 +730,9 @@ class FluidRenderer:
             self._environment_image(eye, right, up, forward, focal)
             self._project_segments(view, focal)
             self.background_view = key
+        if self.with_solids:
+            solids = self.solids
+            self._take_solids(solids.sphere, solids.half, solids.position, solids.rotation)
         self._clear()
         if count and self.per_item:
             if self.footprints is None or self.footprints.capacity < positions.shape[0]:

@@ -8,6 +8,12 @@ The interactive window (``pbf.app.window``) uses the same View, colours and back
 look like these. Both read the simulation through its read-outs (``Simulation.readout``,
 ``Simulation.density_ratios``) and never change it. ``render.style = "surface"`` draws the water's
 surface instead, with the screen-space renderer of ``pbf.app.fluid_render``.
+
+As the solver's, the renderers' kernels read the scene's numbers (colours, radii, counts of segments
+and bodies) as data (``pbf.app.constants``) and their arrays are sized by buckets
+(``pbf.app.constants.bucket``), so that Taichi's offline cache serves a scene of another spacing,
+size or colours with the kernels a run before compiled. The image size stays in the code: a view
+setting, the same for most runs.
 """
 
 import math
@@ -16,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.app.fluid_render import FluidRenderer
+from pbf.app.constants import bucket, colour, padded, scene_constants
+from pbf.app.fluid_render import BODY_FLOOR, SEGMENT_FLOOR, FluidRenderer
 from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
@@ -27,6 +34,8 @@ EMPTY = np.iinfo(np.int64).max
 LIGHT_DIRECTION = np.array([0.35, 0.8, 0.5]) / np.linalg.norm([0.35, 0.8, 0.5])
 LUT_SIZE = 256
 vec3 = ti.types.vector(3, ti.f32)
+BODY_POINT_FLOOR = 2**12
+"""The fewest rigid-body surface points :class:`BodyPoints` allocates."""
 
 
 @dataclass
@@ -91,7 +100,9 @@ class ParticleColours:
 
         self.sim = sim
         self.render = render
-        self.colours = ti.Vector.field(3, ti.f32, shape=sim.model.capacity)
+        # As long as the solver's per-particle arrays (a capacity bucket, not the scene's count): the
+        # kernels that fill and read it then compile once for every scene of the bucket.
+        self.colours = ti.Vector.field(3, ti.f32, shape=sim.model.allocated)
         table = matplotlib.colormaps[render.colour_map](np.linspace(0.0, 1.0, LUT_SIZE))[:, :3]
         self.table = ti.Vector.field(3, ti.f32, shape=LUT_SIZE)
         self.table.from_numpy(table.astype(np.float32))
@@ -156,9 +167,9 @@ class SphereRenderer:
     is the same on every run."""
 
     def __init__(self, width_px: int, height_px: int, background_rgb, line_rgb=(0.0, 0.0, 0.0), segments=None):
+        # The image size stays in the kernels' code (a view setting, the same for most runs); the
+        # scene's colours and segment count are data, so another scene finds these kernels compiled.
         self.width, self.height = int(width_px), int(height_px)
-        self.background = ti.Vector([float(c) for c in background_rgb])
-        self.line_colour = ti.Vector([float(c) for c in line_rgb])
         self.keys = ti.field(ti.i64, shape=(self.width, self.height))
         """(view depth bits << 32) | particle id of the nearest hit per pixel, EMPTY where none; indexed
         [x, y] with y up like ``packed``, so that shading reads and writes both in memory order."""
@@ -174,9 +185,13 @@ class SphereRenderer:
         everywhere else on Vulkan; and on CUDA each frame cost four copies of it."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_count = len(points) // 2
-        self.segments = ti.Vector.field(3, ti.f32, shape=max(1, len(points)))
+        self.segments = ti.Vector.field(3, ti.f32, shape=2 * bucket(self.segment_count, SEGMENT_FLOOR))
         if len(points):
-            self.segments.from_numpy(points)
+            self.segments.from_numpy(padded(points, self.segments.shape[0]))
+        self.constants = scene_constants(
+            background=colour(background_rgb), line_colour=colour(line_rgb), segment_count=self.segment_count
+        )
+        """The background and line colours and the number of segments, as data (``pbf.app.constants``)."""
         self.depth_range = ti.field(ti.f32, shape=2)
         self.slab_count = ti.field(ti.i32, shape=SLABS)
         self.slab_start = ti.field(ti.i32, shape=SLABS)
@@ -366,7 +381,7 @@ class SphereRenderer:
     ):
         for col, y in self.keys:
             key = self.keys[col, y]
-            word = pack_rgba(self.background)  # a constant: most pixels are background
+            word = pack_rgba(self.constants[None].background)  # the same for all: most pixels are background
             if key != ti.i64(EMPTY):
                 row = self.height - 1 - y
                 i = ti.cast(key & ti.i64(0xFFFFFFFF), ti.i32)
@@ -393,7 +408,7 @@ class SphereRenderer:
         focal: ti.f32,
         out: ti.types.ndarray(dtype=ti.u32, ndim=2),
     ):
-        for s in range(self.segment_count):
+        for s in range(self.constants[None].segment_count):
             a, b = self.segments[2 * s], self.segments[2 * s + 1]
             samples = 2 * (self.width + self.height)
             for k in range(samples + 1):
@@ -403,7 +418,7 @@ class SphereRenderer:
                     key = self.keys[col, self.height - 1 - row]
                     hit = ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)  # the sphere's view depth
                     if key == ti.i64(EMPTY) or depth < hit:
-                        out[col, self.height - 1 - row] = pack_rgba(self.line_colour)
+                        out[col, self.height - 1 - row] = pack_rgba(self.constants[None].line_colour)
 
     @ti.kernel
     def _copy(self, image: ti.types.ndarray(dtype=ti.u32, ndim=2), out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
@@ -523,24 +538,29 @@ class BodyPoints:
             local.append(points)
             owner.append(np.full(len(points), k, np.int32))
         self.count = int(sum(len(p) for p in local))
-        capacity = sim.model.capacity + self.count
-        self.local = ti.Vector.field(3, ti.f32, shape=max(1, self.count))
-        self.owner = ti.field(ti.i32, shape=max(1, self.count))
+        # Every array sized by a bucket and the counts as data, so that scenes of other bodies, spacings
+        # or sizes find the kernel compiled (``pbf.app.constants.bucket``).
+        points = bucket(self.count, BODY_POINT_FLOOR)
+        capacity = sim.model.allocated + points
+        self.local = ti.Vector.field(3, ti.f32, shape=points)
+        self.owner = ti.field(ti.i32, shape=points)
         if self.count:
-            self.local.from_numpy(np.concatenate(local).astype(np.float32))
-            self.owner.from_numpy(np.concatenate(owner))
-        bodies = max(1, len(sim.scene.bodies))
-        self.centre = ti.Vector.field(3, ti.f32, shape=bodies)
-        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=bodies)
+            self.local.from_numpy(padded(np.concatenate(local).astype(np.float32), points))
+            self.owner.from_numpy(padded(np.concatenate(owner), points))
+        self.bodies = bucket(len(sim.scene.bodies), BODY_FLOOR)
+        self.centre = ti.Vector.field(3, ti.f32, shape=self.bodies)
+        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=self.bodies)
         self.positions = ti.Vector.field(3, ti.f32, shape=capacity)
         self.colours = ti.Vector.field(3, ti.f32, shape=capacity)
+        self.constants = scene_constants(points=self.count)
+        """The number of surface points, as data."""
 
     @ti.kernel
     def _combine(self, positions: ti.template(), colours: ti.template(), count: ti.i32):
         for i in range(count):
             self.positions[i] = positions[i]
             self.colours[i] = colours[i]
-        for k in range(self.count):
+        for k in range(self.constants[None].points):
             b = self.owner[k]
             self.positions[count + k] = self.centre[b] + self.rotation[b] @ self.local[k]
             self.colours[count + k] = self.colour
@@ -548,8 +568,9 @@ class BodyPoints:
     def combine(self, positions, colours, count: int):
         """The particles and the bodies' points as one positions field, one colours field and a count."""
         states = self.sim.body_states()
-        self.centre.from_numpy(states[:, 0:3].copy())
-        self.rotation.from_numpy(np.stack([quaternion_matrix_np(q) for q in states[:, 3:7]]).astype(np.float32))
+        self.centre.from_numpy(padded(states[:, 0:3].astype(np.float32), self.bodies))
+        rotations = np.stack([quaternion_matrix_np(q) for q in states[:, 3:7]]).astype(np.float32)
+        self.rotation.from_numpy(padded(rotations, self.bodies))
         self._combine(positions, colours, count)
         return self.positions, self.colours, count + self.count
 
