@@ -44,8 +44,10 @@ import math
 import numpy as np
 import taichi as ti
 
-from pbf.app.constants import bucket, colour, scene_constants
+from pbf.app.constants import colour
 from pbf.app.splat import Footprints, per_item
+from pbf.solver import allocation as bucket
+from pbf.solver import scene_constants
 
 vec3 = ti.types.vector(3, ti.f32)
 
@@ -91,10 +93,10 @@ FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 BODY_AMBIENT = 0.35
 """A rigid body's brightness on its faces turned from the light, of its lit colour."""
 SEGMENT_FLOOR = 16
-"""The fewest line segments the renderers allocate (``pbf.app.constants.bucket``): the container's 12
+"""The fewest line segments the renderers allocate (``pbf.solver.allocation``): the container's 12
 edges fit, and with an obstacle's the next bucket, so most scenes share the line kernels' compile."""
 BODY_FLOOR = 8
-"""The fewest rigid bodies the renderers allocate poses for (``pbf.app.constants.bucket``)."""
+"""The fewest rigid bodies the renderers allocate poses for (``pbf.solver.allocation``)."""
 
 
 @ti.data_oriented

@@ -11,7 +11,7 @@ surface instead, with the screen-space renderer of ``pbf.app.fluid_render``.
 
 As the solver's, the renderers' kernels read the scene's numbers (colours, radii, counts of segments
 and bodies) as data (``pbf.app.constants``) and their arrays are sized by buckets
-(``pbf.app.constants.bucket``), so that Taichi's offline cache serves a scene of another spacing,
+(``pbf.solver.allocation``), so that Taichi's offline cache serves a scene of another spacing,
 size or colours with the kernels a run before compiled. The image size stays in the code: a view
 setting, the same for most runs.
 """
@@ -22,13 +22,14 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.app.constants import bucket, colour, padded, scene_constants
+from pbf.app.constants import colour, padded
 from pbf.app.fluid_render import BODY_FLOOR, SEGMENT_FLOOR, FluidRenderer
 from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
 from pbf.scene import Render, Scene
-from pbf.solver import quaternion_matrix_np
+from pbf.solver import allocation as bucket
+from pbf.solver import quaternion_matrix_np, scene_constants
 
 EMPTY = np.iinfo(np.int64).max
 LIGHT_DIRECTION = np.array([0.35, 0.8, 0.5]) / np.linalg.norm([0.35, 0.8, 0.5])
@@ -539,7 +540,7 @@ class BodyPoints:
             owner.append(np.full(len(points), k, np.int32))
         self.count = int(sum(len(p) for p in local))
         # Every array sized by a bucket and the counts as data, so that scenes of other bodies, spacings
-        # or sizes find the kernel compiled (``pbf.app.constants.bucket``).
+        # or sizes find the kernel compiled (``pbf.solver.allocation``).
         points = bucket(self.count, BODY_POINT_FLOOR)
         capacity = sim.model.allocated + points
         self.local = ti.Vector.field(3, ti.f32, shape=points)

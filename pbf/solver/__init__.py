@@ -6,7 +6,8 @@ import only the scene schema (``pbf.scene``), Taichi and NumPy: no plotting, com
 
 from pbf.solver.backend import ARCHES, ENV_VAR, BackendError, start_backend
 from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
-from pbf.solver.model import Control, Model, Push
+from pbf.solver.constants import scene_constants
+from pbf.solver.model import Control, Model, Push, allocation
 from pbf.solver.simulation import STAGES, Readout, Simulation, StageHook
 from pbf.solver.state import Snapshot
 
@@ -23,6 +24,8 @@ __all__ = [
     "Simulation",
     "Snapshot",
     "StageHook",
+    "allocation",
     "quaternion_matrix_np",
+    "scene_constants",
     "start_backend",
 ]
