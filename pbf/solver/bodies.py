@@ -48,7 +48,8 @@ import math
 import numpy as np
 import taichi as ti
 
-from pbf.solver.model import BoundaryParams
+from pbf.solver.constants import scene_constants
+from pbf.solver.model import BoundaryParams, allocation
 
 STATE_LAYOUT = (
     ("position_m", 3),
@@ -166,21 +167,37 @@ class Bodies:
     mirrored = False
 
     def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
+        """``capacity``: the per-particle arrays' length (a bucket). The bodies' arrays have slots of a
+        bucket too (``pbf.solver.model.allocation``) and every number the kernels read is data
+        (``self.constants``), so that every scene with bodies shares one compile of their code: a
+        field's shape and a Python number a kernel reads are both part of a kernel's cache key. What
+        stays a switch (``ti.static``) is whether a scene has spheres, boxes or both, whether it has
+        obstacles and whether walls have ghost density: each leaves a whole feature's code out."""
         bodies = params.bodies
         self.params = bodies
         self.tables = tables
         self.obstacles = obstacles
         self.count = bodies.count
+        """The number of bodies, for the host side; kernels read ``constants[None].count``."""
         self.particle_radius = params.particle_radius_m
-        self.wall_margin = 0.99 * params.particle_radius_m
-        """How far inside the container a way out of a body must lead: the walls' collision distance, a
-        little less so that rounding does not shut a way flush with it."""
         self.kernel_radius = params.kernel_radius_m
         self.with_wall_density = params.wall_density
-        self.lower = ti.Vector(list(params.lower_m))
-        self.upper = ti.Vector(list(params.upper_m))
-        self.volume = bodies.particle_volume_m3
-        slots = max(1, self.count)
+        slots = allocation(self.count, 8)
+        # The arrays whose shapes follow the particles' bucket first, closed into a SNode tree of their
+        # own by a launch (the fill), then the bodies' slots in another: Taichi's cache key of a field
+        # holds its tree's layout, so the rigid step's kernels, which touch only the slots, are shared
+        # by scenes of any particle bucket. The reaction's blocks follow the bucketed capacity.
+        self.block = max(64, math.ceil(capacity / 1024))
+        self.blocks = math.ceil(capacity / self.block)
+        self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)
+        """The part of x*_i this substep that the bodies' collision accounts for, D_i (m; see record_start)."""
+        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)
+        """D_i as the iteration before left it (the two-step recurrence's other term)."""
+        self.pusher = ti.field(ti.i32, shape=capacity)
+        """The body that pushed particle i last this substep (−1: none); it takes the reaction of D_i."""
+        self.pusher.fill(-1)
         self.sphere = ti.field(ti.i32, shape=slots)
         self.half = ti.Vector.field(3, ti.f32, shape=slots)
         """Half extents along the body's axes (a sphere: its radius on each), m."""
@@ -197,42 +214,53 @@ class Bodies:
         """Its torque about the centre of mass, N m."""
         self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)
         """The rotation matrix of the quaternion, kept beside it for the fluid's kernels."""
-        self.block = max(64, math.ceil(capacity / 1024))
-        self.blocks = math.ceil(capacity / self.block)
-        self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
-        self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
-        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)
-        """The part of x*_i this substep that the bodies' collision accounts for, D_i (m; see record_start)."""
-        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)
-        """D_i as the iteration before left it (the two-step recurrence's other term)."""
-        self.pusher = ti.field(ti.i32, shape=capacity)
-        """The body that pushed particle i last this substep (−1: none); it takes the reaction of D_i."""
         self.particle_mass = bodies.rest_density_kg_m3 * bodies.particle_volume_m3
-        for b in range(self.count):
-            self.sphere[b] = int(bodies.shapes[b] == "sphere")
-            self.half[b] = bodies.half_extents_m[b]
-            self.inverse_mass[b] = 1.0 / bodies.masses_kg[b]
-            self.inertia[b] = bodies.inertia_kg_m2[b]
         self.reach = ti.field(ti.f32, shape=slots)
         """Each body's collision distance this substep, m (:meth:`collision_reach`)."""
-        self.reach.fill(COLLISION_AT_REST * self.particle_radius)
         self.bounding = ti.field(ti.f32, shape=slots)
         """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
         self.fastest = ti.field(ti.f32, shape=())
-        for b in range(self.count):
-            half = bodies.half_extents_m[b]
-            self.bounding[b] = float(np.linalg.norm(half)) if bodies.shapes[b] == "box" else half[0]
         self.has_spheres = "sphere" in bodies.shapes
         self.has_boxes = "box" in bodies.shapes or not bodies.shapes
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
         self.pairs = len(pairs)
-        self.pair_first = ti.field(ti.i32, shape=max(1, self.pairs))
-        self.pair_second = ti.field(ti.i32, shape=max(1, self.pairs))
+        pair_slots = allocation(self.pairs, 8)
+        self.pair_first = ti.field(ti.i32, shape=pair_slots)
+        self.pair_second = ti.field(ti.i32, shape=pair_slots)
         """The pairs of bodies a < b in order, for :meth:`_contacts`' one loop over bodies and pairs."""
-        for k, (a, b) in enumerate(pairs):
-            self.pair_first[k], self.pair_second[k] = a, b
         self.static_candidates = CONTAINER_CANDIDATES + CORNERS * obstacles.count
         """Candidates of each body against the container and the obstacles (:meth:`_static_candidate`)."""
+        self.constants = scene_constants(
+            count=self.count,
+            pairs=self.pairs,
+            static_candidates=self.static_candidates,
+            block=self.block,
+            blocks=self.blocks,
+            lower=tuple(float(v) for v in params.lower_m),
+            upper=tuple(float(v) for v in params.upper_m),
+            particle_radius=float(self.particle_radius),
+            wall_margin=0.99 * float(self.particle_radius),
+            kernel_radius=float(self.kernel_radius),
+            volume=float(bodies.particle_volume_m3),
+        )
+        """The counts, the container, the radii and the particle volume as data. ``wall_margin``: how far
+        inside the container a way out of a body must lead: the walls' collision distance, a little less
+        so that rounding does not shut a way flush with it."""
+        # One kernel writes them all: a write per element from Python compiles a kernel per field, and
+        # a from_numpy one per field too (7 more compiles at the start).
+        rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
+        for b in range(self.count):
+            extents = bodies.half_extents_m[b]
+            rows[b, 0] = bodies.shapes[b] == "sphere"
+            rows[b, 1:4] = extents
+            rows[b, 4] = 1.0 / bodies.masses_kg[b]
+            rows[b, 5:8] = bodies.inertia_kg_m2[b]
+            rows[b, 8] = float(np.linalg.norm(extents)) if bodies.shapes[b] == "box" else extents[0]
+        pair_rows = np.zeros((pair_slots, 2), np.int32)
+        if pairs:
+            pair_rows[: len(pairs)] = pairs
+        self._describe(rows, pair_rows)
+        self._rest_reach()
         self.held = False
         """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
 
@@ -263,7 +291,7 @@ class Bodies:
 
     @ti.kernel
     def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             self.position[b] = ti.Vector([rows[b, i] for i in ti.static(range(0, 3))])
             self.quaternion[b] = ti.Vector([rows[b, i] for i in ti.static(range(3, 7))])
             self.linear_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(7, 10))])
@@ -274,7 +302,7 @@ class Bodies:
 
     @ti.kernel
     def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             for i in ti.static(range(3)):
                 rows[b, i] = self.position[b][i]
                 rows[b, 7 + i] = self.linear_velocity[b][i]
@@ -297,14 +325,14 @@ class Bodies:
         # A maximum over a handful of bodies, once a frame: the atomic into one address is not in the
         # substep, and a maximum does not depend on the order.
         self.fastest[None] = 0.0
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             ti.atomic_max(self.fastest[None], self.fastest_point(b))
         return self.fastest[None]
 
     def advance(self, dt: float, gravity) -> None:
         """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
         if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
-            self.reach.fill(COLLISION_AT_REST * self.particle_radius)
+            self._rest_reach()
         else:
             # Three launches, not one kernel: Taichi's compile time grows faster than a kernel's length,
             # and the contacts alone are most of it (docs/BODIES.md, Compile time).
@@ -314,7 +342,7 @@ class Bodies:
 
     @ti.kernel
     def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             centre = self.position[b]
             gap = 0.0
             if self.sphere[b]:
@@ -349,7 +377,7 @@ class Bodies:
 
     @ti.kernel
     def _advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             r = quaternion_matrix(self.quaternion[b])
             v = self.linear_velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
             inertia = self.inertia[b]
@@ -374,8 +402,26 @@ class Bodies:
             self._contacts()
 
     @ti.kernel
+    def _describe(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2), pairs: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for b in range(rows.shape[0]):
+            self.sphere[b] = ti.cast(rows[b, 0], ti.i32)
+            self.half[b] = ti.Vector([rows[b, 1], rows[b, 2], rows[b, 3]])
+            self.inverse_mass[b] = rows[b, 4]
+            self.inertia[b] = ti.Vector([rows[b, 5], rows[b, 6], rows[b, 7]])
+            self.bounding[b] = rows[b, 8]
+        for k in range(pairs.shape[0]):
+            self.pair_first[k] = pairs[k, 0]
+            self.pair_second[k] = pairs[k, 1]
+
+    @ti.kernel
+    def _rest_reach(self):
+        # Not ``reach.fill(number)``: Taichi's fill takes its value as a template, compiled into the kernel.
+        for b in range(self.constants[None].count):
+            self.reach[b] = COLLISION_AT_REST * self.constants[None].particle_radius
+
+    @ti.kernel
     def _update_reach(self, dt: ti.f32):
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             self.reach[b] = self.collision_reach(b, dt)
 
     @ti.func
@@ -383,7 +429,7 @@ class Bodies:
         """How far outside body b the collision keeps particle centres this substep: r at rest, less
         the distance the body's fastest point moves in Δt (times COLLISION_GIVE), at least
         COLLISION_MOVING r (the constants say why)."""
-        r = self.particle_radius
+        r = self.constants[None].particle_radius
         return ti.max(COLLISION_MOVING * r, COLLISION_AT_REST * r - COLLISION_GIVE * self.fastest_point(b) * dt)
 
     @ti.func
@@ -404,12 +450,13 @@ class Bodies:
         written once in the loop's body: Taichi inlines every ``ti.func`` call, and with a call per
         wall, axis and kind of pair (unrolled by ``ti.static``) the impulse code was inlined 16 times
         and the rigid step took 100 s to compile on 2 cores (docs/BODIES.md, Compile time)."""
+        c = self.constants[None]
         for _sweep in range(CONTACT_SWEEPS):
-            for slot in range(self.count + self.pairs):
+            for slot in range(c.count + c.pairs):
                 a, b = slot, -1  # a body against the container and the obstacles
-                candidates = self.static_candidates
-                if slot >= self.count:  # a pair, a < b
-                    a, b = self.pair_first[slot - self.count], self.pair_second[slot - self.count]
+                candidates = c.static_candidates
+                if slot >= c.count:  # a pair, a < b
+                    a, b = self.pair_first[slot - c.count], self.pair_second[slot - c.count]
                     candidates = self._pair_candidates(a, b)
                 corners = 0
                 for m in range(candidates):
@@ -477,11 +524,11 @@ class Bodies:
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
             point = self._corner(b, m // 6)
             if above:
-                depth, normal = component(point, axis) - component(self.upper, axis), -unit
+                depth, normal = component(point, axis) - component(self.constants[None].upper, axis), -unit
             else:
-                depth, normal = component(self.lower, axis) - component(point, axis), unit
+                depth, normal = component(self.constants[None].lower, axis) - component(point, axis), unit
             found = depth > 0.0
-        if ti.static(self.obstacles.count > 0):
+        if ti.static(self.obstacles.present):
             if m >= CONTAINER_CANDIDATES:
                 o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
                 lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
@@ -505,13 +552,13 @@ class Bodies:
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
             centre = component(self.position[b], axis)
             if above:
-                depth = centre + radius - component(self.upper, axis)
+                depth = centre + radius - component(self.constants[None].upper, axis)
                 point, normal = self.position[b] + radius * unit, -unit
             else:
-                depth = component(self.lower, axis) - (centre - radius)
+                depth = component(self.constants[None].lower, axis) - (centre - radius)
                 point, normal = self.position[b] - radius * unit, unit
             found = depth > 0.0
-        if ti.static(self.obstacles.count > 0):
+        if ti.static(self.obstacles.present):
             if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
                 o = (m - CONTAINER_CANDIDATES) // CORNERS
                 lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
@@ -783,7 +830,7 @@ class Bodies:
         offset = p - centre
         distance = offset.norm()
         surface = distance - radius
-        if surface < self.kernel_radius:
+        if surface < self.constants[None].kernel_radius:
             value, slope = self.tables.wall(surface)
             density = value
             gradient = slope * offset / ti.max(distance, 1e-12)
@@ -802,7 +849,7 @@ class Bodies:
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.with_wall_density):
-            for b in range(self.count):
+            for b in range(self.constants[None].count):
                 d, g = self._ghost_of(p, b)
                 density += d
                 gradient += g
@@ -814,7 +861,7 @@ class Bodies:
         the nearest face (a box) or along the radius (a sphere); and the last body that moved it (−1: none)."""
         q = p
         pusher = -1
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             moved = False
             if ti.static(self.has_spheres and self.has_boxes):
                 if self.sphere[b]:
@@ -862,6 +909,8 @@ class Bodies:
         stays inside the container, so that a particle under a box on the floor leaves by a side rather
         than through the floor, from which the container would put it back inside the box; the nearest
         face when every way out is shut."""
+        c = self.constants[None]
+        low, high = c.lower + c.wall_margin, c.upper - c.wall_margin
         best, exit = 1e30, p
         nearest, fallback = 1e30, p
         for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times
@@ -872,7 +921,7 @@ class Bodies:
             target = centre + r @ out
             if depth < nearest:
                 nearest, fallback = depth, target
-            open_way = (target > self.lower + self.wall_margin).all() and (target < self.upper - self.wall_margin).all()
+            open_way = (target > low).all() and (target < high).all()
             if open_way and depth < best:
                 best, exit = depth, target
         if best == 1e30:
@@ -922,14 +971,15 @@ class Bodies:
     def velocity(self, p):
         """The velocity v + ω × (p − c) of the body whose ghost p sees (within h of its surface)."""
         v = ti.Vector([0.0, 0.0, 0.0])
-        for b in range(self.count):
+        h = self.constants[None].kernel_radius
+        for b in range(self.constants[None].count):
             centre = self.position[b]
             near = False
             if self.sphere[b]:
-                near = (p - centre).norm() - self.half[b][0] < self.kernel_radius
+                near = (p - centre).norm() - self.half[b][0] < h
             else:
                 local = self.rotation[b].transpose() @ (p - centre)
-                near = ti.max(ti.abs(local) - self.half[b], 0.0).norm() < self.kernel_radius
+                near = ti.max(ti.abs(local) - self.half[b], 0.0).norm() < h
             if near:
                 v += self.linear_velocity[b] + self.angular_velocity[b].cross(p - centre)
         return v
@@ -947,26 +997,27 @@ class Bodies:
         velocity_scale: ti.f32,
         push_scale: ti.f32,
     ):
-        for b, k in ti.ndrange(self.count, self.blocks):
+        for b, k in ti.ndrange(self.constants[None].count, self.constants[None].blocks):
+            block, volume = self.constants[None].block, self.constants[None].volume
             force = ti.Vector([0.0, 0.0, 0.0])
             torque = ti.Vector([0.0, 0.0, 0.0])
             centre = self.position[b]
-            for i in range(k * self.block, ti.min((k + 1) * self.block, active[None])):
+            for i in range(k * block, ti.min((k + 1) * block, active[None])):
                 f = ti.Vector([0.0, 0.0, 0.0])
                 _density, gradient = self._ghost_of(x[i], b)
                 if gradient.norm_sqr() > 0.0:
                     pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
-                    f = self.volume * pressure * gradient
+                    f = volume * pressure * gradient
                 if self.pusher[i] == b:
                     f += push_scale * self.shift[i]
                 force += f
                 torque += (x[i] - centre).cross(f)
             self.partial_force[b, k] = force
             self.partial_torque[b, k] = torque
-        for b in range(self.count):
+        for b in range(self.constants[None].count):
             force = ti.Vector([0.0, 0.0, 0.0])
             torque = ti.Vector([0.0, 0.0, 0.0])
-            for k in range(self.blocks):  # in order: the same sum on any thread count
+            for k in range(self.constants[None].blocks):  # in order: the same sum on any thread count
                 force += self.partial_force[b, k]
                 torque += self.partial_torque[b, k]
             self.force[b] = force
