@@ -241,11 +241,16 @@ class FluidRenderer:
         and ``travelled`` how far its ray came from the eye to ``origin`` (m): the floor is averaged
         over the pixel's footprint on it (a box filter of the checkerboard), so tiles smaller than a
         pixel blend to their mean instead of aliasing into moiré."""
-        constants = self.constants[None]
-        per_tile = constants.inverse_tile
+        (inverse_tile, floor_y, inverse_fade, horizon) = (
+            self.constants[None].inverse_tile,
+            self.constants[None].floor_y,
+            self.constants[None].inverse_fade,
+            self.constants[None].horizon,
+        )
+        per_tile = inverse_tile
         colour = self._sky(d)
         if d.y < -1e-6:
-            t = (constants.floor_y - origin.y) / d.y
+            t = (floor_y - origin.y) / d.y
             if t > 0.0:
                 hit = origin + t * d
                 # The footprint is an ellipse t·spread across the ray and t·spread/|d.y| along its track
@@ -259,8 +264,8 @@ class FluidRenderer:
                 odd_x, odd_z = self._tiles(hit.x * per_tile, width_x), self._tiles(hit.z * per_tile, width_z)
                 tile = odd_x + odd_z - 2.0 * odd_x * odd_z  # the mean of odd_x XOR odd_z (the box is separable)
                 floor = ti.Vector(FLOOR_RGB[0]) * (1.0 - tile) + ti.Vector(FLOOR_RGB[1]) * tile
-                fade = 1.0 / (1.0 + t * constants.inverse_fade)  # the floor greys out into the horizon
-                colour = floor * fade + constants.horizon * (1.0 - fade)
+                fade = 1.0 / (1.0 + t * inverse_fade)  # the floor greys out into the horizon
+                colour = floor * fade + horizon * (1.0 - fade)
         return colour
 
     @ti.func
@@ -333,8 +338,11 @@ class FluidRenderer:
     def _splat(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
-            constants = self.constants[None]
-            radius, chord_scale, per_quantum = constants.radius, constants.chord_scale, constants.inverse_quantum
+            (radius, chord_scale, inverse_quantum) = (
+                self.constants[None].radius,
+                self.constants[None].chord_scale,
+                self.constants[None].inverse_quantum,
+            )
             centre = x[i] - eye
             depth = centre.dot(forward)
             if depth > radius * 1.01:
@@ -361,7 +369,7 @@ class FluidRenderer:
                         if disc > 0.0:
                             root = ti.sqrt(disc)
                             ti.atomic_min(self.depth[r, c], (b - root) / a)
-                            steps = 2.0 * root / ti.sqrt(a) * chord_scale * per_quantum
+                            steps = 2.0 * root / ti.sqrt(a) * chord_scale * inverse_quantum
                             ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel
@@ -386,8 +394,11 @@ class FluidRenderer:
         self.footprints.scan(count)
         for w in range(self.footprints.total(count)):
             i, c, r = self.footprints.item(w, count)
-            constants = self.constants[None]
-            radius = constants.radius
+            (radius, chord_scale, inverse_quantum) = (
+                self.constants[None].radius,
+                self.constants[None].chord_scale,
+                self.constants[None].inverse_quantum,
+            )
             centre = x[i] - eye
             # The per-particle loops visit only the disc of the bounding square; so does this.
             depth = centre.dot(forward)
@@ -403,7 +414,7 @@ class FluidRenderer:
             if in_disc and disc > 0.0:
                 root = ti.sqrt(disc)
                 ti.atomic_min(self.depth[r, c], (b - root) / a)
-                steps = 2.0 * root / ti.sqrt(a) * constants.chord_scale * constants.inverse_quantum
+                steps = 2.0 * root / ti.sqrt(a) * chord_scale * inverse_quantum
                 ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
 
     @ti.kernel

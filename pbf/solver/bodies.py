@@ -450,13 +450,17 @@ class Bodies:
         written once in the loop's body: Taichi inlines every ``ti.func`` call, and with a call per
         wall, axis and kind of pair (unrolled by ``ti.static``) the impulse code was inlined 16 times
         and the rigid step took 100 s to compile on 2 cores (docs/BODIES.md, Compile time)."""
-        c = self.constants[None]
+        (count, pairs, static_candidates) = (
+            self.constants[None].count,
+            self.constants[None].pairs,
+            self.constants[None].static_candidates,
+        )
         for _sweep in range(CONTACT_SWEEPS):
-            for slot in range(c.count + c.pairs):
+            for slot in range(count + pairs):
                 a, b = slot, -1  # a body against the container and the obstacles
-                candidates = c.static_candidates
-                if slot >= c.count:  # a pair, a < b
-                    a, b = self.pair_first[slot - c.count], self.pair_second[slot - c.count]
+                candidates = static_candidates
+                if slot >= count:  # a pair, a < b
+                    a, b = self.pair_first[slot - count], self.pair_second[slot - count]
                     candidates = self._pair_candidates(a, b)
                 corners = 0
                 for m in range(candidates):
@@ -909,8 +913,12 @@ class Bodies:
         stays inside the container, so that a particle under a box on the floor leaves by a side rather
         than through the floor, from which the container would put it back inside the box; the nearest
         face when every way out is shut."""
-        c = self.constants[None]
-        low, high = c.lower + c.wall_margin, c.upper - c.wall_margin
+        (lower, wall_margin, upper) = (
+            self.constants[None].lower,
+            self.constants[None].wall_margin,
+            self.constants[None].upper,
+        )
+        low, high = lower + wall_margin, upper - wall_margin
         best, exit = 1e30, p
         nearest, fallback = 1e30, p
         for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times

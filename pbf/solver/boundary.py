@@ -246,16 +246,16 @@ class Container:
         velocity = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wave_maker):
             below = p[0] - self.piston_x[None]
-            c = self.constants[None]
-            if below < c.kernel_radius and below <= c.upper[0] - p[0]:
+            kernel_radius, upper = self.constants[None].kernel_radius, self.constants[None].upper
+            if below < kernel_radius and below <= upper[0] - p[0]:
                 velocity[0] = self.piston_v[None]
         return velocity
 
     @ti.func
     def project(self, p):
         """p moved into the container shrunk by the particle radius."""
-        c = self.constants[None]
-        return ti.max(self._lower() + c.radius, ti.min(p, c.upper - c.radius))
+        radius, upper = self.constants[None].radius, self.constants[None].upper
+        return ti.max(self._lower() + radius, ti.min(p, upper - radius))
 
     @ti.func
     def mirror_walls(self, p):
@@ -264,13 +264,13 @@ class Container:
         near = ti.Vector([0, 0, 0])
         plane = ti.Vector([0.0, 0.0, 0.0])
         lower = self._lower()
-        c = self.constants[None]
+        upper, mirror_reach = self.constants[None].upper, self.constants[None].mirror_reach
         for axis in ti.static(range(3)):
             below = p[axis] - lower[axis]
-            above = c.upper[axis] - p[axis]
-            if ti.min(below, above) < c.mirror_reach:
+            above = upper[axis] - p[axis]
+            if ti.min(below, above) < mirror_reach:
                 near[axis] = 1
-                plane[axis] = c.upper[axis]
+                plane[axis] = upper[axis]
                 if below <= above:
                     plane[axis] = lower[axis]
         return near, plane
@@ -283,14 +283,14 @@ class Container:
         gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.with_wall_density):
             lower = self._lower()
-            c = self.constants[None]
+            upper, kernel_radius = self.constants[None].upper, self.constants[None].kernel_radius
             distance = ti.Vector([0.0, 0.0, 0.0])
             side = ti.Vector([0.0, 0.0, 0.0])  # +1: near the lower wall, −1: the upper, 0: neither
             for axis in ti.static(range(3)):
                 below = p[axis] - lower[axis]
-                above = c.upper[axis] - p[axis]
+                above = upper[axis] - p[axis]
                 distance[axis] = ti.min(below, above)
-                if distance[axis] < c.kernel_radius:
+                if distance[axis] < kernel_radius:
                     side[axis] = 1.0 if below <= above else -1.0
                     d, s = self.tables.wall(distance[axis])
                     density += d

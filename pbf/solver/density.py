@@ -203,8 +203,7 @@ class DensityConstraint:
     @ti.func
     def plain_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
         """:meth:`pair_sums` without mirror images."""
-        c = self.constants[None]
-        h, volume = c.h, c.volume
+        h, volume = self.constants[None].h, self.constants[None].volume
         ratio = volume * kernel(0.0, h)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
@@ -224,8 +223,7 @@ class DensityConstraint:
         self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane, gradients: ti.template()
     ):
         """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
-        c = self.constants[None]
-        h, volume = c.h, c.volume
+        h, volume = self.constants[None].h, self.constants[None].volume
         w_self, g_self, _ = self.image_sums(xi, xi, near, plane, h, gradients)
         ratio = volume * (kernel(0.0, h) + w_self)
         own_images = volume * h * g_self
@@ -278,10 +276,14 @@ class DensityConstraint:
             else:
                 ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
             # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
-            c = self.constants[None]
-            colour = gradient_i + own_images + c.h * wall_gradient
-            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + c.relaxation
-            if c.surface_density:
+            (h, relaxation, surface_density) = (
+                self.constants[None].h,
+                self.constants[None].relaxation,
+                self.constants[None].surface_density,
+            )
+            colour = gradient_i + own_images + h * wall_gradient
+            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
+            if surface_density:
                 self.colour_gradient[i] = colour
         else:
             if from_second:
@@ -302,15 +304,20 @@ class DensityConstraint:
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
         if cap > SURFACE_SKIP:
-            c = self.constants[None]
-            h, volume = c.h, c.volume
+            (h, volume, surface_offset, surface_slope, surface_top) = (
+                self.constants[None].h,
+                self.constants[None].volume,
+                self.constants[None].surface_offset,
+                self.constants[None].surface_slope,
+                self.constants[None].surface_top,
+            )
             xi = x[i]
             smoothed = volume * kernel(0.0, h) * self.colour_gradient[i]
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
                 smoothed += volume * kernel((xi - x[j]).norm_sqr(), h) * self.colour_gradient[j]
-            u = ti.min(ti.max((smoothed.norm() - c.surface_offset) * c.surface_slope, 0.0), 1.0)
-            psi = ti.min(c.surface_top * u * u * (3.0 - 2.0 * u), cap)
+            u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
+            psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
         return psi
 
     @ti.func
@@ -334,8 +341,8 @@ class DensityConstraint:
         """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi, with ``solver.wall_mirror``
         also the pairs' mirror images with (λ̂_i + λ̂_j) and the particle's own with 2 λ̂_i (they move
         with it); Jacobi, so x is only read."""
-        c = self.constants[None]
-        h, volume = c.h, c.volume
+        h, volume = self.constants[None].h, self.constants[None].volume
+        scorr = ti.Vector([self.constants[None].scorr_k, self.constants[None].inverse_w_dq])
         dx = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
             near, plane = self.boundaries.container.mirror_walls(xi)
@@ -347,23 +354,25 @@ class DensityConstraint:
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
                     w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, True)
-                    dx += self.pair_term(x, xi, lam_i, j, c) + (lam_i + self.lam[j]) * volume * h * g_images
+                    images = (lam_i + self.lam[j]) * volume * h * g_images
+                    dx += self.pair_term(x, xi, lam_i, j, h, volume, scorr) + images
             else:
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                    dx += self.pair_term(x, xi, lam_i, neighbours[k], c)
+                    dx += self.pair_term(x, xi, lam_i, neighbours[k], h, volume, scorr)
         else:
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                dx += self.pair_term(x, xi, lam_i, neighbours[k], c)
+                dx += self.pair_term(x, xi, lam_i, neighbours[k], h, volume, scorr)
         return dx
 
     @ti.func
-    def pair_term(self, x: ti.template(), xi, lam_i, j, c: ti.template()):
-        """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12), ``c`` the constants the caller read once per particle."""
-        w, grad_w = kernel_and_gradient(xi - x[j], c.h)
+    def pair_term(self, x: ti.template(), xi, lam_i, j, h, volume, scorr):
+        """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12); h, V and (k, 1/W(Δq)) of s_corr from the caller, which
+        reads them once per particle."""
+        w, grad_w = kernel_and_gradient(xi - x[j], h)
         s_corr = 0.0
         if ti.static(self.with_scorr):
-            s_corr = -c.scorr_k * (w * c.inverse_w_dq) ** ti.static(SCORR_N)
-        return (lam_i + self.lam[j] + s_corr) * c.volume * c.h * grad_w
+            s_corr = -scorr[0] * (w * scorr[1]) ** ti.static(SCORR_N)
+        return (lam_i + self.lam[j] + s_corr) * volume * h * grad_w
 
     @ti.func
     def jacobi_step(
@@ -371,8 +380,7 @@ class DensityConstraint:
     ):
         """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
         other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
-        c = self.constants[None]
-        h = c.h
+        h, max_correction = self.constants[None].h, self.constants[None].max_correction
         xi = self.own_position(first, second, from_second, i)
         lam_i = self.lam[i]
         dx = ti.Vector([0.0, 0.0, 0.0])
@@ -386,7 +394,7 @@ class DensityConstraint:
         dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi, from the λ pass
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
-        dx *= ti.min(1.0, c.max_correction / (dx.norm() + 1e-12))
+        dx *= ti.min(1.0, max_correction / (dx.norm() + 1e-12))
         corrected = xi + h * dx
         moved = self.boundaries.project_recorded(
             ti.select(weight == 1.0, corrected, earlier + weight * (corrected - earlier)), i, "iteration", weight

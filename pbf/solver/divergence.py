@@ -61,8 +61,7 @@ class DivergenceCorrection:
         """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
         min(C_i, 0) and the denominator of δλ̂_i."""
         xi = x[i]
-        c = self.constants[None]
-        h, volume = c.h, c.volume
+        h, volume, relaxation = self.constants[None].h, self.constants[None].volume, self.constants[None].relaxation
         increment_i = self.increment[i]
         dv = ti.Vector([0.0, 0.0, 0.0])
         ratio = volume * kernel(0.0, h)
@@ -83,7 +82,7 @@ class DivergenceCorrection:
         dv += increment_i * h * wall_gradient
         if ti.static(start):
             self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
-            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + c.relaxation
+            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + relaxation
         return h_over_dt * dv
 
     @ti.kernel
@@ -98,8 +97,7 @@ class DivergenceCorrection:
     def iterate(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
         """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
         for i in range(self.state.active[None]):
-            constants = self.constants[None]
-            h, volume = constants.h, constants.volume
+            h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
@@ -109,7 +107,7 @@ class DivergenceCorrection:
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))
             carried = self.state.multiplier[i] * dt * dt
             c = dt / h * rate + self.deficit[i]
-            total = ti.min(carried - constants.omega * c / self.denominator[i], 0.0)
+            total = ti.min(carried - omega * c / self.denominator[i], 0.0)
             self.increment[i] = total - carried
             self.state.multiplier[i] = total / (dt * dt)
         for i in range(self.state.active[None]):

@@ -92,9 +92,13 @@ class NeighbourGrid:
     @ti.func
     def cell_of(self, p):
         """Integer cell coordinates of position p, clamped to the grid (monotone, so exactness holds)."""
-        g = self.constants[None]
-        c = ti.cast(ti.floor((p - g.lower) * g.inverse_cell_size), ti.i32)
-        return ti.max(0, ti.min(c, g.resolution - 1))
+        (lower, inverse_cell_size, resolution) = (
+            self.constants[None].lower,
+            self.constants[None].inverse_cell_size,
+            self.constants[None].resolution,
+        )
+        c = ti.cast(ti.floor((p - lower) * inverse_cell_size), ti.i32)
+        return ti.max(0, ti.min(c, resolution - 1))
 
     @ti.func
     def linear(self, c):
@@ -178,8 +182,8 @@ class NeighbourGrid:
         plain store of the same 1 by every such thread, no atomic into one address."""
         capacity = neighbours.shape[0]
         for i in range(count):
-            g = self.constants[None]
-            h2 = g.kernel_radius * g.kernel_radius
+            kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
+            h2 = kernel_radius * kernel_radius
             xi = x[i]
             c = self.cell_of(xi)
             begin = i * SLOTS
@@ -189,7 +193,7 @@ class NeighbourGrid:
                 limit = ti.min(self.neighbour_start[i + 1], capacity)
             k = begin
             for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
-                first, last = self.column_range(c, g.resolution, dx, dy)
+                first, last = self.column_range(c, resolution, dx, dy)
                 for j in range(first, last):
                     # Branch-free: write every candidate to the next free slot and advance only past
                     # neighbours. A branch on the distance test mispredicts on most candidates.
