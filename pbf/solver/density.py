@@ -67,7 +67,7 @@ from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import SCORR_N, DensityParams
 from pbf.solver.scan import TreeSum
-from pbf.solver.sph import kernel, kernel_and_gradient
+from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient
 
 SURFACE_RAMP = (0.25, 0.75)
 """Where between the smoothed colour gradient of a lattice's second layer (0) and of its top layer (1)
@@ -150,12 +150,13 @@ class DensityConstraint:
         return self.boundaries.ghost(xi, True)
 
     @ti.func
-    def image_sums(self, xi, xj, near, plane, h, gradients: ti.template()):
+    def image_sums(self, xi, xj, near, plane, h, scale, gradients: ti.template()):
         """Σ W(x_i − x') over the mirror images x' of x_j in the container walls ``near`` x_i: one across
         each, one across each edge, one across the corner (with the fluid they fill the space around a
         lattice in a corner). With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the image's
-        reflection (∂/∂x_j of W(x_i − x') is −R∇W). ``h`` comes from the caller, read once per particle:
-        read here, once per neighbour, it cost the `hydrostatic` tank 14% of its time."""
+        reflection (∂/∂x_j of W(x_i − x') is −R∇W). ``h`` and its ``scale = kernel_scale(h)`` come from the
+        caller, read once per particle: read here, once per neighbour, h cost the `hydrostatic` tank 14%
+        of its time."""
         w_sum = 0.0
         g_sum = ti.Vector([0.0, 0.0, 0.0])
         reflected_sum = ti.Vector([0.0, 0.0, 0.0])
@@ -170,12 +171,12 @@ class DensityConstraint:
                 r = xi - (flip * xj + 2.0 * ti.Vector(m) * plane)  # x' = x_j reflected: 2 P_a − x_j,a
                 if r.norm_sqr() < h * h:  # most images are out of reach: no square root for them
                     if ti.static(gradients):
-                        w, g = kernel_and_gradient(r, h)
+                        w, g = scaled_kernel_and_gradient(r, scale)
                         w_sum += w
                         g_sum += g
                         reflected_sum += flip * g
                     else:
-                        w_sum += kernel(r.norm_sqr(), h)
+                        w_sum += scaled_kernel(r.norm_sqr(), scale)
         return w_sum, g_sum, reflected_sum
 
     @ti.func
@@ -204,18 +205,19 @@ class DensityConstraint:
     def plain_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
         """:meth:`pair_sums` without mirror images."""
         h, volume = self.constants[None].h, self.constants[None].volume
-        ratio = volume * kernel(0.0, h)
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        ratio = volume * scaled_kernel(0.0, scale)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             if ti.static(gradients):
-                w, grad_w = kernel_and_gradient(xi - x[neighbours[k]], h)
+                w, grad_w = scaled_kernel_and_gradient(xi - x[neighbours[k]], scale)
                 ratio += volume * w
                 g = volume * h * grad_w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
-                ratio += volume * kernel((xi - x[neighbours[k]]).norm_sqr(), h)
+                ratio += volume * scaled_kernel((xi - x[neighbours[k]]).norm_sqr(), scale)
         return ratio, gradient_i, sum_sq
 
     @ti.func
@@ -224,22 +226,23 @@ class DensityConstraint:
     ):
         """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
         h, volume = self.constants[None].h, self.constants[None].volume
-        w_self, g_self, _ = self.image_sums(xi, xi, near, plane, h, gradients)
-        ratio = volume * (kernel(0.0, h) + w_self)
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        w_self, g_self, _ = self.image_sums(xi, xi, near, plane, h, scale, gradients)
+        ratio = volume * (scaled_kernel(0.0, scale) + w_self)
         own_images = volume * h * g_self
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             xj = x[neighbours[k]]
             if ti.static(gradients):
-                w, grad_w = kernel_and_gradient(xi - xj, h)
-                w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, True)
+                w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
+                w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, scale, True)
                 ratio += volume * (w + w_images)
                 gradient_i += volume * h * (grad_w + g_images)
                 sum_sq += (volume * h * (grad_w + reflected)).norm_sqr()
             else:
-                w_images, _, _ = self.image_sums(xi, xj, near, plane, h, False)
-                ratio += volume * (kernel((xi - xj).norm_sqr(), h) + w_images)
+                w_images, _, _ = self.image_sums(xi, xj, near, plane, h, scale, False)
+                ratio += volume * (scaled_kernel((xi - xj).norm_sqr(), scale) + w_images)
         return ratio, gradient_i, sum_sq, own_images
 
     @ti.func
@@ -311,11 +314,12 @@ class DensityConstraint:
                 self.constants[None].surface_slope,
                 self.constants[None].surface_top,
             )
+            scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi = x[i]
-            smoothed = volume * kernel(0.0, h) * self.colour_gradient[i]
+            smoothed = volume * scaled_kernel(0.0, scale) * self.colour_gradient[i]
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                smoothed += volume * kernel((xi - x[j]).norm_sqr(), h) * self.colour_gradient[j]
+                smoothed += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale) * self.colour_gradient[j]
             u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
             psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
         return psi
@@ -342,6 +346,7 @@ class DensityConstraint:
         also the pairs' mirror images with (λ̂_i + λ̂_j) and the particle's own with 2 λ̂_i (they move
         with it); Jacobi, so x is only read."""
         h, volume = self.constants[None].h, self.constants[None].volume
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
         scorr = ti.Vector([self.constants[None].scorr_k, self.constants[None].inverse_w_dq])
         dx = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
@@ -349,26 +354,26 @@ class DensityConstraint:
             if near.sum() > 0:  # a loop of its own, as in pair_sums
                 # Unused results named, not "_": Taichi gives one "_" a single type, and a second "_"
                 # of another type (a float, then a vector) broke its compile without optimisation.
-                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, True)
+                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
                 dx = 2.0 * lam_i * volume * h * g_self
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
-                    w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, True)
+                    w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, scale, True)
                     images = (lam_i + self.lam[j]) * volume * h * g_images
-                    dx += self.pair_term(x, xi, lam_i, j, h, volume, scorr) + images
+                    dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
             else:
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                    dx += self.pair_term(x, xi, lam_i, neighbours[k], h, volume, scorr)
+                    dx += self.pair_term(x, xi, lam_i, neighbours[k], h, scale, volume, scorr)
         else:
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                dx += self.pair_term(x, xi, lam_i, neighbours[k], h, volume, scorr)
+                dx += self.pair_term(x, xi, lam_i, neighbours[k], h, scale, volume, scorr)
         return dx
 
     @ti.func
-    def pair_term(self, x: ti.template(), xi, lam_i, j, h, volume, scorr):
+    def pair_term(self, x: ti.template(), xi, lam_i, j, h, scale, volume, scorr):
         """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12); h, V and (k, 1/W(Δq)) of s_corr from the caller, which
         reads them once per particle."""
-        w, grad_w = kernel_and_gradient(xi - x[j], h)
+        w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
         s_corr = 0.0
         if ti.static(self.with_scorr):
             s_corr = -scorr[0] * (w * scorr[1]) ** ti.static(SCORR_N)

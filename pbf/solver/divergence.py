@@ -34,7 +34,7 @@ import taichi as ti
 
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import DensityParams
-from pbf.solver.sph import kernel, kernel_and_gradient, kernel_gradient
+from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient, scaled_kernel_gradient
 
 
 @ti.data_oriented
@@ -62,22 +62,23 @@ class DivergenceCorrection:
         min(C_i, 0) and the denominator of δλ̂_i."""
         xi = x[i]
         h, volume, relaxation = self.constants[None].h, self.constants[None].volume, self.constants[None].relaxation
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
         increment_i = self.increment[i]
         dv = ti.Vector([0.0, 0.0, 0.0])
-        ratio = volume * kernel(0.0, h)
+        ratio = volume * scaled_kernel(0.0, scale)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
             j = neighbours[k]
             if ti.static(start):
-                w, grad_w = kernel_and_gradient(xi - x[j], h)
+                w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 g = volume * h * grad_w
                 ratio += volume * w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
                 dv += (increment_i + self.increment[j]) * g
             else:
-                dv += (increment_i + self.increment[j]) * volume * h * kernel_gradient(xi - x[j], h)
+                dv += (increment_i + self.increment[j]) * volume * h * scaled_kernel_gradient(xi - x[j], scale)
         wall, wall_gradient = self.boundaries.ghost(xi, False)
         dv += increment_i * h * wall_gradient
         if ti.static(start):
@@ -98,11 +99,12 @@ class DivergenceCorrection:
         """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
         for i in range(self.state.active[None]):
             h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
+            scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
             for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                 j = neighbours[k]
-                rate += volume * h * kernel_gradient(xi - x[j], h).dot(vi - self.state.v[j])
+                rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))
             carried = self.state.multiplier[i] * dt * dt

@@ -20,7 +20,7 @@ import taichi as ti
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import VelocityParams
-from pbf.solver.sph import kernel_and_gradient, kernel_gradient
+from pbf.solver.sph import kernel_scale, scaled_kernel_and_gradient, scaled_kernel_gradient
 
 
 @ti.data_oriented
@@ -62,17 +62,19 @@ class VelocityPostprocess:
         if ti.static(with_vorticity):
             for i in range(self.state.active[None]):
                 h, volume = self.constants[None].h, self.constants[None].volume
+                scale = kernel_scale(h)  # once per particle, for the neighbour loop
                 xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                 omega = ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
-                    omega += volume * kernel_gradient(xi - x_pred[j], h).cross(
+                    omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
                         self.velocity(x_pred, j, inverse_dt) - vi
                     )
                 self.omega[i] = omega
                 self.omega_norm[i] = omega.norm()
         for i in range(self.state.active[None]):
             h, volume = self.constants[None].h, self.constants[None].volume
+            scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
             dv = ti.Vector([0.0, 0.0, 0.0])
             if ti.static(with_vorticity or with_xsph):
@@ -85,7 +87,7 @@ class VelocityPostprocess:
                     omega_i_norm = self.omega_norm[i]
                 for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
                     j = neighbours[k]
-                    w, grad_w = kernel_and_gradient(xi - x_pred[j], h)
+                    w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                     if ti.static(with_xsph):
                         smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
                     if ti.static(with_vorticity):

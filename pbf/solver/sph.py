@@ -20,27 +20,57 @@ SIGMA_3D = 8.0 / math.pi
 
 
 @ti.func
-def kernel(r2: ti.f32, h: ti.f32) -> ti.f32:
-    """W(r, h) from r², with q = r/h: σ(6q³ − 6q² + 1) for q ≤ ½, 2σ(1 − q)³ for q < 1, σ = 8/(π h³)."""
-    q = ti.sqrt(r2) * (1.0 / h)  # a product: 1/h is hoisted out of the caller's neighbour loop
-    t = ti.max(1.0 - q, 0.0)
-    return SIGMA_3D / h**3 * ti.select(q <= 0.5, 6.0 * q * q * (q - 1.0) + 1.0, 2.0 * t * t * t)
+def kernel_scale(h):
+    """(1/h, σ, σ/h²) of the kernel at support radius h, σ = 8/(π h³): what :func:`scaled_kernel` and
+    :func:`scaled_kernel_and_gradient` need. h is data (``pbf.solver.constants``), so a caller works
+    this out once per particle and passes it to its neighbour loop, where the three divisions a baked h
+    folded away would otherwise be paid per pair."""
+    inverse_h = 1.0 / h
+    sigma = SIGMA_3D * inverse_h * inverse_h * inverse_h
+    return ti.Vector([inverse_h, sigma, sigma * inverse_h * inverse_h])
 
 
 @ti.func
-def kernel_and_gradient(r: ti.template(), h: ti.f32):
-    """(W, ∇W) at offset r, sharing one square root: the solver's inner loops need both.
+def scaled_kernel(r2, k):
+    """W(r, h) from r² and k = kernel_scale(h), with q = r/h: σ(6q³ − 6q² + 1) for q ≤ ½, 2σ(1 − q)³ for q < 1."""
+    q = ti.sqrt(r2) * k[0]
+    t = ti.max(1.0 - q, 0.0)
+    return k[1] * ti.select(q <= 0.5, 6.0 * q * q * (q - 1.0) + 1.0, 2.0 * t * t * t)
+
+
+@ti.func
+def scaled_kernel_and_gradient(r: ti.template(), k):
+    """(W, ∇W) at offset r, k = kernel_scale(h), sharing one square root: the solver's inner loops need both.
 
     ∇W = W'(|r|) r/|r| with W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½ (no division, and zero force at r = 0)
     and −σ/h⁵ · 6(1 − q)²/q beyond. Both pieces are computed and one selected: a branch on q would
     mispredict on the pairs where it changes, in every pass over every pair.
     """
-    q = r.norm() * (1.0 / h)  # h is data (pbf.solver.constants): a product per pair, not a division
+    q = r.norm() * k[0]
     t = ti.max(1.0 - q, 0.0)
     inner = q <= 0.5
-    w = SIGMA_3D / h**3 * ti.select(inner, 6.0 * q * q * (q - 1.0) + 1.0, 2.0 * t * t * t)
-    slope_over_r = SIGMA_3D / h**5 * ti.select(inner, 6.0 * (3.0 * q - 2.0), -6.0 * t * t / ti.max(q, 0.5))
+    w = k[1] * ti.select(inner, 6.0 * q * q * (q - 1.0) + 1.0, 2.0 * t * t * t)
+    slope_over_r = k[2] * ti.select(inner, 6.0 * (3.0 * q - 2.0), -6.0 * t * t / ti.max(q, 0.5))
     return w, slope_over_r * r
+
+
+@ti.func
+def kernel(r2: ti.f32, h: ti.f32) -> ti.f32:
+    """W(r, h) from r² (:func:`scaled_kernel`, its scale worked out here)."""
+    return scaled_kernel(r2, kernel_scale(h))
+
+
+@ti.func
+def kernel_and_gradient(r: ti.template(), h: ti.f32):
+    """(W, ∇W) at offset r (:func:`scaled_kernel_and_gradient`, its scale worked out here)."""
+    return scaled_kernel_and_gradient(r, kernel_scale(h))
+
+
+@ti.func
+def scaled_kernel_gradient(r: ti.template(), k):
+    """∇W at offset r, k = kernel_scale(h); zero at r = 0 (no self-force)."""
+    _, gradient = scaled_kernel_and_gradient(r, k)
+    return gradient
 
 
 @ti.func
