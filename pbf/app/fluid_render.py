@@ -126,7 +126,7 @@ class FluidRenderer:
         from its device fields as they stand at each draw."""
         # The image size stays in the kernels' code (a view setting, the same for most runs); what
         # depends on the scene is data (``constants``, and fields sized by buckets), so that a scene of
-        # another spacing, container or colours finds these kernels compiled (``pbf.app.constants``).
+        # another spacing, container or colours finds these kernels compiled (``pbf.solver.scene_constants``).
         self.width, self.height = int(width_px), int(height_px)
         self.coarse_width, self.coarse_height = self.width // COARSE, self.height // COARSE
         self.spacing = float(spacing_m)
@@ -247,7 +247,6 @@ class FluidRenderer:
             self.constants[None].inverse_fade,
             self.constants[None].horizon,
         )
-        per_tile = inverse_tile
         colour = self._sky(d)
         if d.y < -1e-6:
             t = (floor_y - origin.y) / d.y
@@ -259,9 +258,9 @@ class FluidRenderer:
                 along = across / ti.max(-d.y, 1e-3)
                 track = ti.Vector([d.x, d.z])
                 track = track / ti.max(track.norm(), 1e-12)
-                width_x = ti.sqrt((along * track[0]) ** 2 + (across * track[1]) ** 2) * per_tile
-                width_z = ti.sqrt((along * track[1]) ** 2 + (across * track[0]) ** 2) * per_tile
-                odd_x, odd_z = self._tiles(hit.x * per_tile, width_x), self._tiles(hit.z * per_tile, width_z)
+                width_x = ti.sqrt((along * track[0]) ** 2 + (across * track[1]) ** 2) * inverse_tile
+                width_z = ti.sqrt((along * track[1]) ** 2 + (across * track[0]) ** 2) * inverse_tile
+                odd_x, odd_z = self._tiles(hit.x * inverse_tile, width_x), self._tiles(hit.z * inverse_tile, width_z)
                 tile = odd_x + odd_z - 2.0 * odd_x * odd_z  # the mean of odd_x XOR odd_z (the box is separable)
                 floor = ti.Vector(FLOOR_RGB[0]) * (1.0 - tile) + ti.Vector(FLOOR_RGB[1]) * tile
                 fade = 1.0 / (1.0 + t * inverse_fade)  # the floor greys out into the horizon

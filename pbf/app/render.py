@@ -10,7 +10,7 @@ look like these. Both read the simulation through its read-outs (``Simulation.re
 surface instead, with the screen-space renderer of ``pbf.app.fluid_render``.
 
 As the solver's, the renderers' kernels read the scene's numbers (colours, radii, counts of segments
-and bodies) as data (``pbf.app.constants``) and their arrays are sized by buckets
+and bodies) as data (``pbf.solver.scene_constants``) and their arrays are sized by buckets
 (``pbf.solver.allocation``), so that Taichi's offline cache serves a scene of another spacing,
 size or colours with the kernels a run before compiled. The image size stays in the code: a view
 setting, the same for most runs.
@@ -192,7 +192,7 @@ class SphereRenderer:
         self.constants = scene_constants(
             background=colour(background_rgb), line_colour=colour(line_rgb), segment_count=self.segment_count
         )
-        """The background and line colours and the number of segments, as data (``pbf.app.constants``)."""
+        """The background and line colours and the number of segments, as data (``pbf.solver.scene_constants``)."""
         self.depth_range = ti.field(ti.f32, shape=2)
         self.slab_count = ti.field(ti.i32, shape=SLABS)
         self.slab_start = ti.field(ti.i32, shape=SLABS)
