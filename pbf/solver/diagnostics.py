@@ -34,7 +34,7 @@ class Diagnostics:
             speed2 = self.state.v[i].norm_sqr()
             self.terms[0][i] = ti.max(ratio - 1.0, 0.0)
             self.terms[1][i] = speed2
-            self.terms[2][i] = ti.cast(self.grid.neighbour_end[i] - self.grid.neighbour_start[i], ti.f32)
+            self.terms[2][i] = ti.cast(self.grid.neighbour_listed[i], ti.f32)
             self.speed[i] = ti.sqrt(speed2)
         for k in ti.static(range(3)):
             self.sums.sum(self.terms[k], k, count)

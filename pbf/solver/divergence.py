@@ -68,8 +68,9 @@ class DivergenceCorrection:
         ratio = volume * scaled_kernel(0.0, scale)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
-        for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-            j = neighbours[k]
+        entry, stride, listed = self.grid.listed(i, neighbours)
+        for k in range(listed):
+            j = neighbours[entry + k * stride]
             if ti.static(start):
                 w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 g = volume * h * grad_w
@@ -102,8 +103,9 @@ class DivergenceCorrection:
             scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
-            for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                j = neighbours[k]
+            entry, stride, listed = self.grid.listed(i, neighbours)
+            for k in range(listed):
+                j = neighbours[entry + k * stride]
                 rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))

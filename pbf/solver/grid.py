@@ -25,7 +25,7 @@ import warnings
 import numpy as np
 import taichi as ti
 
-from pbf.solver.backend import keeps_decisions_on_device
+from pbf.solver.backend import keeps_decisions_on_device, on_gpu
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan
@@ -73,12 +73,18 @@ class NeighbourGrid:
         """sorted_from[slot] = index, before sorting, of the particle that moves to ``slot``."""
         self.neighbour_count = ti.field(ti.i32, shape=particle_count)
         self.neighbour_start = ti.field(ti.i32, shape=particle_count + 1)
-        self.neighbour_end = ti.field(ti.i32, shape=particle_count)
+        self.neighbour_listed = ti.field(ti.i32, shape=particle_count)
+        """Entries of particle i's neighbours in the list (``neighbour_count`` unless cut at the list's end)."""
         self.overflow = ti.field(ti.i32, shape=())
         """1 when the last visit found a particle with more than SLOTS neighbours."""
         self.status = ti.field(ti.i32, shape=2)
         """What unchecked builds saw since the host last asked (:meth:`take_status`)."""
         self.on_device = keeps_decisions_on_device()
+        self.slot_major = on_gpu()
+        """How the one-visit list lies (fixed for a backend at compile time): on a GPU slot-major, the k-th
+        neighbours of all particles side by side (entry i + k·n), so that the threads of a warp, which
+        walk their lists in step, read one contiguous run per k; on the CPU particle-major (entry
+        i·SLOTS + k), so that one thread reads its list from one stretch of memory."""
         self.checking = False
         """Whether unchecked builds read the overflow flag anyway (the last frame's compact list was over
         CHECK_ABOVE full)."""
@@ -86,8 +92,8 @@ class NeighbourGrid:
         """The longest compact list of the checked builds since the last :meth:`settle_frame`."""
         self.neighbour_scan = ExclusiveScan(particle_count)
         self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
-        """Flat neighbour list: the neighbours of sorted particle i are
-        neighbours[neighbour_start[i] : neighbour_end[i]], itself excluded."""
+        """Flat neighbour list: the neighbours of sorted particle i, itself excluded, are the
+        ``neighbour_listed[i]`` entries neighbours[start + k · stride] of :meth:`listed`."""
 
     @ti.func
     def cell_of(self, p):
@@ -175,9 +181,21 @@ class NeighbourGrid:
         return begin, end
 
     @ti.func
+    def listed(self, i, neighbours: ti.template()):
+        """Where the neighbours of particle i lie in ``neighbours``: (start, stride, count), entry k at
+        start + k · stride. Slot-major (:attr:`slot_major`, a stride of the list's length over SLOTS,
+        at least the particle count) after the one-visit build; entries in a row after an overflow's
+        compact build and on the CPU."""
+        stride = 1
+        if ti.static(self.slot_major):
+            stride = ti.select(self.overflow[None] > 0, 1, neighbours.shape[0] // SLOTS)
+        return self.neighbour_start[i], stride, self.neighbour_listed[i]
+
+    @ti.func
     def _visit_loop(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), count):
-        """Find the neighbours of the first ``count`` particles: into slot i·SLOTS (first visit) or, when
-        ``compact``, into the prefix-summed range neighbour_start[i] (second visit, only after an
+        """Find the neighbours of the first ``count`` particles: into the SLOTS entries of particle i
+        (first visit: slot-major on a GPU, a row of its own on the CPU; :attr:`slot_major`) or, when
+        ``compact``, into the prefix-summed row neighbour_start[i] (second visit, only after an
         overflow), never past the list's end. A particle with more than SLOTS sets ``overflow``: a
         plain store of the same 1 by every such thread, no atomic into one address."""
         capacity = neighbours.shape[0]
@@ -186,32 +204,45 @@ class NeighbourGrid:
             h2 = kernel_radius * kernel_radius
             xi = x[i]
             c = self.cell_of(xi)
-            begin = i * SLOTS
-            limit = begin + SLOTS
+            start, stride, room = i * SLOTS, 1, SLOTS
+            if ti.static(self.slot_major):
+                start, stride = i, capacity // SLOTS
             if ti.static(compact):
-                begin = ti.min(self.neighbour_start[i], capacity)
-                limit = ti.min(self.neighbour_start[i + 1], capacity)
-            k = begin
+                start = ti.min(self.neighbour_start[i], capacity)
+                stride = 1
+                room = ti.min(self.neighbour_start[i + 1], capacity) - start
+            found = 0
             for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
                 first, last = self.column_range(c, resolution, dx, dy)
                 for j in range(first, last):
-                    # Branch-free: write every candidate to the next free slot and advance only past
-                    # neighbours. A branch on the distance test mispredicts on most candidates.
-                    if k < limit:
-                        neighbours[k] = j
-                    k += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
-            self.neighbour_count[i] = k - begin
+                    if ti.static(self.slot_major):
+                        # A GPU thread stores only neighbours: a warp's threads take the branch
+                        # together or wait for one another, and every store skipped is a scattered
+                        # write saved (the candidates are 3-6 times the neighbours).
+                        if j != i and (x[j] - xi).norm_sqr() < h2:
+                            if found < room:
+                                neighbours[start + found * stride] = j
+                            found += 1
+                    else:
+                        # Branch-free on the CPU: write every candidate to the next free entry and
+                        # advance only past neighbours. A branch on the distance test mispredicts on
+                        # most candidates.
+                        if found < room:
+                            neighbours[start + found] = j
+                        found += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
+            self.neighbour_count[i] = found
             if ti.static(not compact):
-                self.neighbour_start[i] = begin
-                if k - begin > SLOTS:
+                self.neighbour_start[i] = start
+                if found > SLOTS:
                     self.overflow[None] = 1
-            self.neighbour_end[i] = ti.min(k, limit)
+            self.neighbour_listed[i] = ti.min(found, room)
 
     @ti.kernel
     def _visit(self, x: ti.template(), neighbours: NeighbourList, compact: ti.template()) -> ti.i32:
         """:meth:`_visit_loop` over the live particles; returns whether some particle has more than SLOTS
-        neighbours (after the first visit)."""
-        self.overflow[None] = 0
+        neighbours (after the first visit; the flag stays set through the second, :meth:`listed`)."""
+        if ti.static(not compact):
+            self.overflow[None] = 0
         self._visit_loop(x, neighbours, compact, self.active[None])
         return self.overflow[None]
 
@@ -283,6 +314,7 @@ class NeighbourGrid:
 
     def neighbour_lists(self):
         """Neighbour lists as a list of NumPy arrays of sorted indices (for tests and inspection)."""
-        start, end = self.neighbour_start.to_numpy(), self.neighbour_end.to_numpy()
+        start, listed = self.neighbour_start.to_numpy(), self.neighbour_listed.to_numpy()
         flat = self.neighbours.to_numpy()
-        return [flat[start[i] : end[i]] for i in range(int(self.active[None]))]
+        stride = len(flat) // SLOTS if self.slot_major and not self.overflow[None] else 1
+        return [flat[start[i] + stride * np.arange(listed[i])] for i in range(int(self.active[None]))]

@@ -65,8 +65,9 @@ class VelocityPostprocess:
                 scale = kernel_scale(h)  # once per particle, for the neighbour loop
                 xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                 omega = ti.Vector([0.0, 0.0, 0.0])
-                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                    j = neighbours[k]
+                entry, stride, listed = self.grid.listed(i, neighbours)
+                for k in range(listed):
+                    j = neighbours[entry + k * stride]
                     omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
                         self.velocity(x_pred, j, inverse_dt) - vi
                     )
@@ -85,8 +86,9 @@ class VelocityPostprocess:
                 if ti.static(with_vorticity):
                     omega_i = self.omega[i]
                     omega_i_norm = self.omega_norm[i]
-                for k in range(self.grid.neighbour_start[i], self.grid.neighbour_end[i]):
-                    j = neighbours[k]
+                entry, stride, listed = self.grid.listed(i, neighbours)
+                for k in range(listed):
+                    j = neighbours[entry + k * stride]
                     w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                     if ti.static(with_xsph):
                         smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
