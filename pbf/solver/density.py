@@ -477,7 +477,7 @@ class DensityConstraint:
             self.jacobi_step(first, second, from_second, i, neighbours, weight)
         high, low = 0.0, 0.0
         if ti.static(measure):
-            self.error_sum.sum(self.error, 0, self.grid.active[None])
+            self.error_sum.sum(self.error, 0, self.grid.active)
             high, low = self.error_sum.high[0], self.error_sum.low[0]
         return high, low, self.grid.active[None]
 

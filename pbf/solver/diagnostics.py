@@ -28,8 +28,7 @@ class Diagnostics:
 
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
-        count = self.state.active[None]
-        for i in range(count):
+        for i in range(self.state.active[None]):
             ratio = self.density.density_ratio(self.state.x, i, neighbours)
             speed2 = self.state.v[i].norm_sqr()
             self.terms[0][i] = ti.max(ratio - 1.0, 0.0)
@@ -37,10 +36,10 @@ class Diagnostics:
             self.terms[2][i] = ti.cast(self.grid.neighbour_listed[i], ti.f32)
             self.speed[i] = ti.sqrt(speed2)
         for k in ti.static(range(3)):
-            self.sums.sum(self.terms[k], k, count)
-        self.sums.maximum(self.terms[0], 3, count)
-        self.sums.maximum(self.speed, 4, count)
-        self.sums.maximum(self.terms[2], 5, count)
+            self.sums.sum(self.terms[k], k, self.state.active)
+        self.sums.maximum(self.terms[0], 3, self.state.active)
+        self.sums.maximum(self.speed, 4, self.state.active)
+        self.sums.maximum(self.terms[2], 5, self.state.active)
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
@@ -56,10 +55,9 @@ class Diagnostics:
 
     @ti.kernel
     def _max_speed(self) -> tuple[ti.f32, ti.i32, ti.i32]:
-        count = self.state.active[None]
-        for i in range(count):
+        for i in range(self.state.active[None]):
             self.speed[i] = self.state.v[i].norm()
-        self.sums.maximum(self.speed, 4, count)
+        self.sums.maximum(self.speed, 4, self.state.active)
         status = self.grid.take_status()
         return self.sums.high[4], status[0], status[1]
 

@@ -39,6 +39,8 @@ class JacobiIterations:
         self.active = active
         self.on_device = on_device
         self._used = 0
+        self._measured = False
+        """Whether the last substep on the device path had a target (else it ran every iteration)."""
         if on_device:
             self.table = ti.field(ti.f32, shape=len(weights.table))
             self.table.from_numpy(np.asarray(weights.table, np.float32))
@@ -47,15 +49,14 @@ class JacobiIterations:
 
     @property
     def used(self) -> int:
-        """Iterations the last substep ran (on the device path one read, so only when asked)."""
-        return int(self.flags[USED]) if self.on_device else self._used
+        """Iterations the last substep ran (on the device path with a target one read, so only when asked)."""
+        return int(self.flags[USED]) if self.on_device and self._measured else self._used
 
     @used.setter
     def used(self, count: int) -> None:
         if self.on_device:
             self.flags[USED] = count
-        else:
-            self._used = count
+        self._used = count
 
     def run(self, predicted, neighbours, control) -> None:
         """``control.iterations`` Jacobi iterations of x* (a ``PredictedPositions``) at most, stopped by
@@ -92,19 +93,33 @@ class JacobiIterations:
     def _run_on_device(self, predicted, neighbours, control) -> None:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
+        measure = target > 0.0
         for k in range(control.iterations):
             self._iterate(
                 predicted.first,
                 predicted.second,
                 neighbours,
-                target > 0.0,
+                measure,
                 k,
                 target,
                 control.min_iterations,
                 int(control.step_back),
             )
-        self._finish(predicted.first, predicted.second)
+        self._finish(predicted.first, predicted.second, measure, control.iterations)
         predicted.in_second = False
+        self._used, self._measured = control.iterations, measure
+
+    @ti.func
+    def _loop_state(self, measure: ti.template(), k):
+        """(running, the buffer x* is in, the weight's index) before iteration ``k``: without a target a
+        function of k; with one, what the sum of iteration k − 1 decided (:meth:`received`)."""
+        running, from_second, index = 1, k % 2, k
+        if ti.static(measure):
+            if k > 0:
+                running = 1 - self.flags[DONE]
+                from_second = self.flags[IN_SECOND]
+                index = self.flags[WEIGHT_INDEX]
+        return running, from_second, index
 
     @ti.kernel
     def _iterate(
@@ -118,52 +133,76 @@ class JacobiIterations:
         min_iterations: ti.i32,
         step_back: ti.i32,
     ):
-        """Iteration ``k`` of the substep, over no particles once the target was met; then the rules of
-        :meth:`_run_on_host` on the device's entries."""
-        if k == 0:
-            self.flags[DONE] = 0
-            self.flags[WEIGHT_INDEX] = 0
-            self.flags[IN_SECOND] = 0
-            self.flags[STEPPING_BACK] = 0
-            self.values[LAST_ERROR] = ti.math.inf
-        running = 1 - self.flags[DONE]
-        count = self.active[None] * running
-        from_second = self.flags[IN_SECOND]
-        weight = self.table[ti.min(self.flags[WEIGHT_INDEX], self.table.shape[0] - 1)]
-        first_iteration = ti.select(k == 0, 1, 0)
-        # The passes of DensityConstraint.iterate, over no particles once done.
-        for i in range(count):
-            self.density.multiplier_pass(first, second, from_second, i, neighbours, measure, first_iteration, weight)
-        for i in range(self.density.surface_count(first_iteration) * running):
-            self.density.surface_pass(first, i, neighbours, measure, first_iteration, weight)
-        for i in range(count):
-            self.density.jacobi_step(first, second, from_second, i, neighbours, weight)
+        """Iteration ``k`` of the substep, over no particles once the target was met; then, with a target,
+        the rules of :meth:`_run_on_host` decided by the thread that holds the error's sum.
+
+        Every loop runs over the particles' bucket, a count the kernel knows, and every thread reads the
+        loop's state and the live count itself: read once outside the loops they would be one-thread
+        tasks of their own, a launch each on a GPU."""
+        for i in range(ti.static(self.density.error.shape[0])):
+            running, from_second, index = self._loop_state(measure, k)
+            if i < self.active[None] * running:
+                weight = self._weight(index)
+                first_iteration = ti.select(k == 0, 1, 0)
+                self.density.multiplier_pass(
+                    first, second, from_second, i, neighbours, measure, first_iteration, weight
+                )
+        for i in range(ti.static(self.density.error.shape[0])):
+            running, _, index = self._loop_state(measure, k)
+            if k == 0 and i < self.density.surface_count(1):
+                self.density.surface_pass(first, i, neighbours, measure, 1, self._weight(index))
+        for i in range(ti.static(self.density.error.shape[0])):
+            running, from_second, index = self._loop_state(measure, k)
+            if i < self.active[None] * running:
+                self.density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
         if ti.static(measure):
-            self.density.error_sum.sum(self.density.error, 0, count)
+            context = ti.Vector(
+                [ti.cast(k, ti.f32), target, ti.cast(min_iterations, ti.f32), ti.cast(step_back, ti.f32)]
+            )
+            self.density.error_sum.sum_then(self.density.error, 0, self.active, self, context)
+
+    @ti.func
+    def _weight(self, index):
+        return self.table[ti.min(index, self.table.shape[0] - 1)]
+
+    @ti.func
+    def received(self, total, count, context):
+        """The rules of :meth:`_run_on_host` after iteration k = context[0] (target, least iterations and
+        step back the rest), on the mean error ``total`` / ``count``: run by the one thread that summed
+        it (``TreeSum.sum_then``), into the flags the next iteration reads."""
+        k = ti.cast(context[0], ti.i32)
+        target, min_iterations, step_back = context[1], ti.cast(context[2], ti.i32), ti.cast(context[3], ti.i32)
+        running, from_second, index = self._loop_state(True, k)
         if running:
+            error = total / ti.cast(ti.max(count, 1), ti.f32)
+            last = ti.math.inf
+            if k > 0:
+                last = self.values[LAST_ERROR]
             self.flags[USED] = k + 1
             self.flags[IN_SECOND] = 1 - from_second
-            self.flags[WEIGHT_INDEX] += 1
-            if ti.static(measure):
-                error = self.density.error_sum.total(0) / ti.cast(ti.max(count, 1), ti.f32)
-                last = self.values[LAST_ERROR]
-                if error < target and k + 1 >= min_iterations:
-                    if step_back and k + 1 > min_iterations and last >= target:
-                        self.values[FRACTION] = (target - error) / (last - error)
-                        self.flags[STEPPING_BACK] = 1
-                    self.flags[DONE] = 1
-                else:
-                    if error > last:  # the acceleration overshot: plain again
-                        self.flags[WEIGHT_INDEX] = 0
-                    self.values[LAST_ERROR] = error
+            self.flags[WEIGHT_INDEX] = index + 1
+            self.flags[DONE] = 0
+            self.flags[STEPPING_BACK] = 0
+            if error < target and k + 1 >= min_iterations:
+                if step_back and k + 1 > min_iterations and last >= target:
+                    self.values[FRACTION] = (target - error) / (last - error)
+                    self.flags[STEPPING_BACK] = 1
+                self.flags[DONE] = 1
+            else:
+                if error > last:  # the acceleration overshot: plain again
+                    self.flags[WEIGHT_INDEX] = 0
+                self.values[LAST_ERROR] = error
 
     @ti.kernel
-    def _finish(self, first: ti.template(), second: ti.template()):
+    def _finish(self, first: ti.template(), second: ti.template(), measure: ti.template(), iterations: ti.i32):
         """x* into the first buffer: stepped back between the buffers, or copied when it is in the second."""
-        in_second, stepping_back = self.flags[IN_SECOND], self.flags[STEPPING_BACK]
-        fraction = self.values[FRACTION]
-        for i in range(self.active[None] * ti.max(in_second, stepping_back)):
-            if stepping_back:
-                self.density.between(first, second, in_second, fraction, i)
-            else:
-                first[i] = second[i]
+        for i in range(ti.static(self.density.error.shape[0])):
+            in_second, stepping_back, fraction = iterations % 2, 0, 0.0
+            if ti.static(measure):
+                in_second, stepping_back = self.flags[IN_SECOND], self.flags[STEPPING_BACK]
+                fraction = self.values[FRACTION]
+            if i < self.active[None] and (in_second or stepping_back):
+                if stepping_back:
+                    self.density.between(first, second, in_second, fraction, i)
+                else:
+                    first[i] = second[i]

@@ -61,6 +61,8 @@ class Tree:
             self.lengths.append(math.ceil(self.lengths[-1] / self.blocks[-1]))
             self.blocks.append(above)
         self.top = len(self.lengths) - 1
+        self.block_counts = self.lengths[1:] + [1]
+        """Blocks of each level, the top's one."""
         """The top level: one block (0: the values themselves are the top)."""
         self.offsets = [0, 0]
         for level_length in self.lengths[1:]:
@@ -76,6 +78,17 @@ class Tree:
 def _live(count, block):
     """Blocks that hold any of the first ``count`` entries."""
     return (count + block - 1) // block
+
+
+@ti.func
+def _read(count: ti.template()):
+    """A count given as a Python int or a 0-D field, read where it is used (inside a loop)."""
+    value = 0
+    if ti.static(isinstance(count, int)):
+        value = count
+    else:
+        value = count[None]
+    return value
 
 
 @ti.func
@@ -202,42 +215,62 @@ class TreeSum:
         return self.high[slot] + self.low[slot]
 
     @ti.func
-    def sum(self, values: ti.template(), slot: ti.template(), count):
-        """high[slot] + low[slot] = Σ_{k < count} values[k], count ≤ length. Called at a kernel's top level."""
-        self._reduce(values, slot, count, False)
+    def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
+        """high[slot] + low[slot] = Σ_{k < count} values[k], ``count`` ≤ length a Python int or a 0-D field
+        (read inside the loops: a count read outside them would be a one-thread task of its own). Called at a kernel's
+        top level."""
+        self._reduce(values, slot, count, False, False, 0.0)
 
     @ti.func
-    def maximum(self, values: ti.template(), slot: ti.template(), count):
+    def sum_then(self, values: ti.template(), slot: ti.template(), count: ti.template(), then: ti.template(), context):
+        """:meth:`sum`, then ``then.received(total, count, context)`` by the one thread that holds the
+        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task."""
+        self._reduce(values, slot, count, False, then, context)
+
+    @ti.func
+    def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
-        self._reduce(values, slot, count, True)
+        self._reduce(values, slot, count, True, False, 0.0)
 
     @ti.func
-    def _reduce(self, values: ti.template(), slot: ti.template(), count, is_max: ti.template()):
-        self.high[slot] = 0.0  # the result when count is 0; the top block overwrites it otherwise
-        self.low[slot] = 0.0
+    def _reduce(
+        self,
+        values: ti.template(),
+        slot: ti.template(),
+        count: ti.template(),
+        is_max: ti.template(),
+        then: ti.template(),
+        context,
+    ):
+        # Every level loops over all of its blocks, a count the kernel knows, and skips those past the
+        # live entries: a loop bound read at run time costs a one-thread task before the loop. The top
+        # block always runs, so that it writes 0 when there is nothing to add.
         for level in ti.static(range(self.tree.top + 1)):
             block = ti.static(self.tree.blocks[level])
-            live = count
-            for j in ti.static(range(level)):
-                live = _live(live, self.tree.blocks[j])
-            for b in range(_live(live, block)):
-                zero = self.zero[None]
-                high, low = 0.0, 0.0
-                for k in range(b * block, ti.min((b + 1) * block, live)):
-                    value_high, value_low = 0.0, 0.0
-                    if ti.static(level == 0):
-                        value_high = values[k]
+            for b in range(ti.static(self.tree.block_counts[level])):
+                live = _read(count)
+                for j in ti.static(range(level)):
+                    live = _live(live, self.tree.blocks[j])
+                if ti.static(level == self.tree.top) or b < _live(live, block):
+                    zero = self.zero[None]
+                    high, low = 0.0, 0.0
+                    for k in range(b * block, ti.min((b + 1) * block, live)):
+                        value_high, value_low = 0.0, 0.0
+                        if ti.static(level == 0):
+                            value_high = values[k]
+                        else:
+                            value_high = self.scratch_high[self.tree.offsets[level] + k]
+                            value_low = self.scratch_low[self.tree.offsets[level] + k]
+                        if ti.static(is_max):
+                            high = ti.max(high, value_high)
+                        else:
+                            high, error = _two_sum(high, value_high, zero)
+                            low += error + value_low
+                    if ti.static(level == self.tree.top):
+                        self.high[slot] = high
+                        self.low[slot] = low
+                        if ti.static(then):
+                            then.received(high + low, _read(count), context)
                     else:
-                        value_high = self.scratch_high[self.tree.offsets[level] + k]
-                        value_low = self.scratch_low[self.tree.offsets[level] + k]
-                    if ti.static(is_max):
-                        high = ti.max(high, value_high)
-                    else:
-                        high, error = _two_sum(high, value_high, zero)
-                        low += error + value_low
-                if ti.static(level == self.tree.top):
-                    self.high[slot] = high
-                    self.low[slot] = low
-                else:
-                    self.scratch_high[self.tree.offsets[level + 1] + b] = high
-                    self.scratch_low[self.tree.offsets[level + 1] + b] = low
+                        self.scratch_high[self.tree.offsets[level + 1] + b] = high
+                        self.scratch_low[self.tree.offsets[level + 1] + b] = low
