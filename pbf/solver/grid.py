@@ -139,32 +139,39 @@ class NeighbourGrid:
         the particles are, so runs, and a restored snapshot, replay bit for bit. A cell holds one or
         two particles at h/2 wide cells, so an insertion sort costs next to nothing.
         """
-        for i in range(self.active[None]):
-            cell = self.linear(self.cell_of(x[i]))
-            self.particle_cell[i] = cell
-            self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
+        # Every loop runs over the particles' bucket, a count the kernel knows, and skips the slots past
+        # the live particles: a loop bound read at run time costs a one-thread task, a launch on a GPU.
+        for i in range(ti.static(self.particle_cell.shape[0])):
+            if i == 0:  # the lists' overflow flag, for the next visit (NeighbourGrid._visit_on_device)
+                self.overflow[None] = 0
+            if i < self.active[None]:
+                cell = self.linear(self.cell_of(x[i]))
+                self.particle_cell[i] = cell
+                self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
-        # hold no particle and add nothing, and a count read at run time would cost a one-thread task.
+        # hold no particle and add nothing.
         self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
-        for i in range(self.active[None]):
-            cell = self.particle_cell[i]
-            self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
-            # Clear the counts for the next sort here rather than in a loop over all cells of its own:
-            # the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
-            self.cell_particles[cell] = 0
-        for slot in range(self.active[None]):
+        for i in range(ti.static(self.particle_cell.shape[0])):
+            if i < self.active[None]:
+                cell = self.particle_cell[i]
+                self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
+                # Clear the counts for the next sort here rather than in a loop over all cells of its
+                # own: the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
+                self.cell_particles[cell] = 0
+        for slot in range(ti.static(self.particle_cell.shape[0])):
             # The thread at a cell's first slot sorts the cell; any other slot of the cell reads some
             # particle of the same cell here, so it never mistakes itself for the first.
-            begin = self.cell_start[self.particle_cell[self.sorted_from[slot]]]
-            if begin == slot:
-                end = self.cell_start[self.particle_cell[self.sorted_from[slot]] + 1]
-                for a in range(begin + 1, end):
-                    moving = self.sorted_from[a]
-                    b = a
-                    while b > begin and key[self.sorted_from[b - 1]] > key[moving]:
-                        self.sorted_from[b] = self.sorted_from[b - 1]
-                        b -= 1
-                    self.sorted_from[b] = moving
+            if slot < self.active[None]:
+                begin = self.cell_start[self.particle_cell[self.sorted_from[slot]]]
+                if begin == slot:
+                    end = self.cell_start[self.particle_cell[self.sorted_from[slot]] + 1]
+                    for a in range(begin + 1, end):
+                        moving = self.sorted_from[a]
+                        b = a
+                        while b > begin and key[self.sorted_from[b - 1]] > key[moving]:
+                            self.sorted_from[b] = self.sorted_from[b - 1]
+                            b -= 1
+                        self.sorted_from[b] = moving
 
     @ti.func
     def column_range(self, c, resolution, dx: ti.template(), dy: ti.template()):
@@ -192,76 +199,79 @@ class NeighbourGrid:
         return self.neighbour_start[i], stride, self.neighbour_listed[i]
 
     @ti.func
-    def _visit_loop(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), count):
-        """Find the neighbours of the first ``count`` particles: into the SLOTS entries of particle i
+    def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):
+        """Find the neighbours of particle i: into its SLOTS entries
         (first visit: slot-major on a GPU, a row of its own on the CPU; :attr:`slot_major`) or, when
         ``compact``, into the prefix-summed row neighbour_start[i] (second visit, only after an
         overflow), never past the list's end. A particle with more than SLOTS sets ``overflow``: a
         plain store of the same 1 by every such thread, no atomic into one address."""
         capacity = neighbours.shape[0]
-        for i in range(count):
-            kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
-            h2 = kernel_radius * kernel_radius
-            xi = x[i]
-            c = self.cell_of(xi)
-            start, stride, room = i * SLOTS, 1, SLOTS
-            if ti.static(self.slot_major):
-                start, stride = i, capacity // SLOTS
-            if ti.static(compact):
-                start = ti.min(self.neighbour_start[i], capacity)
-                stride = 1
-                room = ti.min(self.neighbour_start[i + 1], capacity) - start
-            found = 0
-            for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
-                first, last = self.column_range(c, resolution, dx, dy)
-                for j in range(first, last):
-                    if ti.static(self.slot_major):
-                        # A GPU thread stores only neighbours: a warp's threads take the branch
-                        # together or wait for one another, and every store skipped is a scattered
-                        # write saved (the candidates are 3-6 times the neighbours).
-                        if j != i and (x[j] - xi).norm_sqr() < h2:
-                            if found < room:
-                                neighbours[start + found * stride] = j
-                            found += 1
-                    else:
-                        # Branch-free on the CPU: write every candidate to the next free entry and
-                        # advance only past neighbours. A branch on the distance test mispredicts on
-                        # most candidates.
+        kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
+        h2 = kernel_radius * kernel_radius
+        xi = x[i]
+        c = self.cell_of(xi)
+        start, stride, room = i * SLOTS, 1, SLOTS
+        if ti.static(self.slot_major):
+            start, stride = i, capacity // SLOTS
+        if ti.static(compact):
+            start = ti.min(self.neighbour_start[i], capacity)
+            stride = 1
+            room = ti.min(self.neighbour_start[i + 1], capacity) - start
+        found = 0
+        for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
+            first, last = self.column_range(c, resolution, dx, dy)
+            for j in range(first, last):
+                if ti.static(self.slot_major):
+                    # A GPU thread stores only neighbours: a warp's threads take the branch
+                    # together or wait for one another, and every store skipped is a scattered
+                    # write saved (the candidates are 3-6 times the neighbours).
+                    if j != i and (x[j] - xi).norm_sqr() < h2:
                         if found < room:
-                            neighbours[start + found] = j
-                        found += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
-            self.neighbour_count[i] = found
-            if ti.static(not compact):
-                self.neighbour_start[i] = start
-                if found > SLOTS:
-                    self.overflow[None] = 1
-            self.neighbour_listed[i] = ti.min(found, room)
+                            neighbours[start + found * stride] = j
+                        found += 1
+                else:
+                    # Branch-free on the CPU: write every candidate to the next free entry and
+                    # advance only past neighbours. A branch on the distance test mispredicts on
+                    # most candidates.
+                    if found < room:
+                        neighbours[start + found] = j
+                    found += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
+        self.neighbour_count[i] = found
+        if ti.static(not compact):
+            self.neighbour_start[i] = start
+            if found > SLOTS:
+                self.overflow[None] = 1
+        self.neighbour_listed[i] = ti.min(found, room)
 
     @ti.kernel
     def _visit(self, x: ti.template(), neighbours: NeighbourList, compact: ti.template()) -> ti.i32:
-        """:meth:`_visit_loop` over the live particles; returns whether some particle has more than SLOTS
+        """:meth:`_visit_particle` over the live particles; returns whether some particle has more than SLOTS
         neighbours (after the first visit; the flag stays set through the second, :meth:`listed`)."""
         if ti.static(not compact):
             self.overflow[None] = 0
-        self._visit_loop(x, neighbours, compact, self.active[None])
+        for i in range(self.active[None]):
+            self._visit_particle(x, neighbours, compact, i)
         return self.overflow[None]
 
     @ti.kernel
     def _visit_on_device(self, x: ti.template(), neighbours: NeighbourList):
         """Both visits in one launch, the second and its prefix sum over no particles unless the first
         overflowed: the device decides, the host reads nothing. A compact list longer than the array
-        is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
-        count = self.active[None]
-        self.overflow[None] = 0
-        self._visit_loop(x, neighbours, False, count)
-        overflowed = count * self.overflow[None]
-        self.neighbour_scan.scan(self.neighbour_count, self.neighbour_start, overflowed)
-        self._visit_loop(x, neighbours, True, overflowed)
-        if overflowed > 0:
-            total = self.neighbour_start[count]
-            self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
-            if total > neighbours.shape[0]:
-                self.status[TRUNCATED] = 1
+        is cut at its end and ``status`` says so, for :meth:`settle_frame`. The overflow flag was
+        cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`_sort`)."""
+        for i in range(ti.static(self.particle_cell.shape[0])):
+            if i < self.active[None]:
+                self._visit_particle(x, neighbours, False, i)
+        self.neighbour_scan.scan(self.neighbour_count, self.neighbour_start, self.active, self.overflow)
+        for i in range(ti.static(self.particle_cell.shape[0])):
+            count = self.active[None]
+            if i < count * self.overflow[None]:
+                self._visit_particle(x, neighbours, True, i)
+                if i == 0:
+                    total = self.neighbour_start[count]
+                    self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
+                    if total > neighbours.shape[0]:
+                        self.status[TRUNCATED] = 1
 
     def build_neighbours(self, x, checked: bool = True) -> None:
         """Exact neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell.

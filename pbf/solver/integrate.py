@@ -56,11 +56,13 @@ class Integrator:
     @ti.kernel
     def advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
         """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the boundaries as in
-        :meth:`predict`; one launch for both."""
-        for i in range(self.state.active[None]):
-            v = self.state.v[i] + dt * gravity
-            self.state.v[i] = v
-            self.predicted.first[i] = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
+        :meth:`predict`; one launch for both. Over the particles' bucket, the live ones only: a loop
+        bound read at run time would cost a one-thread task, a launch on a GPU."""
+        for i in range(ti.static(self.state.capacity)):
+            if i < self.state.active[None]:
+                v = self.state.v[i] + dt * gravity
+                self.state.v[i] = v
+                self.predicted.first[i] = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
 
     @ti.kernel
     def damp(self, factor: ti.f32):

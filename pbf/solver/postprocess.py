@@ -57,60 +57,66 @@ class VelocityPostprocess:
         max_speed: ti.f32,
     ):
         """v from x* and x, ω (if confining), confinement and XSPH into v, capped at ``max_speed`` (m/s,
-        0: no cap), then x ← x* and the substep's pressure added to the frame's sum: one launch."""
-        inverse_dt = 1.0 / dt
+        0: no cap), then x ← x* and the substep's pressure added to the frame's sum: one launch. Every
+        loop runs over the particles' bucket and reads what it needs itself: a loop bound or a value
+        worked out outside the loops would be a one-thread task, a launch on a GPU."""
         if ti.static(with_vorticity):
-            for i in range(self.state.active[None]):
+            for i in range(ti.static(self.state.capacity)):
+                if i < self.state.active[None]:
+                    h, volume = self.constants[None].h, self.constants[None].volume
+                    inverse_dt = 1.0 / dt
+                    scale = kernel_scale(h)  # once per particle, for the neighbour loop
+                    xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
+                    omega = ti.Vector([0.0, 0.0, 0.0])
+                    entry, stride, listed = self.grid.listed(i, neighbours)
+                    for k in range(listed):
+                        j = neighbours[entry + k * stride]
+                        omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
+                            self.velocity(x_pred, j, inverse_dt) - vi
+                        )
+                    self.omega[i] = omega
+                    self.omega_norm[i] = omega.norm()
+        for i in range(ti.static(self.state.capacity)):
+            if i < self.state.active[None]:
                 h, volume = self.constants[None].h, self.constants[None].volume
+                inverse_dt = 1.0 / dt
                 scale = kernel_scale(h)  # once per particle, for the neighbour loop
                 xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
-                omega = ti.Vector([0.0, 0.0, 0.0])
-                entry, stride, listed = self.grid.listed(i, neighbours)
-                for k in range(listed):
-                    j = neighbours[entry + k * stride]
-                    omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
-                        self.velocity(x_pred, j, inverse_dt) - vi
-                    )
-                self.omega[i] = omega
-                self.omega_norm[i] = omega.norm()
-        for i in range(self.state.active[None]):
-            h, volume = self.constants[None].h, self.constants[None].volume
-            scale = kernel_scale(h)  # once per particle, for the neighbour loop
-            xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
-            dv = ti.Vector([0.0, 0.0, 0.0])
-            if ti.static(with_vorticity or with_xsph):
-                eta = ti.Vector([0.0, 0.0, 0.0])
-                smoothing = ti.Vector([0.0, 0.0, 0.0])
-                omega_i = ti.Vector([0.0, 0.0, 0.0])
-                omega_i_norm = 0.0
-                if ti.static(with_vorticity):
-                    omega_i = self.omega[i]
-                    omega_i_norm = self.omega_norm[i]
-                entry, stride, listed = self.grid.listed(i, neighbours)
-                for k in range(listed):
-                    j = neighbours[entry + k * stride]
-                    w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
-                    if ti.static(with_xsph):
-                        smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
+                dv = ti.Vector([0.0, 0.0, 0.0])
+                if ti.static(with_vorticity or with_xsph):
+                    eta = ti.Vector([0.0, 0.0, 0.0])
+                    smoothing = ti.Vector([0.0, 0.0, 0.0])
+                    omega_i = ti.Vector([0.0, 0.0, 0.0])
+                    omega_i_norm = 0.0
                     if ti.static(with_vorticity):
-                        eta += volume * (self.omega_norm[j] - omega_i_norm) * grad_w
-                dv = xsph * smoothing
-                if ti.static(with_vorticity):
-                    eta_norm = eta.norm()
-                    if eta_norm > 0.0:
-                        dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
-            v = vi + dv
-            if max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
-                speed = v.norm()
-                if speed > max_speed:
-                    v *= max_speed / speed
-            self.state.v[i] = v
-        for i in range(self.state.active[None]):
-            self.state.x[i] = x_pred[i]
-            # The pressure of this substep, from the position iterations' multiplier L and the
-            # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
-            pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
-            self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
+                        omega_i = self.omega[i]
+                        omega_i_norm = self.omega_norm[i]
+                    entry, stride, listed = self.grid.listed(i, neighbours)
+                    for k in range(listed):
+                        j = neighbours[entry + k * stride]
+                        w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
+                        if ti.static(with_xsph):
+                            smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
+                        if ti.static(with_vorticity):
+                            eta += volume * (self.omega_norm[j] - omega_i_norm) * grad_w
+                    dv = xsph * smoothing
+                    if ti.static(with_vorticity):
+                        eta_norm = eta.norm()
+                        if eta_norm > 0.0:
+                            dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
+                v = vi + dv
+                if max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
+                    speed = v.norm()
+                    if speed > max_speed:
+                        v *= max_speed / speed
+                self.state.v[i] = v
+        for i in range(ti.static(self.state.capacity)):
+            if i < self.state.active[None]:
+                self.state.x[i] = x_pred[i]
+                # The pressure of this substep, from the position iterations' multiplier L and the
+                # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
+                pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
+                self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
 
     def run(
         self, x_pred, neighbours, dt, vorticity, xsph, impulse, pressure_per_impulse, first_of_frame, max_speed=0.0

@@ -24,6 +24,7 @@ the compiler cannot see (``_opaque``), which costs two bit casts and keeps the a
 import math
 
 import taichi as ti
+from taichi.lang.field import ScalarField
 
 from pbf.solver.backend import on_gpu
 
@@ -81,13 +82,16 @@ def _live(count, block):
 
 
 @ti.func
-def _read(count: ti.template()):
-    """A count given as a Python int or a 0-D field, read where it is used (inside a loop)."""
+def read_count(count: ti.template(), gate: ti.template()):
+    """A count given as a 0-D field, a Python int or a value, read where it is used (inside a loop), times
+    the 0-D field ``gate`` (0 or 1) if one is given."""
     value = 0
-    if ti.static(isinstance(count, int)):
-        value = count
-    else:
+    if ti.static(isinstance(count, ScalarField)):
         value = count[None]
+    else:
+        value = count
+    if ti.static(isinstance(gate, ScalarField)):
+        value *= gate[None]
     return value
 
 
@@ -128,29 +132,34 @@ class ExclusiveScan:
         return value
 
     @ti.func
-    def scan(self, values: ti.template(), starts: ti.template(), count):
-        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total). Called at
-        a kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
+    def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), gate: ti.template() = 1):
+        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
+        0-D field, a Python int or a value, times the 0-D field ``gate`` if one is given. Called at a
+        kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
         running sums of the top block (or, for a top of few entries, each block below adds up the
         entries before its own); down the tree each block writes the running sums of its entries from
-        its own start."""
-        starts[count] = 0  # the total when count is 0; otherwise the last block overwrites it
+        its own start.
+
+        Every level loops over all of its blocks, a count the kernel knows, and skips those past the
+        live entries, each thread reading the count itself: a loop bound or a count read at run time
+        outside the loops would be a one-thread task of its own."""
         for level in ti.static(range(self.tree.top)):  # up: the sums of each level's blocks
             block = ti.static(self.tree.blocks[level])
-            live = count  # this level's entries that hold any of the first count values
-            for j in ti.static(range(level)):
-                live = _live(live, self.tree.blocks[j])
-            for b in range(_live(live, block)):
-                total = 0
-                for k in range(b * block, ti.min((b + 1) * block, live)):
-                    total += self._entry(values, level, k)
-                self.sums[self.tree.offsets[level + 1] + b] = total
+            for b in range(ti.static(self.tree.block_counts[level])):
+                live = read_count(count, gate)  # this level's entries that hold any of the first count values
+                for j in ti.static(range(level)):
+                    live = _live(live, self.tree.blocks[j])
+                if b < _live(live, block):
+                    total = 0
+                    for k in range(b * block, ti.min((b + 1) * block, live)):
+                        total += self._entry(values, level, k)
+                    self.sums[self.tree.offsets[level + 1] + b] = total
         if ti.static(self.tree.top > 0 and not self.tree.fused_top):  # the top block: one thread walks it
             top = ti.static(self.tree.top)
-            live = count
-            for j in ti.static(range(top)):
-                live = _live(live, self.tree.blocks[j])
-            for _ in range(_live(live, self.tree.blocks[top])):
+            for _ in range(1):
+                live = read_count(count, gate)
+                for j in ti.static(range(top)):
+                    live = _live(live, self.tree.blocks[j])
                 running = 0
                 for k in range(live):
                     self.starts[self.tree.offsets[top] + k] = running
@@ -158,33 +167,39 @@ class ExclusiveScan:
         for down in ti.static(range(self.tree.top)):  # down: each level's starts from its blocks' starts
             level = ti.static(self.tree.top - 1 - down)
             block = ti.static(self.tree.blocks[level])
-            live = count
-            for j in ti.static(range(level)):
-                live = _live(live, self.tree.blocks[j])
-            for b in range(_live(live, block)):
-                running = 0
-                if ti.static(level + 1 == self.tree.top and self.tree.fused_top):
-                    for k in range(b):  # the top level's sums before this block (fewer than GPU_BLOCK)
-                        running += self.sums[self.tree.offsets[self.tree.top] + k]
-                else:
-                    running = self.starts[self.tree.offsets[level + 1] + b]
-                end = ti.min((b + 1) * block, live)
-                for k in range(b * block, end):
-                    if ti.static(level == 0):
-                        starts[k] = running
+            for b in range(ti.static(self.tree.block_counts[level])):
+                total_count = read_count(count, gate)
+                live = total_count
+                for j in ti.static(range(level)):
+                    live = _live(live, self.tree.blocks[j])
+                if b < _live(live, block):
+                    running = 0
+                    if ti.static(level + 1 == self.tree.top and self.tree.fused_top):
+                        for k in range(b):  # the top level's sums before this block (fewer than GPU_BLOCK)
+                            running += self.sums[self.tree.offsets[self.tree.top] + k]
                     else:
-                        self.starts[self.tree.offsets[level] + k] = running
-                    running += self._entry(values, level, k)
+                        running = self.starts[self.tree.offsets[level + 1] + b]
+                    end = ti.min((b + 1) * block, live)
+                    for k in range(b * block, end):
+                        if ti.static(level == 0):
+                            starts[k] = running
+                        else:
+                            self.starts[self.tree.offsets[level] + k] = running
+                        running += self._entry(values, level, k)
+                    if ti.static(level == 0):
+                        if end == total_count:
+                            starts[total_count] = running
                 if ti.static(level == 0):
-                    if end == count:
-                        starts[count] = running
+                    if b == 0 and total_count == 0:  # no block is live: the total is 0
+                        starts[0] = 0
         if ti.static(self.tree.top == 0):  # a single block: one thread walks it
-            for _ in range(_live(count, self.tree.blocks[0])):
+            for _ in range(1):
+                live = read_count(count, gate)
                 running = 0
-                for k in range(count):
+                for k in range(live):
                     starts[k] = running
                     running += values[k]
-                starts[count] = running
+                starts[live] = running
 
     @ti.kernel
     def run(self, values: ti.template(), starts: ti.template()) -> ti.i32:
@@ -248,7 +263,7 @@ class TreeSum:
         for level in ti.static(range(self.tree.top + 1)):
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):
-                live = _read(count)
+                live = read_count(count, 1)
                 for j in ti.static(range(level)):
                     live = _live(live, self.tree.blocks[j])
                 if ti.static(level == self.tree.top) or b < _live(live, block):
@@ -269,8 +284,8 @@ class TreeSum:
                     if ti.static(level == self.tree.top):
                         self.high[slot] = high
                         self.low[slot] = low
-                        if ti.static(then):
-                            then.received(high + low, _read(count), context)
+                        if ti.static(not isinstance(then, bool)):  # False: nothing to tell
+                            then.received(high + low, read_count(count, 1), context)
                     else:
                         self.scratch_high[self.tree.offsets[level + 1] + b] = high
                         self.scratch_low[self.tree.offsets[level + 1] + b] = low

@@ -141,13 +141,15 @@ class State:
         """Apply the grid's counting-sort permutation (``sorted_from[slot]`` = the slot the particle
         comes from) to every carried array: loops for the top level of the grid's sort kernel
         (``NeighbourGrid.sort_and_permute``), one to gather into scratch and one to copy back."""
-        for slot in range(self.active[None]):
-            i = sorted_from[slot]
-            for k in ti.static(range(len(self._carried))):
-                self._carried[k][1][slot] = self._carried[k][0][i]
-        for slot in range(self.active[None]):
-            for k in ti.static(range(len(self._carried))):
-                self._carried[k][0][slot] = self._carried[k][1][slot]
+        for slot in range(ti.static(self.capacity)):  # the bucket: no one-thread task for a bound
+            if slot < self.active[None]:
+                i = sorted_from[slot]
+                for k in ti.static(range(len(self._carried))):
+                    self._carried[k][1][slot] = self._carried[k][0][i]
+        for slot in range(ti.static(self.capacity)):
+            if slot < self.active[None]:
+                for k in ti.static(range(len(self._carried))):
+                    self._carried[k][0][slot] = self._carried[k][1][slot]
 
     @ti.func
     def reset_new(self, slot):
