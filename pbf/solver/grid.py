@@ -118,18 +118,18 @@ class NeighbourGrid:
         cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The solver uses
         :meth:`sort_and_permute`; this is the sort alone, for a caller with arrays of its own (the grid's
         tests check it against brute force)."""
-        self._sort(x, key)
+        self.sort_loops(x, key)
 
     @ti.kernel
     def sort_and_permute(self, x: ti.template(), key: ti.template(), mover: ti.template()):
         """:meth:`sort`, then ``mover.permute(sorted_from)`` in the same launch: ``mover`` (the
         ``Integrator``) applies the permutation to every per-particle array, ``x`` included. A launch
         costs 50-100 µs on a 2-core CPU, about what the reorder's own work does at 8,000 particles."""
-        self._sort(x, key)
+        self.sort_loops(x, key)
         mover.permute(self.sorted_from)
 
     @ti.func
-    def _sort(self, x: ti.template(), key: ti.template()):
+    def sort_loops(self, x: ti.template(), key: ti.template()):
         """The loops of :meth:`sort`, at the top level of the kernel that calls it (so parallel).
 
         The ranks the atomic counter hands out depend on which thread gets there first, so within a
@@ -255,13 +255,25 @@ class NeighbourGrid:
 
     @ti.kernel
     def _visit_on_device(self, x: ti.template(), neighbours: NeighbourList):
-        """Both visits in one launch, the second and its prefix sum over no particles unless the first
-        overflowed: the device decides, the host reads nothing. A compact list longer than the array
-        is cut at its end and ``status`` says so, for :meth:`settle_frame`. The overflow flag was
-        cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`_sort`)."""
+        """:meth:`visit_on_device` as a launch of its own."""
+        self.visit_on_device(x, neighbours)
+
+    @ti.func
+    def visit_first(self, x: ti.template(), neighbours: ti.template()):
+        """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
+        was cleared by the sort)."""
         for i in range(ti.static(self.particle_cell.shape[0])):
             if i < self.active[None]:
                 self._visit_particle(x, neighbours, False, i)
+
+    @ti.func
+    def visit_on_device(self, x: ti.template(), neighbours: ti.template()):
+        """Both visits in one launch, the second and its prefix sum over no particles unless the first
+        overflowed: the device decides, the host reads nothing. A compact list longer than the array
+        is cut at its end and ``status`` says so, for :meth:`settle_frame`. The overflow flag was
+        cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For
+        the top level of a kernel."""
+        self.visit_first(x, neighbours)
         self.neighbour_scan.scan(self.neighbour_count, self.neighbour_start, self.active, self.overflow)
         for i in range(ti.static(self.particle_cell.shape[0])):
             count = self.active[None]
@@ -289,8 +301,12 @@ class NeighbourGrid:
         if not checked and self.on_device and not self.checking:
             self._visit_on_device(x, self.neighbours)
             return
-        if not self._visit(x, self.neighbours, False):
-            return
+        if self._visit(x, self.neighbours, False):
+            self.build_compact(x)
+
+    def build_compact(self, x) -> None:
+        """After a first visit that overflowed: the compact list, sized by a prefix sum of the counts
+        (grown as needed), filled by a second visit."""
         total = self.neighbour_scan.run(self.neighbour_count, self.neighbour_start)
         self.most_entries_in_frame = max(self.most_entries_in_frame, total)
         if total > self.neighbours.shape[0]:

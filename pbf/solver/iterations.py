@@ -58,12 +58,14 @@ class JacobiIterations:
             self.flags[USED] = count
         self._used = count
 
-    def run(self, predicted, neighbours, control) -> None:
+    def run(self, predicted, neighbours, control, settle: bool = True) -> None:
         """``control.iterations`` Jacobi iterations of x* (a ``PredictedPositions``) at most, stopped by
         ``control.target_density_error`` (0: never) after ``control.min_iterations``; x* may end in
-        either buffer (``predicted.gather()`` brings it back)."""
+        either buffer (``predicted.gather()`` brings it back). On the device path the last launch
+        settles x* into the first buffer (:meth:`settle_loop`), unless ``settle`` is False: then the
+        caller runs that loop in a launch of its own making (``pbf.solver.substep``)."""
         if self.on_device:
-            self._run_on_device(predicted, neighbours, control)
+            self._run_on_device(predicted, neighbours, control, settle)
         else:
             self._run_on_host(predicted, neighbours, control)
 
@@ -90,7 +92,7 @@ class JacobiIterations:
                 weights.restart()
             last_error = error
 
-    def _run_on_device(self, predicted, neighbours, control) -> None:
+    def _run_on_device(self, predicted, neighbours, control, settle: bool) -> None:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
@@ -105,8 +107,9 @@ class JacobiIterations:
                 control.min_iterations,
                 int(control.step_back),
             )
-        self._finish(predicted.first, predicted.second, measure, control.iterations)
-        predicted.in_second = False
+        if settle:
+            self._finish(predicted.first, predicted.second, measure, control.iterations)
+            predicted.in_second = False
         self._used, self._measured = control.iterations, measure
 
     @ti.func
@@ -195,7 +198,16 @@ class JacobiIterations:
 
     @ti.kernel
     def _finish(self, first: ti.template(), second: ti.template(), measure: ti.template(), iterations: ti.i32):
-        """x* into the first buffer: stepped back between the buffers, or copied when it is in the second."""
+        """:meth:`settle_loop` as a launch of its own."""
+        self.settle_loop(first, second, measure, iterations)
+
+    @ti.func
+    def settle_loop(
+        self, first: ti.template(), second: ti.template(), measure: ti.template(), iterations: ti.template()
+    ):
+        """x* into the first buffer after ``iterations`` iterations on the device's decisions: stepped back
+        between the buffers, or copied when it is in the second. For the top level of a kernel
+        (``pbf.solver.substep`` runs it in the launch that ends the substep)."""
         for i in range(ti.static(self.density.error.shape[0])):
             in_second, stepping_back, fraction = iterations % 2, 0, 0.0
             if ti.static(measure):

@@ -56,10 +56,45 @@ class VelocityPostprocess:
         first_of_frame: ti.i32,
         max_speed: ti.f32,
     ):
-        """v from x* and x, ω (if confining), confinement and XSPH into v, capped at ``max_speed`` (m/s,
-        0: no cap), then x ← x* and the substep's pressure added to the frame's sum: one launch. Every
-        loop runs over the particles' bucket and reads what it needs itself: a loop bound or a value
-        worked out outside the loops would be a one-thread task, a launch on a GPU."""
+        """Lines 20-23 of Algorithm 1 in one launch: v = (x* − x)/Δt, confinement (``with_vorticity``, at
+        ε = ``vorticity``) and XSPH (``with_xsph``, c = ``xsph``) on v, v capped at ``max_speed`` (m/s,
+        ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of the multipliers
+        ``impulse`` (L, per particle) and Λ, at ``pressure_per_impulse`` Pa per unit of L, added to
+        ``State.pressure_sum`` (which starts again at the ``first_of_frame`` substep). Every loop runs
+        over the particles' bucket and reads what it needs itself: a loop bound or a value worked out
+        outside the loops would be a one-thread task, a launch on a GPU."""
+        self.finish_loops(
+            x_pred,
+            neighbours,
+            dt,
+            vorticity,
+            xsph,
+            with_vorticity,
+            with_xsph,
+            impulse,
+            pressure_per_impulse,
+            first_of_frame,
+            max_speed,
+        )
+
+    @ti.func
+    def finish_loops(
+        self,
+        x_pred: ti.template(),
+        neighbours: ti.template(),
+        dt: ti.template(),
+        vorticity: ti.template(),
+        xsph: ti.template(),
+        with_vorticity: ti.template(),
+        with_xsph: ti.template(),
+        impulse: ti.template(),
+        pressure_per_impulse: ti.template(),
+        first_of_frame: ti.template(),
+        max_speed: ti.template(),
+    ):
+        """The loops of :meth:`finish`, for the top level of a kernel (``pbf.solver.substep`` runs them in
+        the launch that ends the iterations). Every argument is a template: a value argument of a
+        ``ti.func`` is copied at the call, outside the loops, which is a one-thread task."""
         if ti.static(with_vorticity):
             for i in range(ti.static(self.state.capacity)):
                 if i < self.state.active[None]:
@@ -117,25 +152,3 @@ class VelocityPostprocess:
                 # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
                 pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
                 self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
-
-    def run(
-        self, x_pred, neighbours, dt, vorticity, xsph, impulse, pressure_per_impulse, first_of_frame, max_speed=0.0
-    ):
-        """Lines 20-23 of Algorithm 1: v = (x* − x)/Δt, confinement (if ε > 0) and XSPH (if c > 0) on v,
-        v capped at ``max_speed`` (m/s, ``time.max_speed_m_s``; 0: no cap), then x = x*; and the
-        pressure (Pa) of the multipliers ``impulse`` (L, per particle) and Λ, at
-        ``pressure_per_impulse`` Pa per unit of L, added to ``State.pressure_sum`` (which starts again
-        at the ``first_of_frame`` substep)."""
-        self.finish(
-            x_pred,
-            neighbours,
-            dt,
-            vorticity,
-            xsph,
-            vorticity > 0.0,
-            xsph > 0.0,
-            impulse,
-            pressure_per_impulse,
-            first_of_frame,
-            max_speed,
-        )

@@ -29,11 +29,10 @@ from pbf.solver.iterations import JacobiIterations
 from pbf.solver.model import Control, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
+from pbf.solver.substep import SubstepLaunches
 
 STAGES = (
-    "predict",
-    "sort by cell",
-    "neighbour lists",
+    "predict, sort by cell, neighbour lists",
     "divergence pre-correction",
     "solver iterations",
     "velocity, vorticity, XSPH, x = x*",
@@ -147,6 +146,8 @@ class Simulation:
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
+        self.launches = SubstepLaunches(self.state, self.integrator, self.grid, self.iterations, self.postprocess)
+        """The stages composed into few kernel calls (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
@@ -442,31 +443,36 @@ class Simulation:
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         x_star = self.integrator.predicted
         self._outside_inputs(dt)  # emitters, the mouse, moving walls
-        with hook.stage("predict"):
-            self.integrator.advance(dt, control.gravity_m_s2)  # lines 1-4: v += Δt g, x* = x + Δt v
-        with hook.stage("sort by cell"):  # lines 5-7: find neighbouring particles
-            self._sort_by_cell(x_star.first)
-        with hook.stage("neighbour lists"):
-            self.grid.build_neighbours(x_star.first, checked=False)
+        with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch:
+            self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2)  # v += Δt g, x* = x + Δt v,
+            # the particles sorted by the cell of x*, and their neighbours
         with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
             if control.divergence_iterations > 0:  # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
+        on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target
-            self.iterations.run(x_star, self.grid.neighbours, control)
-            x_star.gather()  # x* back in the first buffer
+            self.iterations.run(x_star, self.grid.neighbours, control, settle=not on_device)
+            x_star.gather()  # x* back in the first buffer (the device path's last launch does it)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
-            self.postprocess.run(
-                x_star.first,
-                self.grid.neighbours,
+            finish = (
                 dt,  # lines 20-23: v = (x* − x)/Δt,
                 control.vorticity,
                 control.xsph,  # confinement, XSPH, x = x*;
+                control.vorticity > 0.0,
+                control.xsph > 0.0,
                 self.density.lam_total,  # and the pressure, summed
                 self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
                 self.pressure_substeps == 0,
                 self.scene.time.max_speed_m_s,  # and v capped (0: not)
             )
+            if on_device:  # x* settled after the iterations, then lines 20-23, in one launch
+                self.launches.finish(
+                    self.grid.neighbours, control.target_density_error > 0.0, control.iterations, *finish
+                )
+                x_star.in_second = False
+            else:
+                self.postprocess.finish(x_star.first, self.grid.neighbours, *finish)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1

@@ -1,0 +1,97 @@
+"""The substep's launches: the stages of Algorithm 1, each in a module of its own, composed into few kernels.
+
+Each stage is a set of loops (``@ti.func``) in its module: the prediction in ``pbf.solver.integrate``,
+the counting sort and the neighbour visit in ``pbf.solver.grid``, the Jacobi iterations in
+``pbf.solver.iterations`` and ``pbf.solver.density``, the velocity update in ``pbf.solver.postprocess``.
+On a GPU every kernel call costs the host tens of microseconds and every top-level loop a launch of a
+few, so at 8,000 particles the calls, not the work, set the cost of a substep. The kernels here run
+consecutive stages in one call:
+
+* lines 1-7, :meth:`SubstepLaunches.predict_and_find_neighbours`: v += Δt g and x* = x + Δt v, the
+  counting sort by cell with the state reordered alike, and the neighbour lists (both visits on a
+  device that keeps its decisions; the first, and its overflow flag back to the host, on the CPU);
+* lines 8-19, the iterations, one call each (``pbf.solver.iterations``);
+* lines 20-23, :meth:`SubstepLaunches.finish` on the device path: x* settled into the first buffer
+  (copied back or stepped back between the two), then the velocity, vorticity and XSPH passes and
+  x = x*, in the call that ends the substep.
+"""
+
+import taichi as ti
+
+from pbf.solver.grid import NeighbourList
+
+
+@ti.data_oriented
+class SubstepLaunches:
+    def __init__(self, state, integrator, grid, iterations, postprocess):
+        self.state = state
+        self.integrator = integrator
+        self.grid = grid
+        self.iterations = iterations
+        self.postprocess = postprocess
+
+    def predict_and_find_neighbours(self, dt: float, gravity) -> None:
+        """Algorithm 1, lines 1-7, in one call: v += Δt g, x* = x + Δt v (kept inside the boundaries),
+        the particles and x* sorted by the cell of x*, and their exact neighbour lists. On the CPU the
+        call returns whether a particle has more than SLOTS neighbours, and only then a second visit
+        fills a compact list (``NeighbourGrid.build_compact``)."""
+        grid, x = self.grid, self.integrator.predicted.first
+        if grid.on_device and not grid.checking:
+            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, gravity)
+        elif self._predict_and_visit(grid.neighbours, dt, gravity):
+            grid.build_compact(x)
+
+    @ti.func
+    def _predict_and_sort(self, dt: ti.template(), gravity: ti.template()):
+        self.integrator.advance_loop(dt, gravity)  # lines 1-4: v = v + Δt g, x* = x + Δt v
+        x = ti.static(self.integrator.predicted.first)
+        self.grid.sort_loops(x, self.state.index)  # lines 5-7: a counting sort by the cell of x*,
+        self.state.permute(self.grid.sorted_from)  # the state and x* reordered alike
+
+    @ti.kernel
+    def _predict_and_find_neighbours_on_device(
+        self, neighbours: NeighbourList, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)
+    ):
+        self._predict_and_sort(dt, gravity)
+        self.grid.visit_on_device(ti.static(self.integrator.predicted.first), neighbours)  # the lists
+
+    @ti.kernel
+    def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)) -> ti.i32:
+        self._predict_and_sort(dt, gravity)
+        self.grid.visit_first(ti.static(self.integrator.predicted.first), neighbours)  # the lists' first visit
+        return self.grid.overflow[None]
+
+    @ti.kernel
+    def finish(
+        self,
+        neighbours: NeighbourList,
+        measure: ti.template(),
+        iterations: ti.i32,
+        dt: ti.f32,
+        vorticity: ti.f32,
+        xsph: ti.f32,
+        with_vorticity: ti.template(),
+        with_xsph: ti.template(),
+        impulse: ti.template(),
+        pressure_per_impulse: ti.f32,
+        first_of_frame: ti.i32,
+        max_speed: ti.f32,
+    ):
+        """The device path's end of a substep in one call: x* settled into the first buffer after the
+        iterations (``JacobiIterations.settle_loop``), then lines 20-23 (``VelocityPostprocess.finish``)."""
+        self.iterations.settle_loop(
+            self.integrator.predicted.first, self.integrator.predicted.second, measure, iterations
+        )
+        self.postprocess.finish_loops(
+            self.integrator.predicted.first,
+            neighbours,
+            dt,
+            vorticity,
+            xsph,
+            with_vorticity,
+            with_xsph,
+            impulse,
+            pressure_per_impulse,
+            first_of_frame,
+            max_speed,
+        )
