@@ -159,22 +159,22 @@ class JacobiIterations:
             if i < self.active[None] * running:
                 self.density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
         if ti.static(measure):
-            context = ti.Vector(
-                [ti.cast(k, ti.f32), target, ti.cast(min_iterations, ti.f32), ti.cast(step_back, ti.f32)]
+            # The arguments as they are (a tuple of templates), read where they are used.
+            self.density.error_sum.sum_then(
+                self.density.error, 0, self.active, self, (k, target, min_iterations, step_back)
             )
-            self.density.error_sum.sum_then(self.density.error, 0, self.active, self, context)
 
     @ti.func
     def _weight(self, index):
         return self.table[ti.min(index, self.table.shape[0] - 1)]
 
     @ti.func
-    def received(self, total, count, context):
-        """The rules of :meth:`_run_on_host` after iteration k = context[0] (target, least iterations and
-        step back the rest), on the mean error ``total`` / ``count``: run by the one thread that summed
-        it (``TreeSum.sum_then``), into the flags the next iteration reads."""
-        k = ti.cast(context[0], ti.i32)
-        target, min_iterations, step_back = context[1], ti.cast(context[2], ti.i32), ti.cast(context[3], ti.i32)
+    def received(self, total, count, context: ti.template()):
+        """The rules of :meth:`_run_on_host` after iteration k of ``context`` (k, the target, the least
+        iterations, whether to step back: the kernel's arguments), on the mean error ``total`` /
+        ``count``: run by the one thread that summed it (``TreeSum.sum_then``), into the flags the next
+        iteration reads."""
+        k, target, min_iterations, step_back = context
         running, from_second, index = self._loop_state(True, k)
         if running:
             error = total / ti.cast(ti.max(count, 1), ti.f32)

@@ -237,9 +237,18 @@ class TreeSum:
         self._reduce(values, slot, count, False, False, 0.0)
 
     @ti.func
-    def sum_then(self, values: ti.template(), slot: ti.template(), count: ti.template(), then: ti.template(), context):
+    def sum_then(
+        self,
+        values: ti.template(),
+        slot: ti.template(),
+        count: ti.template(),
+        then: ti.template(),
+        context: ti.template(),
+    ):
         """:meth:`sum`, then ``then.received(total, count, context)`` by the one thread that holds the
-        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task."""
+        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task. ``context``
+        (anything: a tuple of the kernel's arguments) reaches ``then`` as it is, not copied outside the
+        loops, which would be a one-thread task."""
         self._reduce(values, slot, count, False, then, context)
 
     @ti.func
@@ -255,7 +264,7 @@ class TreeSum:
         count: ti.template(),
         is_max: ti.template(),
         then: ti.template(),
-        context,
+        context: ti.template(),
     ):
         # Every level loops over all of its blocks, a count the kernel knows, and skips those past the
         # live entries: a loop bound read at run time costs a one-thread task before the loop. The top
