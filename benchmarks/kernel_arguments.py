@@ -245,8 +245,9 @@ LAUNCH_PACKS = (1, 8, 32)
 
 
 def launch_costs(rounds: int, calls: int = 500) -> dict:
-    """µs per launch of a kernel over one element: reading two fields, and taking argpacks of
-    LAUNCH_PACKS ndarrays (it reads two of them); medians of ``rounds`` alternating rounds."""
+    """µs per launch of a kernel over one element: reading two fields, taking a 3-vector or three values
+    (gravity, as the substep's first kernel takes it), and taking argpacks of LAUNCH_PACKS ndarrays (it
+    reads two of them); medians of ``rounds`` alternating rounds."""
     a, b = ti.field(ti.f32, shape=1), ti.field(ti.f32, shape=1)
 
     @ti.kernel
@@ -254,7 +255,22 @@ def launch_costs(rounds: int, calls: int = 500) -> dict:
         for i in range(1):
             a[i] = b[i] + 1.0
 
-    launches = {"fields": on_fields}
+    @ti.kernel
+    def with_vector(g: ti.types.vector(3, ti.f32)):
+        for i in range(1):
+            a[i] = b[i] + g[1]
+
+    @ti.kernel
+    def with_values(gx: ti.f32, gy: ti.f32, gz: ti.f32):
+        for i in range(1):
+            a[i] = b[i] + ti.Vector([gx, gy, gz])[1]
+
+    gravity = (0.0, -9.81, 0.0)
+    launches = {
+        "fields": on_fields,
+        "a vector arg.": lambda: with_vector(gravity),
+        "three values": lambda: with_values(*gravity),
+    }
     for members in LAUNCH_PACKS:
         pack_type = ti.types.argpack(**{f"a{k}": f32_array for k in range(members)})
         pack = pack_type(**{f"a{k}": ti.ndarray(ti.f32, shape=1) for k in range(members)})

@@ -26,18 +26,26 @@ DONE, WEIGHT_INDEX, USED, IN_SECOND, STEPPING_BACK = range(5)
 """Entries of ``JacobiIterations.flags``."""
 LAST_ERROR, FRACTION = range(2)
 """Entries of ``JacobiIterations.values``."""
+PER_LAUNCH = 2
+"""Iterations per kernel call on the device path. A call costs the host 60-130 µs on a GPU machine
+(Taichi's Python side sets every argument) and 2 iterations a call save 2 of the 6 calls of a substep
+at 4 iterations, 5 of 12 at the presets' 10; each iteration in a call is a copy of its code, +1.5 s
+of compile at 2 and +5 s at 4 (8,000 particles, the CPU backend; docs/BENCHMARKS.md, "Launches")."""
 
 
 @ti.data_oriented
 class JacobiIterations:
     """Runs a substep's iterations on the host's or on the device's decisions (``on_device``)."""
 
-    def __init__(self, density, weights, active, on_device: bool):
+    def __init__(self, density, weights, active, on_device: bool, per_launch: int = PER_LAUNCH):
         self.density = density
         self.weights = weights
         """``pbf.solver.acceleration.Weights``: the host path's weights, and the table the device copies."""
         self.active = active
         self.on_device = on_device
+        self.per_launch = per_launch
+        """Iterations per kernel call on the device path: more save host time per substep (tens of µs a
+        call on a GPU) and cost compile time (each is a copy of an iteration's code)."""
         self._used = 0
         self._measured = False
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
@@ -96,13 +104,15 @@ class JacobiIterations:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
-        for k in range(control.iterations):
+        for k in range(0, control.iterations, self.per_launch):
             self._iterate(
                 predicted.first,
                 predicted.second,
                 neighbours,
                 measure,
+                self.per_launch,
                 k,
+                control.iterations,
                 target,
                 control.min_iterations,
                 int(control.step_back),
@@ -131,38 +141,45 @@ class JacobiIterations:
         second: ti.template(),
         neighbours: NeighbourList,
         measure: ti.template(),
-        k: ti.i32,
+        per_launch: ti.template(),
+        start: ti.i32,
+        iterations: ti.i32,
         target: ti.f32,
         min_iterations: ti.i32,
         step_back: ti.i32,
     ):
-        """Iteration ``k`` of the substep, over no particles once the target was met; then, with a target,
-        the rules of :meth:`_run_on_host` decided by the thread that holds the error's sum.
+        """Iterations ``start`` … ``start + per_launch − 1`` of the substep's ``iterations`` (:attr:`per_launch`),
+        each over no particles once the target was met; with a target, after each the rules of
+        :meth:`_run_on_host` decided by the thread that holds the error's sum.
 
         Every loop runs over the particles' bucket, a count the kernel knows, and every thread reads the
         loop's state and the live count itself: read once outside the loops they would be one-thread
         tasks of their own, a launch each on a GPU."""
-        for i in range(ti.static(self.density.error.shape[0])):
-            running, from_second, index = self._loop_state(measure, k)
-            if i < self.active[None] * running:
-                weight = self._weight(index)
-                first_iteration = ti.select(k == 0, 1, 0)
-                self.density.multiplier_pass(
-                    first, second, from_second, i, neighbours, measure, first_iteration, weight
+        for u in ti.static(range(per_launch)):
+            for i in range(ti.static(self.density.error.shape[0])):
+                k = start + u
+                running, from_second, index = self._loop_state(measure, k)
+                if k < iterations and i < self.active[None] * running:
+                    first_iteration = ti.select(k == 0, 1, 0)
+                    weight = self._weight(index)
+                    self.density.multiplier_pass(
+                        first, second, from_second, i, neighbours, measure, first_iteration, weight
+                    )
+            if ti.static(u == 0):  # the surface ghost's pass, in a substep's first iteration only
+                for i in range(ti.static(self.density.error.shape[0])):
+                    running, _, index = self._loop_state(measure, start)
+                    if start == 0 and i < self.density.surface_count(1):
+                        self.density.surface_pass(first, i, neighbours, measure, 1, self._weight(index))
+            for i in range(ti.static(self.density.error.shape[0])):
+                k = start + u
+                running, from_second, index = self._loop_state(measure, k)
+                if k < iterations and i < self.active[None] * running:
+                    self.density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
+            if ti.static(measure):
+                # The arguments as they are (a tuple of templates), read where they are used.
+                self.density.error_sum.sum_then(
+                    self.density.error, 0, self.active, self, (start + u, iterations, target, min_iterations, step_back)
                 )
-        for i in range(ti.static(self.density.error.shape[0])):
-            running, _, index = self._loop_state(measure, k)
-            if k == 0 and i < self.density.surface_count(1):
-                self.density.surface_pass(first, i, neighbours, measure, 1, self._weight(index))
-        for i in range(ti.static(self.density.error.shape[0])):
-            running, from_second, index = self._loop_state(measure, k)
-            if i < self.active[None] * running:
-                self.density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
-        if ti.static(measure):
-            # The arguments as they are (a tuple of templates), read where they are used.
-            self.density.error_sum.sum_then(
-                self.density.error, 0, self.active, self, (k, target, min_iterations, step_back)
-            )
 
     @ti.func
     def _weight(self, index):
@@ -170,13 +187,13 @@ class JacobiIterations:
 
     @ti.func
     def received(self, total, count, context: ti.template()):
-        """The rules of :meth:`_run_on_host` after iteration k of ``context`` (k, the target, the least
-        iterations, whether to step back: the kernel's arguments), on the mean error ``total`` /
+        """The rules of :meth:`_run_on_host` after iteration k of ``context`` (k, the substep's iterations,
+        the target, the least iterations, whether to step back: the kernel's arguments), on the mean error ``total`` /
         ``count``: run by the one thread that summed it (``TreeSum.sum_then``), into the flags the next
         iteration reads."""
-        k, target, min_iterations, step_back = context
+        k, iterations, target, min_iterations, step_back = context
         running, from_second, index = self._loop_state(True, k)
-        if running:
+        if running and k < iterations:
             error = total / ti.cast(ti.max(count, 1), ti.f32)
             last = ti.math.inf
             if k > 0:

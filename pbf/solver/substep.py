@@ -37,8 +37,8 @@ class SubstepLaunches:
         fills a compact list (``NeighbourGrid.build_compact``)."""
         grid, x = self.grid, self.integrator.predicted.first
         if grid.on_device and not grid.checking:
-            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, gravity)
-        elif self._predict_and_visit(grid.neighbours, dt, gravity):
+            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, *gravity)
+        elif self._predict_and_visit(grid.neighbours, dt, *gravity):
             grid.build_compact(x)
 
     @ti.func
@@ -50,14 +50,16 @@ class SubstepLaunches:
 
     @ti.kernel
     def _predict_and_find_neighbours_on_device(
-        self, neighbours: NeighbourList, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)
+        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32
     ):
-        self._predict_and_sort(dt, gravity)
+        # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
+        # a call than three values (benchmarks/kernel_arguments.py).
+        self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         self.grid.visit_on_device(ti.static(self.integrator.predicted.first), neighbours)  # the lists
 
     @ti.kernel
-    def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)) -> ti.i32:
-        self._predict_and_sort(dt, gravity)
+    def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32) -> ti.i32:
+        self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         self.grid.visit_first(ti.static(self.integrator.predicted.first), neighbours)  # the lists' first visit
         return self.grid.overflow[None]
 

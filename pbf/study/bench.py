@@ -398,6 +398,7 @@ def counts(args) -> list:
             (f"{particles:,}, {args.iterations} iterations", fixed, False),
             (f"{particles:,}, {args.iterations} its., device decisions", fixed, True),
             (f"{particles:,}, the preset's error target", dam_break(particles, 10, args.set), False),
+            (f"{particles:,}, preset's target, device", dam_break(particles, 10, args.set), True),
         ):
             with decisions_on_device(on_device or args.device_decisions):
                 sim = Simulation(scene, arch=args.backend, quiet=True)
