@@ -23,10 +23,12 @@ def make_grid(n, lower, upper, h, reach):
     return NeighbourGrid(GridParams.covering(n, lower, upper, h, reach), active)
 
 
-def grid_neighbours(points, lower, upper, h, reach=1, checked=True):
+def grid_neighbours(points, lower, upper, h, reach=1, checked=True, slot_major=None):
     n = len(points)
     with decisions_on_device(not checked):
         grid = make_grid(n, lower, upper, h, reach)
+    if slot_major is not None:  # the GPU's layout on the CPU (chosen before the first compile)
+        grid.slot_major = slot_major
     x = ti.Vector.field(3, ti.f32, shape=n)
     x.from_numpy(points.astype(np.float32))
     keys = np.random.default_rng(n).permutation(n).astype(np.int32)
@@ -53,8 +55,8 @@ def float32_brute_force(points, h):
     return brute_force(points.astype(np.float32), np.float32(h))
 
 
-def check(points, lower, upper, h, reach=1, checked=True):
-    got, order = grid_neighbours(points, lower, upper, h, reach, checked)
+def check(points, lower, upper, h, reach=1, checked=True, slot_major=None):
+    got, order = grid_neighbours(points, lower, upper, h, reach, checked, slot_major)
     expected = float32_brute_force(points, h)
     by_original = [None] * len(points)
     for slot, original in enumerate(order):
@@ -174,6 +176,19 @@ def test_tree_sums_are_compensated_and_independent_of_the_count_of_blocks(block)
     high, low = sums.high.to_numpy(), sums.low.to_numpy()
     assert float(high[0]) + float(low[0]) == pytest.approx(values.astype(np.float64).sum(), rel=1e-11)
     assert high[1] == values.max() and low[1] == 0.0
+
+
+@pytest.mark.parametrize("checked", [True, False])
+@pytest.mark.parametrize("pile", [False, True])
+def test_the_gpus_slot_major_lists_match_brute_force(checked, pile):
+    # The GPU's layout (entry i + k·n) and its branchy build, on the CPU: random points, and with a
+    # pile of 200 in one cell, whose lists overflow SLOTS and go to the compact rows.
+    rng = np.random.default_rng(7)
+    points = rng.uniform(0.0, 1.0, size=(2000, 3))
+    if pile:
+        points[:200] = rng.uniform(0.5, 0.52, size=(200, 3))
+    expected = check(points, (0, 0, 0), (1, 1, 1), 0.08, 2, checked, slot_major=True)
+    assert max(map(len, expected)) > SLOTS if pile else max(map(len, expected)) < SLOTS
 
 
 @REACHES

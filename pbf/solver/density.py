@@ -209,16 +209,18 @@ class DensityConstraint:
         ratio = volume * scaled_kernel(0.0, scale)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
-        entry, stride, listed = self.grid.listed(i, neighbours)
-        for k in range(listed):
+        first, last, stride = self.grid.listed(i, neighbours)
+        for k in range(first, last):
             if ti.static(gradients):
-                w, grad_w = scaled_kernel_and_gradient(xi - x[neighbours[entry + k * stride]], scale)
+                w, grad_w = scaled_kernel_and_gradient(xi - x[self.grid.neighbour(neighbours, first, stride, k)], scale)
                 ratio += volume * w
                 g = volume * h * grad_w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
-                ratio += volume * scaled_kernel((xi - x[neighbours[entry + k * stride]]).norm_sqr(), scale)
+                ratio += volume * scaled_kernel(
+                    (xi - x[self.grid.neighbour(neighbours, first, stride, k)]).norm_sqr(), scale
+                )
         return ratio, gradient_i, sum_sq
 
     @ti.func
@@ -233,9 +235,9 @@ class DensityConstraint:
         own_images = volume * h * g_self
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
-        entry, stride, listed = self.grid.listed(i, neighbours)
-        for k in range(listed):
-            xj = x[neighbours[entry + k * stride]]
+        first, last, stride = self.grid.listed(i, neighbours)
+        for k in range(first, last):
+            xj = x[self.grid.neighbour(neighbours, first, stride, k)]
             if ti.static(gradients):
                 w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
                 w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, scale, True)
@@ -319,9 +321,9 @@ class DensityConstraint:
             scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi = x[i]
             smoothed = volume * scaled_kernel(0.0, scale) * self.colour_gradient[i]
-            entry, stride, listed = self.grid.listed(i, neighbours)
-            for k in range(listed):
-                j = neighbours[entry + k * stride]
+            first, last, stride = self.grid.listed(i, neighbours)
+            for k in range(first, last):
+                j = self.grid.neighbour(neighbours, first, stride, k)
                 smoothed += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale) * self.colour_gradient[j]
             u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
             psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
@@ -359,20 +361,24 @@ class DensityConstraint:
                 # of another type (a float, then a vector) broke its compile without optimisation.
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
                 dx = 2.0 * lam_i * volume * h * g_self
-                entry, stride, listed = self.grid.listed(i, neighbours)
-                for k in range(listed):
-                    j = neighbours[entry + k * stride]
+                first, last, stride = self.grid.listed(i, neighbours)
+                for k in range(first, last):
+                    j = self.grid.neighbour(neighbours, first, stride, k)
                     w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, scale, True)
                     images = (lam_i + self.lam[j]) * volume * h * g_images
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
             else:
-                entry, stride, listed = self.grid.listed(i, neighbours)
-                for k in range(listed):
-                    dx += self.pair_term(x, xi, lam_i, neighbours[entry + k * stride], h, scale, volume, scorr)
+                first, last, stride = self.grid.listed(i, neighbours)
+                for k in range(first, last):
+                    dx += self.pair_term(
+                        x, xi, lam_i, self.grid.neighbour(neighbours, first, stride, k), h, scale, volume, scorr
+                    )
         else:
-            entry, stride, listed = self.grid.listed(i, neighbours)
-            for k in range(listed):
-                dx += self.pair_term(x, xi, lam_i, neighbours[entry + k * stride], h, scale, volume, scorr)
+            first, last, stride = self.grid.listed(i, neighbours)
+            for k in range(first, last):
+                dx += self.pair_term(
+                    x, xi, lam_i, self.grid.neighbour(neighbours, first, stride, k), h, scale, volume, scorr
+                )
         return dx
 
     @ti.func

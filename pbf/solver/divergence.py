@@ -68,9 +68,9 @@ class DivergenceCorrection:
         ratio = volume * scaled_kernel(0.0, scale)
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
-        entry, stride, listed = self.grid.listed(i, neighbours)
-        for k in range(listed):
-            j = neighbours[entry + k * stride]
+        first, last, stride = self.grid.listed(i, neighbours)
+        for k in range(first, last):
+            j = self.grid.neighbour(neighbours, first, stride, k)
             if ti.static(start):
                 w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 g = volume * h * grad_w
@@ -103,9 +103,9 @@ class DivergenceCorrection:
             scale = kernel_scale(h)  # once per particle, for the neighbour loop
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
-            entry, stride, listed = self.grid.listed(i, neighbours)
-            for k in range(listed):
-                j = neighbours[entry + k * stride]
+            first, last, stride = self.grid.listed(i, neighbours)
+            for k in range(first, last):
+                j = self.grid.neighbour(neighbours, first, stride, k)
                 rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))

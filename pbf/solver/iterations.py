@@ -6,13 +6,16 @@ rises, and the step back that takes back the part of the last iteration the targ
 On the CPU backend the host steers: each iteration returns its mean error and the loop stops at the
 target, so no launch is wasted (a launch costs 30-100 µs on two cores, reading its result nothing
 more). On a GPU backend that would make the host wait for the device after every iteration, so the
-rules run on the device instead: each iteration's kernel reads the state of the loop (the buffer
-that holds x*, the weight's index, the last error, whether the target was met) from a few device
-entries and updates them at its end, and once the target is met the remaining launches loop over no
-particles. The host launches ``solver.iterations`` of them and one to finish (the step back, or x*
-copied back into the first buffer) and reads nothing; the iteration count comes back only when asked
-(``used``, for ``stats()``). The two paths take the same decisions from the same mean errors, which
-the device forms in float32 and the host in float64 from the same compensated sum.
+rules run on the device instead, in the one thread that finishes each iteration's error sum
+(``TreeSum.sum_then``, :meth:`JacobiIterations.received`): it writes the state of the loop (the buffer
+that holds x*, the weight's index, the last error, whether the target was met) to a few device
+entries that the next iteration's threads read, and once the target is met the remaining iterations
+loop over no particles. Without a target the state is a function of the iteration's index and
+nothing is written. The host launches ``solver.iterations`` of them, PER_LAUNCH to a call, and reads
+nothing; the end (the step back, or x* copied back into the first buffer) runs in the call that ends
+the substep (``pbf.solver.substep``), and the iteration count comes back only when asked (``used``,
+for ``stats()``). The two paths take the same decisions from the same mean errors, which the device
+forms in float32 and the host in float64 from the same compensated sum.
 """
 
 import math

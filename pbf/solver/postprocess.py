@@ -103,9 +103,9 @@ class VelocityPostprocess:
                     scale = kernel_scale(h)  # once per particle, for the neighbour loop
                     xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
                     omega = ti.Vector([0.0, 0.0, 0.0])
-                    entry, stride, listed = self.grid.listed(i, neighbours)
-                    for k in range(listed):
-                        j = neighbours[entry + k * stride]
+                    first, last, stride = self.grid.listed(i, neighbours)
+                    for k in range(first, last):
+                        j = self.grid.neighbour(neighbours, first, stride, k)
                         omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
                             self.velocity(x_pred, j, inverse_dt) - vi
                         )
@@ -126,9 +126,9 @@ class VelocityPostprocess:
                     if ti.static(with_vorticity):
                         omega_i = self.omega[i]
                         omega_i_norm = self.omega_norm[i]
-                    entry, stride, listed = self.grid.listed(i, neighbours)
-                    for k in range(listed):
-                        j = neighbours[entry + k * stride]
+                    first, last, stride = self.grid.listed(i, neighbours)
+                    for k in range(first, last):
+                        j = self.grid.neighbour(neighbours, first, stride, k)
                         w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                         if ti.static(with_xsph):
                             smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
