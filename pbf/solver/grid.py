@@ -29,7 +29,7 @@ import taichi as ti
 from pbf.solver.backend import keeps_decisions_on_device, on_gpu
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
-from pbf.solver.scan import ExclusiveScan
+from pbf.solver.scan import ExclusiveScan, read_count
 
 SLOTS = 64
 """Neighbours stored per particle on the one-visit path; about twice the typical 30-40 at h = 2.2 s."""
@@ -81,6 +81,8 @@ class NeighbourGrid:
         self.status = ti.field(ti.i32, shape=2)
         """What unchecked builds saw since the host last asked (:meth:`take_status`)."""
         self.on_device = keeps_decisions_on_device()
+        self.loop_bound = allocated if self.on_device else active
+        """What loops over the live particles run to (as ``State.loop_bound``)."""
         self.slot_major = on_gpu()
         """How the one-visit list lies (fixed for a backend at compile time): on a GPU slot-major, the k-th
         neighbours of all particles side by side (entry i + k·n), so that the threads of a warp, which
@@ -140,9 +142,9 @@ class NeighbourGrid:
         the particles are, so runs, and a restored snapshot, replay bit for bit. A cell holds one or
         two particles at h/2 wide cells, so an insertion sort costs next to nothing.
         """
-        # Every loop runs over the particles' bucket, a count the kernel knows, and skips the slots past
-        # the live particles: a loop bound read at run time costs a one-thread task, a launch on a GPU.
-        for i in range(ti.static(self.particle_cell.shape[0])):
+        # Every loop runs to loop_bound (the bucket on the GPU backends' path: no one-thread task for a
+        # bound read at run time) and skips the slots past the live particles.
+        for i in range(read_count(self.loop_bound, 1)):
             if i == 0:  # the lists' overflow flag, for the next visit (NeighbourGrid._visit_on_device)
                 self.overflow[None] = 0
             if i < self.active[None]:
@@ -152,14 +154,14 @@ class NeighbourGrid:
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
         # hold no particle and add nothing.
         self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
-        for i in range(ti.static(self.particle_cell.shape[0])):
+        for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 cell = self.particle_cell[i]
                 self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
                 # Clear the counts for the next sort here rather than in a loop over all cells of its
                 # own: the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
                 self.cell_particles[cell] = 0
-        for slot in range(ti.static(self.particle_cell.shape[0])):
+        for slot in range(read_count(self.loop_bound, 1)):
             # The thread at a cell's first slot sorts the cell; any other slot of the cell reads some
             # particle of the same cell here, so it never mistakes itself for the first.
             if slot < self.active[None]:
@@ -274,7 +276,7 @@ class NeighbourGrid:
     def visit_first(self, x: ti.template(), neighbours: ti.template()):
         """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
         was cleared by the sort)."""
-        for i in range(ti.static(self.particle_cell.shape[0])):
+        for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 self._visit_particle(x, neighbours, False, i)
 

@@ -64,7 +64,7 @@ class Integrator:
         """The loop of :meth:`advance`, for the top level of a kernel (``pbf.solver.substep``). Over the
         particles' bucket, the live ones only: a loop bound read at run time would cost a one-thread
         task, a launch on a GPU."""
-        for i in range(ti.static(self.state.capacity)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 v = self.state.v[i] + dt * gravity
                 self.state.v[i] = v

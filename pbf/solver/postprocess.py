@@ -96,7 +96,7 @@ class VelocityPostprocess:
         the launch that ends the iterations). Every argument is a template: a value argument of a
         ``ti.func`` is copied at the call, outside the loops, which is a one-thread task."""
         if ti.static(with_vorticity):
-            for i in range(ti.static(self.state.capacity)):
+            for i in range(self.state.live_bound()):
                 if i < self.state.active[None]:
                     h, volume = self.constants[None].h, self.constants[None].volume
                     inverse_dt = 1.0 / dt
@@ -111,7 +111,7 @@ class VelocityPostprocess:
                         )
                     self.omega[i] = omega
                     self.omega_norm[i] = omega.norm()
-        for i in range(ti.static(self.state.capacity)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 h, volume = self.constants[None].h, self.constants[None].volume
                 inverse_dt = 1.0 / dt
@@ -145,7 +145,7 @@ class VelocityPostprocess:
                     if speed > max_speed:
                         v *= max_speed / speed
                 self.state.v[i] = v
-        for i in range(ti.static(self.state.capacity)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 self.state.x[i] = x_pred[i]
                 # The pressure of this substep, from the position iterations' multiplier L and the
