@@ -269,7 +269,9 @@ class NeighbourGrid:
 
     @ti.kernel
     def _visit_on_device(self, x: ti.template(), neighbours: NeighbourList):
-        """:meth:`visit_on_device` as a launch of its own."""
+        """:meth:`visit_on_device` as a launch of its own (which clears the overflow flag itself: it may come
+        without a sort before it)."""
+        self.overflow[None] = 0
         self.visit_on_device(x, neighbours)
 
     @ti.func

@@ -59,6 +59,7 @@ class SubstepLaunches:
 
     @ti.kernel
     def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32) -> ti.i32:
+        self.grid.overflow[None] = 0  # the sort clears it in its first thread, which an empty box lacks
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         self.grid.visit_first(ti.static(self.integrator.predicted.first), neighbours)  # the lists' first visit
         return self.grid.overflow[None]
