@@ -258,6 +258,14 @@ def test_traffic_model_counts_a_lattice():
 
 
 @pytest.mark.slow
+def test_substep_time_prints_its_table_and_a_presets_rate(capsys):
+    script("substep_time").main(["--sizes", "1000", "--substeps", "3", "--rounds", "1", "--preset", "pour"])
+    out = capsys.readouterr().out
+    assert "ms/substep" in out and "host issue ms" in out
+    assert "pour, cpu:" in out and "frames of simulation a second" in out
+
+
+@pytest.mark.slow
 def test_speed_cap_prints_its_table(capsys):
     script("speed_cap").main(["--particles", "8000", "--frames", "3", "--factors", "0", "2", "--divisor", "0"])
     out = capsys.readouterr().out

@@ -1,0 +1,151 @@
+"""A substep timed whole on any backend, the host's share of it, and a preset's frame rate: the GPU's figures.
+
+    python benchmarks/substep_time.py --arch cuda --sizes 8000 64000 1000000
+    python benchmarks/substep_time.py --arch cuda --preset dam_break_large
+    python benchmarks/substep_time.py --arch cuda --sizes 8000 --profile     # Taichi's profiler, per task
+
+``--sizes``: the seed dam break scaled to each size (``pbf.study.common.dam_break``, 4 iterations at
+most, the preset's target), 5 frames to warm up (the kernels compile), then ``--substeps`` substeps
+timed whole, the device synchronised at each end, ``--rounds`` times: medians of ms per substep, and
+of the time the host took to issue them (the same as the whole when the host is the limit, less when
+the device is). For an A/B of two checkouts run it from a folder outside both with
+``PYTHONPATH=<checkout>``, alternating.
+
+``--preset``: 3 frames to warm up, then 30 frames of the preset timed (frames of 1/60 s simulated per
+second of wall time), then 30 more with the density error read each frame, and where the particles
+lie.
+
+``--profile``: Taichi's kernel profiler (it is chosen when Taichi starts, so only as the first thing
+this process does): the device time of each task of 10 substeps, in the order they ran.
+"""
+
+import argparse
+import statistics
+import time
+from collections import defaultdict
+
+import taichi as ti
+
+from pbf import Simulation
+from pbf.solver import start_backend
+from pbf.study.common import dam_break
+
+WARMUP_FRAMES = 5
+
+
+def substep_times(particles: int, substeps: int, rounds: int) -> dict:
+    began = time.perf_counter()
+    sim = Simulation(dam_break(particles, 4), quiet=True)
+    sim.step(WARMUP_FRAMES)
+    dt = sim.dt_s
+    ti.sync()
+    built = time.perf_counter() - began
+    host, whole = [], []
+    for _ in range(rounds):
+        ti.sync()
+        start = time.perf_counter()
+        for _ in range(substeps):
+            sim.substep(dt)
+        issued = time.perf_counter()
+        ti.sync()
+        done = time.perf_counter()
+        host.append((issued - start) * 1e3 / substeps)
+        whole.append((done - start) * 1e3 / substeps)
+    return {
+        "particles": sim.particle_count,
+        "ms": statistics.median(whole),
+        "host_ms": statistics.median(host),
+        "built_s": built,
+    }
+
+
+def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
+    """(task, launches per substep, µs each) of ``substeps`` substeps, in the order the tasks first ran."""
+    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+
+    sim = Simulation(dam_break(particles, 4), quiet=True)
+    sim.step(WARMUP_FRAMES)
+    dt = sim.dt_s
+    ti.sync()
+    ti.profiler.clear_kernel_profiler_info()
+    for _ in range(substeps):
+        sim.substep(dt)
+    ti.sync()
+    profiler = get_default_kernel_profiler()
+    profiler._update_records()  # Taichi 1.7.4, pinned (pbf.study.launches does the same)
+    totals: dict[str, list] = defaultdict(lambda: [0, 0.0])
+    for record in profiler._traced_records:
+        totals[record.name][0] += 1
+        totals[record.name][1] += record.kernel_time
+    return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in totals.items()]
+
+
+def preset_rate(preset: str, frames: int = 30) -> dict:
+    began = time.perf_counter()
+    sim = Simulation(preset, quiet=True)
+    sim.step(3)
+    ti.sync()
+    start = time.perf_counter()
+    substeps = 0
+    for _ in range(frames):
+        sim.step()
+        substeps += sim.frame_substeps
+    ti.sync()
+    seconds = time.perf_counter() - start
+    errors = []
+    for _ in range(frames):
+        sim.step()
+        errors.append(sim.stats()["mean_density_error"])
+    x = sim.positions()
+    return {
+        "particles": sim.particle_count,
+        "frames_per_s": frames / seconds,
+        "substeps": substeps / frames,
+        "mean_error": statistics.fmean(errors),
+        "worst_error": max(errors),
+        "lowest_m": x.min(axis=0),
+        "highest_m": x.max(axis=0),
+        "built_s": start - began,
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arch", default=None, help="Taichi's backend (default: as the program picks)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[])
+    parser.add_argument("--substeps", type=int, default=40, help="substeps of one timed round")
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--preset", default=None, help="a preset whose frame rate to measure")
+    parser.add_argument("--profile", action="store_true", help="per task device times (Taichi's profiler)")
+    args = parser.parse_args(argv)
+    if not args.sizes and args.preset is None:
+        parser.error("give --sizes, --preset or both")
+    backend = start_backend(args.arch, quiet=True, kernel_profiler=args.profile)
+    if args.profile:
+        for particles in args.sizes:
+            print(f"{particles:,} particles, {backend}: device time per task of a substep (Taichi's profiler)")
+            rows = profile(particles)
+            for name, count, micros in rows:
+                print(f"  {name:<64} {count:>3}x {micros:>9.1f} µs")
+            print(f"  total {sum(count * micros for _, count, micros in rows) / 1e3:.3f} ms a substep")
+        return
+    if args.sizes:
+        print(f"backend {backend}; {args.substeps} substeps a round, medians of {args.rounds} rounds")
+        print(f"{'particles':>10} {'ms/substep':>11} {'host issue ms':>14} {'built and warmed s':>19}")
+        for particles in args.sizes:
+            r = substep_times(particles, args.substeps, args.rounds)
+            print(f"{r['particles']:>10,} {r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['built_s']:>19.1f}", flush=True)
+    if args.preset is not None:
+        r = preset_rate(args.preset)
+        lowest, highest = (r[k].astype(float).round(4).tolist() for k in ("lowest_m", "highest_m"))
+        print(
+            f"{args.preset}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
+            f"simulation a second, {r['substeps']:.2f} substeps a frame; mean density error "
+            f"{r['mean_error']:.3%} (the worst frame {r['worst_error']:.3%}); particles from "
+            f"{lowest} to {highest} m; built and warmed "
+            f"in {r['built_s']:.1f} s"
+        )
+
+
+if __name__ == "__main__":
+    main()
