@@ -31,9 +31,10 @@ LAST_ERROR, FRACTION = range(2)
 """Entries of ``JacobiIterations.values``."""
 PER_LAUNCH = 2
 """Iterations per kernel call on the device path. A call costs the host 60-130 µs on a GPU machine
-(Taichi's Python side sets every argument) and 2 iterations a call save 2 of the 6 calls of a substep
-at 4 iterations, 5 of 12 at the presets' 10; each iteration in a call is a copy of its code, +1.5 s
-of compile at 2 and +5 s at 4 (8,000 particles, the CPU backend; docs/BENCHMARKS.md, "Launches")."""
+(Taichi's Python side sets every argument); at 2 a call a substep of 4 iterations is 3 calls with the
+last call's iterations run in the substep's last launch (``pbf.solver.substep``), 6 at the presets'
+10. Each iteration in a call is a copy of its code: +1.5 s of compile at 2 and +5 s at 4 against 1
+(8,000 particles, the CPU backend; docs/BENCHMARKS.md, "Launches per substep")."""
 
 
 @ti.data_oriented
@@ -49,6 +50,8 @@ class JacobiIterations:
         self.per_launch = per_launch
         """Iterations per kernel call on the device path: more save host time per substep (tens of µs a
         call on a GPU) and cost compile time (each is a copy of an iteration's code)."""
+        self.last_start = 0
+        """The first iteration of the substep's last call, which ``run(settle=False)`` leaves to its caller."""
         self._used = 0
         self._measured = False
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
@@ -74,7 +77,8 @@ class JacobiIterations:
         ``control.target_density_error`` (0: never) after ``control.min_iterations``; x* may end in
         either buffer (``predicted.gather()`` brings it back). On the device path the last launch
         settles x* into the first buffer (:meth:`settle_loop`), unless ``settle`` is False: then the
-        caller runs that loop in a launch of its own making (``pbf.solver.substep``)."""
+        caller runs the last call's iterations (from :attr:`last_start`, :meth:`iterate_loops`) and
+        that loop in a launch of its own making (``pbf.solver.substep``)."""
         if self.on_device:
             self._run_on_device(predicted, neighbours, control, settle)
         else:
@@ -107,7 +111,10 @@ class JacobiIterations:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
-        for k in range(0, control.iterations, self.per_launch):
+        starts = list(range(0, control.iterations, self.per_launch))
+        if not settle:  # the caller's launch runs the last call's iterations (pbf.solver.substep)
+            starts, self.last_start = starts[:-1], starts[-1]
+        for k in starts:
             self._iterate(
                 predicted.first,
                 predicted.second,
@@ -158,6 +165,27 @@ class JacobiIterations:
         Every loop runs over the particles' bucket, a count the kernel knows, and every thread reads the
         loop's state and the live count itself: read once outside the loops they would be one-thread
         tasks of their own, a launch each on a GPU."""
+        self.iterate_loops(
+            first, second, neighbours, measure, per_launch, start, iterations, target, min_iterations, step_back
+        )
+
+    @ti.func
+    def iterate_loops(
+        self,
+        first: ti.template(),
+        second: ti.template(),
+        neighbours: ti.template(),
+        measure: ti.template(),
+        per_launch: ti.template(),
+        start: ti.template(),
+        iterations: ti.template(),
+        target: ti.template(),
+        min_iterations: ti.template(),
+        step_back: ti.template(),
+    ):
+        """The loops of :meth:`_iterate`, for the top level of a kernel (``pbf.solver.substep`` runs the
+        substep's last call of them in the launch that ends it); every argument a template, so that no
+        value is copied outside the loops (a one-thread task)."""
         for u in ti.static(range(per_launch)):
             for i in range(ti.static(self.density.error.shape[0])):
                 k = start + u

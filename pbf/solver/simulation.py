@@ -451,7 +451,8 @@ class Simulation:
                 self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
         on_device = self.iterations.on_device
-        with hook.stage("solver iterations"):  # lines 8-19, until the error target
+        with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
+            # path all but the last call's: that runs with lines 20-23, timed with them)
             self.iterations.run(x_star, self.grid.neighbours, control, settle=not on_device)
             x_star.gather()  # x* back in the first buffer (the device path's last launch does it)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
@@ -466,9 +467,17 @@ class Simulation:
                 self.pressure_substeps == 0,
                 self.scene.time.max_speed_m_s,  # and v capped (0: not)
             )
-            if on_device:  # x* settled after the iterations, then lines 20-23, in one launch
+            if on_device:  # the iterations' last call, x* settled, then lines 20-23: one launch
                 self.launches.finish(
-                    self.grid.neighbours, control.target_density_error > 0.0, control.iterations, *finish
+                    self.grid.neighbours,
+                    control.target_density_error > 0.0,
+                    self.iterations.per_launch,
+                    self.iterations.last_start,
+                    control.iterations,
+                    control.target_density_error,
+                    control.min_iterations,
+                    int(control.step_back),
+                    *finish,
                 )
                 x_star.in_second = False
             else:

@@ -10,10 +10,11 @@ consecutive stages in one call:
 * lines 1-7, :meth:`SubstepLaunches.predict_and_find_neighbours`: v += Δt g and x* = x + Δt v, the
   counting sort by cell with the state reordered alike, and the neighbour lists (both visits on a
   device that keeps its decisions; the first, and its overflow flag back to the host, on the CPU);
-* lines 8-19, the iterations, one call each (``pbf.solver.iterations``);
-* lines 20-23, :meth:`SubstepLaunches.finish` on the device path: x* settled into the first buffer
-  (copied back or stepped back between the two), then the velocity, vorticity and XSPH passes and
-  x = x*, in the call that ends the substep.
+* lines 8-19, the iterations: on the CPU one call each, steered by the host; on the device path
+  PER_LAUNCH a call (``pbf.solver.iterations``), the last call's in the call that ends the substep;
+* lines 20-23, :meth:`SubstepLaunches.finish` on the device path: the last iterations, x* settled
+  into the first buffer (copied back or stepped back between the two), then the velocity, vorticity
+  and XSPH passes and x = x*, in one call. At 4 iterations a substep is 3 calls.
 """
 
 import taichi as ti
@@ -69,7 +70,12 @@ class SubstepLaunches:
         self,
         neighbours: NeighbourList,
         measure: ti.template(),
+        per_launch: ti.template(),
+        start: ti.i32,
         iterations: ti.i32,
+        target: ti.f32,
+        min_iterations: ti.i32,
+        step_back: ti.i32,
         dt: ti.f32,
         vorticity: ti.f32,
         xsph: ti.f32,
@@ -80,8 +86,21 @@ class SubstepLaunches:
         first_of_frame: ti.i32,
         max_speed: ti.f32,
     ):
-        """The device path's end of a substep in one call: x* settled into the first buffer after the
-        iterations (``JacobiIterations.settle_loop``), then lines 20-23 (``VelocityPostprocess.finish``)."""
+        """The device path's end of a substep in one call: the iterations of the last call from ``start``
+        (``JacobiIterations.iterate_loops``), x* settled into the first buffer
+        (``JacobiIterations.settle_loop``), then lines 20-23 (``VelocityPostprocess.finish``)."""
+        self.iterations.iterate_loops(
+            self.integrator.predicted.first,
+            self.integrator.predicted.second,
+            neighbours,
+            measure,
+            per_launch,
+            start,
+            iterations,
+            target,
+            min_iterations,
+            step_back,
+        )
         self.iterations.settle_loop(
             self.integrator.predicted.first, self.integrator.predicted.second, measure, iterations
         )

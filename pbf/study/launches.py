@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 ITERATION_KERNELS = ("iterate", "_iterate")
 """Kernels whose tasks repeat with the iteration count (``DensityConstraint.iterate`` on the host's
-decisions, ``JacobiIterations._iterate`` on the device's)."""
+decisions, ``JacobiIterations._iterate`` on the device's). On the device's, the substep's last call of
+iterations runs in the kernel that ends the substep (``SubstepLaunches.finish``), whose tasks are not
+counted here: the column undercounts that path's iterations by that call's."""
 
 
 @dataclass(frozen=True)
