@@ -41,6 +41,14 @@ class VelocityPostprocess:
         """v_i = (x*_i − x_i) / Δt (Algorithm 1, line 21)."""
         return (x_pred[i] - self.state.x[i]) * inverse_dt
 
+    @ti.func
+    def particle(self, x_pred: ti.template(), i, dt):
+        """What a pass over particle i's neighbours reads once for the particle: h, V, the kernel's scale,
+        1/Δt, x*_i and v_i."""
+        h, volume = self.constants[None].h, self.constants[None].volume
+        inverse_dt = 1.0 / dt
+        return h, volume, kernel_scale(h), inverse_dt, x_pred[i], self.velocity(x_pred, i, inverse_dt)
+
     @ti.kernel
     def finish(
         self,
@@ -98,10 +106,7 @@ class VelocityPostprocess:
         if ti.static(with_vorticity):
             for i in range(self.state.live_bound()):
                 if i < self.state.active[None]:
-                    h, volume = self.constants[None].h, self.constants[None].volume
-                    inverse_dt = 1.0 / dt
-                    scale = kernel_scale(h)  # once per particle, for the neighbour loop
-                    xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
+                    h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
                     omega = ti.Vector([0.0, 0.0, 0.0])
                     first, last, stride = self.grid.listed(i, neighbours)
                     for k in range(first, last):
@@ -113,10 +118,7 @@ class VelocityPostprocess:
                     self.omega_norm[i] = omega.norm()
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
-                h, volume = self.constants[None].h, self.constants[None].volume
-                inverse_dt = 1.0 / dt
-                scale = kernel_scale(h)  # once per particle, for the neighbour loop
-                xi, vi = x_pred[i], self.velocity(x_pred, i, inverse_dt)
+                h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
                 dv = ti.Vector([0.0, 0.0, 0.0])
                 if ti.static(with_vorticity or with_xsph):
                     eta = ti.Vector([0.0, 0.0, 0.0])

@@ -24,6 +24,9 @@ from pbf.solver.grid import NeighbourList
 
 @ti.data_oriented
 class SubstepLaunches:
+    """The kernels that run consecutive stages of a substep in one call (the module docstring); the
+    stages themselves are the objects given, each from its module."""
+
     def __init__(self, state, integrator, grid, iterations, postprocess):
         self.state = state
         self.integrator = integrator
