@@ -51,7 +51,8 @@ class JacobiIterations:
         """Iterations per kernel call on the device path: more save host time per substep (tens of µs a
         call on a GPU) and cost compile time (each is a copy of an iteration's code)."""
         self.last_start = 0
-        """The first iteration of the substep's last call, which ``run(settle=False)`` leaves to its caller."""
+        """The first iteration of the substep's last call, which :meth:`run` leaves to its caller on the
+        device path."""
         self._used = 0
         self._measured = False
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
@@ -72,15 +73,15 @@ class JacobiIterations:
             self.flags[USED] = count
         self._used = count
 
-    def run(self, predicted, neighbours, control, settle: bool = True) -> None:
+    def run(self, predicted, neighbours, control) -> None:
         """``control.iterations`` Jacobi iterations of x* (a ``PredictedPositions``) at most, stopped by
         ``control.target_density_error`` (0: never) after ``control.min_iterations``; x* may end in
-        either buffer (``predicted.gather()`` brings it back). On the device path the last launch
-        settles x* into the first buffer (:meth:`settle_loop`), unless ``settle`` is False: then the
-        caller runs the last call's iterations (from :attr:`last_start`, :meth:`iterate_loops`) and
-        that loop in a launch of its own making (``pbf.solver.substep``)."""
+        either buffer (``predicted.gather()`` brings it back). On the device path all calls but the
+        last: the caller runs the last call's iterations (from :attr:`last_start`,
+        :meth:`iterate_loops`) and :meth:`settle_loop` in the launch that ends the substep
+        (``pbf.solver.substep.SubstepLaunches.finish``)."""
         if self.on_device:
-            self._run_on_device(predicted, neighbours, control, settle)
+            self._run_on_device(predicted, neighbours, control)
         else:
             self._run_on_host(predicted, neighbours, control)
 
@@ -107,14 +108,13 @@ class JacobiIterations:
                 weights.restart()
             last_error = error
 
-    def _run_on_device(self, predicted, neighbours, control, settle: bool) -> None:
+    def _run_on_device(self, predicted, neighbours, control) -> None:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
         starts = list(range(0, control.iterations, self.per_launch))
-        if not settle:  # the caller's launch runs the last call's iterations (pbf.solver.substep)
-            starts, self.last_start = starts[:-1], starts[-1]
-        for k in starts:
+        self.last_start = starts[-1]  # the caller's launch runs the last call (pbf.solver.substep)
+        for k in starts[:-1]:
             self._iterate(
                 predicted.first,
                 predicted.second,
@@ -127,9 +127,6 @@ class JacobiIterations:
                 control.min_iterations,
                 int(control.step_back),
             )
-        if settle:
-            self._finish(predicted.first, predicted.second, measure, control.iterations)
-            predicted.in_second = False
         self._used, self._measured = control.iterations, measure
 
     @ti.func
@@ -243,11 +240,6 @@ class JacobiIterations:
                 if error > last:  # the acceleration overshot: plain again
                     self.flags[WEIGHT_INDEX] = 0
                 self.values[LAST_ERROR] = error
-
-    @ti.kernel
-    def _finish(self, first: ti.template(), second: ti.template(), measure: ti.template(), iterations: ti.i32):
-        """:meth:`settle_loop` as a launch of its own."""
-        self.settle_loop(first, second, measure, iterations)
 
     @ti.func
     def settle_loop(

@@ -453,7 +453,7 @@ class Simulation:
         on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
             # path all but the last call's: that runs with lines 20-23, timed with them)
-            self.iterations.run(x_star, self.grid.neighbours, control, settle=not on_device)
+            self.iterations.run(x_star, self.grid.neighbours, control)
             x_star.gather()  # x* back in the first buffer (the device path's last launch does it)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             finish = (
