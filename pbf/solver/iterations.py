@@ -50,9 +50,6 @@ class JacobiIterations:
         self.per_launch = per_launch
         """Iterations per kernel call on the device path: more save host time per substep (tens of µs a
         call on a GPU) and cost compile time (each is a copy of an iteration's code)."""
-        self.last_start = 0
-        """The first iteration of the substep's last call, which :meth:`run` leaves to its caller on the
-        device path."""
         self._used = 0
         self._measured = False
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
@@ -77,7 +74,7 @@ class JacobiIterations:
         """``control.iterations`` Jacobi iterations of x* (a ``PredictedPositions``) at most, stopped by
         ``control.target_density_error`` (0: never) after ``control.min_iterations``; x* may end in
         either buffer (``predicted.gather()`` brings it back). On the device path all calls but the
-        last: the caller runs the last call's iterations (from :attr:`last_start`,
+        last: the caller runs the last call's iterations (from :meth:`last_start`,
         :meth:`iterate_loops`) and :meth:`settle_loop` in the launch that ends the substep
         (``pbf.solver.substep.SubstepLaunches.finish``)."""
         if self.on_device:
@@ -112,9 +109,7 @@ class JacobiIterations:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
-        starts = list(range(0, control.iterations, self.per_launch))
-        self.last_start = starts[-1]  # the caller's launch runs the last call (pbf.solver.substep)
-        for k in starts[:-1]:
+        for k in range(0, self.last_start(control.iterations), self.per_launch):  # the last call: the caller's
             self._iterate(
                 predicted.first,
                 predicted.second,
@@ -128,6 +123,11 @@ class JacobiIterations:
                 int(control.step_back),
             )
         self._used, self._measured = control.iterations, measure
+
+    def last_start(self, iterations: int) -> int:
+        """The first iteration of the last call of ``iterations`` on the device path, which :meth:`run`
+        leaves to the launch that ends the substep."""
+        return (iterations - 1) // self.per_launch * self.per_launch
 
     @ti.func
     def _loop_state(self, measure: ti.template(), k):

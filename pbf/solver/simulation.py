@@ -472,7 +472,7 @@ class Simulation:
                     self.grid.neighbours,
                     control.target_density_error > 0.0,
                     self.iterations.per_launch,
-                    self.iterations.last_start,
+                    self.iterations.last_start(control.iterations),
                     control.iterations,
                     control.target_density_error,
                     control.min_iterations,
