@@ -120,6 +120,8 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     if not args.sizes and args.preset is None:
         parser.error("give --sizes, --preset or both")
+    if args.profile and (args.preset is not None or not args.sizes):
+        parser.error("--profile: profiles the substeps of --sizes, not a preset's frames; give --sizes alone")
     backend = start_backend(args.arch, quiet=True, kernel_profiler=args.profile)
     if args.profile:
         for particles in args.sizes:
