@@ -3,9 +3,10 @@
 Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
 1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell;
 2. exclusive prefix sum of the counts → first slot of every cell;
-3. slot = start[cell] + rank, then each cell put in the order of a key (the creation index): the
-   permutation that sorts particles by cell, which the caller applies to its arrays so that
-   neighbours sit together in memory;
+3. slot = start[cell] + rank, then each particle's place inside its cell by the order of a key (the
+   creation index): the permutation that sorts particles by cell, which the caller applies to its
+   arrays so that neighbours sit together in memory (gathered in the same loop, and taken back from
+   scratch in the visit's);
 4. visit the cells within ``reach`` of each particle's own (3×3×3 for reach 1, 5×5×5 for reach 2)
    once, writing its neighbours within h into its SLOTS entries (slot-major on a GPU, a row on the
    CPU: :attr:`NeighbourGrid.slot_major`) and counting them all. If some
@@ -70,6 +71,8 @@ class NeighbourGrid:
         self.cell_scan = ExclusiveScan(cell_count)
         self.particle_cell = ti.field(ti.i32, shape=particle_count)
         self.rank_in_cell = ti.field(ti.i32, shape=particle_count)
+        self.cell_members = ti.field(ti.i32, shape=particle_count)
+        """The particles by cell in the atomic counter's order, which changes from run to run (step 3)."""
         self.sorted_from = ti.field(ti.i32, shape=particle_count)
         """sorted_from[slot] = index, before sorting, of the particle that moves to ``slot``."""
         self.neighbour_count = ti.field(ti.i32, shape=particle_count)
@@ -121,60 +124,82 @@ class NeighbourGrid:
         cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The solver uses
         :meth:`sort_and_permute`; this is the sort alone, for a caller with arrays of its own (the grid's
         tests check it against brute force)."""
-        self.sort_loops(x, key)
+        self.sort_loops(x, key, False)
 
     @ti.kernel
     def sort_and_permute(self, x: ti.template(), key: ti.template(), mover: ti.template()):
-        """:meth:`sort`, then ``mover.permute(sorted_from)`` in the same launch: ``mover`` (the
-        ``Integrator``) applies the permutation to every per-particle array, ``x`` included. A launch
-        costs 50-100 µs on a 2-core CPU, about what the reorder's own work does at 8,000 particles."""
-        self.sort_loops(x, key)
-        mover.permute(self.sorted_from)
+        """:meth:`sort`, with ``mover`` (the ``State``) gathering every per-particle array it carries, ``x``
+        included, into sorted order and taking them back, in the same launch. A launch costs 50-100 µs
+        on a 2-core CPU, about what the reorder's own work does at 8,000 particles."""
+        self.sort_loops(x, key, mover)
+        for slot in range(read_count(self.loop_bound, 1)):
+            if slot < self.active[None]:
+                mover.take_gathered(slot)
 
     @ti.func
-    def sort_loops(self, x: ti.template(), key: ti.template()):
-        """The loops of :meth:`sort`, at the top level of the kernel that calls it (so parallel).
-
-        The ranks the atomic counter hands out depend on which thread gets there first, so within a
-        cell the order would change from run to run, and with it the order of every neighbour sum:
-        two runs of the seed scene ended 0.46 m apart after a second. Ordering each cell by a key
-        that belongs to the particle (its creation index) makes the permutation depend only on where
-        the particles are, so runs, and a restored snapshot, replay bit for bit. A cell holds one or
-        two particles at h/2 wide cells, so an insertion sort costs next to nothing.
-        """
+    def sort_loops(self, x: ti.template(), key: ti.template(), mover: ti.template()):
+        """The loops of :meth:`sort` (``mover``: as in :meth:`order_loops`), at the top level of the kernel
+        that calls it (so parallel)."""
         # Every loop runs to loop_bound (the bucket on the GPU backends' path: no one-thread task for a
         # bound read at run time) and skips the slots past the live particles.
         for i in range(read_count(self.loop_bound, 1)):
-            if i == 0:  # the lists' overflow flag, for the next visit (NeighbourGrid._visit_on_device)
-                self.overflow[None] = 0
+            self.clear_overflow_in(i)
             if i < self.active[None]:
-                cell = self.linear(self.cell_of(x[i]))
-                self.particle_cell[i] = cell
-                self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
+                self.count_in_cell(x[i], i)
+        self.order_loops(key, mover)
+
+    @ti.func
+    def clear_overflow_in(self, i):
+        """Thread 0 of the counting loop clears the lists' overflow flag for the visit after it
+        (:meth:`visit_on_device`): a store outside the loops would be a one-thread task."""
+        if i == 0:
+            self.overflow[None] = 0
+
+    @ti.func
+    def count_in_cell(self, p, i):
+        """Step 1 for particle i at position p: its cell, and a rank among the cell's particles counted so far."""
+        cell = self.linear(self.cell_of(p))
+        self.particle_cell[i] = cell
+        self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
+
+    @ti.func
+    def order_loops(self, key: ti.template(), mover: ti.template()):
+        """Steps 2-3 once every particle is counted (:meth:`count_in_cell`), for the top level of a kernel:
+        :attr:`sorted_from`, and, unless ``mover`` is False, ``mover.gather(slot, i)`` of each particle into
+        its sorted slot (the ``State``: into scratch, which ``mover.take_gathered`` brings back).
+
+        The ranks the atomic counter hands out depend on which thread gets there first, so within a
+        cell the order would change from run to run, and with it the order of every neighbour sum:
+        two runs of the seed scene ended 0.46 m apart after a second. Each particle's place inside its
+        cell is its rank by a key that belongs to it (its creation index; its slot before the sort
+        breaks a tie), so the permutation depends only on where the particles are, and runs, and a
+        restored snapshot, replay bit for bit. A cell holds a few particles, and each thread reads the
+        keys of its own cell's: the same work as one thread sorting the cell, spread over its particles.
+        """
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
         # hold no particle and add nothing.
         self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 cell = self.particle_cell[i]
-                self.sorted_from[self.cell_start[cell] + self.rank_in_cell[i]] = i
+                self.cell_members[self.cell_start[cell] + self.rank_in_cell[i]] = i
                 # Clear the counts for the next sort here rather than in a loop over all cells of its
                 # own: the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
                 self.cell_particles[cell] = 0
         for slot in range(read_count(self.loop_bound, 1)):
-            # The thread at a cell's first slot sorts the cell; any other slot of the cell reads some
-            # particle of the same cell here, so it never mistakes itself for the first.
             if slot < self.active[None]:
-                begin = self.cell_start[self.particle_cell[self.sorted_from[slot]]]
-                if begin == slot:
-                    end = self.cell_start[self.particle_cell[self.sorted_from[slot]] + 1]
-                    for a in range(begin + 1, end):
-                        moving = self.sorted_from[a]
-                        b = a
-                        while b > begin and key[self.sorted_from[b - 1]] > key[moving]:
-                            self.sorted_from[b] = self.sorted_from[b - 1]
-                            b -= 1
-                        self.sorted_from[b] = moving
+                i = self.cell_members[slot]
+                cell = self.particle_cell[i]
+                begin, end = self.cell_start[cell], self.cell_start[cell + 1]
+                key_i = key[i]
+                place = begin
+                for m in range(begin, end):
+                    other = self.cell_members[m]
+                    key_other = key[other]
+                    place += ti.select(key_other < key_i or (key_other == key_i and other < i), 1, 0)
+                self.sorted_from[place] = i
+                if ti.static(not isinstance(mover, bool)):
+                    mover.gather(place, i)
 
     @ti.func
     def column_range(self, c, resolution, dx: ti.template(), dy: ti.template()):
@@ -272,24 +297,32 @@ class NeighbourGrid:
         """:meth:`visit_on_device` as a launch of its own (which clears the overflow flag itself: it may come
         without a sort before it)."""
         self.overflow[None] = 0
-        self.visit_on_device(x, neighbours)
+        self.visit_on_device(x, neighbours, False, x)
 
     @ti.func
-    def visit_first(self, x: ti.template(), neighbours: ti.template()):
+    def visit_first(self, x: ti.template(), neighbours: ti.template(), mover: ti.template()):
         """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
-        was cleared by the sort)."""
+        was cleared by the sort). After a sort whose ``mover`` gathered into scratch
+        (:meth:`order_loops`), ``x`` is the sorted positions' scratch and each thread first takes its
+        particle's arrays back (``mover.take_gathered``): no loop of its own for the copy; else ``mover``
+        is False."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
+                if ti.static(not isinstance(mover, bool)):
+                    mover.take_gathered(i)
                 self._visit_particle(x, neighbours, False, i)
 
     @ti.func
-    def visit_on_device(self, x: ti.template(), neighbours: ti.template()):
+    def visit_on_device(
+        self, x: ti.template(), neighbours: ti.template(), mover: ti.template(), gathered: ti.template()
+    ):
         """Both visits in one launch, the second and its prefix sum over no particles unless the first
         overflowed: the device decides, the host reads nothing. A compact list longer than the array
         is cut at its end and ``status`` says so, for :meth:`settle_frame`. The overflow flag was
         cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For
-        the top level of a kernel."""
-        self.visit_first(x, neighbours)
+        the top level of a kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted
+        positions' scratch, read by the first visit; the second reads ``x``, taken back by then)."""
+        self.visit_first(gathered, neighbours, mover)
         self.neighbour_scan.scan(self.neighbour_count, self.neighbour_start, self.active, self.overflow)
         for i in range(ti.static(self.particle_cell.shape[0])):
             count = self.active[None]

@@ -66,9 +66,16 @@ class Integrator:
         task, a launch on a GPU."""
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
-                v = self.state.v[i] + dt * gravity
-                self.state.v[i] = v
-                self.predicted.first[i] = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
+                self.advance_particle(dt, gravity, i)
+
+    @ti.func
+    def advance_particle(self, dt, gravity, i):
+        """v_i ← v_i + Δt g and x*_i ← x_i + Δt v_i, kept inside the boundaries; returns x*_i."""
+        v = self.state.v[i] + dt * gravity
+        self.state.v[i] = v
+        x_star = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
+        self.predicted.first[i] = x_star
+        return x_star
 
     @ti.kernel
     def damp(self, factor: ti.f32):

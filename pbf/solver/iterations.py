@@ -163,7 +163,7 @@ class JacobiIterations:
         loop's state and the live count itself: read once outside the loops they would be one-thread
         tasks of their own, a launch each on a GPU."""
         self.iterate_loops(
-            first, second, neighbours, measure, per_launch, start, iterations, target, min_iterations, step_back
+            first, second, neighbours, measure, per_launch, True, start, iterations, target, min_iterations, step_back
         )
 
     @ti.func
@@ -174,6 +174,7 @@ class JacobiIterations:
         neighbours: ti.template(),
         measure: ti.template(),
         per_launch: ti.template(),
+        surface_pass: ti.template(),
         start: ti.template(),
         iterations: ti.template(),
         target: ti.template(),
@@ -182,7 +183,8 @@ class JacobiIterations:
     ):
         """The loops of :meth:`_iterate`, for the top level of a kernel (``pbf.solver.substep`` runs the
         substep's last call of them in the launch that ends it); every argument a template, so that no
-        value is copied outside the loops (a one-thread task)."""
+        value is copied outside the loops (a one-thread task). ``surface_pass``: whether the loops include
+        the surface ghost's pass, which runs in a call that starts at the substep's first iteration."""
         for u in ti.static(range(per_launch)):
             for i in range(ti.static(self.density.error.shape[0])):
                 k = start + u
@@ -193,7 +195,7 @@ class JacobiIterations:
                     self.density.multiplier_pass(
                         first, second, from_second, i, neighbours, measure, first_iteration, weight
                     )
-            if ti.static(u == 0):  # the surface ghost's pass, in a substep's first iteration only
+            if ti.static(u == 0 and surface_pass):  # the surface ghost's pass, in a substep's first iteration only
                 for i in range(ti.static(self.density.error.shape[0])):
                     running, _, index = self._loop_state(measure, start)
                     if start == 0 and i < self.density.surface_count(1):

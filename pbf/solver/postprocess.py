@@ -13,6 +13,8 @@ The h in Eq. 14 makes confinement fade as resolution rises, as the vorticity it 
 lost to coarse particles. Every pass reads v_j as (x*_j − x_j)/Δt instead of a stored velocity, so
 the velocity update needs no pass of its own and the smoothed velocity can be written straight into
 v (nothing in that pass reads v): two particle loops fewer than update, smooth into a copy, copy back.
+With confinement on, the ω pass keeps each v_i (``velocity_now``) and the last pass reads v_j from
+there, not from x_j, so it also moves x to x*: no loop of its own for line 23 (a launch on a GPU).
 """
 
 import taichi as ti
@@ -35,6 +37,8 @@ class VelocityPostprocess:
         self.omega = ti.Vector.field(3, ti.f32, shape=params.particle_count)
         self.omega_norm = ti.field(ti.f32, shape=params.particle_count)
         """|ω_i|, read once per pair by the location vector η: computed once per particle."""
+        self.velocity_now = ti.Vector.field(3, ti.f32, shape=params.particle_count)
+        """v_i = (x*_i − x_i)/Δt as the ω pass read it, for the pass after it (the module docstring)."""
 
     @ti.func
     def velocity(self, x_pred: ti.template(), i, inverse_dt):
@@ -116,6 +120,10 @@ class VelocityPostprocess:
                         )
                     self.omega[i] = omega
                     self.omega_norm[i] = omega.norm()
+                    self.velocity_now[i] = vi
+        # x = x* in the pass below when it reads no x_j: with confinement (v_j kept by the ω pass) or
+        # without neighbour sums at all.
+        moves_x = ti.static(with_vorticity or not with_xsph)
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
@@ -133,7 +141,12 @@ class VelocityPostprocess:
                         j = self.grid.neighbour(neighbours, first, stride, k)
                         w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                         if ti.static(with_xsph):
-                            smoothing += volume * (self.velocity(x_pred, j, inverse_dt) - vi) * w
+                            vj = ti.Vector([0.0, 0.0, 0.0])
+                            if ti.static(moves_x):
+                                vj = self.velocity_now[j]
+                            else:
+                                vj = self.velocity(x_pred, j, inverse_dt)
+                            smoothing += volume * (vj - vi) * w
                         if ti.static(with_vorticity):
                             eta += volume * (self.omega_norm[j] - omega_i_norm) * grad_w
                     dv = xsph * smoothing
@@ -147,10 +160,26 @@ class VelocityPostprocess:
                     if speed > max_speed:
                         v *= max_speed / speed
                 self.state.v[i] = v
-        for i in range(self.state.live_bound()):
-            if i < self.state.active[None]:
-                self.state.x[i] = x_pred[i]
-                # The pressure of this substep, from the position iterations' multiplier L and the
-                # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
-                pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
-                self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
+                if ti.static(moves_x):
+                    self.move(x_pred, i, dt, impulse, pressure_per_impulse, first_of_frame)
+        if ti.static(not moves_x):
+            for i in range(self.state.live_bound()):
+                if i < self.state.active[None]:
+                    self.move(x_pred, i, dt, impulse, pressure_per_impulse, first_of_frame)
+
+    @ti.func
+    def move(
+        self,
+        x_pred: ti.template(),
+        i,
+        dt: ti.template(),
+        impulse: ti.template(),
+        pressure_per_impulse: ti.template(),
+        first_of_frame: ti.template(),
+    ):
+        """x_i = x*_i (line 23), and the substep's pressure added to particle i's sum."""
+        self.state.x[i] = x_pred[i]
+        # The pressure of this substep, from the position iterations' multiplier L and the
+        # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
+        pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
+        self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure

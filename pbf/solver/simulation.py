@@ -468,17 +468,7 @@ class Simulation:
                 self.scene.time.max_speed_m_s,  # and v capped (0: not)
             )
             if on_device:  # the iterations' last call, x* settled, then lines 20-23: one launch
-                self.launches.finish(
-                    self.grid.neighbours,
-                    control.target_density_error > 0.0,
-                    self.iterations.per_launch,
-                    self.iterations.last_start(control.iterations),
-                    control.iterations,
-                    control.target_density_error,
-                    control.min_iterations,
-                    int(control.step_back),
-                    *finish,
-                )
+                self.launches.finish(self.grid.neighbours, control, *finish)
                 x_star.in_second = False
             else:
                 self.postprocess.finish(x_star.first, self.grid.neighbours, *finish)

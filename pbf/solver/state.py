@@ -1,7 +1,7 @@
 """Particle state: what persists from one substep to the next, kept apart from the stages' scratch.
 
 Every per-particle quantity is declared once, in :data:`PARTICLE_FIELDS`: the state allocates it,
-the grid's sort carries it along (:meth:`State.permute`), the emitters give new particles its initial
+the grid's sort carries it along (:meth:`State.gather`), the emitters give new particles its initial
 value, and snapshots keep it where it says so. A stage's own per-particle array that must follow
 the sort (the predicted positions x*) is attached with :meth:`State.carry`.
 """
@@ -151,19 +151,23 @@ class State:
         return read_count(self.loop_bound, 1)
 
     @ti.func
-    def permute(self, sorted_from: ti.template()):
-        """Apply the grid's counting-sort permutation (``sorted_from[slot]`` = the slot the particle
-        comes from) to every carried array: loops for the top level of the grid's sort kernel
-        (``NeighbourGrid.sort_and_permute``), one to gather into scratch and one to copy back."""
-        for slot in range(self.live_bound()):
-            if slot < self.active[None]:
-                i = sorted_from[slot]
-                for k in ti.static(range(len(self._carried))):
-                    self._carried[k][1][slot] = self._carried[k][0][i]
-        for slot in range(self.live_bound()):
-            if slot < self.active[None]:
-                for k in ti.static(range(len(self._carried))):
-                    self._carried[k][0][slot] = self._carried[k][1][slot]
+    def gather(self, slot, i):
+        """Particle i's carried arrays into ``slot`` of their scratch: the grid's sort calls it for every
+        particle (``NeighbourGrid.order_loops``), and :meth:`take_gathered` brings the sorted arrays back
+        in a later loop (the neighbour visit's, or one of their own)."""
+        for k in ti.static(range(len(self._carried))):
+            self._carried[k][1][slot] = self._carried[k][0][i]
+
+    @ti.func
+    def take_gathered(self, slot):
+        """``slot`` of every carried array from its scratch, after :meth:`gather`."""
+        for k in ti.static(range(len(self._carried))):
+            self._carried[k][0][slot] = self._carried[k][1][slot]
+
+    def scratch_of(self, values):
+        """The scratch that :meth:`gather` fills for the carried array ``values``: the sorted copy, until
+        :meth:`take_gathered`."""
+        return next(scratch for field, scratch in self._carried if field is values)
 
     @ti.func
     def reset_new(self, slot):

@@ -47,10 +47,12 @@ class SubstepLaunches:
 
     @ti.func
     def _predict_and_sort(self, dt: ti.template(), gravity: ti.template()):
-        self.integrator.advance_loop(dt, gravity)  # lines 1-4: v = v + Δt g, x* = x + Δt v
-        x = ti.static(self.integrator.predicted.first)
-        self.grid.sort_loops(x, self.state.index)  # lines 5-7: a counting sort by the cell of x*,
-        self.state.permute(self.grid.sorted_from)  # the state and x* reordered alike
+        for i in range(self.state.live_bound()):
+            self.grid.clear_overflow_in(i)  # for this substep's visit
+            if i < self.state.active[None]:
+                x_star = self.integrator.advance_particle(dt, gravity, i)  # lines 1-4: v = v + Δt g, x* = x + Δt v
+                self.grid.count_in_cell(x_star, i)  # lines 5-7: a counting sort by the cell of x*,
+        self.grid.order_loops(self.state.index, self.state)  # the state and x* gathered in sorted order
 
     @ti.kernel
     def _predict_and_find_neighbours_on_device(
@@ -59,21 +61,48 @@ class SubstepLaunches:
         # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
         # a call than three values (benchmarks/kernel_arguments.py).
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
-        self.grid.visit_on_device(ti.static(self.integrator.predicted.first), neighbours)  # the lists
+        x = ti.static(self.integrator.predicted.first)
+        self.grid.visit_on_device(x, neighbours, self.state, ti.static(self.state.scratch_of(x)))  # the lists
 
     @ti.kernel
     def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32) -> ti.i32:
         self.grid.overflow[None] = 0  # the sort clears it in its first thread, which an empty box lacks
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
-        self.grid.visit_first(ti.static(self.integrator.predicted.first), neighbours)  # the lists' first visit
+        x = ti.static(self.integrator.predicted.first)
+        self.grid.visit_first(ti.static(self.state.scratch_of(x)), neighbours, self.state)  # the lists' first visit
         return self.grid.overflow[None]
 
+    def finish(self, neighbours, control, *finish) -> None:
+        """The device path's end of a substep in one call (:meth:`_finish`): the iterations of the last call,
+        x* settled into the first buffer, then lines 20-23 (``finish``: the arguments of
+        ``VelocityPostprocess.finish`` after the neighbours). Loops that would run over no particle are
+        left out at compile time, each a launch saved: the surface pass unless the last call holds the
+        substep's first iteration, and the settling when x* surely ends in the first buffer (no target,
+        an even count: the last iteration reads the second and writes the first)."""
+        iterations, measure = control.iterations, control.target_density_error > 0.0
+        start = self.iterations.last_start(iterations)
+        self._finish(
+            neighbours,
+            measure,
+            self.iterations.per_launch,
+            start == 0,
+            measure or iterations % 2 == 1,
+            start,
+            iterations,
+            control.target_density_error,
+            control.min_iterations,
+            int(control.step_back),
+            *finish,
+        )
+
     @ti.kernel
-    def finish(
+    def _finish(
         self,
         neighbours: NeighbourList,
         measure: ti.template(),
         per_launch: ti.template(),
+        surface_pass: ti.template(),
+        settle: ti.template(),
         start: ti.i32,
         iterations: ti.i32,
         target: ti.f32,
@@ -89,24 +118,26 @@ class SubstepLaunches:
         first_of_frame: ti.i32,
         max_speed: ti.f32,
     ):
-        """The device path's end of a substep in one call: the iterations of the last call from ``start``
-        (``JacobiIterations.iterate_loops``), x* settled into the first buffer
-        (``JacobiIterations.settle_loop``), then lines 20-23 (``VelocityPostprocess.finish``)."""
+        """:meth:`finish`'s launch: the iterations from ``start`` (``JacobiIterations.iterate_loops``, the
+        surface pass only with ``surface_pass``), x* settled into the first buffer
+        (``JacobiIterations.settle_loop``, only with ``settle``), then lines 20-23 (``VelocityPostprocess.finish``)."""
         self.iterations.iterate_loops(
             self.integrator.predicted.first,
             self.integrator.predicted.second,
             neighbours,
             measure,
             per_launch,
+            surface_pass,
             start,
             iterations,
             target,
             min_iterations,
             step_back,
         )
-        self.iterations.settle_loop(
-            self.integrator.predicted.first, self.integrator.predicted.second, measure, iterations
-        )
+        if ti.static(settle):
+            self.iterations.settle_loop(
+                self.integrator.predicted.first, self.integrator.predicted.second, measure, iterations
+            )
         self.postprocess.finish_loops(
             self.integrator.predicted.first,
             neighbours,
