@@ -42,12 +42,38 @@ def grid_neighbours(points, lower, upper, h, reach=1, checked=True, slot_major=N
     grid.build_neighbours(x, checked=checked)
     lists = grid.neighbour_lists()
     assert np.array_equal([len(l) for l in lists], grid.neighbour_count.to_numpy())
+    check_walk(grid, lists)
     # Back to original indices; also check the sort put cells in ascending order.
     cells = grid.particle_cell.to_numpy()[order]
     assert np.all(np.diff(cells) >= 0)
     same_cell = np.diff(cells) == 0
     assert np.all(np.diff(keys[order])[same_cell] > 0), "within a cell, particles follow their keys"
     return [set(order[l].tolist()) for l in lists], order
+
+
+SIGNATURE_MODULUS = 1_000_003
+
+
+@ti.kernel
+def _walk(grid: ti.template(), neighbours: ti.types.ndarray(dtype=ti.i32, ndim=1), signature: ti.template()):
+    for i in range(grid.active[None]):
+        first, last, stride = grid.listed(i, neighbours)
+        upcoming = grid.upcoming(neighbours, first, last)
+        total = 0
+        for k in range(first, last):
+            j, upcoming = grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            total = (total + (k - first + 1) * (j + 1)) % SIGNATURE_MODULUS
+        signature[i] = total
+
+
+def check_walk(grid, lists):
+    """The solver's walk of a list (``listed``, ``upcoming``, ``next_neighbour``: read one entry ahead on a
+    GPU) meets every entry of ``neighbour_lists`` in its order: a signature Σ (k + 1)(j + 1) per particle
+    (modulo a prime, so that a pile's long lists stay inside int32)."""
+    signature = ti.field(ti.i32, shape=max(len(lists), 1))
+    _walk(grid, grid.neighbours, signature)
+    expected = [int(((np.arange(len(l)) + 1) * (l.astype(np.int64) + 1)).sum() % SIGNATURE_MODULUS) for l in lists]
+    assert np.array_equal(signature.to_numpy()[: len(lists)].astype(np.int64), np.array(expected, np.int64))
 
 
 def float32_brute_force(points, h):

@@ -210,17 +210,17 @@ class DensityConstraint:
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         first, last, stride = self.grid.listed(i, neighbours)
+        upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
+            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
             if ti.static(gradients):
-                w, grad_w = scaled_kernel_and_gradient(xi - x[self.grid.neighbour(neighbours, first, stride, k)], scale)
+                w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 ratio += volume * w
                 g = volume * h * grad_w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
-                ratio += volume * scaled_kernel(
-                    (xi - x[self.grid.neighbour(neighbours, first, stride, k)]).norm_sqr(), scale
-                )
+                ratio += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale)
         return ratio, gradient_i, sum_sq
 
     @ti.func
@@ -236,8 +236,10 @@ class DensityConstraint:
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         first, last, stride = self.grid.listed(i, neighbours)
+        upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
-            xj = x[self.grid.neighbour(neighbours, first, stride, k)]
+            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            xj = x[j]
             if ti.static(gradients):
                 w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
                 w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, scale, True)
@@ -322,8 +324,9 @@ class DensityConstraint:
             xi = x[i]
             smoothed = volume * scaled_kernel(0.0, scale) * self.colour_gradient[i]
             first, last, stride = self.grid.listed(i, neighbours)
+            upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j = self.grid.neighbour(neighbours, first, stride, k)
+                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
                 smoothed += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale) * self.colour_gradient[j]
             u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
             psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
@@ -362,23 +365,24 @@ class DensityConstraint:
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
                 dx = 2.0 * lam_i * volume * h * g_self
                 first, last, stride = self.grid.listed(i, neighbours)
+                upcoming = self.grid.upcoming(neighbours, first, last)
                 for k in range(first, last):
-                    j = self.grid.neighbour(neighbours, first, stride, k)
+                    j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
                     w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, scale, True)
                     images = (lam_i + self.lam[j]) * volume * h * g_images
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
             else:
                 first, last, stride = self.grid.listed(i, neighbours)
+                upcoming = self.grid.upcoming(neighbours, first, last)
                 for k in range(first, last):
-                    dx += self.pair_term(
-                        x, xi, lam_i, self.grid.neighbour(neighbours, first, stride, k), h, scale, volume, scorr
-                    )
+                    j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                    dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
         else:
             first, last, stride = self.grid.listed(i, neighbours)
+            upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                dx += self.pair_term(
-                    x, xi, lam_i, self.grid.neighbour(neighbours, first, stride, k), h, scale, volume, scorr
-                )
+                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
         return dx
 
     @ti.func

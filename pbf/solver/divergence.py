@@ -69,8 +69,9 @@ class DivergenceCorrection:
         gradient_i = ti.Vector([0.0, 0.0, 0.0])
         sum_sq = 0.0
         first, last, stride = self.grid.listed(i, neighbours)
+        upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
-            j = self.grid.neighbour(neighbours, first, stride, k)
+            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
             if ti.static(start):
                 w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 g = volume * h * grad_w
@@ -104,8 +105,9 @@ class DivergenceCorrection:
             xi, vi = x[i], self.state.v[i]
             rate = 0.0
             first, last, stride = self.grid.listed(i, neighbours)
+            upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j = self.grid.neighbour(neighbours, first, stride, k)
+                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
                 rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))

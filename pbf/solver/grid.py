@@ -217,10 +217,14 @@ class NeighbourGrid:
 
     @ti.func
     def listed(self, i, neighbours: ti.template()):
-        """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride), its k-th for k in
-        range(first, last) being :meth:`neighbour` (``neighbours``, first, stride, k). Slot-major
-        (:attr:`slot_major`, a stride of the list's length over SLOTS, at least the particle count)
-        after the one-visit build; entries in a row after an overflow's compact build and on the CPU."""
+        """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride), walked as
+
+            upcoming = grid.upcoming(neighbours, first, last)
+            for k in range(first, last):
+                j, upcoming = grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+
+        Slot-major (:attr:`slot_major`, a stride of the list's length over SLOTS, at least the particle
+        count) after the one-visit build; entries in a row after an overflow's compact build and on the CPU."""
         first = self.neighbour_start[i]
         stride = 1
         if ti.static(self.slot_major):
@@ -228,14 +232,34 @@ class NeighbourGrid:
         return first, first + self.neighbour_listed[i], stride
 
     @ti.func
-    def neighbour(self, neighbours: ti.template(), first, stride, k):
-        """The k-th entry of a range of :meth:`listed`: on the CPU, where entries are in a row, ``neighbours[k]``
-        itself, the loop the compiler knows best (an index worked out from a stride made the CPU's
-        iterations 5% slower at 64,000 particles)."""
-        index = k
+    def upcoming(self, neighbours: ti.template(), first, last):
+        """Before a walk of :meth:`listed`'s range on a GPU, its first entry (read ahead: :meth:`next_neighbour`);
+        nothing on the CPU."""
+        index = 0
         if ti.static(self.slot_major):
-            index = first + (k - first) * stride
-        return neighbours[index]
+            if first < last:
+                index = neighbours[first]
+        return index
+
+    @ti.func
+    def next_neighbour(self, neighbours: ti.template(), first, last, stride, k, upcoming):
+        """(j, upcoming): the k-th entry of a range of :meth:`listed`, and what the next step needs.
+
+        On a GPU the walk reads one entry ahead: j is the entry read at the step before, and the next one
+        is asked for now, so that its load is in flight while the thread gathers and uses x_j. A
+        thread's walk is two dependent loads a neighbour (the index, then what it points at), and the
+        iterations' passes wait on that latency more than on bandwidth at a million particles
+        (docs/BENCHMARKS.md, "On a GPU"). The order of every sum stays the same. On the CPU, whose
+        cores read ahead themselves, j is ``neighbours[k]`` and nothing more, the loop the compiler knows
+        best (an index worked out from a stride made the CPU's iterations 5% slower at 64,000 particles)."""
+        j = 0
+        if ti.static(self.slot_major):
+            j = upcoming
+            if k + 1 < last:
+                upcoming = neighbours[first + (k + 1 - first) * stride]
+        else:
+            j = neighbours[k]
+        return j, upcoming
 
     @ti.func
     def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):

@@ -113,8 +113,9 @@ class VelocityPostprocess:
                     h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
                     omega = ti.Vector([0.0, 0.0, 0.0])
                     first, last, stride = self.grid.listed(i, neighbours)
+                    upcoming = self.grid.upcoming(neighbours, first, last)
                     for k in range(first, last):
-                        j = self.grid.neighbour(neighbours, first, stride, k)
+                        j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
                         omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
                             self.velocity(x_pred, j, inverse_dt) - vi
                         )
@@ -137,8 +138,9 @@ class VelocityPostprocess:
                         omega_i = self.omega[i]
                         omega_i_norm = self.omega_norm[i]
                     first, last, stride = self.grid.listed(i, neighbours)
+                    upcoming = self.grid.upcoming(neighbours, first, last)
                     for k in range(first, last):
-                        j = self.grid.neighbour(neighbours, first, stride, k)
+                        j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
                         w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                         if ti.static(with_xsph):
                             vj = ti.Vector([0.0, 0.0, 0.0])

@@ -51,22 +51,32 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
     visit_stream = 2 * SCALAR + k * SCALAR if listed else 0.0
     visit_gather = k * VECTOR if listed else 25 * 2 * SCALAR + c * VECTOR
     rows = [
-        Pass("predict", "v += Δt g, x* = x + Δt v: x, v in; v, x* out", 4 * VECTOR, 0.0),
-        Pass("sort", "cell of x*, rank in cell: x* in; cell, rank out", VECTOR + 2 * SCALAR, 0.0),
+        Pass(
+            "predict",
+            "v += Δt g, x* = x + Δt v, its cell and rank: x, v in; v, x*, cell, rank out",
+            4 * VECTOR + 2 * SCALAR,
+            0.0,
+        ),
         Pass("sort", "prefix sum over the cells (count in, start out)", 2 * SCALAR * cells, 0.0),
-        Pass("sort", "scatter: cell, rank in, cell start gathered; order out", 3 * SCALAR, SCALAR),
-        Pass("sort", "order within a cell: order, cell, cell start in", 3 * SCALAR, 0.0),
-        Pass("sort", "permute the carried arrays: gather, then copy back", 3 * CARRIED, CARRIED),
+        Pass("sort", "scatter: cell, rank in, cell start gathered; members out", 3 * SCALAR, SCALAR),
+        Pass(
+            "sort",
+            "place in the cell by key, gathered there: member, cell, starts in, the cell's keys; order, scratch out",
+            4 * SCALAR + CARRIED,
+            2 * SCALAR + CARRIED,
+        ),
     ]
-    if listed:
-        rows.append(
-            Pass(
-                "neighbour lists",
-                "visit the cells: x* in, candidates' x* gathered; indices, count, start, end out",
-                VECTOR + k * SCALAR + 3 * SCALAR,
-                25 * 2 * SCALAR + c * VECTOR,
-            )
+    # The visit that follows the sort takes the carried arrays back from scratch (2 × CARRIED streamed).
+    rows.append(
+        Pass(
+            "neighbour lists" if listed else "sort",
+            "visit the cells: x* in, candidates' x* gathered; indices, count, start, end out; carried taken back"
+            if listed
+            else "the carried arrays taken back from scratch",
+            (VECTOR + k * SCALAR + 3 * SCALAR if listed else 0.0) + 2 * CARRIED,
+            25 * 2 * SCALAR + c * VECTOR if listed else 0.0,
         )
+    )
     rows += [
         Pass(
             "iterations",
@@ -84,8 +94,8 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
         ),
         Pass(
             "velocity, vorticity, XSPH",
-            "v = (x* − x)/Δt, ω: x, x* in; ω, |ω| out; neighbours' x*, v",
-            2 * VECTOR + VECTOR + SCALAR + visit_stream,
+            "v = (x* − x)/Δt, ω: x, x* in; ω, |ω|, v out; neighbours' x*, v",
+            2 * VECTOR + 2 * VECTOR + SCALAR + visit_stream,
             visit_gather + k * VECTOR,
         ),
         Pass(
