@@ -15,6 +15,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.scene.schema import _show
+from pbf.solver import settled
 from pbf.solver.acceleration import Weights
 from pbf.solver.backend import keeps_decisions_on_device, start_backend
 from pbf.solver.bodies import STATE_WIDTH
@@ -173,10 +174,15 @@ class Simulation:
         if self._start is not None:
             self.restore(self._start)
             return
-        positions, velocities = self.model.initial_particles()
-        self.restore(Snapshot(positions, velocities, 0.0, 0))
-        if self.scene.time.settle_s > 0.0:
-            self._settle(self.scene.time.settle_s)
+        settled_start = settled.load(self.scene) if self.scene.time.settle_s > 0.0 else None
+        if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
+            self.restore(settled_start)
+        else:
+            positions, velocities = self.model.initial_particles()
+            self.restore(Snapshot(positions, velocities, 0.0, 0))
+            if self.scene.time.settle_s > 0.0:
+                self._settle(self.scene.time.settle_s)
+                settled.store(self.scene, self.snapshot())
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
