@@ -7,6 +7,7 @@ import pytest
 
 from pbf.scene import load_scene
 from pbf.solver import settled
+from pbf.solver.backend import decisions_on_device
 from pbf.solver.simulation import Simulation
 from tests.scenes import small_dam_break
 
@@ -47,6 +48,8 @@ def test_the_key_follows_the_physics_not_the_view():
     assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "camera.position_m=[1, 1, 2]"])) == same
     assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "solver.iterations=5"])) != same
     assert settled.settled_key(load_scene(small_dam_break(), ["time.settle_s=0.2"])) != same
+    with decisions_on_device():  # the GPU backends' substep, run on the CPU: another path
+        assert settled.settled_key(scene) != same
 
 
 def test_a_file_cut_short_is_settled_again(folder):

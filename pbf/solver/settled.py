@@ -9,8 +9,9 @@ restored snapshot, so a start from the file steps bit for bit as one that settle
 
 The file is named by a hash of everything the settled state depends on (:func:`settled_key`): the
 scene's physics (every table but the view's: name, description, camera, render, surface), the
-package's solver and scene code (every ``.py`` file of ``pbf/solver`` and ``pbf/scene``), Taichi's
-version and the backend's ``ti.init`` options and device (the compile mode rounds differently). A
+package's solver and scene code (every ``.py`` file of ``pbf/solver`` and ``pbf/scene``), Taichi's and
+NumPy's versions, the backend's ``ti.init`` options and device (the compile mode rounds differently)
+and whether the substep's decisions stay on the device (another path, other rounding). A
 change to any of them names another file; stale files are never read, only left behind (a few
 hundred kB each, in ``pbf_settled/`` of the offline cache folder, removed with it).
 
@@ -63,14 +64,15 @@ def settled_key(scene) -> str:
     """The hash that names ``scene``'s settled start on this backend (module docstring)."""
     physics = {f.name: getattr(scene, f.name) for f in dataclasses.fields(scene) if f.name not in VIEW_KEYS}
     digest = hashlib.sha256()
+    options = sorted((name, str(value)) for name, value in backend._options.items())  # str: a type's name
     for part in (
         repr(physics),
         _code(),
         backend.taichi_version(),
-        repr(
-            sorted((name, str(value)) for name, value in backend._options.items())
-        ),  # str: a type prints its name, repr its address
+        np.__version__,  # the initial lattice is laid out in NumPy
+        repr(options),
         repr(backend._started),
+        repr(backend.keeps_decisions_on_device()),  # the device path's substep rounds differently
     ):
         digest.update(part.encode())
         digest.update(b"\0")
