@@ -45,6 +45,13 @@ class Time:
         "seconds of solver steps, velocities damped after each, that "
         "bring the blocks to the solver's own rest state before t = 0 (not with emitters)",
     )
+    settle_substeps: int = key(
+        0,
+        _between(0, 1000),
+        "substeps per frame while settling, but for its last 0.25 s, which runs at time.substeps (the "
+        "run's own Δt, so its rest state is the run's): fewer settle a tall column in fewer steps "
+        "(0: time.substeps throughout)",
+    )
 
 
 def travel_spacings(max_cfl: float, iterations: int) -> float:

@@ -15,6 +15,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.scene.schema import _show
+from pbf.solver import settled
 from pbf.solver.acceleration import Weights
 from pbf.solver.backend import keeps_decisions_on_device, start_backend
 from pbf.solver.bodies import STATE_WIDTH
@@ -43,6 +44,10 @@ STAGES = (
 SETTLE_DAMPING = 0.9
 """Velocities are multiplied by this after each substep of settling (``time.settle_s``): zeroing them
 left only the iterations' creep, and settled too slowly; 0.9 comes to rest within a second."""
+SETTLE_FINISH_S = 0.25
+"""With ``time.settle_substeps``, settling ends with this long at the run's own Δt: the solver's rest
+compression depends on Δt, and a tank settled at a coarser one alone started with the particles at
+0.2 m/s as it took up the finer Δt's (`hydrostatic`)."""
 
 
 class StageHook(Protocol):
@@ -169,24 +174,36 @@ class Simulation:
         if self._start is not None:
             self.restore(self._start)
             return
-        positions, velocities = self.model.initial_particles()
-        self.restore(Snapshot(positions, velocities, 0.0, 0))
-        if self.scene.time.settle_s > 0.0:
-            self._settle(self.scene.time.settle_s)
+        settled_start = settled.load(self.scene) if self.scene.time.settle_s > 0.0 else None
+        if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
+            self.restore(settled_start)
+        else:
+            positions, velocities = self.model.initial_particles()
+            self.restore(Snapshot(positions, velocities, 0.0, 0))
+            if self.scene.time.settle_s > 0.0:
+                self._settle(self.scene.time.settle_s)
+                settled.store(self.scene, self.snapshot())
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
         """Step ``seconds`` with the velocities damped by SETTLE_DAMPING after each substep (the wave
         maker standing still), then start the clock at t = 0 from there: the blocks come close to the
         positions and the pressure the solver itself holds at rest, so a tank at rest starts near rest
-        instead of sagging into it (docs/VALIDATION.md)."""
-        dt = self.scene.time.frame_dt_s / self.control.substeps
+        instead of sagging into it (docs/VALIDATION.md). With ``time.settle_substeps`` all but the last
+        SETTLE_FINISH_S run at that coarser Δt, the rest at the run's own."""
+        t = self.scene.time
+        fine = t.frame_dt_s / self.control.substeps
+        finish = min(seconds, SETTLE_FINISH_S) if t.settle_substeps else seconds
+        phases = [(fine, finish)]
+        if seconds > finish:
+            phases.insert(0, (t.frame_dt_s / t.settle_substeps, seconds - finish))
         self.control.wave_maker_on = False
         if self.bodies is not None:
             self.bodies.held = True  # the water settles around the bodies where the scene puts them
-        for _ in range(math.ceil(seconds / dt - 1e-9)):
-            self.substep(dt)
-            self.integrator.damp(SETTLE_DAMPING)
+        for dt, span in phases:
+            for _ in range(math.ceil(span / dt - 1e-9)):
+                self.substep(dt)
+                self.integrator.damp(SETTLE_DAMPING)
         if self.bodies is not None:
             self.bodies.held = False
         self.control.wave_maker_on = True
