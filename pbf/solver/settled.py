@@ -23,6 +23,7 @@ start in every respect, and a run without the offline cache neither reads nor wr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import os
 import tempfile
@@ -43,21 +44,18 @@ them shares its settled start."""
 CODE = ("solver", "scene")
 """The package folders whose code the settled state depends on."""
 
-_code_digest: str | None = None
 
-
+@functools.cache
 def _code() -> str:
-    """A hash of every ``.py`` file of the package folders in CODE, by relative path and content."""
-    global _code_digest
-    if _code_digest is None:
-        digest = hashlib.sha256()
-        package = Path(__file__).resolve().parent.parent
-        for folder in CODE:
-            for path in sorted((package / folder).rglob("*.py")):
-                digest.update(str(path.relative_to(package)).encode())
-                digest.update(path.read_bytes())
-        _code_digest = digest.hexdigest()
-    return _code_digest
+    """A hash of every ``.py`` file of the package folders in CODE, by relative path and content (read once
+    a process)."""
+    digest = hashlib.sha256()
+    package = Path(__file__).resolve().parent.parent
+    for folder in CODE:
+        for path in sorted((package / folder).rglob("*.py")):
+            digest.update(str(path.relative_to(package)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
 
 
 def settled_key(scene) -> str:
