@@ -182,6 +182,44 @@ def test_exclusive_scan_in_gpu_blocks_of_some_entries(length, count):
     assert np.array_equal(starts.to_numpy()[: live + 1], np.concatenate([[0], np.cumsum(values[:live])]))
 
 
+@pytest.mark.parametrize("block", [None, 4, 32])
+@pytest.mark.parametrize("length", [1, 33, 1025, 40_000])
+def test_a_scan_whose_caller_counted_the_blocks(block, length):
+    # The sort's way: each value added to its level-0 block's sum by atomics where it is counted
+    # (add_to_block), the first pass up skipped (counted=True), the block sums cleared after
+    # (clear_block); twice, so that a sum left over from the first count would show in the second.
+    scan = ExclusiveScan(length, block=block)
+    source = ti.field(ti.i32, shape=length)
+    starts = ti.field(ti.i32, shape=length + 1)
+
+    @ti.kernel
+    def count_and_scan():
+        for k in range(length):
+            scan.add_to_block(k, source[k])
+        scan.scan(source, starts, length, 1, True)
+        for k in range(length):
+            scan.clear_block(k)
+
+    @ti.kernel
+    def count_and_start_each():  # the compact list's way: the passes up, then each thread its own start
+        for k in range(length):
+            scan.add_to_block(k, source[k])
+        scan.up(source, length, 1, True)
+        for k in range(length):
+            starts[k] = scan.start_of(source, k)
+        for k in range(length):
+            scan.clear_block(k)
+
+    for seed in (1, 2):
+        values = np.random.default_rng(seed * length).integers(0, 50, size=length).astype(np.int32)
+        source.from_numpy(values)
+        count_and_scan()
+        assert np.array_equal(starts.to_numpy(), np.concatenate([[0], np.cumsum(values)]))
+        starts.fill(-1)
+        count_and_start_each()
+        assert np.array_equal(starts.to_numpy()[:length], np.concatenate([[0], np.cumsum(values)])[:length])
+
+
 @pytest.mark.parametrize("block", [None, 32])
 def test_tree_sums_are_compensated_and_independent_of_the_count_of_blocks(block):
     # 100,003 values spanning eight decades: a float32 running sum loses ~1e-4 of it, the pair keeps it

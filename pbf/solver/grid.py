@@ -1,7 +1,8 @@
 """Uniform grid and exact neighbour lists, rebuilt every substep by counting sorts.
 
 Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
-1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell;
+1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell, and
+   in each block of cells of the prefix sum (its first pass up);
 2. exclusive prefix sum of the counts → first slot of every cell;
 3. slot = start[cell] + rank, then each particle's place inside its cell by the order of a key (the
    creation index): the permutation that sorts particles by cell, which the caller applies to its
@@ -143,17 +144,21 @@ class NeighbourGrid:
         # Every loop runs to loop_bound (the bucket on the GPU backends' path: no one-thread task for a
         # bound read at run time) and skips the slots past the live particles.
         for i in range(read_count(self.loop_bound, 1)):
-            self.clear_overflow_in(i)
+            self.clear_for_visit(i)
             if i < self.active[None]:
                 self.count_in_cell(x[i], i)
         self.order_loops(key, mover)
 
     @ti.func
-    def clear_overflow_in(self, i):
-        """Thread 0 of the counting loop clears the lists' overflow flag for the visit after it
-        (:meth:`visit_on_device`): a store outside the loops would be a one-thread task."""
+    def clear_for_visit(self, i):
+        """Thread i of a loop over the particles' bucket before a visit (the sort's counting loop) clears
+        what the visit gathers: the lists' overflow flag (thread 0) and the sum of i's block of the
+        overflow's prefix sum (:meth:`visit_on_device`). Stores outside the loops would be a one-thread
+        task; the sums stay until here because the second visit reads them in a loop that cannot also
+        clear them."""
         if i == 0:
             self.overflow[None] = 0
+        self.neighbour_scan.clear_block(i)
 
     @ti.func
     def count_in_cell(self, p, i):
@@ -161,6 +166,7 @@ class NeighbourGrid:
         cell = self.linear(self.cell_of(p))
         self.particle_cell[i] = cell
         self.rank_in_cell[i] = ti.atomic_add(self.cell_particles[cell], 1)
+        self.cell_scan.add_to_block(cell, 1)  # the scan's first pass up, done here
 
     @ti.func
     def order_loops(self, key: ti.template(), mover: ti.template()):
@@ -178,7 +184,7 @@ class NeighbourGrid:
         """
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
         # hold no particle and add nothing.
-        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length)
+        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length, 1, True)
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 cell = self.particle_cell[i]
@@ -186,6 +192,7 @@ class NeighbourGrid:
                 # Clear the counts for the next sort here rather than in a loop over all cells of its
                 # own: the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
                 self.cell_particles[cell] = 0
+                self.cell_scan.clear_block(cell)
         for slot in range(read_count(self.loop_bound, 1)):
             if slot < self.active[None]:
                 i = self.cell_members[slot]
@@ -279,7 +286,7 @@ class NeighbourGrid:
         if ti.static(compact):
             start = ti.min(self.neighbour_start[i], capacity)
             stride = 1
-            room = ti.min(self.neighbour_start[i + 1], capacity) - start
+            room = ti.min(self.neighbour_start[i] + self.neighbour_count[i], capacity) - start
         found = 0
         for dx, dy in ti.static(ti.ndrange((-self.reach, self.reach + 1), (-self.reach, self.reach + 1))):
             first, last = self.column_range(c, resolution, dx, dy)
@@ -299,8 +306,8 @@ class NeighbourGrid:
                     if found < room:
                         neighbours[start + found] = j
                     found += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
-        self.neighbour_count[i] = found
-        if ti.static(not compact):
+        if ti.static(not compact):  # the second visit finds the same count, which others may be reading
+            self.neighbour_count[i] = found
             self.neighbour_start[i] = start
             if found > SLOTS:
                 self.overflow[None] = 1
@@ -318,23 +325,29 @@ class NeighbourGrid:
 
     @ti.kernel
     def _visit_on_device(self, x: ti.template(), neighbours: NeighbourList):
-        """:meth:`visit_on_device` as a launch of its own (which clears the overflow flag itself: it may come
-        without a sort before it)."""
-        self.overflow[None] = 0
+        """:meth:`visit_on_device` as a launch of its own (which clears what the visit gathers itself: it may
+        come without a sort before it)."""
+        for i in range(read_count(self.loop_bound, 1)):
+            self.clear_for_visit(i)
         self.visit_on_device(x, neighbours, False, x)
 
     @ti.func
-    def visit_first(self, x: ti.template(), neighbours: ti.template(), mover: ti.template()):
+    def visit_first(
+        self, x: ti.template(), neighbours: ti.template(), mover: ti.template(), count_blocks: ti.template() = False
+    ):
         """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
         was cleared by the sort). After a sort whose ``mover`` gathered into scratch
         (:meth:`order_loops`), ``x`` is the sorted positions' scratch and each thread first takes its
         particle's arrays back (``mover.take_gathered``): no loop of its own for the copy; else ``mover``
-        is False."""
+        is False. ``count_blocks``: each particle's count also goes into its block of the overflow's
+        prefix sum (``ExclusiveScan.add_to_block``, that sum's first pass up), for :meth:`visit_on_device`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 if ti.static(not isinstance(mover, bool)):
                     mover.take_gathered(i)
                 self._visit_particle(x, neighbours, False, i)
+                if ti.static(count_blocks):
+                    self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
 
     @ti.func
     def visit_on_device(
@@ -346,14 +359,19 @@ class NeighbourGrid:
         cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For
         the top level of a kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted
         positions' scratch, read by the first visit; the second reads ``x``, taken back by then)."""
-        self.visit_first(gathered, neighbours, mover)
-        self.neighbour_scan.scan(self.neighbour_count, self.neighbour_start, self.active, self.overflow)
+        self.visit_first(gathered, neighbours, mover, True)
+        # The compact list's starts: the first visit summed each block of counts; the levels above are
+        # summed only after an overflow, and each thread of the second visit adds up its own start
+        # (ExclusiveScan.start_of), so that no pass down runs in every substep for a rare event.
+        self.neighbour_scan.up(self.neighbour_count, self.active, self.overflow, True)
         for i in range(ti.static(self.particle_cell.shape[0])):
             count = self.active[None]
             if i < count * self.overflow[None]:
+                start = self.neighbour_scan.start_of(self.neighbour_count, i)
+                self.neighbour_start[i] = start
                 self._visit_particle(x, neighbours, True, i)
-                if i == 0:
-                    total = self.neighbour_start[count]
+                if i == count - 1:  # the last particle's list ends where the compact list does
+                    total = start + self.neighbour_count[i]
                     self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
                     if total > neighbours.shape[0]:
                         self.status[TRUNCATED] = 1

@@ -138,18 +138,25 @@ class ExclusiveScan:
         return value
 
     @ti.func
-    def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), gate: ti.template() = 1):
-        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
-        0-D field, a Python int or a value, times the 0-D field ``gate`` if one is given. Called at a
-        kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
-        running sums of the top block (or, for a top of few entries, each block below adds up the
-        entries before its own); down the tree each block writes the running sums of its entries from
-        its own start.
+    def add_to_block(self, k, amount):
+        """Add ``amount`` to the sum of the level-0 block that holds entry k, for a caller that counts its
+        values itself (an atomic into one address a block, so many addresses): the scan's first pass up
+        is then done (``scan(..., counted=True)``). Nothing when the tree is one block."""
+        if ti.static(self.tree.top > 0):
+            ti.atomic_add(self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]], amount)
 
-        Every level loops over all of its blocks, a count the kernel knows, and skips those past the
-        live entries, each thread reading the count itself: a loop bound or a count read at run time
-        outside the loops would be a one-thread task of its own."""
-        for level in ti.static(range(self.tree.top)):  # up: the sums of each level's blocks
+    @ti.func
+    def clear_block(self, k):
+        """Zero the sum :meth:`add_to_block` gathers for entry k's block, once the scan has read it (for
+        the next count; every caller in the block may store the same 0)."""
+        if ti.static(self.tree.top > 0):
+            self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]] = 0
+
+    @ti.func
+    def up(self, values: ti.template(), count: ti.template(), gate: ti.template() = 1, counted: ti.template() = False):
+        """The passes up the tree of :meth:`scan` (after :meth:`add_to_block` when ``counted``: from level 1),
+        each block's sum into the level above: enough for :meth:`start_of`. Called at a kernel's top level."""
+        for level in ti.static(range(1 if counted else 0, self.tree.top)):
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):
                 live = read_count(count, gate)  # this level's entries that hold any of the first count values
@@ -160,6 +167,45 @@ class ExclusiveScan:
                     for k in range(b * block, ti.min((b + 1) * block, live)):
                         total += self._entry(values, level, k)
                     self.sums[self.tree.offsets[level + 1] + b] = total
+
+    @ti.func
+    def start_of(self, values: ti.template(), k):
+        """Σ_{l<k} values[l] worked out by the calling thread alone, after :meth:`up`: the entries before k
+        in its level-0 block, then before its block in the level above, and so on to the top (at most
+        one block's entries a level). For a caller that needs a few starts, or each thread its own,
+        without the passes down (a task each)."""
+        total = 0
+        index = k
+        for level in ti.static(range(self.tree.top + 1)):
+            block = ti.static(self.tree.blocks[level])
+            above = index // block
+            for e in range(above * block, index):
+                total += self._entry(values, level, e)
+            index = above
+        return total
+
+    @ti.func
+    def scan(
+        self,
+        values: ti.template(),
+        starts: ti.template(),
+        count: ti.template(),
+        gate: ti.template() = 1,
+        counted: ti.template() = False,
+    ):
+        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
+        0-D field, a Python int or a value, times the 0-D field ``gate`` if one is given. Called at a
+        kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
+        running sums of the top block (or, for a top of few entries, each block below adds up the
+        entries before its own); down the tree each block writes the running sums of its entries from
+        its own start.
+
+        Every level loops over all of its blocks, a count the kernel knows, and skips those past the
+        live entries, each thread reading the count itself: a loop bound or a count read at run time
+        outside the loops would be a one-thread task of its own. ``counted``: the level-0 blocks' sums
+        were gathered by :meth:`add_to_block` (over all ``length`` entries), and the first pass up is
+        skipped."""
+        self.up(values, count, gate, counted)
         if ti.static(self.tree.top > 0 and not self.tree.fused_top):  # the top block: one thread walks it
             top = ti.static(self.tree.top)
             for _ in range(1):

@@ -48,7 +48,7 @@ class SubstepLaunches:
     @ti.func
     def _predict_and_sort(self, dt: ti.template(), gravity: ti.template()):
         for i in range(self.state.live_bound()):
-            self.grid.clear_overflow_in(i)  # for this substep's visit
+            self.grid.clear_for_visit(i)  # for this substep's visit
             if i < self.state.active[None]:
                 x_star = self.integrator.advance_particle(dt, gravity, i)  # lines 1-4: v = v + Δt g, x* = x + Δt v
                 self.grid.count_in_cell(x_star, i)  # lines 5-7: a counting sort by the cell of x*,
