@@ -61,14 +61,15 @@ def _walk(grid: ti.template(), neighbours: ti.types.ndarray(dtype=ti.i32, ndim=1
         upcoming = grid.upcoming(neighbours, first, last)
         total = 0
         for k in range(first, last):
-            j, upcoming = grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            j = grid.neighbour(neighbours, k, upcoming)
+            upcoming = grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             total = (total + (k - first + 1) * (j + 1)) % SIGNATURE_MODULUS
         signature[i] = total
 
 
 def check_walk(grid, lists):
-    """The solver's walk of a list (``listed``, ``upcoming``, ``next_neighbour``: read one entry ahead on a
-    GPU) meets every entry of ``neighbour_lists`` in its order: a signature Σ (k + 1)(j + 1) per particle
+    """The solver's walk of a list (``listed``, ``upcoming``, ``neighbour``, ``read_ahead``: one entry ahead
+    on a GPU) meets every entry of ``neighbour_lists`` in its order: a signature Σ (k + 1)(j + 1) per particle
     (modulo a prime, so that a pile's long lists stay inside int32)."""
     signature = ti.field(ti.i32, shape=max(len(lists), 1))
     _walk(grid, grid.neighbours, signature)

@@ -212,7 +212,8 @@ class DensityConstraint:
         first, last, stride = self.grid.listed(i, neighbours)
         upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
-            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            j = self.grid.neighbour(neighbours, k, upcoming)
+            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             if ti.static(gradients):
                 w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 ratio += volume * w
@@ -238,7 +239,8 @@ class DensityConstraint:
         first, last, stride = self.grid.listed(i, neighbours)
         upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
-            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            j = self.grid.neighbour(neighbours, k, upcoming)
+            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             xj = x[j]
             if ti.static(gradients):
                 w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
@@ -326,7 +328,8 @@ class DensityConstraint:
             first, last, stride = self.grid.listed(i, neighbours)
             upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                j = self.grid.neighbour(neighbours, k, upcoming)
+                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                 smoothed += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale) * self.colour_gradient[j]
             u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
             psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
@@ -367,7 +370,8 @@ class DensityConstraint:
                 first, last, stride = self.grid.listed(i, neighbours)
                 upcoming = self.grid.upcoming(neighbours, first, last)
                 for k in range(first, last):
-                    j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                    j = self.grid.neighbour(neighbours, k, upcoming)
+                    upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                     w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, scale, True)
                     images = (lam_i + self.lam[j]) * volume * h * g_images
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
@@ -375,13 +379,15 @@ class DensityConstraint:
                 first, last, stride = self.grid.listed(i, neighbours)
                 upcoming = self.grid.upcoming(neighbours, first, last)
                 for k in range(first, last):
-                    j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                    j = self.grid.neighbour(neighbours, k, upcoming)
+                    upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
         else:
             first, last, stride = self.grid.listed(i, neighbours)
             upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                j = self.grid.neighbour(neighbours, k, upcoming)
+                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                 dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
         return dx
 

@@ -71,7 +71,8 @@ class DivergenceCorrection:
         first, last, stride = self.grid.listed(i, neighbours)
         upcoming = self.grid.upcoming(neighbours, first, last)
         for k in range(first, last):
-            j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+            j = self.grid.neighbour(neighbours, k, upcoming)
+            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             if ti.static(start):
                 w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
                 g = volume * h * grad_w
@@ -107,7 +108,8 @@ class DivergenceCorrection:
             first, last, stride = self.grid.listed(i, neighbours)
             upcoming = self.grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                j = self.grid.neighbour(neighbours, k, upcoming)
+                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                 rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
             _, wall_gradient = self.boundaries.ghost(xi, False)
             rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))

@@ -228,7 +228,8 @@ class NeighbourGrid:
 
             upcoming = grid.upcoming(neighbours, first, last)
             for k in range(first, last):
-                j, upcoming = grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                j = grid.neighbour(neighbours, k, upcoming)
+                upcoming = grid.read_ahead(neighbours, first, last, stride, k, upcoming)
 
         Slot-major (:attr:`slot_major`, a stride of the list's length over SLOTS, at least the particle
         count) after the one-visit build; entries in a row after an overflow's compact build and on the CPU."""
@@ -240,8 +241,8 @@ class NeighbourGrid:
 
     @ti.func
     def upcoming(self, neighbours: ti.template(), first, last):
-        """Before a walk of :meth:`listed`'s range on a GPU, its first entry (read ahead: :meth:`next_neighbour`);
-        nothing on the CPU."""
+        """Before a walk of :meth:`listed`'s range on a GPU, its first entry (:meth:`read_ahead`); nothing on
+        the CPU."""
         index = 0
         if ti.static(self.slot_major):
             if first < last:
@@ -249,24 +250,27 @@ class NeighbourGrid:
         return index
 
     @ti.func
-    def next_neighbour(self, neighbours: ti.template(), first, last, stride, k, upcoming):
-        """(j, upcoming): the k-th entry of a range of :meth:`listed`, and what the next step needs.
-
-        On a GPU the walk reads one entry ahead: j is the entry read at the step before, and the next one
-        is asked for now, so that its load is in flight while the thread gathers and uses x_j. A
-        thread's walk is two dependent loads a neighbour (the index, then what it points at), and the
-        iterations' passes wait on that latency more than on bandwidth at a million particles
-        (docs/BENCHMARKS.md, "On a GPU"). The order of every sum stays the same. On the CPU, whose
-        cores read ahead themselves, j is ``neighbours[k]`` and nothing more, the loop the compiler knows
-        best (an index worked out from a stride made the CPU's iterations 5% slower at 64,000 particles)."""
-        j = 0
-        if ti.static(self.slot_major):
-            j = upcoming
-            if k + 1 < last:
-                upcoming = neighbours[first + (k + 1 - first) * stride]
-        else:
+    def neighbour(self, neighbours: ti.template(), k, upcoming):
+        """The k-th entry of a range of :meth:`listed`: on the CPU ``neighbours[k]`` itself, the loop the
+        compiler knows best (an index worked out from a stride made the CPU's iterations 5% slower at
+        64,000 particles); on a GPU ``upcoming``, read at the step before (:meth:`read_ahead`)."""
+        j = upcoming
+        if ti.static(not self.slot_major):
             j = neighbours[k]
-        return j, upcoming
+        return j
+
+    @ti.func
+    def read_ahead(self, neighbours: ti.template(), first, last, stride, k, upcoming):
+        """On a GPU the entry after the k-th, asked for before the thread gathers and uses x_j of the k-th,
+        so that its load is in flight meanwhile: a walk is two dependent loads a neighbour (the index,
+        then what it points at), and the iterations' passes wait on that latency more than on
+        bandwidth at a million particles (docs/BENCHMARKS.md, "On a GPU"). The order of every sum stays
+        the same. On the CPU, whose cores read ahead themselves, ``upcoming`` as it is (unused)."""
+        following = upcoming
+        if ti.static(self.slot_major):
+            if k + 1 < last:
+                following = neighbours[first + (k + 1 - first) * stride]
+        return following
 
     @ti.func
     def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):

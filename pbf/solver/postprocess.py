@@ -115,7 +115,8 @@ class VelocityPostprocess:
                     first, last, stride = self.grid.listed(i, neighbours)
                     upcoming = self.grid.upcoming(neighbours, first, last)
                     for k in range(first, last):
-                        j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                        j = self.grid.neighbour(neighbours, k, upcoming)
+                        upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                         omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
                             self.velocity(x_pred, j, inverse_dt) - vi
                         )
@@ -140,7 +141,8 @@ class VelocityPostprocess:
                     first, last, stride = self.grid.listed(i, neighbours)
                     upcoming = self.grid.upcoming(neighbours, first, last)
                     for k in range(first, last):
-                        j, upcoming = self.grid.next_neighbour(neighbours, first, last, stride, k, upcoming)
+                        j = self.grid.neighbour(neighbours, k, upcoming)
+                        upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                         w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
                         if ti.static(with_xsph):
                             vj = ti.Vector([0.0, 0.0, 0.0])
