@@ -7,6 +7,7 @@ import pytest
 
 from pbf import Simulation
 from pbf.solver.backend import decisions_on_device
+from pbf.solver.grid import SLOTS
 from pbf.study.common import TransferCounter
 from scenes import small_dam_break
 
@@ -88,3 +89,24 @@ def test_the_gpus_list_layout_holds_the_cpus_lists(monkeypatch):
         slot_major.step()
     assert np.abs(rows.positions() - slot_major.positions()).max() < 1e-5  # m: rounding, 1e-4 spacings
     assert slot_major.stats()["mean_neighbours"] == pytest.approx(rows.stats()["mean_neighbours"], rel=1e-3)
+
+
+def test_the_device_paths_substep_keeps_exact_lists_past_their_slots():
+    # At h = 3.6 spacings a particle inside the block has about 190 neighbours, far more than the SLOTS
+    # of the one-visit list: every substep of the device path takes the compact list's way (its
+    # second visit and the starts it works out on the device), and must give the host path's lists
+    # exactly (its own overflow read and compact build) and the same motion up to rounding.
+    scene = small_dam_break(iterations=3)
+    scene["solver"]["kernel_ratio"] = 3.6
+    host = Simulation(scene)
+    with decisions_on_device():
+        device = Simulation(scene)
+    for _ in range(2):
+        host.step()
+        device.step()
+    assert max(map(len, host.grid.neighbour_lists())) > 2 * SLOTS  # not vacuous: the lists overflowed
+    assert device.grid.overflow[None] == 1
+    assert device.grid.on_device and not device.grid.checking  # the device's unchecked build, both visits in one call
+    for a, b in zip(host.grid.neighbour_lists(), device.grid.neighbour_lists(), strict=True):
+        assert np.array_equal(a, b)
+    assert np.abs(device.positions() - host.positions()).max() < 1e-5  # m: rounding, 3e-4 spacings
