@@ -82,6 +82,9 @@ class NeighbourGrid:
         """Entries of particle i's neighbours in the list (``neighbour_count`` unless cut at the list's end)."""
         self.overflow = ti.field(ti.i32, shape=())
         """1 when the last visit found a particle with more than SLOTS neighbours."""
+        self.deferred = ti.field(ti.i32, shape=())
+        """1 while an overflow's second visit waits for the first λ pass (:meth:`visit_on_device` with
+        ``defer``, :meth:`finish_compact`)."""
         self.status = ti.field(ti.i32, shape=2)
         """What unchecked builds saw since the host last asked (:meth:`take_status`)."""
         self.on_device = keeps_decisions_on_device()
@@ -158,6 +161,7 @@ class NeighbourGrid:
         clear them."""
         if i == 0:
             self.overflow[None] = 0
+            self.deferred[None] = 0
         self.neighbour_scan.clear_block(i)
 
     @ti.func
@@ -337,14 +341,20 @@ class NeighbourGrid:
 
     @ti.func
     def visit_first(
-        self, x: ti.template(), neighbours: ti.template(), mover: ti.template(), count_blocks: ti.template() = False
+        self,
+        x: ti.template(),
+        neighbours: ti.template(),
+        mover: ti.template(),
+        count_blocks: ti.template() = False,
+        defer: ti.template() = False,
     ):
         """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
         was cleared by the sort). After a sort whose ``mover`` gathered into scratch
         (:meth:`order_loops`), ``x`` is the sorted positions' scratch and each thread first takes its
         particle's arrays back (``mover.take_gathered``): no loop of its own for the copy; else ``mover``
         is False. ``count_blocks``: each particle's count also goes into its block of the overflow's
-        prefix sum (``ExclusiveScan.add_to_block``, that sum's first pass up), for :meth:`visit_on_device`."""
+        prefix sum (``ExclusiveScan.add_to_block``, that sum's first pass up), for :meth:`visit_on_device`;
+        ``defer``: an overflow also sets :attr:`deferred`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 if ti.static(not isinstance(mover, bool)):
@@ -352,33 +362,54 @@ class NeighbourGrid:
                 self._visit_particle(x, neighbours, False, i)
                 if ti.static(count_blocks):
                     self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
+                if ti.static(defer):
+                    if self.neighbour_count[i] > SLOTS:
+                        self.deferred[None] = 1
 
     @ti.func
     def visit_on_device(
-        self, x: ti.template(), neighbours: ti.template(), mover: ti.template(), gathered: ti.template()
+        self,
+        x: ti.template(),
+        neighbours: ti.template(),
+        mover: ti.template(),
+        gathered: ti.template(),
+        defer: ti.template() = False,
     ):
-        """Both visits in one launch, the second and its prefix sum over no particles unless the first
-        overflowed: the device decides, the host reads nothing. A compact list longer than the array
-        is cut at its end and ``status`` says so, for :meth:`settle_frame`. The overflow flag was
-        cleared by the sort; the loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For
-        the top level of a kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted
-        positions' scratch, read by the first visit; the second reads ``x``, taken back by then)."""
-        self.visit_first(gathered, neighbours, mover, True)
+        """Both visits in one launch, the second over no particles unless the first overflowed: the device
+        decides, the host reads nothing. A compact list longer than the array is cut at its end and
+        ``status`` says so, for :meth:`settle_frame`. The overflow flag was cleared by the sort; the
+        loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For the top level of a
+        kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted positions' scratch, read
+        by the first visit; the second reads ``x``, taken back by then).
+
+        With ``defer`` the second visit is left to the substep's first λ pass (:meth:`finish_compact`,
+        each thread for its own particle, which is all that pass reads of the lists): a loop fewer, for a
+        substep with nothing between the lists and the iterations that reads them."""
+        self.visit_first(gathered, neighbours, mover, True, defer)
         # The compact list's starts: the first visit summed each block of counts; the levels above are
         # summed only after an overflow, and each thread of the second visit adds up its own start
         # (ExclusiveScan.start_of), so that no pass down runs in every substep for a rare event.
         self.neighbour_scan.up(self.neighbour_count, self.active, self.overflow, True)
-        for i in range(ti.static(self.particle_cell.shape[0])):
-            count = self.active[None]
-            if i < count * self.overflow[None]:
-                start = self.neighbour_scan.start_of(self.neighbour_count, i)
-                self.neighbour_start[i] = start
-                self._visit_particle(x, neighbours, True, i)
-                if i == count - 1:  # the last particle's list ends where the compact list does
-                    total = start + self.neighbour_count[i]
-                    self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
-                    if total > neighbours.shape[0]:
-                        self.status[TRUNCATED] = 1
+        if ti.static(not defer):
+            for i in range(ti.static(self.particle_cell.shape[0])):
+                self.finish_compact(x, neighbours, i, self.overflow)
+
+    @ti.func
+    def finish_compact(self, x: ti.template(), neighbours: ti.template(), i, gate: ti.template()):
+        """The second visit for particle i after a first visit that overflowed (the 0-D field ``gate``: the
+        overflow flag, or :attr:`deferred`): its start in the compact list, worked out by this thread
+        (``ExclusiveScan.start_of``), then its neighbours written there; the last particle's thread
+        records how long the list got."""
+        count = self.active[None]
+        if i < count * gate[None]:
+            start = self.neighbour_scan.start_of(self.neighbour_count, i)
+            self.neighbour_start[i] = start
+            self._visit_particle(x, neighbours, True, i)
+            if i == count - 1:  # the last particle's list ends where the compact list does
+                total = start + self.neighbour_count[i]
+                self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
+                if total > neighbours.shape[0]:
+                    self.status[TRUNCATED] = 1
 
     def build_neighbours(self, x, checked: bool = True) -> None:
         """Exact neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell.

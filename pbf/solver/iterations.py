@@ -70,15 +70,16 @@ class JacobiIterations:
             self.flags[USED] = count
         self._used = count
 
-    def run(self, predicted, neighbours, control) -> None:
+    def run(self, predicted, neighbours, control, defer: bool = False) -> None:
         """``control.iterations`` Jacobi iterations of x* (a ``PredictedPositions``) at most, stopped by
         ``control.target_density_error`` (0: never) after ``control.min_iterations``; x* may end in
         either buffer (``predicted.gather()`` brings it back). On the device path all calls but the
         last: the caller runs the last call's iterations (from :meth:`last_start`,
         :meth:`iterate_loops`) and :meth:`settle_loop` in the launch that ends the substep
-        (``pbf.solver.substep.SubstepLaunches.finish``)."""
+        (``pbf.solver.substep.SubstepLaunches.finish``). ``defer``: the lists' second visit after an
+        overflow was left to the first λ pass (``NeighbourGrid.finish_compact``; the device path only)."""
         if self.on_device:
-            self._run_on_device(predicted, neighbours, control)
+            self._run_on_device(predicted, neighbours, control, defer)
         else:
             self._run_on_host(predicted, neighbours, control)
 
@@ -105,7 +106,7 @@ class JacobiIterations:
                 weights.restart()
             last_error = error
 
-    def _run_on_device(self, predicted, neighbours, control) -> None:
+    def _run_on_device(self, predicted, neighbours, control, defer: bool) -> None:
         assert not predicted.in_second, "a substep's x* starts in the first buffer"
         target = control.target_density_error
         measure = target > 0.0
@@ -116,6 +117,7 @@ class JacobiIterations:
                 neighbours,
                 measure,
                 self.per_launch,
+                defer,
                 k,
                 control.iterations,
                 target,
@@ -149,6 +151,7 @@ class JacobiIterations:
         neighbours: NeighbourList,
         measure: ti.template(),
         per_launch: ti.template(),
+        finish_lists: ti.template(),
         start: ti.i32,
         iterations: ti.i32,
         target: ti.f32,
@@ -163,7 +166,18 @@ class JacobiIterations:
         loop's state and the live count itself: read once outside the loops they would be one-thread
         tasks of their own, a launch each on a GPU."""
         self.iterate_loops(
-            first, second, neighbours, measure, per_launch, True, start, iterations, target, min_iterations, step_back
+            first,
+            second,
+            neighbours,
+            measure,
+            per_launch,
+            True,
+            finish_lists,
+            start,
+            iterations,
+            target,
+            min_iterations,
+            step_back,
         )
 
     @ti.func
@@ -175,6 +189,7 @@ class JacobiIterations:
         measure: ti.template(),
         per_launch: ti.template(),
         surface_pass: ti.template(),
+        finish_lists: ti.template(),
         start: ti.template(),
         iterations: ti.template(),
         target: ti.template(),
@@ -184,9 +199,14 @@ class JacobiIterations:
         """The loops of :meth:`_iterate`, for the top level of a kernel (``pbf.solver.substep`` runs the
         substep's last call of them in the launch that ends it); every argument a template, so that no
         value is copied outside the loops (a one-thread task). ``surface_pass``: whether the loops include
-        the surface ghost's pass, which runs in a call that starts at the substep's first iteration."""
+        the surface ghost's pass, which runs in a call that starts at the substep's first iteration;
+        ``finish_lists``: whether the first λ pass begins with the lists' deferred second visit
+        (``NeighbourGrid.finish_compact``: each thread its own particle's list, the only one its λ reads)."""
         for u in ti.static(range(per_launch)):
             for i in range(ti.static(self.density.error.shape[0])):
+                if ti.static(u == 0 and finish_lists):
+                    if start == 0:
+                        self.density.grid.finish_compact(first, neighbours, i, self.density.grid.deferred)
                 k = start + u
                 running, from_second, index = self._loop_state(measure, k)
                 if k < iterations and i < self.active[None] * running:

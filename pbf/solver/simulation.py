@@ -460,8 +460,11 @@ class Simulation:
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         x_star = self.integrator.predicted
         self._outside_inputs(dt)  # emitters, the mouse, moving walls
+        # On the device path an overflow's second visit can wait for the first λ pass when no divergence
+        # pass reads the lists before it (NeighbourGrid.finish_compact): a launch fewer.
+        defer = self.iterations.on_device and control.divergence_iterations == 0
         with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch:
-            self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2)  # v += Δt g, x* = x + Δt v,
+            self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer)  # v += Δt g, x* = x + Δt v,
             # the particles sorted by the cell of x*, and their neighbours
         with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
             if control.divergence_iterations > 0:  # warm-started), then x* = x + Δt v again
@@ -470,7 +473,7 @@ class Simulation:
         on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
             # path all but the last call's: that runs with lines 20-23, timed with them)
-            self.iterations.run(x_star, self.grid.neighbours, control)
+            self.iterations.run(x_star, self.grid.neighbours, control, defer)
             x_star.gather()  # x* back in the first buffer (the device path's last launch does it)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             finish = (
@@ -485,7 +488,7 @@ class Simulation:
                 self.scene.time.max_speed_m_s,  # and v capped (0: not)
             )
             if on_device:  # the iterations' last call, x* settled, then lines 20-23: one launch
-                self.launches.finish(self.grid.neighbours, control, *finish)
+                self.launches.finish(self.grid.neighbours, control, defer, *finish)
                 x_star.in_second = False
             else:
                 self.postprocess.finish(x_star.first, self.grid.neighbours, *finish)

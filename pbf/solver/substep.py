@@ -34,14 +34,16 @@ class SubstepLaunches:
         self.iterations = iterations
         self.postprocess = postprocess
 
-    def predict_and_find_neighbours(self, dt: float, gravity) -> None:
+    def predict_and_find_neighbours(self, dt: float, gravity, defer: bool = False) -> None:
         """Algorithm 1, lines 1-7, in one call: v += Δt g, x* = x + Δt v (kept inside the boundaries),
         the particles and x* sorted by the cell of x*, and their exact neighbour lists. On the CPU the
         call returns whether a particle has more than SLOTS neighbours, and only then a second visit
-        fills a compact list (``NeighbourGrid.build_compact``)."""
+        fills a compact list (``NeighbourGrid.build_compact``). On the device path ``defer`` leaves an
+        overflow's second visit to the first λ pass (``NeighbourGrid.finish_compact``), for a substep in
+        which nothing else reads the lists before it."""
         grid, x = self.grid, self.integrator.predicted.first
         if grid.on_device and not grid.checking:
-            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, *gravity)
+            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, *gravity, defer)
         elif self._predict_and_visit(grid.neighbours, dt, *gravity):
             grid.build_compact(x)
 
@@ -56,13 +58,13 @@ class SubstepLaunches:
 
     @ti.kernel
     def _predict_and_find_neighbours_on_device(
-        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32
+        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, defer: ti.template()
     ):
         # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
         # a call than three values (benchmarks/kernel_arguments.py).
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
-        self.grid.visit_on_device(x, neighbours, self.state, ti.static(self.state.scratch_of(x)))  # the lists
+        self.grid.visit_on_device(x, neighbours, self.state, ti.static(self.state.scratch_of(x)), defer)  # the lists
 
     @ti.kernel
     def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32) -> ti.i32:
@@ -72,13 +74,14 @@ class SubstepLaunches:
         self.grid.visit_first(ti.static(self.state.scratch_of(x)), neighbours, self.state)  # the lists' first visit
         return self.grid.overflow[None]
 
-    def finish(self, neighbours, control, *finish) -> None:
+    def finish(self, neighbours, control, defer: bool, *finish) -> None:
         """The device path's end of a substep in one call (:meth:`_finish`): the iterations of the last call,
         x* settled into the first buffer, then lines 20-23 (``finish``: the arguments of
         ``VelocityPostprocess.finish`` after the neighbours). Loops that would run over no particle are
         left out at compile time, each a launch saved: the surface pass unless the last call holds the
         substep's first iteration, and the settling when x* surely ends in the first buffer (no target,
-        an even count: the last iteration reads the second and writes the first)."""
+        an even count: the last iteration reads the second and writes the first). ``defer``: as in
+        :meth:`predict_and_find_neighbours`."""
         iterations, measure = control.iterations, control.target_density_error > 0.0
         start = self.iterations.last_start(iterations)
         self._finish(
@@ -86,6 +89,7 @@ class SubstepLaunches:
             measure,
             self.iterations.per_launch,
             start == 0,
+            defer and start == 0,
             measure or iterations % 2 == 1,
             start,
             iterations,
@@ -102,6 +106,7 @@ class SubstepLaunches:
         measure: ti.template(),
         per_launch: ti.template(),
         surface_pass: ti.template(),
+        finish_lists: ti.template(),
         settle: ti.template(),
         start: ti.i32,
         iterations: ti.i32,
@@ -119,8 +124,9 @@ class SubstepLaunches:
         max_speed: ti.f32,
     ):
         """:meth:`finish`'s launch: the iterations from ``start`` (``JacobiIterations.iterate_loops``, the
-        surface pass only with ``surface_pass``), x* settled into the first buffer
-        (``JacobiIterations.settle_loop``, only with ``settle``), then lines 20-23 (``VelocityPostprocess.finish``)."""
+        surface pass only with ``surface_pass``, a deferred second visit only with ``finish_lists``), x*
+        settled into the first buffer (``JacobiIterations.settle_loop``, only with ``settle``), then lines
+        20-23 (``VelocityPostprocess.finish``)."""
         self.iterations.iterate_loops(
             self.integrator.predicted.first,
             self.integrator.predicted.second,
@@ -128,6 +134,7 @@ class SubstepLaunches:
             measure,
             per_launch,
             surface_pass,
+            finish_lists,
             start,
             iterations,
             target,
