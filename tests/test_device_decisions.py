@@ -91,13 +91,15 @@ def test_the_gpus_list_layout_holds_the_cpus_lists(monkeypatch):
     assert slot_major.stats()["mean_neighbours"] == pytest.approx(rows.stats()["mean_neighbours"], rel=1e-3)
 
 
-def test_the_device_paths_substep_keeps_exact_lists_past_their_slots():
+@pytest.mark.parametrize("divergence", [0, 1])
+def test_the_device_paths_substep_keeps_exact_lists_past_their_slots(divergence):
     # At h = 3.6 spacings a particle inside the block has about 190 neighbours, far more than the SLOTS
     # of the one-visit list: every substep of the device path takes the compact list's way (its
     # second visit and the starts it works out on the device), and must give the host path's lists
-    # exactly (its own overflow read and compact build) and the same motion up to rounding.
+    # exactly (its own overflow read and compact build) and the same motion up to rounding. Without
+    # the divergence pass the second visit runs in the first λ pass; with it, in lines 1-7's call.
     scene = small_dam_break(iterations=3)
-    scene["solver"]["kernel_ratio"] = 3.6
+    scene["solver"].update(kernel_ratio=3.6, divergence_iterations=divergence)
     host = Simulation(scene)
     with decisions_on_device():
         device = Simulation(scene)
