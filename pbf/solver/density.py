@@ -376,19 +376,21 @@ class DensityConstraint:
                     images = (lam_i + self.lam[j]) * volume * h * g_images
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
             else:
-                first, last, stride = self.grid.listed(i, neighbours)
-                upcoming = self.grid.upcoming(neighbours, first, last)
-                for k in range(first, last):
-                    j = self.grid.neighbour(neighbours, k, upcoming)
-                    upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                    dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
+                dx = self.plain_pair_correction(x, xi, i, lam_i, neighbours, h, scale, volume, scorr)
         else:
-            first, last, stride = self.grid.listed(i, neighbours)
-            upcoming = self.grid.upcoming(neighbours, first, last)
-            for k in range(first, last):
-                j = self.grid.neighbour(neighbours, k, upcoming)
-                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
+            dx = self.plain_pair_correction(x, xi, i, lam_i, neighbours, h, scale, volume, scorr)
+        return dx
+
+    @ti.func
+    def plain_pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template(), h, scale, volume, scorr):
+        """:meth:`pair_correction` without mirror images."""
+        dx = ti.Vector([0.0, 0.0, 0.0])
+        first, last, stride = self.grid.listed(i, neighbours)
+        upcoming = self.grid.upcoming(neighbours, first, last)
+        for k in range(first, last):
+            j = self.grid.neighbour(neighbours, k, upcoming)
+            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
+            dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
         return dx
 
     @ti.func
