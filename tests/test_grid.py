@@ -197,7 +197,7 @@ def test_a_scan_whose_caller_counted_the_blocks(block, length):
     def count_and_scan():
         for k in range(length):
             scan.add_to_block(k, source[k])
-        scan.scan(source, starts, length, 1, True)
+        scan.scan(source, starts, length, True)
         for k in range(length):
             scan.clear_block(k)
 

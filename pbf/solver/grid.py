@@ -188,7 +188,7 @@ class NeighbourGrid:
         """
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
         # hold no particle and add nothing.
-        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length, 1, True)
+        self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length, True)
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 cell = self.particle_cell[i]

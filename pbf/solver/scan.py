@@ -76,9 +76,6 @@ class Tree:
             self.offsets.append(self.offsets[-1] + level_length)
         self.scratch = max(self.offsets[-1], 1)
         """Entries of levels 1 … top, back to back (level j at ``offsets[j]``)."""
-        self.fused_top = self.lengths[self.top] <= max(GPU_BLOCK, CPU_SCAN_BLOCKS)
-        """Whether the scan's first pass down finds each top entry's start by adding the (few) entries
-        before it, rather than in a pass of its own over the top block."""
 
 
 @ti.func
@@ -126,7 +123,7 @@ class ExclusiveScan:
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
         self.starts = ti.field(ti.i32, shape=self.tree.scratch)
-        """Exclusive block starts of levels 1 … top (the top only when it has a pass of its own)."""
+        """Exclusive block starts of levels 1 … top − 1 (the top's are added up where they are needed)."""
 
     @ti.func
     def _entry(self, values: ti.template(), level: ti.template(), k):
@@ -185,49 +182,31 @@ class ExclusiveScan:
         return total
 
     @ti.func
-    def scan(
-        self,
-        values: ti.template(),
-        starts: ti.template(),
-        count: ti.template(),
-        gate: ti.template() = 1,
-        counted: ti.template() = False,
-    ):
+    def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), counted: ti.template() = False):
         """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
-        0-D field, a Python int or a value, times the 0-D field ``gate`` if one is given. Called at a
-        kernel's top level. Up the tree each block sums its entries; at the top one thread writes the
-        running sums of the top block (or, for a top of few entries, each block below adds up the
-        entries before its own); down the tree each block writes the running sums of its entries from
-        its own start.
+        0-D field, a Python int or a value. Called at a kernel's top level. Up the tree each block sums
+        its entries; the first pass down has each block add up the top's entries before its own (at
+        most a block's: 255 on the CPU, 31 on a GPU), so the top needs no pass of its own; down the
+        tree each block writes the running sums of its entries from its own start.
 
         Every level loops over all of its blocks, a count the kernel knows, and skips those past the
         live entries, each thread reading the count itself: a loop bound or a count read at run time
         outside the loops would be a one-thread task of its own. ``counted``: the level-0 blocks' sums
         were gathered by :meth:`add_to_block` (over all ``length`` entries), and the first pass up is
         skipped."""
-        self.up(values, count, gate, counted)
-        if ti.static(self.tree.top > 0 and not self.tree.fused_top):  # the top block: one thread walks it
-            top = ti.static(self.tree.top)
-            for _ in range(1):
-                live = read_count(count, gate)
-                for j in ti.static(range(top)):
-                    live = _live(live, self.tree.blocks[j])
-                running = 0
-                for k in range(live):
-                    self.starts[self.tree.offsets[top] + k] = running
-                    running += self.sums[self.tree.offsets[top] + k]
+        self.up(values, count, 1, counted)
         for down in ti.static(range(self.tree.top)):  # down: each level's starts from its blocks' starts
             level = ti.static(self.tree.top - 1 - down)
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):
-                total_count = read_count(count, gate)
+                total_count = read_count(count, 1)
                 live = total_count
                 for j in ti.static(range(level)):
                     live = _live(live, self.tree.blocks[j])
                 if b < _live(live, block):
                     running = 0
-                    if ti.static(level + 1 == self.tree.top and self.tree.fused_top):
-                        for k in range(b):  # the top level's sums before this block (fewer than GPU_BLOCK)
+                    if ti.static(level + 1 == self.tree.top):
+                        for k in range(b):  # the top level's sums before this block (fewer than a block)
                             running += self.sums[self.tree.offsets[self.tree.top] + k]
                     else:
                         running = self.starts[self.tree.offsets[level + 1] + b]
@@ -246,7 +225,7 @@ class ExclusiveScan:
                         starts[0] = 0
         if ti.static(self.tree.top == 0):  # a single block: one thread walks it
             for _ in range(1):
-                live = read_count(count, gate)
+                live = read_count(count, 1)
                 running = 0
                 for k in range(live):
                     starts[k] = running
