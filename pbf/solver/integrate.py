@@ -56,14 +56,8 @@ class Integrator:
     @ti.kernel
     def advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
         """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the boundaries as in
-        :meth:`predict`; one launch for both."""
-        self.advance_loop(dt, gravity)
-
-    @ti.func
-    def advance_loop(self, dt: ti.template(), gravity: ti.template()):
-        """The loop of :meth:`advance`, for the top level of a kernel (``pbf.solver.substep``). Over the
-        particles' bucket, the live ones only: a loop bound read at run time would cost a one-thread
-        task, a launch on a GPU."""
+        :meth:`predict`; one launch for both. The substep does the same in the loop that also counts each
+        particle's cell (``pbf.solver.substep``)."""
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 self.advance_particle(dt, gravity, i)
