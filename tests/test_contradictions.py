@@ -28,6 +28,10 @@ def scene_with(**tables):
             "frame's substeps; raise time.max_substeps or lower time.substeps",
         ),
         (
+            {"time": {"settle_substeps": 2}},
+            "key 'time.settle_substeps' = 2 sets the substeps of settling, but 'time.settle_s' is 0",
+        ),
+        (
             {"time": {"max_cfl": 3.0}, "solver": {"kernel_ratio": 2.0}},
             "key 'time.max_cfl' = 3 would let a particle pass its whole neighbourhood",
         ),

@@ -141,7 +141,13 @@ def _check_time(scene, source: str) -> None:
 
 
 def _check_settle(scene, source: str) -> None:
-    """Settling runs the blocks alone: water that an emitter adds later cannot be settled beforehand."""
+    """Settling runs the blocks alone: water that an emitter adds later cannot be settled beforehand; and
+    its own Δt means something only where it settles."""
+    if scene.time.settle_substeps > 0 and scene.time.settle_s == 0.0:
+        raise SceneError(
+            f"{source}: key 'time.settle_substeps' = {scene.time.settle_substeps} sets the substeps of settling, "
+            f"but 'time.settle_s' is 0: this scene does not settle; allowed: 0 unless time.settle_s > 0"
+        )
     if scene.time.settle_s > 0.0 and scene.emitters:
         raise SceneError(
             f"{source}: key 'time.settle_s' = {_num(scene.time.settle_s)} settles the blocks before t = 0, "
