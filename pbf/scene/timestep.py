@@ -146,7 +146,8 @@ def _check_settle(scene, source: str) -> None:
     if scene.time.settle_substeps > 0 and scene.time.settle_s == 0.0:
         raise SceneError(
             f"{source}: key 'time.settle_substeps' = {scene.time.settle_substeps} sets the substeps of settling, "
-            f"but 'time.settle_s' is 0: this scene does not settle; allowed: 0 unless time.settle_s > 0"
+            f"but 'time.settle_s' is 0: this scene does not settle; allowed: 0 unless time.settle_s > 0 "
+            f"(to turn settling off, set both to 0)"
         )
     if scene.time.settle_s > 0.0 and scene.emitters:
         raise SceneError(

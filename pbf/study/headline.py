@@ -111,8 +111,9 @@ def rows(quick: bool, rounds: int) -> tuple[list[tuple[str, str]], float | None]
     """(measure, value) of every line of the table, and the load average when the timing ended."""
     seed = seed_second(3 if quick else SEED_FRAMES, 1 if quick else rounds)
     surge = validate.martin_moyce(9 if quick else MARTIN_MOYCE_DIVISOR, end_T=0.5 if quick else 3.5)
+    unsettled = ["time.settle_s=0", "time.settle_substeps=0"]  # --quick: no settling before t = 0
     tank = validate.hydrostatic(
-        3 if quick else HYDROSTATIC_FRAMES, samples=2 if quick else 30, overrides=["time.settle_s=0"] if quick else ()
+        3 if quick else HYDROSTATIC_FRAMES, samples=2 if quick else 30, overrides=unsettled if quick else ()
     )
     waves = validate.wave_tank(end_s=0.1 if quick else 4.0, gauges_in_depths=(2.0,))
     late_surface = tank.surface_m[len(tank.surface_m) // 2 :].mean()
