@@ -77,6 +77,23 @@ SURFACE_SKIP = 0.002
 """ψ is left at 0, without its neighbour loop, where twice the deficit 1 − ρ/ρ0 is below this."""
 
 
+@ti.func
+def position(x: ti.template(), j):
+    """x_j of ``x``: a field, or the triple (first, second, from_second) of the iterations' two buffers,
+    read from the one ``from_second`` picks. The choice is made per neighbour, inside the walk, so that a
+    kernel holds one copy of each walk, not one per buffer: a branch every thread takes the same way,
+    which costs nothing measurable, where the copies doubled the compile of the density iteration."""
+    xj = ti.Vector([0.0, 0.0, 0.0])
+    if ti.static(isinstance(x, tuple)):
+        if x[2]:
+            xj = ti.static(x[1])[j]
+        else:
+            xj = ti.static(x[0])[j]
+    else:
+        xj = x[j]
+    return xj
+
+
 @ti.data_oriented
 class DensityConstraint:
     """The constraint's kernels and scratch: λ̂ per particle, its sum over a substep, the error sum."""
@@ -215,13 +232,13 @@ class DensityConstraint:
             j = self.grid.neighbour(neighbours, k, upcoming)
             upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             if ti.static(gradients):
-                w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
+                w, grad_w = scaled_kernel_and_gradient(xi - position(x, j), scale)
                 ratio += volume * w
                 g = volume * h * grad_w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
-                ratio += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale)
+                ratio += volume * scaled_kernel((xi - position(x, j)).norm_sqr(), scale)
         return ratio, gradient_i, sum_sq
 
     @ti.func
@@ -241,7 +258,7 @@ class DensityConstraint:
         for k in range(first, last):
             j = self.grid.neighbour(neighbours, k, upcoming)
             upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            xj = x[j]
+            xj = position(x, j)
             if ti.static(gradients):
                 w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
                 w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, scale, True)
@@ -280,12 +297,8 @@ class DensityConstraint:
         wall, wall_gradient = self.fixed_walls(xi)
         self.wall_gradient[i] = wall_gradient  # for this iteration's Δx pass (jacobi_step)
         ratio = 0.0
-        if first_iteration:
-            gradient_i, sum_sq, own_images = ti.Vector([0.0, 0.0, 0.0]), 0.0, ti.Vector([0.0, 0.0, 0.0])
-            if from_second:
-                ratio, gradient_i, sum_sq, own_images = self.pair_sums(second, xi, i, neighbours, True)
-            else:
-                ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
+        if first_iteration:  # always from the first buffer (x* starts a substep there)
+            ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
             # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
             (h, relaxation, surface_density) = (
                 self.constants[None].h,
@@ -297,10 +310,7 @@ class DensityConstraint:
             if surface_density:
                 self.colour_gradient[i] = colour
         else:
-            if from_second:
-                ratio, _, _, _ = self.pair_sums(second, xi, i, neighbours, False)
-            else:
-                ratio, _, _, _ = self.pair_sums(first, xi, i, neighbours, False)
+            ratio, _, _, _ = self.pair_sums((first, second, from_second), xi, i, neighbours, False)
         return ratio + wall - 1.0
 
     @ti.func
@@ -372,7 +382,7 @@ class DensityConstraint:
                 for k in range(first, last):
                     j = self.grid.neighbour(neighbours, k, upcoming)
                     upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                    w_images, g_images, reflected = self.image_sums(xi, x[j], near, plane, h, scale, True)
+                    w_images, g_images, reflected = self.image_sums(xi, position(x, j), near, plane, h, scale, True)
                     images = (lam_i + self.lam[j]) * volume * h * g_images
                     dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
             else:
@@ -397,7 +407,7 @@ class DensityConstraint:
     def pair_term(self, x: ti.template(), xi, lam_i, j, h, scale, volume, scorr):
         """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12); h, V and (k, 1/W(Δq)) of s_corr from the caller, which
         reads them once per particle."""
-        w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
+        w, grad_w = scaled_kernel_and_gradient(xi - position(x, j), scale)
         s_corr = 0.0
         if ti.static(self.with_scorr):
             s_corr = -scorr[0] * (w * scorr[1]) ** ti.static(SCORR_N)
@@ -412,14 +422,10 @@ class DensityConstraint:
         h, max_correction = self.constants[None].h, self.constants[None].max_correction
         xi = self.own_position(first, second, from_second, i)
         lam_i = self.lam[i]
-        dx = ti.Vector([0.0, 0.0, 0.0])
-        earlier = xi
+        dx = self.pair_correction((first, second, from_second), xi, i, lam_i, neighbours)
+        earlier = second[i]
         if from_second:
-            dx = self.pair_correction(second, xi, i, lam_i, neighbours)
             earlier = first[i]
-        else:
-            dx = self.pair_correction(first, xi, i, lam_i, neighbours)
-            earlier = second[i]
         dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi, from the λ pass
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
