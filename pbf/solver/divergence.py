@@ -55,6 +55,11 @@ class DivergenceCorrection:
         """min(C_i, 0) at x: how far below ρ0 particle i may still fill."""
         self.increment = ti.field(ti.f32, shape=params.particle_count)
         """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
+        self.wall_gradient = density.wall_gradient
+        """ĝ_wall at x_i, looked up by :meth:`start` and read by every iteration (x stays put while v is
+        corrected): the density constraint's field, free outside its iterations, which come after this
+        pass. The ghost of obstacles and bodies is long code: looked up three times per iteration kernel
+        and start, it took 2.4 s of a cold start's compile with bodies."""
 
     @ti.func
     def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), h_over_dt, start: ti.template()):
@@ -82,11 +87,16 @@ class DivergenceCorrection:
                 dv += (increment_i + self.increment[j]) * g
             else:
                 dv += (increment_i + self.increment[j]) * volume * h * scaled_kernel_gradient(xi - x[j], scale)
-        wall, wall_gradient = self.boundaries.ghost(xi, False)
-        dv += increment_i * h * wall_gradient
+        wall_gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(start):
+            wall, at_start = self.boundaries.ghost(xi, False)
+            wall_gradient = at_start
+            self.wall_gradient[i] = wall_gradient
             self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
             self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + relaxation
+        else:
+            wall_gradient = self.wall_gradient[i]
+        dv += increment_i * h * wall_gradient
         return h_over_dt * dv
 
     @ti.kernel
@@ -111,8 +121,7 @@ class DivergenceCorrection:
                 j = self.grid.neighbour(neighbours, k, upcoming)
                 upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
                 rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
-            _, wall_gradient = self.boundaries.ghost(xi, False)
-            rate += h * wall_gradient.dot(vi - self.boundaries.velocity(xi))
+            rate += h * self.wall_gradient[i].dot(vi - self.boundaries.velocity(xi))
             carried = self.state.multiplier[i] * dt * dt
             c = dt / h * rate + self.deficit[i]
             total = ti.min(carried - omega * c / self.denominator[i], 0.0)
