@@ -205,6 +205,7 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
         (["sizes", "--presets", "pour"], "--presets: applies to the presets and start modes only, not to sizes"),
         (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
+        (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
     ],
 )
 def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):
@@ -236,6 +237,23 @@ def test_bench_start_counts_the_kernels_a_start_compiles(tmp_path):
     assert cold["compiled"] > 10, cold  # the solver's kernels, each one file in the cache
     assert warm["compiled"] == 0, warm  # the same start again: everything from the cache
     assert warm["ready_s"] < cold["ready_s"], (cold, warm)
+
+
+@pytest.mark.slow
+def test_bench_start_first_calls_names_the_kernels_a_cold_start_compiles(capsys):
+    """``--first-calls``: a fresh process with an empty cache builds the preset and steps it once, and
+    the table names the solver's kernels with positive times, the longest first."""
+    from pbf.study import start
+
+    start.first_calls(["dam_break"], "cpu")
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith("dam_break: built and one substep in "), lines
+    rows = [line.split() for line in lines[1:]]
+    seconds = [float(row[0]) for row in rows]
+    names = [row[2] for row in rows]
+    assert len(rows) == start.FIRST_CALLS_SHOWN and all(t > 0 for t in seconds), lines
+    assert seconds == sorted(seconds, reverse=True), lines
+    assert "DensityConstraint.iterate" in names and "SubstepLaunches._predict_and_visit" in names, lines
 
 
 def test_traffic_model_counts_a_lattice():

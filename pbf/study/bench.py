@@ -6,7 +6,7 @@
     python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
     python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
     python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4]   (kernel calls, tasks per substep)
-    python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared]   (see pbf.study.start)
+    python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (see pbf.study.start)
     python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
     python -m pbf.study.bench frames  [options of python -m pbf.study.frames]   (the renderers and writer alone)
 
@@ -476,6 +476,9 @@ def main(argv=None):
     parser.add_argument("--presets", nargs="+", default=None, help="presets, start: which (default: all)")
     parser.add_argument("--no-shared", action="store_true", help="start: leave out the starts in one shared cache")
     parser.add_argument(
+        "--first-calls", action="store_true", help="start: each kernel's first call (its compile) instead, per preset"
+    )
+    parser.add_argument(
         "--device-decisions",
         action="store_true",
         help="keep the substep's decisions on the device, as GPU backends do, on any backend",
@@ -548,6 +551,7 @@ def main(argv=None):
     for option, given, modes in (
         ("--presets", args.presets, ("presets", "start")),
         ("--no-shared", args.no_shared, ("start",)),
+        ("--first-calls", args.first_calls, ("start",)),
         ("--perturb", args.perturb is not None, ("presets",)),
         ("tables", args.tables, ("compare",)),
     ):
@@ -562,6 +566,8 @@ def main(argv=None):
         from pbf.study import start
 
         presets = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
+        if args.first_calls:
+            return start.first_calls(presets, args.arch)
         return start.run(presets, args.arch, not args.no_shared, args.csv)
     args.backend = start_backend(
         args.arch,

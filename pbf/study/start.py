@@ -18,6 +18,12 @@ Per preset, in a cache folder of its own, emptied first:
 
 Then, unless ``--no-shared``, every preset once more in order in one fresh shared folder (``shared``):
 what a preset costs after the ones before it have run, e.g. ``drop_into_pool`` after ``dam_break``.
+
+With ``--first-calls``, where a cold start's compile goes instead: per preset, in a fresh process with
+an empty offline cache, the Simulation built with settling off and one substep, and the first call of
+each kernel timed (Taichi's Python front end, the compile and one run), the longest first:
+
+    python -m pbf.study.bench start --first-calls [--presets hydrostatic ...]
 """
 
 from __future__ import annotations
@@ -69,6 +75,66 @@ def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str])
         "compiled": len(cached_kernels(folder) - before),
         "error": error,
     }
+
+
+FIRST_CALLS_SHOWN = 8
+"""Kernels each ``--first-calls`` table lists."""
+
+
+def first_calls(presets: list[str], arch: str | None) -> None:
+    """For each preset, :func:`first_calls_here` in a fresh process with an empty offline cache."""
+    for preset in presets:
+        with tempfile.TemporaryDirectory(prefix="pbf-first-calls-") as folder:
+            code = f"from pbf.study.start import first_calls_here; first_calls_here({preset!r}, {arch!r})"
+            env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder)
+            done = subprocess.run(
+                [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
+            )
+            lines = done.stdout.strip().splitlines() or [(done.stderr.strip().splitlines() or ["no output"])[-1]]
+            print("\n".join(lines) + "\n", flush=True)
+
+
+def first_calls_here(preset: str, arch: str | None) -> None:
+    """In this process: ``preset`` built with its settling off (a start that settles runs its substeps
+    on kernels already compiled) and stepped one substep, each kernel's first call per compiled
+    variant timed in wall seconds; prints the total and the FIRST_CALLS_SHOWN longest."""
+    import taichi as ti
+    import taichi.lang.kernel_impl as kernel_impl  # Taichi's own class: a call that adds a variant compiles it
+
+    from pbf.scene import load_scene
+    from pbf.solver import Simulation, start_backend
+
+    start_backend(arch or "cpu", quiet=True)
+    seconds: dict[str, float] = {}
+    call = kernel_impl.Kernel.__call__
+
+    def timed(kernel, *args, **kwargs):
+        variants = len(kernel.compiled_kernels)
+        began = time.perf_counter()
+        result = call(kernel, *args, **kwargs)
+        if len(kernel.compiled_kernels) > variants:
+            ti.sync()
+            name = kernel.func.__qualname__
+            seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - began
+        return result
+
+    kernel_impl.Kernel.__call__ = timed
+    try:
+        scene = load_scene(preset)
+        off = ["time.settle_s=0", "time.settle_substeps=0"] if scene.time.settle_s > 0 else []
+        began = time.perf_counter()
+        sim = Simulation(load_scene(preset, off), quiet=True)
+        sim.substep()
+        ti.sync()
+        total = time.perf_counter() - began
+    finally:
+        kernel_impl.Kernel.__call__ = call
+    firsts, kernels = sum(seconds.values()), len(seconds)
+    print(
+        f"{preset}: built and one substep in {total:.2f} s, {firsts:.2f} s of it the first calls of {kernels} kernels"
+    )
+    for name, value in sorted(seconds.items(), key=lambda item: -item[1])[:FIRST_CALLS_SHOWN]:
+        print(f"  {value:6.2f} s  {name}")
 
 
 def spacing_override(preset: str) -> str:
