@@ -206,6 +206,7 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
         (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
         (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
+        (["start", "--presets", "dam_brake"], "--presets: dam_brake: no such scene file; did you mean dam_break?"),
     ],
 )
 def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):

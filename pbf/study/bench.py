@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from pbf.scene import SCENES_DIR, load_scene
+from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study import sweep as speed_error
@@ -560,6 +560,11 @@ def main(argv=None):
             parser.error(f"{option}: applies to {named} only, not to {args.mode}")
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
+    for name in args.presets or ():  # every scene read before any runs (each start reads its own again)
+        try:
+            load_scene(name)
+        except SceneError as error:
+            parser.error(f"--presets: {error}")
     if args.mode == "compare":
         return compare(args.tables)
     if args.mode == "start":  # each start a process of its own: this one starts no backend

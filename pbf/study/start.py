@@ -87,10 +87,16 @@ def first_calls(presets: list[str], arch: str | None) -> None:
         with tempfile.TemporaryDirectory(prefix="pbf-first-calls-") as folder:
             code = f"from pbf.study.start import first_calls_here; first_calls_here({preset!r}, {arch!r})"
             env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder)
-            done = subprocess.run(
-                [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
-            )
-            lines = done.stdout.strip().splitlines() or [(done.stderr.strip().splitlines() or ["no output"])[-1]]
+            try:
+                done = subprocess.run(
+                    [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
+                )
+            except subprocess.TimeoutExpired:
+                print(f"{preset}: over {TIMEOUT_S} s\n", flush=True)
+                continue
+            lines = done.stdout.strip().splitlines()
+            if done.returncode != 0:  # what it printed, then why it stopped
+                lines.append(f"{preset}: failed: {(done.stderr.strip().splitlines() or ['no output'])[-1]}")
             print("\n".join(lines) + "\n", flush=True)
 
 
