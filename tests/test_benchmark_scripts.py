@@ -241,6 +241,23 @@ def test_bench_start_counts_the_kernels_a_start_compiles(tmp_path):
 
 
 @pytest.mark.slow
+def test_bench_presets_writes_its_table(tmp_path):
+    """``bench presets``, the table the backends are judged by, runs in a process of its own."""
+    table = tmp_path / "cpu.csv"
+    argv = ["presets", "--presets", "martin_moyce", "--frames", "2", "--arch", "cpu", "--csv", str(table)]
+    run = subprocess.run(
+        [sys.executable, "-m", "pbf.study.bench", *argv],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "TQDM_DISABLE": "1"},
+    )
+    assert run.returncode == 0, run.stderr
+    rows = table.read_text().splitlines()
+    assert len(rows) == 2 and rows[1].startswith("martin_moyce,"), rows
+
+
+@pytest.mark.slow
 def test_bench_start_first_calls_names_the_kernels_a_cold_start_compiles(capsys):
     """``--first-calls``: a fresh process with an empty cache builds the preset and steps it once, and
     the table names the solver's kernels with positive times, the longest first."""

@@ -570,10 +570,10 @@ def main(argv=None):
     if args.mode == "start":  # each start a process of its own: this one starts no backend
         from pbf.study import start
 
-        presets = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
+        names = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
         if args.first_calls:
-            return start.first_calls(presets, args.arch)
-        return start.run(presets, args.arch, not args.no_shared, args.csv)
+            return start.first_calls(names, args.arch)
+        return start.run(names, args.arch, not args.no_shared, args.csv)
     args.backend = start_backend(
         args.arch,
         quiet=True,
