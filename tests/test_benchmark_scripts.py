@@ -207,6 +207,8 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
         (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
         (["start", "--presets", "dam_brake"], "--presets: dam_brake: no such scene file; did you mean dam_break?"),
+        (["compare", "no-such-table.csv"], "tables: no-such-table.csv: cannot be read (FileNotFoundError"),
+        (["compare", str(BENCHMARKS.parent / "README.md")], "README.md: not a presets table (no column backend,"),
     ],
 )
 def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):

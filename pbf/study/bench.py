@@ -566,6 +566,15 @@ def main(argv=None):
         except SceneError as error:
             parser.error(f"--presets: {error}")
     if args.mode == "compare":
+        for table in args.tables:  # each table read before any is judged
+            needed = {"preset", "backend", *PRESET_STATISTICS}
+            try:
+                with table.open(newline="") as file:
+                    missing = needed - set(next(csv.reader(file), []))
+            except (OSError, UnicodeDecodeError) as error:
+                parser.error(f"tables: {table}: cannot be read ({error.__class__.__name__}: {error})")
+            if missing:
+                parser.error(f"tables: {table}: not a presets table (no column {', '.join(sorted(missing))})")
         return compare(args.tables)
     if args.mode == "start":  # each start a process of its own: this one starts no backend
         from pbf.study import start
