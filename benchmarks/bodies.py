@@ -13,12 +13,11 @@ distances from 0.2 to 1 particle radius and for the distance that shrinks from r
     PYTHONPATH=$PWD python benchmarks/bodies.py archimedes
     PYTHONPATH=$PWD python benchmarks/bodies.py collision
     PYTHONPATH=$PWD python benchmarks/bodies.py compile [runs] [other checkout]
-    PYTHONPATH=$PWD python benchmarks/bodies.py kernels [scene]
 
 With ``compile``: the cold start (``run.py SCENE --stats-only --frames 1``'s "kernels ready in", a fresh
 process and a fresh Taichi offline cache each) of dam_break and floating_boxes, runs alternated,
 medians; with another checkout's root, its floating_boxes too (``git worktree add`` an earlier commit).
-With ``kernels``: each kernel's first call (its compile) in one process, CPU seconds, the largest first.
+Each kernel's first call (its compile): ``python -m pbf.study.bench start --first-calls --presets floating_boxes``.
 """
 
 import os
@@ -241,32 +240,6 @@ def compile_times(runs: int = 3, other: str | None = None) -> None:
         print(f"| {scene} | {root} | {median:.1f} | {runs_s} | {median / base:.2f} |")
 
 
-def kernel_compile_times(scene: str = "floating_boxes", shown: int = 15) -> None:
-    import taichi.lang.kernel_impl as kernel_impl  # Taichi's own class: its first call of a kernel compiles it
-
-    first_calls = {}
-    call = kernel_impl.Kernel.__call__
-
-    def timed(kernel, *args, **kwargs):
-        compiled = len(kernel.compiled_kernels)
-        start = time.process_time()
-        result = call(kernel, *args, **kwargs)
-        if len(kernel.compiled_kernels) > compiled:
-            name = kernel.func.__qualname__
-            first_calls[name] = first_calls.get(name, 0.0) + time.process_time() - start
-        return result
-
-    kernel_impl.Kernel.__call__ = timed
-    start, cpu = time.perf_counter(), time.process_time()
-    sim = Simulation(load_scene(scene), quiet=True)
-    sim.step()
-    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
-    print(f"{scene}: {wall:.1f} s, {cpu:.1f} CPU s, of which first calls {sum(first_calls.values()):.1f} CPU s")
-    print("| kernel | first call, CPU s |\n|---|---|")
-    for name, seconds in sorted(first_calls.items(), key=lambda item: -item[1])[:shown]:
-        print(f"| {name} | {seconds:.2f} |")
-
-
 if __name__ == "__main__":
     if sys.argv[1:2] == ["momentum"]:
         momentum()
@@ -276,8 +249,10 @@ if __name__ == "__main__":
         collision()
     elif sys.argv[1:2] == ["compile"]:
         compile_times(int(sys.argv[2]) if len(sys.argv) > 2 else 3, sys.argv[3] if len(sys.argv) > 3 else None)
-    elif sys.argv[1:2] == ["kernels"]:
-        kernel_compile_times(*sys.argv[2:3])
-
+    elif sys.argv[1:] and not sys.argv[1].isdigit():
+        sys.exit(
+            f"bodies.py: {sys.argv[1]!r}: expected a number of frames or one of momentum, archimedes, collision, "
+            "compile (each kernel's first call: python -m pbf.study.bench start --first-calls)"
+        )
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)
