@@ -196,10 +196,10 @@ def test_a_body_at_rest_on_a_pool_at_rest_stays_at_rest():
         sim.step()
         body.append(np.linalg.norm(sim.bodies.state()[0, 7:10]))
         pool_fastest.append(np.linalg.norm(sim.velocities(), axis=1).max())
-    # 0.050-0.060 m/s measured, moving with the build's rounding alone (the tests' quicker compile, the
-    # optimised one, a change of fast math's contractions); the pool's fastest particles move at 0.14.
-    assert max(body) < 0.08
-    assert np.median(body) < 0.5 * np.median(pool_fastest)
+    # Its peak below half the pool's typical fastest particle (0.35-0.42 of it measured: 0.050-0.060 m/s
+    # against 0.14, moving with the build's rounding alone), its median below a fifth (0.14-0.15).
+    assert max(body) < 0.5 * np.median(pool_fastest)
+    assert np.median(body) < 0.2 * np.median(pool_fastest)
 
 
 @pytest.mark.slow
