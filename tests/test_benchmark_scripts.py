@@ -206,6 +206,8 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
         (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
         (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
+        (["start", "--first-calls", "--no-shared"], "--no-shared: applies to the starts' table, not to --first-calls"),
+        (["start", "--first-calls", "--csv", "t.csv"], "--csv: applies to the starts' table, not to --first-calls"),
         (["start", "--presets", "dam_brake"], "--presets: dam_brake: no such scene file; did you mean dam_break?"),
         (["compare", "no-such-table.csv"], "tables: no-such-table.csv: cannot be read (FileNotFoundError"),
         (["compare", str(BENCHMARKS.parent / "README.md")], "README.md: not a presets table (no column backend,"),

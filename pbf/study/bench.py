@@ -558,6 +558,10 @@ def main(argv=None):
         if given and args.mode not in modes:
             named = f"the {' and '.join(modes)} mode{'s' if len(modes) > 1 else ''}"
             parser.error(f"{option}: applies to {named} only, not to {args.mode}")
+    if args.first_calls and (args.no_shared or args.csv is not None):  # the starts' options, not this table's
+        parser.error(
+            f"{'--no-shared' if args.no_shared else '--csv'}: applies to the starts' table, not to --first-calls"
+        )
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
     for name in args.presets or ():  # every scene read before any runs (each start reads its own again)
