@@ -369,6 +369,23 @@ def decisions_on_device(enabled: bool = True):
         _decisions_on_device_on_cpu = before
 
 
+@contextlib.contextmanager
+def light_compile():
+    """Kernels that compile inside (their first call) skip Taichi's advanced IR optimisation, as every
+    kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile.
+    The bodies' contacts are one thread over a few dozen candidates a substep, and the whole-kernel
+    simplification that takes 1.4 s of their first call on 2 cores (it grows faster than the kernel)
+    takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up"). A kernel compiled so is compiled so on
+    every start, and rounds its own way, deterministically; the offline cache keys it by the option."""
+    config = ti.lang.impl.current_cfg()
+    before = config.advanced_optimization
+    config.advanced_optimization = False
+    try:
+        yield
+    finally:
+        config.advanced_optimization = before
+
+
 def host_available_bytes() -> int:
     """Physical memory that is free now (Linux/macOS), falling back to 8 GiB where it cannot be read."""
     try:

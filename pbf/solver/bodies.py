@@ -48,6 +48,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from pbf.solver import backend
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import BoundaryParams, allocation
 
@@ -337,7 +338,8 @@ class Bodies:
             # Three launches, not one kernel: Taichi's compile time grows faster than a kernel's length,
             # and the contacts alone are most of it (docs/BODIES.md, Compile time).
             self._advance(dt, gravity)
-            self._resolve_contacts()
+            with backend.light_compile():
+                self._resolve_contacts()
             self._update_reach(dt)
 
     @ti.kernel

@@ -76,6 +76,26 @@ def allocation(count: int, floor: int) -> int:
     return max(int(floor), 1 << max(int(count) - 1, 0).bit_length())
 
 
+def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple[int, int]:
+    """The (particles, cells) buckets a scene allocates: ``own`` (its :func:`allocation` of each) where
+    it is among the ``compiled`` pairs or none fits, else the pair of ``compiled`` that holds it, is at
+    most one size up on each and adds at most ``limit_bytes`` of memory, the smallest such
+    (``pbf.solver.buckets``: the results are the same in any bucket, a compile is not)."""
+    particles, cells = own
+    if own in compiled:
+        return own
+
+    def extra(pair):
+        return (pair[0] - particles) * BYTES_PER_PARTICLE + (pair[1] - cells) * BYTES_PER_CELL
+
+    fitting = [
+        pair
+        for pair in compiled
+        if particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
+    ]
+    return min(fitting, key=lambda pair: (extra(pair), pair), default=own)
+
+
 """Grid memory per cell: count, start and a scan scratch, int32 each."""
 
 
@@ -95,6 +115,8 @@ class GridParams:
     """Cells per h: every neighbour lies within ``reach`` cells of a particle's own."""
     allocated_particles: int = 0
     """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
+    cell_bucket: int = 0
+    """Per-cell arrays' length, when not :func:`allocation` of the cell count (0: that)."""
 
     @classmethod
     def covering(
@@ -121,8 +143,8 @@ class GridParams:
 
     @property
     def allocated_cells(self) -> int:
-        """Per-cell arrays' length: :func:`allocation` of the cell count."""
-        return allocation(self.cell_count, CELL_BUCKET_FLOOR)
+        """Per-cell arrays' length: :func:`allocation` of the cell count, or a larger bucket (``cell_bucket``)."""
+        return self.cell_bucket or allocation(self.cell_count, CELL_BUCKET_FLOOR)
 
 
 @dataclass(frozen=True)
@@ -490,14 +512,22 @@ class Model:
     one per iteration a substep may run (the schema's most)."""
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> Model:
-        """Derive everything once; raise SceneError if the particles and grid would not fit in memory."""
+    def from_scene(cls, scene: Scene, compiled=frozenset(), reuse_limit_bytes: int = 0) -> Model:
+        """Derive everything once; raise SceneError if the particles and grid would not fit in memory.
+        ``compiled``: the (particles, cells) bucket pairs compiled before, of which the arrays may take
+        one a size up that adds at most ``reuse_limit_bytes`` (:func:`reused_allocation`)."""
         spacing, h = scene.fluid.spacing_m, scene.kernel_radius_m
         n = scene.particle_capacity
         lower, upper = scene.container.min_m, scene.container.max_m
-        allocated = allocation(n, PARTICLE_BUCKET_FLOOR)
-        grid = dataclasses.replace(GridParams.covering(n, lower, upper, h), allocated_particles=allocated)
-        _check_memory(scene, n, grid.cell_count, allocated, grid.allocated_cells)
+        covering = GridParams.covering(n, lower, upper, h)
+        own = (allocation(n, PARTICLE_BUCKET_FLOOR), covering.allocated_cells)
+        allocated, cells = reused_allocation(own, compiled, reuse_limit_bytes)
+        try:
+            _check_memory(scene, n, covering.cell_count, allocated, cells)
+        except SceneError:  # the larger buckets do not fit: the scene's own, checked again
+            allocated, cells = own
+            _check_memory(scene, n, covering.cell_count, allocated, cells)
+        grid = dataclasses.replace(covering, allocated_particles=allocated, cell_bucket=cells)
         mass = scene.fluid.rest_density_kg_m3 / sph.lattice_density_sum(spacing, h)
         volume = mass / scene.fluid.rest_density_kg_m3
         s = scene.solver

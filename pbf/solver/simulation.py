@@ -15,7 +15,7 @@ import numpy as np
 
 from pbf import scene as schema
 from pbf.scene.schema import _show
-from pbf.solver import settled
+from pbf.solver import buckets, settled
 from pbf.solver.acceleration import Weights
 from pbf.solver.backend import keeps_decisions_on_device, start_backend
 from pbf.solver.bodies import STATE_WIDTH
@@ -123,7 +123,9 @@ class Simulation:
     ):
         scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
         self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
-        self.model = Model.from_scene(scene)  # validates memory before Taichi allocates anything
+        # Validates memory before Taichi allocates anything; the arrays may take a bucket compiled before.
+        self.model = Model.from_scene(scene, buckets.compiled(), buckets.REUSE_LIMIT_BYTES)
+        buckets.record(self.model.allocated, self.model.grid.allocated_cells)
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
