@@ -8,7 +8,9 @@
 most, the preset's target), 5 frames to warm up (the kernels compile), then ``--substeps`` substeps
 timed whole, the device synchronised at each end, ``--rounds`` times: medians of ms per substep, and
 of the time the host took to issue them (the same as the whole when the host is the limit, less when
-the device is). For an A/B of two checkouts run it from a folder outside both with
+the device is), and of the CPU time the issuing thread spent (Python and the launches' own work:
+what a GPU backend costs the host per substep, whatever else the machine runs; on the CPU backend
+that thread also runs its share of the kernels). For an A/B of two checkouts run it from a folder outside both with
 ``PYTHONPATH=<checkout>``, alternating.
 
 ``--preset``: 3 frames to warm up, then 30 frames of the preset timed (frames of 1/60 s simulated per
@@ -40,21 +42,23 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
     dt = sim.dt_s
     ti.sync()
     built = time.perf_counter() - began
-    host, whole = [], []
+    host, whole, cpu = [], [], []
     for _ in range(rounds):
         ti.sync()
-        start = time.perf_counter()
+        start, thread_start = time.perf_counter(), time.thread_time()
         for _ in range(substeps):
             sim.substep(dt)
-        issued = time.perf_counter()
+        issued, thread_done = time.perf_counter(), time.thread_time()
         ti.sync()
         done = time.perf_counter()
         host.append((issued - start) * 1e3 / substeps)
         whole.append((done - start) * 1e3 / substeps)
+        cpu.append((thread_done - thread_start) * 1e3 / substeps)
     return {
         "particles": sim.particle_count,
         "ms": statistics.median(whole),
         "host_ms": statistics.median(host),
+        "host_cpu_ms": statistics.median(cpu),
         "built_s": built,
     }
 
@@ -133,10 +137,15 @@ def main(argv=None) -> None:
         return
     if args.sizes:
         print(f"backend {backend}; {args.substeps} substeps a round, medians of {args.rounds} rounds")
-        print(f"{'particles':>10} {'ms/substep':>11} {'host issue ms':>14} {'built and warmed s':>19}")
+        header = f"{'particles':>10} {'ms/substep':>11} {'host issue ms':>14} {'host CPU ms':>12}"
+        print(f"{header} {'built and warmed s':>19}")
         for particles in args.sizes:
             r = substep_times(particles, args.substeps, args.rounds)
-            print(f"{r['particles']:>10,} {r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['built_s']:>19.1f}", flush=True)
+            print(
+                f"{r['particles']:>10,} {r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['host_cpu_ms']:>12.3f} "
+                f"{r['built_s']:>19.1f}",
+                flush=True,
+            )
     if args.preset is not None:
         r = preset_rate(args.preset)
         lowest, highest = (r[k].astype(float).round(4).tolist() for k in ("lowest_m", "highest_m"))

@@ -65,6 +65,7 @@ import taichi as ti
 
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
+from pbf.solver.launch import Launcher
 from pbf.solver.model import SCORR_N, DensityParams
 from pbf.solver.scan import TreeSum
 from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient
@@ -144,6 +145,7 @@ class DensityConstraint:
         self.error = ti.field(ti.f32, shape=particle_count)
         """max(C_i, 0) of the last λ pass that measured it."""
         self.error_sum = TreeSum(particle_count)
+        self._launch_iterate = Launcher(self.iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
@@ -556,7 +558,7 @@ class DensityConstraint:
         density error max(ρ/ρ0 − 1, 0) the iteration started from.
         """
         assert not (first and predicted.in_second), "a substep's x* starts in the first buffer"
-        high, low, count = self.iterate(
+        high, low, count = self._launch_iterate(
             predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure), first, weight
         )
         predicted.swap()

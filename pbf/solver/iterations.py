@@ -24,6 +24,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
+from pbf.solver.launch import Launcher
 
 DONE, WEIGHT_INDEX, USED, IN_SECOND, STEPPING_BACK = range(5)
 """Entries of ``JacobiIterations.flags``."""
@@ -53,6 +54,7 @@ class JacobiIterations:
         self._used = 0
         self._measured = False
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
+        self._launch_iterate = Launcher(self._iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         if on_device:
             self.table = ti.field(ti.f32, shape=len(weights.table))
             self.table.from_numpy(np.asarray(weights.table, np.float32))
@@ -111,7 +113,7 @@ class JacobiIterations:
         target = control.target_density_error
         measure = target > 0.0
         for k in range(0, self.last_start(control.iterations), self.per_launch):  # the last call: the caller's
-            self._iterate(
+            self._launch_iterate(
                 predicted.first,
                 predicted.second,
                 neighbours,

@@ -27,6 +27,7 @@ from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
 from pbf.solver.integrate import Integrator
 from pbf.solver.iterations import JacobiIterations
+from pbf.solver.launch import Launcher
 from pbf.solver.model import Control, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
@@ -154,6 +155,7 @@ class Simulation:
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
         self.launches = SubstepLaunches(self.state, self.integrator, self.grid, self.iterations, self.postprocess)
+        self._finish_on_host = Launcher(self.postprocess.finish)  # lines 20-23 on the host's path
         """The stages composed into few kernel calls (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
@@ -493,7 +495,7 @@ class Simulation:
                 self.launches.finish(self.grid.neighbours, control, defer, *finish)
                 x_star.in_second = False
             else:
-                self.postprocess.finish(x_star.first, self.grid.neighbours, *finish)
+                self._finish_on_host(x_star.first, self.grid.neighbours, *finish)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1

@@ -20,6 +20,7 @@ consecutive stages in one call:
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList
+from pbf.solver.launch import Launcher
 
 
 @ti.data_oriented
@@ -33,6 +34,10 @@ class SubstepLaunches:
         self.grid = grid
         self.iterations = iterations
         self.postprocess = postprocess
+        # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
+        self._launch_on_device = Launcher(self._predict_and_find_neighbours_on_device)
+        self._launch_visit = Launcher(self._predict_and_visit)
+        self._launch_finish = Launcher(self._finish)
 
     def predict_and_find_neighbours(self, dt: float, gravity, defer: bool = False) -> None:
         """Algorithm 1, lines 1-7, in one call: v += Δt g, x* = x + Δt v (kept inside the boundaries),
@@ -43,8 +48,8 @@ class SubstepLaunches:
         which nothing else reads the lists before it."""
         grid, x = self.grid, self.integrator.predicted.first
         if grid.on_device and not grid.checking:
-            self._predict_and_find_neighbours_on_device(grid.neighbours, dt, *gravity, defer)
-        elif self._predict_and_visit(grid.neighbours, dt, *gravity):
+            self._launch_on_device(grid.neighbours, dt, *gravity, defer)
+        elif self._launch_visit(grid.neighbours, dt, *gravity):
             grid.build_compact(x)
 
     @ti.func
@@ -84,7 +89,7 @@ class SubstepLaunches:
         :meth:`predict_and_find_neighbours`."""
         iterations, measure = control.iterations, control.target_density_error > 0.0
         start = self.iterations.last_start(iterations)
-        self._finish(
+        self._launch_finish(
             neighbours,
             measure,
             self.iterations.per_launch,

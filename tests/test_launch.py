@@ -1,0 +1,101 @@
+"""The substep's kernels launched past Taichi's per-call Python (``pbf.solver.launch.Launcher``) run as
+ordinary calls do: the variant the template arguments select, the arguments of this call, the same bits."""
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from pbf.solver import Simulation
+from pbf.solver.backend import decisions_on_device
+from pbf.solver.launch import Launcher
+from tests.scenes import small_dam_break
+
+
+@ti.data_oriented
+class Writer:
+    def __init__(self):
+        self.out = ti.field(ti.f32, shape=4)
+        self.other = ti.field(ti.f32, shape=4)
+
+    @ti.kernel
+    def write(self, target: ti.template(), doubled: ti.template(), value: ti.f32, scale: ti.i32) -> ti.f32:
+        for i in range(4):
+            v = value * scale + i
+            if ti.static(doubled):
+                v *= 2.0
+            target[i] = v
+        return value * scale
+
+    @ti.kernel
+    def add(self, values: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(4):
+            self.out[i] += values[i]
+
+
+def test_each_call_launches_the_variant_its_template_arguments_select_with_its_own_arguments():
+    writer = Writer()
+    call = Launcher(writer.write)
+    compiled = writer.write._primal.compiled_kernels
+    before = len(compiled)
+    for value, doubled, target in [(1.0, False, "out"), (2.0, True, "out"), (3.0, False, "other"), (4.0, False, "out")]:
+        returned = call(getattr(writer, target), doubled, value, 3)
+        assert returned == value * 3
+        expected = (value * 3 + np.arange(4)) * (2.0 if doubled else 1.0)
+        np.testing.assert_array_equal(getattr(writer, target).to_numpy(), expected.astype(np.float32))
+    # Three variants (out, plain), (out, doubled), (other, plain), each compiled once, by Taichi's own call.
+    assert len(compiled) - before == 3
+    assert len(call._variants) == 3
+    assert call._primal is not None  # this Taichi has what the direct launch reads
+
+
+def test_a_new_array_of_the_same_kind_is_the_one_launched_with():
+    writer = Writer()
+    call = Launcher(writer.add)
+    call(ti.ndarray(ti.f32, 4))  # zeros: the first call, through Taichi's own path
+    for k in range(1, 4):
+        values = ti.ndarray(ti.f32, 4)
+        values.from_numpy(np.full(4, k, np.float32))
+        call(values)
+    np.testing.assert_array_equal(writer.out.to_numpy(), np.full(4, 1.0 + 2.0 + 3.0, np.float32))
+    assert len(call._variants) == 1
+
+
+def test_fields_allocated_after_a_launch_are_there_for_the_next():
+    writer = Writer()
+    call = Launcher(writer.write)
+    call(writer.out, False, 1.0, 1)
+    later = Writer()  # new fields, placed after the kernel was compiled and launched
+    call(writer.out, False, 5.0, 1)
+    later.out[0] = 7.0  # the new fields are usable
+    assert later.out[0] == 7.0
+    np.testing.assert_array_equal(writer.out.to_numpy(), 5.0 + np.arange(4, dtype=np.float32))
+
+
+def test_what_is_not_a_bound_kernel_is_called_as_it_is():
+    calls = []
+    call = Launcher(lambda *args: calls.append(args) or len(calls))
+    assert call(1, 2) == 1 and call(3) == 2
+    assert calls == [(1, 2), (3,)]
+
+
+def launchers(sim) -> list[Launcher]:
+    """The Launchers of a Simulation's substep."""
+    owners = (sim, sim.launches, sim.iterations, sim.density)
+    return [value for owner in owners for value in vars(owner).values() if isinstance(value, Launcher)]
+
+
+@pytest.mark.parametrize("on_device", [False, True], ids=["cpu path", "device path"])
+def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_device):
+    with decisions_on_device(on_device):
+        direct = Simulation(small_dam_break(), quiet=True)
+        ordinary = Simulation(small_dam_break(), quiet=True)
+    assert len(launchers(ordinary)) == 6
+    for launcher in launchers(ordinary):
+        launcher._primal = None  # each call the ordinary way
+    start = direct.positions()
+    for sim in (direct, ordinary):
+        sim.step(10)
+    assert np.abs(direct.positions() - start).max() > 0.05  # the splash began
+    assert sum(len(launcher._variants) for launcher in launchers(direct)) >= 3  # launched directly
+    np.testing.assert_array_equal(direct.positions(), ordinary.positions())
+    np.testing.assert_array_equal(direct.velocities(), ordinary.velocities())
