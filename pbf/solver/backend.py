@@ -376,7 +376,7 @@ def light_compile():
     The bodies' contacts are one thread over a few dozen candidates a substep, and the whole-kernel
     simplification that takes 1.4 s of their first call on 2 cores (it grows faster than the kernel)
     takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up"). A kernel compiled so is compiled so on
-    every start, and rounds its own way, deterministically; the offline cache keys it by the option."""
+    every start (and loaded so from the offline cache), and rounds its own way, deterministically."""
     config = ti.lang.impl.current_cfg()
     before = config.advanced_optimization
     config.advanced_optimization = False

@@ -58,6 +58,7 @@ BYTES_PER_PARTICLE = 600
 """Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its 64 neighbour slots at
 4 B (256 B, pbf.solver.grid.SLOTS); rounded up for the compact list that replaces them after an overflow."""
 BYTES_PER_CELL = 12
+"""Grid memory per cell: count, start and a scan scratch, int32 each."""
 PARTICLE_BUCKET_FLOOR = 2**14
 """The smallest particle allocation (:func:`allocation`): every preset below it shares one compile, for
 at most 16,384 × 600 B ≈ 10 MB of memory."""
@@ -94,9 +95,6 @@ def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple
         if particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
     ]
     return min(fitting, key=lambda pair: (extra(pair), pair), default=own)
-
-
-"""Grid memory per cell: count, start and a scan scratch, int32 each."""
 
 
 @dataclass(frozen=True)

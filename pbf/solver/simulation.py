@@ -155,8 +155,8 @@ class Simulation:
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
         self.launches = SubstepLaunches(self.state, self.integrator, self.grid, self.iterations, self.postprocess)
-        self._finish_on_host = Launcher(self.postprocess.finish)  # lines 20-23 on the host's path
         """The stages composed into few kernel calls (``pbf.solver.substep``)."""
+        self._finish_on_host = Launcher(self.postprocess.finish)  # lines 20-23 on the host's path
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later

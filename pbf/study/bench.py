@@ -463,15 +463,91 @@ def _thread_count(text: str) -> int:
     return value
 
 
-def main(argv=None):
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["frames"]:  # the headless frames' own study, with its own options
-        from pbf.study import frames
+MODES = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start", "traffic")
+"""The modes of ``main`` (``frames`` aside: it hands its arguments to ``pbf.study.frames``)."""
+BACKEND_MODES = ("sizes", "sweep", "terms", "presets", "counts", "traffic")
+"""The modes that start a backend in this process (``main``'s ``start_backend``, which takes ``--arch``,
+``--threads`` and ``--fast-compile``): all but ``compare``, which only reads tables, and ``start``, whose
+starts are processes of their own that are handed ``--arch`` alone."""
+OPTION_MODES: dict[str, tuple[str, ...]] = {
+    "tables": ("compare",),
+    "--presets": ("presets", "start"),
+    "--no-shared": ("start",),
+    "--first-calls": ("start",),
+    # Only where a Simulation is built inside ``decisions_on_device``: terms, traffic and sweep build theirs
+    # on the backend's own path (the device's only on a GPU, with or without the option).
+    "--device-decisions": ("sizes", "presets", "counts"),
+    "--fast-compile": BACKEND_MODES,
+    "--perturb": ("presets",),
+    "--perturb-each-frame": ("presets",),
+    "--sizes": ("sizes", "sweep", "terms", "counts", "traffic"),  # traffic: the first count only
+    "--iterations": ("sizes", "sweep", "terms", "counts", "traffic"),
+    "--substeps": ("sweep",),
+    "--target": ("sweep",),
+    "--frames": ("sizes", "sweep", "presets"),  # terms times substeps in --rounds; counts, a fixed number
+    "--particles": ("traffic",),
+    "--warmup": ("sizes", "terms", "traffic"),
+    "--rest-settle": ("sweep",),
+    "--rest-frames": ("sweep",),
+    "--flow": ("sweep",),
+    "--rounds": ("terms",),
+    "--set": BACKEND_MODES,  # start's processes run the presets as shipped
+    "--arch": ("sizes", "sweep", "terms", "presets", "counts", "start", "traffic"),
+    "--csv": ("sizes", "sweep", "presets", "start"),  # sweep writes it unless --from-csv
+    "--threads": BACKEND_MODES,
+    "--from-csv": ("sweep",),
+    "--plot": ("sweep",),
+}
+"""Every option of ``main`` (``tables`` for the positional tables), and the modes that read it, found by
+reading each mode's code down through the helpers it calls: ``main`` refuses an option given to any
+other mode, which would run as if it had not been given. A mode that reads an option only in some of
+its runs (sweep's ``--sizes`` not with ``--from-csv``) is listed: the option is not refused there.
+tests/test_bench_options.py checks that every option of the parser is here."""
 
-        return frames.main(argv[1:])
+SWEEP_RUN_OPTIONS = (
+    "--sizes",
+    "--iterations",
+    "--substeps",
+    "--target",
+    "--rest-settle",
+    "--rest-frames",
+    "--flow",
+    "--set",
+    "--csv",
+    "--threads",
+    "--fast-compile",
+)
+"""The options a sweep reads only when it runs its points, not when it re-plots them ``--from-csv``."""
+
+_NOT_GIVEN = object()
+
+
+def given_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
+    """The options ``argv`` gives, by their option string (``tables`` where it names any).
+
+    argparse itself says, not a comparison with the defaults, which would miss an option given at its
+    default's value (``--frames 60``), nor a scan of argv's tokens, which would miss argparse's own
+    spellings (``--frame 3``, ``--frames=3``) and take an option's value for another option: argparse
+    sets a default only on a namespace that lacks the attribute, so each option's attribute set first
+    to a marker keeps the marker unless the option was given. ``--set`` appends to what is there, so
+    it starts from an empty list instead; the tables, a positional, are given when there are any."""
+    namespace = argparse.Namespace()
+    for action in parser._actions:
+        if action.option_strings and action.dest != "help":
+            setattr(namespace, action.dest, [] if isinstance(action, argparse._AppendAction) else _NOT_GIVEN)
+    parser.parse_args(argv, namespace=namespace)
+    given = {"tables"} if namespace.tables else set()
+    for action in parser._actions:
+        value = getattr(namespace, action.dest, _NOT_GIVEN) if action.option_strings else _NOT_GIVEN
+        if value is not _NOT_GIVEN and value != []:
+            given.add(action.option_strings[0])
+    return given
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``main``'s parser: it runs nothing (the tests read its options)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    modes = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start", "traffic")
-    parser.add_argument("mode", nargs="?", choices=modes, default="sizes")
+    parser.add_argument("mode", nargs="?", choices=MODES, default="sizes")
     parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
     parser.add_argument("--presets", nargs="+", default=None, help="presets, start: which (default: all)")
     parser.add_argument("--no-shared", action="store_true", help="start: leave out the starts in one shared cache")
@@ -513,11 +589,11 @@ def main(argv=None):
         default=0.005,
         help="sweep: also stop iterating under this mean density error (0: no such points)",
     )
-    parser.add_argument("--frames", type=int, default=60, help="timed frames per size or sweep point")
+    parser.add_argument("--frames", type=int, default=60, help="timed frames per size, sweep point or preset")
     parser.add_argument(
         "--particles", type=int, default=1_000_000, help="traffic: the particle count the bytes are scaled to"
     )
-    parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms)")
+    parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms, traffic)")
     parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
     parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
     parser.add_argument(
@@ -547,23 +623,37 @@ def main(argv=None):
     )
     parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
     parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
+    return parser
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["frames"]:  # the headless frames' own study, with its own options
+        from pbf.study import frames
+
+        return frames.main(argv[1:])
+    parser = build_parser()
     args = parser.parse_args(argv)
-    for option, given, modes in (
-        ("--presets", args.presets, ("presets", "start")),
-        ("--no-shared", args.no_shared, ("start",)),
-        ("--first-calls", args.first_calls, ("start",)),
-        ("--perturb", args.perturb is not None, ("presets",)),
-        ("tables", args.tables, ("compare",)),
-    ):
-        if given and args.mode not in modes:
-            named = f"the {' and '.join(modes)} mode{'s' if len(modes) > 1 else ''}"
-            parser.error(f"{option}: applies to {named} only, not to {args.mode}")
+    given = given_options(parser, argv)
+    for option, modes in OPTION_MODES.items():  # before anything starts: no backend, no process
+        if option in given and args.mode not in modes:
+            names = [mode for mode in MODES if mode in modes]
+            listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+            parser.error(
+                f"{option}: applies to the {listed} mode{'s' if len(names) > 1 else ''} only, not to {args.mode}"
+            )
+    # A sweep from --from-csv re-plots the points the CSV holds and runs nothing.
+    for option in SWEEP_RUN_OPTIONS:
+        if args.from_csv is not None and option in given:
+            parser.error(f"{option}: applies to a sweep that runs, not to one re-plotted --from-csv")
     if args.first_calls and (args.no_shared or args.csv is not None):  # the starts' options, not this table's
         parser.error(
             f"{'--no-shared' if args.no_shared else '--csv'}: applies to the starts' table, not to --first-calls"
         )
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
+    if args.mode != "sweep" and len(args.iterations or [4]) > 1:
+        parser.error(f"--iterations: {args.mode} takes one count (several are for sweep)")
     for name in args.presets or ():  # every scene read before any runs (each start reads its own again)
         try:
             load_scene(name)
@@ -613,8 +703,6 @@ def main(argv=None):
         args.substeps = args.substeps or list(speed_error.SUBSTEPS)
         args.csv = args.csv or Path("docs/speed_vs_error.csv")
         return sweep(args)
-    if len(args.iterations or [4]) > 1:
-        parser.error(f"--iterations: {args.mode} takes one count (several are for sweep)")
     args.iterations = (args.iterations or [4])[0]
     if args.mode == "terms":
         args.sizes = args.sizes or [8000]
