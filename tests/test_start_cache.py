@@ -94,11 +94,6 @@ def test_a_smaller_scene_takes_the_larger_bucket_a_start_before_compiled(tmp_pat
     assert again & compiled == set(), f"the smaller scene compiled {sorted(again & compiled)} again"
 
 
-def test_a_scene_alone_keeps_its_own_bucket(tmp_path):
-    report, _, _ = start(small_dam_break(), tmp_path)
-    assert report["allocated"] == 16384
-
-
 @pytest.mark.parametrize("on_device", [False, True], ids=["cpu path", "device path"])
 def test_a_scene_steps_bit_for_bit_the_same_in_a_larger_bucket(monkeypatch, on_device):
     monkeypatch.setattr(buckets, "record", lambda particles, cells: None)  # the user's cache folder untouched
