@@ -84,6 +84,7 @@ def larger_scene() -> dict:
     return scene
 
 
+@pytest.mark.slow  # two more processes that compile the solver: the default run's memory peak
 def test_a_smaller_scene_takes_the_larger_bucket_a_start_before_compiled(tmp_path):
     first, compiled, _ = start(larger_scene(), tmp_path)
     assert first["allocated"] == 32768
