@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from pbf.solver import Simulation
+from pbf.solver import Simulation, launch
 from pbf.solver.backend import decisions_on_device
 from pbf.solver.launch import Launcher
 from tests.scenes import small_dam_break
@@ -102,3 +102,16 @@ def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_devic
     sim.step(10)
     np.testing.assert_array_equal(direct[0], sim.positions())
     np.testing.assert_array_equal(direct[1], sim.velocities())
+
+
+def test_a_template_argument_equal_to_nothing_is_not_kept_without_end(monkeypatch):
+    writer = Writer()
+    call = Launcher(writer.write)
+    for _ in range(3):
+        call(writer.out, float("nan"), 1.0, 1)  # a float template argument: NaN is not equal to itself
+    assert len(call._variants) <= 3
+    monkeypatch.setattr(launch, "MOST_VARIANTS", 4)
+    for value in range(6):  # a new variant each call (a flag of other values): kept up to the most
+        call(writer.out, value, 1.0, 1)
+    assert len(call._variants) == 4
+    np.testing.assert_array_equal(writer.out.to_numpy(), 2.0 * (1.0 + np.arange(4, dtype=np.float32)))

@@ -24,6 +24,9 @@ from __future__ import annotations
 
 from taichi.types.ndarray_type import NdarrayType
 
+MOST_VARIANTS = 64
+"""Variants a Launcher keeps; past them it calls the ordinary way (a template argument that never
+compares equal to itself, a NaN, would otherwise add one a call)."""
 PLAIN = (bool, int, float, str, type(None))
 """Template arguments told apart by value (by type too: Taichi compiles True and 1 alike, but a
 variant should not be found by either for the other)."""
@@ -76,12 +79,13 @@ class Launcher:
             return self._bound(*args)
         key = tuple(_variant(args[i]) for i in self._templates)
         if self._arrays:
-            key += tuple((args[i].dtype, len(args[i].shape)) for i in self._arrays)
+            key += tuple((getattr(args[i], "dtype", None), len(getattr(args[i], "shape", ()))) for i in self._arrays)
         entry = self._variants.get(key)
         if entry is None:  # the first call of this variant: Taichi's own path compiles it and launches
             result = self._bound(*args)
-            compiled = self._primal.compiled_kernels[self._primal.ensure_compiled(self._owner, *args)]
-            self._variants[key] = (compiled, tuple(args[i] for i in self._templates))
+            if len(self._variants) < MOST_VARIANTS:
+                compiled = self._primal.compiled_kernels[self._primal.ensure_compiled(self._owner, *args)]
+                self._variants[key] = (compiled, tuple(args[i] for i in self._templates))
             return result
         self._primal.runtime.materialize()  # fields allocated since the last kernel call, as a call does
         return self._primal.launch_kernel(entry[0], self._owner, *args)
