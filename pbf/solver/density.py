@@ -145,8 +145,8 @@ class DensityConstraint:
         self.error = ti.field(ti.f32, shape=particle_count)
         """max(C_i, 0) of the last λ pass that measured it."""
         self.error_sum = TreeSum(particle_count)
-        self._launch_iterate = Launcher(self.iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
+        self._launch_iterate = Launcher(self.iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
         impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
