@@ -68,6 +68,7 @@ def kernel_task(out: dict) -> None:
 def scan_task(out: dict) -> None:
     import taichi as ti
 
+    from pbf.solver.backend import running_device
     from pbf.solver.scan import ExclusiveScan, TreeSum
 
     for length in SCAN_LENGTHS:
@@ -90,6 +91,23 @@ def scan_task(out: dict) -> None:
         out[f"scan_{length}_counts"], out[f"scan_{length}_starts"] = counts, starts.to_numpy()
         out[f"scan_{length}_values"] = values
         out[f"scan_{length}_sums"] = np.stack([sums.high.to_numpy(), sums.low.to_numpy()])
+
+        # The shared-memory sums (CUDA's): on SPIR-V backends only where one loop holds them (a kernel's
+        # second loop with a shared array fails there), so a sum of one block, a kernel of its own each.
+        blocks = TreeSum(length, 2, shared=True)
+        if blocks.blocks == 1 or running_device().arch == "cuda":
+
+            @ti.kernel
+            def add_in_blocks():
+                blocks.sum(floats, 0, length)
+
+            @ti.kernel
+            def most_in_blocks():
+                blocks.maximum(floats, 1, length)
+
+            add_in_blocks()
+            most_in_blocks()
+            out[f"scan_{length}_block_sums"] = np.stack([blocks.high.to_numpy(), blocks.low.to_numpy()])
 
 
 def grid_task(out: dict) -> None:

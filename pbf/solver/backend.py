@@ -351,6 +351,13 @@ def on_gpu() -> bool:
     return _started is not None and _started.arch in GPU_ARCHES
 
 
+def sums_in_shared_memory() -> bool:
+    """Whether float sums add up in each GPU block's shared memory (``pbf.solver.scan.TreeSum``): on
+    CUDA. Taichi 1.7.4's SPIR-V code generator (Vulkan, Metal) fails on a kernel whose second loop holds
+    a shared array ("Value tmp2 does not yet exist"), and the substep's kernels hold several sums."""
+    return _started is not None and _started.arch == "cuda"
+
+
 def keeps_decisions_on_device() -> bool:
     """Whether a Simulation built now keeps the substep's decisions on the device (the iterations'
     stopping test, the neighbour lists' overflow) and reads the device once per frame: on a GPU

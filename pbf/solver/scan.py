@@ -28,10 +28,21 @@ import math
 import taichi as ti
 from taichi.lang.field import ScalarField
 
-from pbf.solver.backend import on_gpu
+from pbf.solver.backend import on_gpu, sums_in_shared_memory
 
 GPU_BLOCK = 32
-"""Entries per block on a GPU backend, at every level."""
+"""Entries per block of a prefix sum on a GPU backend, at every level."""
+GPU_SUM_THREADS = 256
+"""Threads of a GPU block that adds up a float sum in shared memory (a work-group size every GPU backend
+takes): each adds up its entries, then the block halves its partial sums 8 times."""
+GPU_SUM_PER_THREAD = 64
+"""At most this many entries a thread adds up first: one block covers 16,384 entries (the seed scene's
+bucket), one launch; a larger sum is two, the blocks and then one block over their results (64 blocks
+at a million entries: enough threads in flight to hide the reads' latency, which a few long blocks
+would not)."""
+GPU_SUM_MOST_BLOCKS = 1024
+"""At most this many blocks at level 0 (more entries a thread past 16.7 M): each thread of the loop then
+runs one pass of it on any GPU, so that every thread of a block meets each of its syncs."""
 CPU_BLOCKS = 1024
 """On the CPU: about this many level-0 blocks (of 64 entries at least), and up to this many entries in a
 block above level 0, so that the tree has two levels."""
@@ -244,11 +255,25 @@ class TreeSum:
     """Compensated sums and maxima of float32 values: ``sums`` results, each the same bits on any thread
     count, kept on the device (:attr:`high` + :attr:`low`) for kernels to use or the host to read."""
 
-    def __init__(self, length: int, sums: int = 1, block: int | None = None):
+    def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool | None = None):
         self.length = length
         self.tree = Tree(length, block)
-        self.scratch_high = ti.field(ti.f32, shape=self.tree.scratch)
-        self.scratch_low = ti.field(ti.f32, shape=self.tree.scratch)
+        self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
+        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`): one launch up to 16,384
+        entries and two above, where the tree of blocks of 32 takes three to five. On CUDA unless
+        ``shared`` says otherwise (a GPU backend only; one such sum a kernel on Vulkan and Metal,
+        :func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        threads = GPU_SUM_THREADS
+        self.per_thread = max(
+            min(GPU_SUM_PER_THREAD, math.ceil(max(length, 1) / threads)),
+            math.ceil(length / (threads * GPU_SUM_MOST_BLOCKS)),
+        )
+        self.blocks = math.ceil(max(length, 1) / (threads * self.per_thread))
+        """Level-0 blocks of the shared-memory sum, each over threads × per_thread consecutive entries."""
+        self.top_per_thread = math.ceil(self.blocks / threads)
+        scratch = self.blocks if self.in_shared_memory else self.tree.scratch
+        self.scratch_high = ti.field(ti.f32, shape=scratch)
+        self.scratch_low = ti.field(ti.f32, shape=scratch)
         self.high = ti.field(ti.f32, shape=sums)
         """The results: sum ``slot`` is high[slot] + low[slot] (the low part 0 for a maximum)."""
         self.low = ti.field(ti.f32, shape=sums)
@@ -289,6 +314,86 @@ class TreeSum:
 
     @ti.func
     def _reduce(
+        self,
+        values: ti.template(),
+        slot: ti.template(),
+        count: ti.template(),
+        is_max: ti.template(),
+        then: ti.template(),
+        context: ti.template(),
+    ):
+        if ti.static(self.in_shared_memory):
+            self._reduce_in_blocks(values, slot, count, is_max, then, context)
+        else:
+            self._reduce_in_tree(values, slot, count, is_max, then, context)
+
+    @ti.func
+    def _reduce_in_blocks(
+        self,
+        values: ti.template(),
+        slot: ti.template(),
+        count: ti.template(),
+        is_max: ti.template(),
+        then: ti.template(),
+        context: ti.template(),
+    ):
+        # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
+        # entries), then the block halves its partial sums in shared memory. The partition depends on
+        # the length alone and every block runs (a block past the live entries adds up nothing), so the
+        # order of every addition is fixed: the same bits run after run. One loop a level; the loop's
+        # range is a multiple of the block, each thread runs one pass, so every thread meets each sync.
+        threads = ti.static(GPU_SUM_THREADS)
+        for level in ti.static(range(2 if self.blocks > 1 else 1)):
+            top = ti.static(level == 1 or self.blocks == 1)
+            per = ti.static(self.per_thread if level == 0 else self.top_per_thread)
+            ti.loop_config(block_dim=threads)
+            for i in range(threads * ti.static(self.blocks if level == 0 else 1)):
+                t, g = i % threads, i // threads
+                shared_high = ti.simt.block.SharedArray((threads,), ti.f32)
+                shared_low = ti.simt.block.SharedArray((threads,), ti.f32)
+                live = read_count(count, 1)
+                if ti.static(level == 1):
+                    live = self.blocks
+                zero = self.zero[None]
+                high, low = 0.0, 0.0
+                for j in range(per):
+                    k = (g * per + j) * threads + t
+                    if k < live:
+                        value_high, value_low = 0.0, 0.0
+                        if ti.static(level == 0):
+                            value_high = values[k]
+                        else:
+                            value_high, value_low = self.scratch_high[k], self.scratch_low[k]
+                        if ti.static(is_max):
+                            high = ti.max(high, value_high)
+                        else:
+                            high, error = _two_sum(high, value_high, zero)
+                            low += error + value_low
+                shared_high[t] = high
+                shared_low[t] = low
+                ti.simt.block.sync()
+                for halving in ti.static(range(int(math.log2(threads)))):
+                    width = ti.static(threads >> (halving + 1))
+                    if t < width:
+                        if ti.static(is_max):
+                            shared_high[t] = ti.max(shared_high[t], shared_high[t + width])
+                        else:
+                            total, error = _two_sum(shared_high[t], shared_high[t + width], zero)
+                            shared_high[t] = total
+                            shared_low[t] = shared_low[t] + shared_low[t + width] + error
+                    ti.simt.block.sync()
+                if t == 0:
+                    if ti.static(top):
+                        self.high[slot] = shared_high[0]
+                        self.low[slot] = shared_low[0]
+                        if ti.static(not isinstance(then, bool)):  # False: nothing to tell
+                            then.received(shared_high[0] + shared_low[0], read_count(count, 1), context)
+                    else:
+                        self.scratch_high[g] = shared_high[0]
+                        self.scratch_low[g] = shared_low[0]
+
+    @ti.func
+    def _reduce_in_tree(
         self,
         values: ti.template(),
         slot: ti.template(),
