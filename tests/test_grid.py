@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
+from pbf.solver import scan
 from pbf.solver.backend import decisions_on_device
 from pbf.solver.grid import SLOTS, NeighbourGrid
 from pbf.solver.model import GridParams
@@ -241,6 +242,21 @@ def test_tree_sums_are_compensated_and_independent_of_the_count_of_blocks(block)
     high, low = sums.high.to_numpy(), sums.low.to_numpy()
     assert float(high[0]) + float(low[0]) == pytest.approx(values.astype(np.float64).sum(), rel=1e-11)
     assert high[1] == values.max() and low[1] == 0.0
+
+
+@pytest.mark.parametrize("length", [1, 255, 16_384, 16_385, 1_000_000, 4_194_305, 100_000_000])
+def test_cuda_sums_cover_every_entry_in_one_or_two_launches(length):
+    # The shared-memory sums' shape (their arithmetic runs on CUDA and, one block a kernel, in the Vulkan
+    # subset): one block up to GPU_SUM_ONE_BLOCK entries, else at most GPU_SUM_MOST_BLOCKS blocks, so that
+    # every thread of the loop makes one pass and meets every sync; the blocks cover every entry.
+    sums = TreeSum(length, shared=True)
+    threads = scan.GPU_SUM_THREADS
+    assert sums.in_shared_memory and not TreeSum(length).in_shared_memory  # on the CPU: the tree
+    assert sums.blocks * threads * sums.per_thread >= length > (sums.blocks - 1) * threads * sums.per_thread
+    assert (sums.blocks == 1) == (length <= scan.GPU_SUM_ONE_BLOCK)
+    assert sums.blocks <= scan.GPU_SUM_MOST_BLOCKS and sums.top_per_thread * threads >= sums.blocks
+    if length > scan.GPU_SUM_ONE_BLOCK:
+        assert sums.per_thread >= scan.GPU_SUM_PER_THREAD
 
 
 @pytest.mark.parametrize("checked", [True, False])
