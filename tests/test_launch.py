@@ -31,6 +31,11 @@ class Writer:
         for i in range(4):
             self.out[i] += values[i]
 
+    @ti.kernel
+    def mix(self, target: ti.template(), value: ti.f32, scale: ti.i32, count: ti.u32, values: ti.types.ndarray()):
+        for i in range(4):
+            target[i] = value * scale + ti.cast(count, ti.f32) + values[i]
+
 
 def test_each_call_launches_the_variant_its_template_arguments_select_with_its_own_arguments():
     writer = Writer()
@@ -58,6 +63,35 @@ def test_a_new_array_of_the_same_kind_is_the_one_launched_with():
         call(values)
     np.testing.assert_array_equal(writer.out.to_numpy(), np.full(4, 1.0 + 2.0 + 3.0, np.float32))
     assert len(call._variants) == 1
+
+
+def test_a_kernel_without_results_is_launched_from_its_arguments_set_as_taichi_sets_them():
+    # Float, signed, unsigned and array arguments set straight into the launch context, the compiled
+    # code looked up once: the same values as Taichi's own call, every call with its own arguments.
+    writer = Writer()
+    call = Launcher(writer.mix)
+    values = ti.ndarray(ti.f32, 4)
+    values.from_numpy(np.arange(4, dtype=np.float32))
+    for value, scale, count in [(1.5, 2, 3), (-0.25, -3, 4_000_000_000), (np.float32(2.0), np.int64(5), 0)]:
+        call(writer.out, value, scale, count, values)
+        expected = np.float32(value) * scale + np.float32(count) + np.arange(4, dtype=np.float32)
+        np.testing.assert_array_equal(writer.out.to_numpy(), expected.astype(np.float32))
+    (entry,) = call._variants.values()
+    assert entry[2] is not None  # launched from the context, past Kernel.launch_kernel
+
+
+def test_an_argument_taichi_refuses_is_refused_in_taichis_words():
+    writer = Writer()
+    call = Launcher(writer.mix)
+    values = ti.ndarray(ti.f32, 4)
+    call(writer.out, 1.0, 1, 1, values)
+    for bad in [(writer.out, "1.0", 1, 1, values), (writer.out, 1.0, 1.5, 1, values), (writer.out, 1.0, 1, 1, [0.0])]:
+        with pytest.raises(Exception) as direct:
+            call(*bad)
+        with pytest.raises(Exception) as ordinary:
+            writer.mix(*bad)
+        assert type(direct.value) is type(ordinary.value) and str(direct.value).strip() == str(ordinary.value).strip()
+    np.testing.assert_array_equal(writer.out.to_numpy(), np.full(4, 2.0, np.float32))  # nothing launched
 
 
 def test_fields_allocated_after_a_launch_are_there_for_the_next():
@@ -94,6 +128,8 @@ def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_devic
     start = sim.positions()
     sim.step(10)
     assert sum(len(launcher._variants) for launcher in launchers(sim)) >= 3  # launched directly
+    if on_device:  # its three kernels return nothing: launched from their contexts
+        assert sum(entry[2] is not None for launcher in launchers(sim) for entry in launcher._variants.values()) >= 3
     direct = sim.positions(), sim.velocities()
     assert np.abs(direct[0] - start).max() > 0.05  # the splash began
     sim.reset()
