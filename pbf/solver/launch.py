@@ -18,9 +18,9 @@ as ``Kernel.launch_kernel`` sets them but without the closures and the type disp
 builds a call, and with Taichi's lookup of the compiled code done once; any other goes through
 ``Kernel.launch_kernel``, as does an argument Taichi would refuse (so that it refuses it, in its
 words). The same kernel, the same arguments: the same launch, bit for bit (``tests/test_launch.py``).
-The host's CPU time per substep on the device path (Vulkan, 125 particles): 0.219 ms through Taichi's
-call, 0.167 through ``launch_kernel``, 0.15-0.18 from the context (docs/BENCHMARKS.md, "Host time per
-substep").
+The host's CPU time per substep on the device path (Vulkan, 125 particles): 24% less through
+``launch_kernel`` than through Taichi's call, and 29% less again from the context (docs/BENCHMARKS.md,
+"Host time per substep").
 
 This reads Taichi's own classes (``_BoundedDifferentiableMethod``, ``Kernel.ensure_compiled``,
 ``compiled_kernels``, ``launch_kernel``, ``template_slot_locations``, and for the context the C++
