@@ -34,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from taichi.lang import impl
 from taichi.lang._ndarray import Ndarray
+from taichi.lang.exception import handle_exception_from_cpp
 from taichi.lang.util import cook_dtype
 from taichi.types import primitive_types
 from taichi.types.annotations import template as template_type
@@ -150,7 +151,10 @@ class Launcher:
         if entry[2] is not None:
             context = self._context(entry[0], args)
             if context is not None:
-                impl.get_runtime().prog.launch_kernel(entry[2], context)
+                try:
+                    impl.get_runtime().prog.launch_kernel(entry[2], context)
+                except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
+                    raise handle_exception_from_cpp(error) from None
                 return None
         return self._primal.launch_kernel(entry[0], self._owner, *args)
 
