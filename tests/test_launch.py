@@ -85,7 +85,12 @@ def test_an_argument_taichi_refuses_is_refused_in_taichis_words():
     call = Launcher(writer.mix)
     values = ti.ndarray(ti.f32, 4)
     call(writer.out, 1.0, 1, 1, values)
-    for bad in [(writer.out, "1.0", 1, 1, values), (writer.out, 1.0, 1.5, 1, values), (writer.out, 1.0, 1, 1, [0.0])]:
+    for bad in [
+        (writer.out, "1.0", 1, 1, values),
+        (writer.out, 1.0, 1.5, 1, values),
+        (writer.out, 1.0, 1, 1, [0.0]),
+        (writer.out, 1.0, 1, 1, values, 2.0),
+    ]:
         with pytest.raises(Exception) as direct:
             call(*bad)
         with pytest.raises(Exception) as ordinary:

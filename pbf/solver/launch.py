@@ -16,8 +16,9 @@ directly. A kernel that returns nothing and takes only scalars and ndarrays besi
 (the device path's three) is launched from a launch context whose arguments the Launcher sets itself,
 as ``Kernel.launch_kernel`` sets them but without the closures and the type dispatch that function
 builds a call, and with Taichi's lookup of the compiled code done once; any other goes through
-``Kernel.launch_kernel``, as does an argument Taichi would refuse (so that it refuses it, in its
-words). The same kernel, the same arguments: the same launch, bit for bit (``tests/test_launch.py``).
+``Kernel.launch_kernel``. A call with an argument Taichi would refuse, or with another count of
+arguments, is an ordinary call, so that Taichi refuses it in its own words. The same kernel, the
+same arguments: the same launch, bit for bit (``tests/test_launch.py``).
 The host's CPU time per substep on the device path (Vulkan, 125 particles): 24% less through
 ``launch_kernel`` than through Taichi's call, and 29% less again from the context (docs/BENCHMARKS.md,
 "Host time per substep").
@@ -126,12 +127,14 @@ class Launcher:
             else ()
         )
         self._setters = _argument_setters(primal) if direct else None
+        self._count = len(primal.arguments) - 1 if direct else 0
+        """The arguments the call site passes (the owner is not one)."""
         self._variants: dict = {}
         """key → (the compiled kernel, the template arguments it was compiled for, kept alive, and the
         compiled kernel's data for the program's launch, or None where ``launch_kernel`` launches it)."""
 
     def __call__(self, *args):
-        if self._primal is None:
+        if self._primal is None or len(args) != self._count:  # another count: Taichi's call says so
             return self._bound(*args)
         key = tuple(_variant(args[i]) for i in self._templates)
         if self._arrays:
@@ -150,18 +153,19 @@ class Launcher:
         self._primal.runtime.materialize()  # fields allocated since the last kernel call, as a call does
         if entry[2] is not None:
             context = self._context(entry[0], args)
-            if context is not None:
-                try:
-                    impl.get_runtime().prog.launch_kernel(entry[2], context)
-                except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
-                    raise handle_exception_from_cpp(error) from None
-                return None
+            if context is None:  # an argument Taichi refuses (its call says how) or one this does not set
+                return self._bound(*args)
+            try:
+                impl.get_runtime().prog.launch_kernel(entry[2], context)
+            except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
+                raise handle_exception_from_cpp(error) from None
+            return None
         return self._primal.launch_kernel(entry[0], self._owner, *args)
 
     def _context(self, compiled, args):
         """The launch context with every argument set as ``Kernel.launch_kernel`` sets it, without
         building its closures and type dispatch a call; None where an argument is not what Taichi takes
-        for its type (Taichi's own launch then refuses it, in its words) or an ndarray carries a gradient."""
+        for its type (Taichi's own call then refuses it, in its words) or an ndarray carries a gradient."""
         context = compiled.make_launch_context()
         for setter, value in zip(self._setters, args):
             if setter is None:
