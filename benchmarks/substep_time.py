@@ -13,9 +13,9 @@ what a GPU backend costs the host per substep, whatever else the machine runs; o
 that thread also runs its share of the kernels). For an A/B of two checkouts run it from a folder outside both with
 ``PYTHONPATH=<checkout>``, alternating.
 
-``--preset``: 3 frames to warm up, then 30 frames of the preset timed (frames of 1/60 s simulated per
-second of wall time), then 30 more with the density error read each frame, and where the particles
-lie.
+``--preset`` (with ``--set KEY=VALUE`` overrides of it, repeatable): 3 frames to warm up, then 30
+frames of the preset timed (frames of 1/60 s simulated per second of wall time), then 30 more with the
+density error read each frame, and where the particles lie.
 
 ``--profile``: Taichi's kernel profiler (it is chosen when Taichi starts, so only as the first thing
 this process does): the device time of each task of 10 substeps, in the order they ran.
@@ -29,6 +29,7 @@ from collections import defaultdict
 import taichi as ti
 
 from pbf import Simulation
+from pbf.scene import SceneError, load_scene
 from pbf.solver import start_backend
 from pbf.study.common import dam_break
 
@@ -84,9 +85,9 @@ def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
     return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in totals.items()]
 
 
-def preset_rate(preset: str, frames: int = 30) -> dict:
+def preset_rate(preset: str, overrides=(), frames: int = 30) -> dict:
     began = time.perf_counter()
-    sim = Simulation(preset, quiet=True)
+    sim = Simulation(load_scene(preset, overrides), quiet=True)
     sim.step(3)
     ti.sync()
     start = time.perf_counter()
@@ -120,12 +121,26 @@ def main(argv=None) -> None:
     parser.add_argument("--substeps", type=int, default=40, help="substeps of one timed round")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--preset", default=None, help="a preset whose frame rate to measure")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="--preset: override a key of it, as run.py's --set (repeatable)",
+    )
     parser.add_argument("--profile", action="store_true", help="per task device times (Taichi's profiler)")
     args = parser.parse_args(argv)
     if not args.sizes and args.preset is None:
         parser.error("give --sizes, --preset or both")
     if args.profile and (args.preset is not None or not args.sizes):
         parser.error("--profile: profiles the substeps of --sizes, not a preset's frames; give --sizes alone")
+    if args.set and args.preset is None:
+        parser.error("--set: overrides a key of --preset; give --preset")
+    if args.preset is not None:
+        try:  # before the backend starts
+            load_scene(args.preset, args.set)
+        except SceneError as error:
+            parser.error(str(error))
     backend = start_backend(args.arch, quiet=True, kernel_profiler=args.profile)
     if args.profile:
         for particles in args.sizes:
@@ -147,10 +162,11 @@ def main(argv=None) -> None:
                 flush=True,
             )
     if args.preset is not None:
-        r = preset_rate(args.preset)
+        r = preset_rate(args.preset, args.set)
         lowest, highest = (r[k].astype(float).round(4).tolist() for k in ("lowest_m", "highest_m"))
+        named = args.preset + "".join(f" --set {item}" for item in args.set)
         print(
-            f"{args.preset}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
+            f"{named}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
             f"simulation a second, {r['substeps']:.2f} substeps a frame; mean density error "
             f"{r['mean_error']:.3%} (the worst frame {r['worst_error']:.3%}); particles from "
             f"{lowest} to {highest} m; built and warmed "

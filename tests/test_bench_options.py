@@ -169,3 +169,16 @@ def test_a_sweep_replotted_from_its_csv_takes_its_plot_and_frames(nothing_runs, 
         bench.main(
             ["sweep", "--from-csv", str(tmp_path / "points.csv"), "--plot", str(tmp_path / "p.png"), "--frames", "9"]
         )
+
+
+def test_a_sweep_replotted_from_its_csv_names_the_csv_not_this_machine(monkeypatch, tmp_path, capsys):
+    # The points were measured wherever the CSV was written: the title must not claim this backend.
+    titles = []
+    monkeypatch.setattr(bench.speed_error, "read_csv", lambda path: [])
+    monkeypatch.setattr(bench.speed_error, "plot", lambda points, path, title: titles.append(title))
+    args = bench.build_parser().parse_args(
+        ["sweep", "--from-csv", str(tmp_path / "h200.csv"), "--plot", str(tmp_path / "p.png"), "--frames", "9"]
+    )
+    args.backend = "a backend of this machine"
+    bench.sweep(args)
+    assert titles == ["PBF dam break, 9 frames from rest (the points of h200.csv)"]

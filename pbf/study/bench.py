@@ -447,8 +447,13 @@ def sweep(args):
         )
         speed_error.write_csv(points, args.csv)
     speed_error.print_table(points)
-    machine = f"{platform.processor() or platform.machine()}, {args.backend} backend"
-    speed_error.plot(points, args.plot, f"PBF dam break, {args.frames} frames from rest ({machine})")
+    # Re-plotted, the points are the CSV's machine's, not this one's (--frames says how long they ran).
+    made = (
+        f"the points of {args.from_csv.name}"
+        if args.from_csv
+        else f"{platform.processor() or platform.machine()}, {args.backend} backend"
+    )
+    speed_error.plot(points, args.plot, f"PBF dam break, {args.frames} frames from rest ({made})")
     print(f"wrote {args.plot}" if args.from_csv else f"wrote {args.csv} and {args.plot}")
     return points
 
