@@ -72,9 +72,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     sim = Simulation(small_dam_break())
     sim.step(20)  # mid-splash: the iterations move particles
     x_star, neighbours = sim.integrator.predicted, sim.grid.neighbours
-    sim.integrator.advance(sim.dt_s, sim.control.gravity_m_s2)  # a substep's start (Simulation.substep)
-    sim.grid.sort_and_permute(x_star.first, sim.state.index, sim.state)
-    sim.grid.build_neighbours(x_star.first)
+    sim.launches.predict_and_find_neighbours(sim.dt_s, sim.control.gravity_m_s2)  # a substep's lines 1-7
     for k, weight in enumerate((1.0, 1.25, 1.5)):
         sim.density.project(x_star, neighbours, measure=True, first=k == 0, weight=weight)
     newer = (x_star.second if x_star.in_second else x_star.first).to_numpy()

@@ -190,7 +190,7 @@ class JacobiIterations:
         neighbours: ti.template(),
         measure: ti.template(),
         per_launch: ti.template(),
-        surface_pass: ti.template(),
+        may_start: ti.template(),
         finish_lists: ti.template(),
         start: ti.template(),
         iterations: ti.template(),
@@ -200,8 +200,12 @@ class JacobiIterations:
     ):
         """The loops of :meth:`_iterate`, for the top level of a kernel (``pbf.solver.substep`` runs the
         substep's last call of them in the launch that ends it); every argument a template, so that no
-        value is copied outside the loops (a one-thread task). ``surface_pass``: whether the loops include
-        the surface ghost's pass, which runs in a call that starts at the substep's first iteration;
+        value is copied outside the loops (a one-thread task). ``may_start``: whether the call may hold the
+        substep's first iteration (``start`` 0): only then are the surface ghost's pass and the first
+        iteration's λ pass (the one that also finds the gradients, ``DensityConstraint.constraint``)
+        compiled in. Elsewhere, and in every iteration of a call but its first, the later iterations' λ
+        pass is compiled alone: on a GPU the two in one task kept the registers of the larger
+        (``benchmarks/registers.py``);
         ``finish_lists``: whether the first λ pass begins with the lists' deferred second visit
         (``NeighbourGrid.finish_compact``: each thread its own particle's list, the only one its λ reads)."""
         for u in ti.static(range(per_launch)):
@@ -212,12 +216,14 @@ class JacobiIterations:
                 k = start + u
                 running, from_second, index = self._loop_state(measure, k)
                 if k < iterations and i < self.active[None] * running:
-                    first_iteration = ti.select(k == 0, 1, 0)
+                    first_iteration = 0
+                    if ti.static(u == 0 and may_start):
+                        first_iteration = ti.select(k == 0, 1, 0)
                     weight = self._weight(index)
                     self.density.multiplier_pass(
                         first, second, from_second, i, neighbours, measure, first_iteration, weight
                     )
-            if ti.static(u == 0 and surface_pass):  # the surface ghost's pass, in a substep's first iteration only
+            if ti.static(u == 0 and may_start):  # the surface ghost's pass, in a substep's first iteration only
                 for i in range(ti.static(self.density.error.shape[0])):
                     running, _, index = self._loop_state(measure, start)
                     if start == 0 and i < self.density.surface_count(1):

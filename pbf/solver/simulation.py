@@ -474,6 +474,7 @@ class Simulation:
             if control.divergence_iterations > 0:  # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
                 self.integrator.predict(dt)
+                self.density.look_up_walls(x_star.first)  # the walls' ghost at the new x*
         on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
             # path all but the last call's: that runs with lines 20-23, timed with them)

@@ -59,7 +59,15 @@ class SubstepLaunches:
             if i < self.state.active[None]:
                 x_star = self.integrator.advance_particle(dt, gravity, i)  # lines 1-4: v = v + Δt g, x* = x + Δt v
                 self.grid.count_in_cell(x_star, i)  # lines 5-7: a counting sort by the cell of x*,
-        self.grid.order_loops(self.state.index, self.state)  # the state and x* gathered in sorted order
+        self.grid.order_loops(self.state.index, self)  # the state and x* gathered in sorted order (gather)
+
+    @ti.func
+    def gather(self, slot, i):
+        """The sort's gather of particle i into ``slot`` (``NeighbourGrid.order_loops``): the state and x*
+        into their scratch, and the walls' ghost at x*, looked up here once for the first λ and Δx
+        passes (``DensityConstraint.wall_ghost_at``)."""
+        self.state.gather(slot, i)
+        self.iterations.density.wall_ghost_at(slot, self.integrator.predicted.first[i])
 
     @ti.kernel
     def _predict_and_find_neighbours_on_device(
@@ -110,7 +118,7 @@ class SubstepLaunches:
         neighbours: NeighbourList,
         measure: ti.template(),
         per_launch: ti.template(),
-        surface_pass: ti.template(),
+        may_start: ti.template(),
         finish_lists: ti.template(),
         settle: ti.template(),
         start: ti.i32,
@@ -129,7 +137,7 @@ class SubstepLaunches:
         max_speed: ti.f32,
     ):
         """:meth:`finish`'s launch: the iterations from ``start`` (``JacobiIterations.iterate_loops``, the
-        surface pass only with ``surface_pass``, a deferred second visit only with ``finish_lists``), x*
+        surface pass and the first iteration's λ pass only with ``may_start``, a deferred second visit only with ``finish_lists``), x*
         settled into the first buffer (``JacobiIterations.settle_loop``, only with ``settle``), then lines
         20-23 (``VelocityPostprocess.finish``)."""
         self.iterations.iterate_loops(
@@ -138,7 +146,7 @@ class SubstepLaunches:
             neighbours,
             measure,
             per_launch,
-            surface_pass,
+            may_start,
             finish_lists,
             start,
             iterations,
