@@ -312,6 +312,53 @@ def test_substep_time_refuses_a_profile_of_a_preset(capsys):
     assert "--profile" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--sizes", "1000", "--set", "time.substeps=3"], "--set: overrides a key of --preset"),
+        (["--preset", "pour", "--set", "time.substeps=0"], "key 'time.substeps'"),
+    ],
+)
+def test_substep_time_refuses_an_override_it_cannot_apply(argv, message, capsys):
+    with pytest.raises(SystemExit) as stop:
+        script("substep_time").main(argv)
+    assert stop.value.code == 2 and message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_frame_budget_prints_a_row_a_setting(capsys):
+    script("frame_budget").main(
+        [
+            "--preset",
+            "dam_break",
+            "--frames",
+            "3",
+            "--window",
+            "2",
+            "3",
+            "--setting",
+            "",
+            "--setting",
+            "solver.iterations=4",
+        ]
+    )
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.endswith(("(as shipped)", "iterations=4"))]
+    assert len(rows) == 2 and all(" | yes | " in row for row in rows)  # every particle inside the box
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--window", "5", "4"], "--window: expected 1 <= FIRST <= LAST"),
+        (["--setting", "solver.iterations=0"], "key 'solver.iterations'"),
+    ],
+)
+def test_frame_budget_refuses_before_it_runs(argv, message, capsys):
+    with pytest.raises(SystemExit) as stop:
+        script("frame_budget").main(["--preset", "dam_break", "--frames", "8", *argv])
+    assert stop.value.code == 2 and message in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_speed_cap_prints_its_table(capsys):
     script("speed_cap").main(["--particles", "8000", "--frames", "3", "--factors", "0", "2", "--divisor", "0"])
