@@ -137,9 +137,9 @@ class SubstepLaunches:
         max_speed: ti.f32,
     ):
         """:meth:`finish`'s launch: the iterations from ``start`` (``JacobiIterations.iterate_loops``, the
-        surface pass and the first iteration's λ pass only with ``may_start``, a deferred second visit only with ``finish_lists``), x*
-        settled into the first buffer (``JacobiIterations.settle_loop``, only with ``settle``), then lines
-        20-23 (``VelocityPostprocess.finish``)."""
+        surface pass and the first iteration's λ pass only with ``may_start``, a deferred second visit
+        only with ``finish_lists``), x* settled into the first buffer (``JacobiIterations.settle_loop``,
+        only with ``settle``), then lines 20-23 (``VelocityPostprocess.finish``)."""
         self.iterations.iterate_loops(
             self.integrator.predicted.first,
             self.integrator.predicted.second,
