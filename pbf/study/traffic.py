@@ -61,8 +61,9 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
         Pass("sort", "scatter: cell, rank in, cell start gathered; members out", 3 * SCALAR, SCALAR),
         Pass(
             "sort",
-            "place in the cell by key, gathered there: member, cell, starts in, the cell's keys; order, scratch out",
-            4 * SCALAR + CARRIED,
+            "place in the cell by key, gathered there: member, cell, starts in, the cell's keys; order, scratch, "
+            "the walls' ghost out",
+            4 * SCALAR + CARRIED + SCALAR + VECTOR,
             2 * SCALAR + CARRIED,
         ),
     ]
@@ -80,15 +81,15 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
     rows += [
         Pass(
             "iterations",
-            "λ: x*, denominator, L, L before in; λ, L, L before, the walls' gradient out; neighbours' x*",
-            VECTOR + 3 * SCALAR + 3 * SCALAR + VECTOR + visit_stream,
+            "λ: x*, denominator, L, L before, the walls' ghost in; λ, L, L before out; neighbours' x*",
+            VECTOR + 3 * SCALAR + SCALAR + VECTOR + 3 * SCALAR + visit_stream,
             visit_gather,
             True,
         ),
         Pass(
             "iterations",
-            "Δx: x*, λ, the walls' gradient, x^{k-1} in; x^{k+1} out; neighbours' x* and λ",
-            4 * VECTOR + SCALAR + visit_stream,
+            "Δx: x*, λ, the walls' gradient, x^{k-1} in; x^{k+1}, the walls' ghost there out; neighbours' x* and λ",
+            4 * VECTOR + SCALAR + SCALAR + VECTOR + visit_stream,
             visit_gather + k * SCALAR,
             True,
         ),
