@@ -137,19 +137,20 @@ class DensityConstraint:
         """ρ_i/ρ0 − 1 (walls included, the ghost not) of the substep's first iteration."""
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
+        self.walls_where_written = grid.on_device
+        """Where the walls' ghost at x_i is looked up: on the device path (the GPU backends') where x_i is
+        written (:meth:`wall_ghost_at`: the sort's gather, each Δx pass, :meth:`look_up_walls`), for
+        the λ and Δx passes that read x_i next; on the host path in the λ pass, for its Δx pass. The
+        ghost of the container's edges and corners is trilinear tables, and that of obstacles and bodies
+        long code: in the λ pass it set the registers of the whole neighbour walk on a GPU (72 where the
+        walk alone needs 34, ptxas for sm_90: ``benchmarks/registers.py``), while looked up there the
+        kernels inline one copy of it fewer, which the CPU's compile of a scene with bodies feels (its
+        cold start 1.3-2.5 s longer with the lookups where written)."""
         self.wall_density = ti.field(ti.f32, shape=particle_count)
-        """The held-still ghost's ρ/ρ0 behind the walls (:meth:`fixed_walls`) at x_i, looked up where x_i
-        was last written (:meth:`wall_ghost_at`) for the λ pass that reads x_i next."""
+        """The held-still ghost's ρ/ρ0 behind the walls (:meth:`fixed_walls`) at x_i, on the device path
+        (:attr:`walls_where_written`)."""
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
-        """Its gradient at x_i (1/m), for the λ pass and the Δx pass, which read the same positions.
-
-        Looked up once a position, where it is written: by the sort that gathers x* (lines 1-7,
-        ``pbf.solver.substep``), by each Δx pass for the next λ (:meth:`jacobi_step`), and after a
-        divergence pass predicts x* again (:meth:`look_up_walls`). The ghost of the container's edges
-        and corners is trilinear tables, and that of obstacles and bodies long code: in the λ pass it
-        set the registers of the whole neighbour walk on a GPU (72 where the walk alone needs 34,
-        ptxas for sm_90: ``benchmarks/registers.py``), and it is still looked up once an iteration, so
-        the iteration kernels inline no more of it (the compile of a scene with bodies)."""
+        """Its gradient at x_i (1/m), for the λ pass and the Δx pass, which read the same positions."""
         self.error = ti.field(ti.f32, shape=particle_count)
         """max(C_i, 0) of the last λ pass that measured it."""
         self.error_sum = TreeSum(particle_count)
@@ -304,7 +305,12 @@ class DensityConstraint:
         ``from_second`` picks; in the ``first_iteration`` also the denominator of λ̂_i, kept for the
         substep (module docstring), and the colour gradient the surface ghost is smoothed from."""
         xi = self.own_position(first, second, from_second, i)
-        wall, wall_gradient = self.wall_density[i], self.wall_gradient[i]  # at xi (wall_ghost_at)
+        wall, wall_gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.walls_where_written):
+            wall, wall_gradient = self.wall_density[i], self.wall_gradient[i]  # at xi (wall_ghost_at)
+        else:
+            wall, wall_gradient = self.fixed_walls(xi)
+            self.wall_gradient[i] = wall_gradient  # for this iteration's Δx pass (jacobi_step)
         ratio = 0.0
         if first_iteration:  # always from the first buffer (x* starts a substep there)
             ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
@@ -435,7 +441,7 @@ class DensityConstraint:
         earlier = second[i]
         if from_second:
             earlier = first[i]
-        dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi (wall_ghost_at)
+        dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi (walls_where_written)
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
         dx *= ti.min(1.0, max_correction / (dx.norm() + 1e-12))
@@ -447,22 +453,28 @@ class DensityConstraint:
             first[i] = moved
         else:
             second[i] = moved
-        self.wall_ghost_at(i, moved)  # for the next λ pass
+        if ti.static(self.walls_where_written):
+            self.wall_ghost_at(i, moved)  # for the next λ pass
 
     @ti.func
     def wall_ghost_at(self, i, xi):
-        """The held-still ghost behind the walls at particle i's new position xi, for the λ and Δx passes
-        that read it next (:attr:`wall_gradient`)."""
-        wall, wall_gradient = self.fixed_walls(xi)
-        self.wall_density[i] = wall
-        self.wall_gradient[i] = wall_gradient
+        """On the device path (:attr:`walls_where_written`) the held-still ghost behind the walls at
+        particle i's new position xi, for the λ and Δx passes that read it next; nothing on the host's."""
+        if ti.static(self.walls_where_written):
+            wall, wall_gradient = self.fixed_walls(xi)
+            self.wall_density[i] = wall
+            self.wall_gradient[i] = wall_gradient
 
     @ti.kernel
-    def look_up_walls(self, x: ti.template()):
-        """:meth:`wall_ghost_at` every live particle's position in ``x``: after a pass that wrote x* anew
-        outside the sort (the divergence pre-correction's prediction)."""
+    def _look_up_walls(self, x: ti.template()):
         for i in range(self.grid.active[None]):
             self.wall_ghost_at(i, x[i])
+
+    def look_up_walls(self, x) -> None:
+        """:meth:`wall_ghost_at` every live particle's position in ``x`` on the device path: after a pass
+        that wrote x* anew outside the sort (the divergence pre-correction's prediction)."""
+        if self.walls_where_written:
+            self._look_up_walls(x)
 
     @ti.func
     def multiplier_pass(
