@@ -12,6 +12,7 @@ def test_the_large_dam_break_is_the_seed_scene_but_for_what_it_sets():
     seed, large = load_scene("dam_break"), load_scene("dam_break_large")
     assert large.fluid.spacing_m == 0.005 and large.time.substeps == 10 and large.particle_count == 1_000_000
     assert large.time.max_speed_m_s == 5.2  # the splash's fastest drops capped (docs/METHOD.md, "Time steps")
+    assert large.solver.target_density_error == 0.004  # 100 particles deep (docs/BENCHMARKS.md)
     same = dataclasses.replace(
         large,
         name=seed.name,
@@ -19,6 +20,7 @@ def test_the_large_dam_break_is_the_seed_scene_but_for_what_it_sets():
         source=seed.source,
         fluid=dataclasses.replace(large.fluid, spacing_m=seed.fluid.spacing_m),
         time=dataclasses.replace(large.time, substeps=seed.time.substeps, max_speed_m_s=seed.time.max_speed_m_s),
+        solver=dataclasses.replace(large.solver, target_density_error=seed.solver.target_density_error),
         render=dataclasses.replace(large.render, width_px=1280, height_px=720),
     )
     assert same == seed

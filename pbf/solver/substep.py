@@ -64,8 +64,8 @@ class SubstepLaunches:
     @ti.func
     def gather(self, slot, i):
         """The sort's gather of particle i into ``slot`` (``NeighbourGrid.order_loops``): the state and x*
-        into their scratch, and the walls' ghost at x*, looked up here once for the first λ and Δx
-        passes (``DensityConstraint.wall_ghost_at``)."""
+        into their scratch, and on the device path the walls' ghost at x*, looked up here once for the
+        first λ and Δx passes (``DensityConstraint.walls_where_written``)."""
         self.state.gather(slot, i)
         self.iterations.density.wall_ghost_at(slot, self.integrator.predicted.first[i])
 
