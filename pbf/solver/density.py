@@ -67,7 +67,7 @@ from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.launch import Launcher
 from pbf.solver.model import SCORR_N, DensityParams
-from pbf.solver.scan import TreeSum
+from pbf.solver.scan import TreeSum, read_count
 from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient
 
 SURFACE_RAMP = (0.25, 0.75)
@@ -146,9 +146,9 @@ class DensityConstraint:
         walk alone needs 34, ptxas for sm_90: ``benchmarks/registers.py``), while looked up there the
         kernels inline one copy of it fewer, which the CPU's compile of a scene with bodies feels (its
         cold start 1.3-2.5 s longer with the lookups where written)."""
-        self.wall_density = ti.field(ti.f32, shape=particle_count)
+        self.wall_density = ti.field(ti.f32, shape=particle_count if self.walls_where_written else 1)
         """The held-still ghost's ρ/ρ0 behind the walls (:meth:`fixed_walls`) at x_i, on the device path
-        (:attr:`walls_where_written`)."""
+        (:attr:`walls_where_written`; one unused entry on the host's)."""
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
         """Its gradient at x_i (1/m), for the λ pass and the Δx pass, which read the same positions."""
         self.error = ti.field(ti.f32, shape=particle_count)
@@ -467,8 +467,9 @@ class DensityConstraint:
 
     @ti.kernel
     def _look_up_walls(self, x: ti.template()):
-        for i in range(self.grid.active[None]):
-            self.wall_ghost_at(i, x[i])
+        for i in range(read_count(self.grid.loop_bound, 1)):  # the bucket: no one-thread task for the bound
+            if i < self.grid.active[None]:
+                self.wall_ghost_at(i, x[i])
 
     def look_up_walls(self, x) -> None:
         """:meth:`wall_ghost_at` every live particle's position in ``x`` on the device path: after a pass
