@@ -2,6 +2,8 @@
 neighbour lists' overflow), run here on the CPU (``pbf.solver.backend.decisions_on_device``): it takes
 the host path's decisions and reads the device at most once per substep."""
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -112,3 +114,46 @@ def test_the_device_paths_substep_keeps_exact_lists_past_their_slots(divergence)
     for a, b in zip(host.grid.neighbour_lists(), device.grid.neighbour_lists(), strict=True):
         assert np.array_equal(a, b)
     assert np.abs(device.positions() - host.positions()).max() < 1e-5  # m: rounding, 3e-4 spacings
+
+
+class WallsChecked:
+    """A stage hook that, as the iterations start and as they hand over to the substep's last call, checks
+    that the walls' ghost the device path's λ and Δx passes read is the ghost at x*: the lookup the sort,
+    each Δx pass and a divergence pass's re-prediction made (``DensityConstraint.walls_where_written``)
+    against one made afresh there."""
+
+    def __init__(self):
+        self.sim, self.checked, self.worst = None, 0, 0.0
+
+    @contextlib.contextmanager
+    def stage(self, name):
+        if name in ("solver iterations", "velocity, vorticity, XSPH, x = x*") and self.sim is not None:
+            density, n = self.sim.density, self.sim.particle_count
+            read = density.wall_density.to_numpy()[:n], density.wall_gradient.to_numpy()[:n]
+            density._look_up_walls(self.sim.integrator.predicted.first)  # x* is in the first buffer here
+            fresh = density.wall_density.to_numpy()[:n], density.wall_gradient.to_numpy()[:n]
+            assert np.count_nonzero(fresh[0]) > n // 10  # not vacuous: many particles near a wall
+            # Relative to the value: each lookup is inlined in another kernel, whose fused multiply-adds
+            # may round it an ulp or two apart.
+            self.worst = max(
+                self.worst, *(float((np.abs(a - b) / (1.0 + np.abs(b))).max()) for a, b in zip(read, fresh))
+            )
+            self.checked += 1
+        yield
+
+
+@pytest.mark.parametrize("divergence", [0, 1])
+def test_the_device_path_reads_the_walls_ghost_at_the_positions_it_iterates(divergence):
+    scene = small_dam_break(iterations=4)  # two calls: the first's 2 iterations end with x* in the first buffer
+    scene["solver"].update(divergence_iterations=divergence)
+    scene["obstacles"] = [{"min_m": [0.5, 0.0, 0.1], "max_m": [0.6, 0.1, 0.3]}]  # its ghost too
+    hook = WallsChecked()
+    with decisions_on_device():
+        sim = Simulation(scene, hook=hook)
+    sim.step(8)  # the water spreads along the floor into the obstacle
+    hook.sim = sim
+    sim.step(2)
+    assert sim.density.walls_where_written and hook.checked >= 8
+    # The same lookup of the same positions, up to rounding; one a substep old would be off by the ghost's
+    # change over a substep's travel, percents.
+    assert hook.worst < 1e-6
