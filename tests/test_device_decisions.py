@@ -142,6 +142,7 @@ class WallsChecked:
         yield
 
 
+@pytest.mark.slow  # it compiles the device path's kernels with an obstacle: 30-50 MB more in the worker
 @pytest.mark.parametrize("divergence", [0, 1])
 def test_the_device_path_reads_the_walls_ghost_at_the_positions_it_iterates(divergence):
     scene = small_dam_break(iterations=4)  # two calls: the first's 2 iterations end with x* in the first buffer
