@@ -146,6 +146,12 @@ class DensityConstraint:
         walk alone needs 34, ptxas for sm_90: ``benchmarks/registers.py``), while looked up there the
         kernels inline one copy of it fewer, which the CPU's compile of a scene with bodies feels (its
         cold start 1.3-2.5 s longer with the lookups where written)."""
+        self.first_in_visit = self.walls_where_written and not self.wall_mirror
+        """Whether, on the device path, the neighbour visit may also do the substep's first λ pass
+        (:meth:`sums_in_visit_begin`, ``NeighbourGrid.visit_first``): it meets every pair the pass would
+        walk, in the list's order, at the positions the pass reads, so the pass's walk of the lists, one of
+        the substep's neighbour passes, is saved where nothing between the visit and the iterations
+        moves x* (``Simulation.substep``'s ``defer``). Mirrored walls keep the pass (their images' sums)."""
         self.wall_density = ti.field(ti.f32, shape=particle_count if self.walls_where_written else 1)
         """The held-still ghost's ρ/ρ0 behind the walls (:meth:`fixed_walls`) at x_i, on the device path
         (:attr:`walls_where_written`; one unused entry on the host's)."""
@@ -243,14 +249,58 @@ class DensityConstraint:
             j = self.grid.neighbour(neighbours, k, upcoming)
             upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
             if ti.static(gradients):
-                w, grad_w = scaled_kernel_and_gradient(xi - position(x, j), scale)
-                ratio += volume * w
-                g = volume * h * grad_w
+                w, g = self.pair_density_and_gradient(xi, position(x, j), scale, volume, h)
+                ratio += w
                 gradient_i += g
                 sum_sq += g.norm_sqr()
             else:
                 ratio += volume * scaled_kernel((xi - position(x, j)).norm_sqr(), scale)
         return ratio, gradient_i, sum_sq
+
+    @ti.func
+    def pair_density_and_gradient(self, xi, xj, scale, volume, h):
+        """V W_ij and ĝ_ij = V h ∇W_ij of one pair (h, V and ``scale = kernel_scale(h)`` from the caller,
+        read once per particle): a term of the first iteration's sums (:meth:`plain_pair_sums`)."""
+        w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
+        return volume * w, volume * h * grad_w
+
+    @ti.func
+    def sums_in_visit_begin(self):
+        """The first iteration's sums of :meth:`plain_pair_sums` as the neighbour visit finds the pairs
+        (:attr:`first_in_visit`): (the sums, the particle's own term in; what their pairs need), each a
+        vector the visit carries without reading it."""
+        h, volume = self.constants[None].h, self.constants[None].volume
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])  # ratio, Σ ĝ_ij, Σ |ĝ_ij|²
+        return sums, ti.Vector([scale[0], scale[1], scale[2], volume, h])
+
+    @ti.func
+    def sums_in_visit_add(self, sums, xi, xj, given):
+        """:meth:`sums_in_visit_begin`'s sums with the pair (x_i, x_j) added, in the visit's order, which is
+        the list's: the same sums as the first λ pass's."""
+        scale = ti.Vector([given[0], given[1], given[2]])
+        w, g = self.pair_density_and_gradient(xi, xj, scale, given[3], given[4])
+        return sums + ti.Vector([w, g[0], g[1], g[2], g.norm_sqr()])
+
+    @ti.func
+    def sums_in_visit_end(self, i, sums):
+        """The first iteration's λ pass for particle i from the visit's sums (:attr:`first_in_visit`):
+        C_i, the denominator and the colour gradient kept for the substep, and λ̂_i, or with the surface
+        ghost C_i alone (λ̂_i waits for the ghost: :meth:`surface_pass`). Its weight is w_1 = 1, the
+        first of every table (``pbf.solver.acceleration``); its error is kept whether measured or not."""
+        c = self.first_constraint(
+            i,
+            sums[0],
+            ti.Vector([sums[1], sums[2], sums[3]]),
+            sums[4],
+            ti.Vector([0.0, 0.0, 0.0]),
+            self.wall_density[i],
+            self.wall_gradient[i],
+        )
+        if self.constants[None].surface_density:
+            self.plain_error[i] = c
+        else:
+            self.lagrange_multiplier(i, c, True, 1, 1.0)
 
     @ti.func
     def mirrored_pair_sums(
@@ -311,21 +361,29 @@ class DensityConstraint:
         else:
             wall, wall_gradient = self.fixed_walls(xi)
             self.wall_gradient[i] = wall_gradient  # for this iteration's Δx pass (jacobi_step)
-        ratio = 0.0
+        c = 0.0
         if first_iteration:  # always from the first buffer (x* starts a substep there)
             ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
-            # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
-            (h, relaxation, surface_density) = (
-                self.constants[None].h,
-                self.constants[None].relaxation,
-                self.constants[None].surface_density,
-            )
-            colour = gradient_i + own_images + h * wall_gradient
-            self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
-            if surface_density:
-                self.colour_gradient[i] = colour
+            c = self.first_constraint(i, ratio, gradient_i, sum_sq, own_images, wall, wall_gradient)
         else:
             ratio, _, _, _ = self.pair_sums((first, second, from_second), xi, i, neighbours, False)
+            c = ratio + wall - 1.0
+        return c
+
+    @ti.func
+    def first_constraint(self, i, ratio, gradient_i, sum_sq, own_images, wall, wall_gradient):
+        """C_i of the substep's first iteration from its sums (:meth:`pair_sums` with gradients), with the
+        denominator of λ̂_i and the colour gradient kept for the substep."""
+        # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
+        (h, relaxation, surface_density) = (
+            self.constants[None].h,
+            self.constants[None].relaxation,
+            self.constants[None].surface_density,
+        )
+        colour = gradient_i + own_images + h * wall_gradient
+        self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
+        if surface_density:
+            self.colour_gradient[i] = colour
         return ratio + wall - 1.0
 
     @ti.func

@@ -277,12 +277,17 @@ class NeighbourGrid:
         return following
 
     @ti.func
-    def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):
+    def _visit_particle(
+        self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i, sums: ti.template() = False
+    ):
         """Find the neighbours of particle i: into its SLOTS entries
         (first visit: slot-major on a GPU, a row of its own on the CPU; :attr:`slot_major`) or, when
         ``compact``, into the prefix-summed row neighbour_start[i] (second visit, only after an
         overflow), never past the list's end. A particle with more than SLOTS sets ``overflow``: a
-        plain store of the same 1 by every such thread, no atomic into one address."""
+        plain store of the same 1 by every such thread, no atomic into one address. ``sums`` (the first
+        visit only): an object whose ``sums_in_visit_begin``, ``sums_in_visit_add`` and
+        ``sums_in_visit_end`` are handed every neighbour found, in the list's order, uncut by its room
+        (``DensityConstraint.first_in_visit``); False for none."""
         capacity = neighbours.shape[0]
         kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
         h2 = kernel_radius * kernel_radius
@@ -296,27 +301,40 @@ class NeighbourGrid:
             stride = 1
             room = ti.min(self.neighbour_start[i] + self.neighbour_count[i], capacity) - start
         found = 0
+        with_sums = ti.static(not compact and not isinstance(sums, bool))
+        pair_sums, given = ti.Vector([0.0] * 5), ti.Vector([0.0] * 5)
+        if ti.static(with_sums):
+            pair_sums, given = sums.sums_in_visit_begin()
         # Runtime loops over the columns, not unrolled: the 25 copies of the walk an unrolled loop made
         # took 2.3 s to compile in every kernel that visits, and ran 7% slower on the CPU.
         for dx in range(-self.reach, self.reach + 1):
             for dy in range(-self.reach, self.reach + 1):
                 first, last = self.column_range(c, resolution, dx, dy)
                 for j in range(first, last):
+                    xj = x[j]
                     if ti.static(self.slot_major):
                         # A GPU thread stores only neighbours: a warp's threads take the branch
                         # together or wait for one another, and every store skipped is a scattered
                         # write saved (the candidates are 3-6 times the neighbours).
-                        if j != i and (x[j] - xi).norm_sqr() < h2:
+                        if j != i and (xj - xi).norm_sqr() < h2:
                             if found < room:
                                 neighbours[start + found * stride] = j
                             found += 1
+                            if ti.static(with_sums):
+                                pair_sums = sums.sums_in_visit_add(pair_sums, xi, xj, given)
                     else:
                         # Branch-free on the CPU: write every candidate to the next free entry and
                         # advance only past neighbours. A branch on the distance test mispredicts on
                         # most candidates.
                         if found < room:
                             neighbours[start + found] = j
-                        found += ti.select(j != i and (x[j] - xi).norm_sqr() < h2, 1, 0)
+                        near = j != i and (xj - xi).norm_sqr() < h2
+                        found += ti.select(near, 1, 0)
+                        if ti.static(with_sums):  # the device path on the CPU backend (its tests)
+                            if near:
+                                pair_sums = sums.sums_in_visit_add(pair_sums, xi, xj, given)
+        if ti.static(with_sums):
+            sums.sums_in_visit_end(i, pair_sums)
         if ti.static(not compact):  # the second visit finds the same count, which others may be reading
             self.neighbour_count[i] = found
             self.neighbour_start[i] = start
@@ -350,6 +368,7 @@ class NeighbourGrid:
         mover: ti.template(),
         count_blocks: ti.template() = False,
         defer: ti.template() = False,
+        sums: ti.template() = False,
     ):
         """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
         was cleared by the sort). After a sort whose ``mover`` gathered into scratch
@@ -357,12 +376,12 @@ class NeighbourGrid:
         particle's arrays back (``mover.take_gathered``): no loop of its own for the copy; else ``mover``
         is False. ``count_blocks``: each particle's count also goes into its block of the overflow's
         prefix sum (``ExclusiveScan.add_to_block``, that sum's first pass up), for :meth:`visit_on_device`;
-        ``defer``: an overflow also sets :attr:`deferred`."""
+        ``defer``: an overflow also sets :attr:`deferred`; ``sums``: as in :meth:`_visit_particle`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 if ti.static(not isinstance(mover, bool)):
                     mover.take_gathered(i)
-                self._visit_particle(x, neighbours, False, i)
+                self._visit_particle(x, neighbours, False, i, sums)
                 if ti.static(count_blocks):
                     self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
                 if ti.static(defer):
@@ -377,6 +396,7 @@ class NeighbourGrid:
         mover: ti.template(),
         gathered: ti.template(),
         defer: ti.template() = False,
+        sums: ti.template() = False,
     ):
         """Both visits in one launch, the second over no particles unless the first overflowed: the device
         decides, the host reads nothing. A compact list longer than the array is cut at its end and
@@ -385,10 +405,11 @@ class NeighbourGrid:
         kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted positions' scratch, read
         by the first visit; the second reads ``x``, taken back by then).
 
-        With ``defer`` the second visit is left to the substep's first λ pass (:meth:`finish_compact`,
-        each thread for its own particle, which is all that pass reads of the lists): a loop fewer, for a
-        substep with nothing between the lists and the iterations that reads them."""
-        self.visit_first(gathered, neighbours, mover, True, defer)
+        With ``defer`` the second visit is left to the substep's first pass that walks the lists
+        (:meth:`finish_compact`, each thread for its own particle, which is all that pass reads of the
+        lists): a loop fewer, for a substep with nothing between the lists and the iterations that reads
+        them. ``sums``: as in :meth:`_visit_particle`."""
+        self.visit_first(gathered, neighbours, mover, True, defer, sums)
         # The compact list's starts: the first visit summed each block of counts; the levels above are
         # summed only after an overflow, and each thread of the second visit adds up its own start
         # (ExclusiveScan.start_of), so that no pass down runs in every substep for a rare event.

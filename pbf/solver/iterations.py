@@ -206,9 +206,13 @@ class JacobiIterations:
         compiled in. Elsewhere, and in every iteration of a call but its first, the later iterations' λ
         pass is compiled alone: on a GPU the two in one task kept the registers of the larger
         (``benchmarks/registers.py``);
-        ``finish_lists``: whether the first λ pass begins with the lists' deferred second visit
-        (``NeighbourGrid.finish_compact``: each thread its own particle's list, the only one its λ reads)."""
+        ``finish_lists``: whether the substep's visit left an overflow's second visit to the first pass
+        here (``NeighbourGrid.finish_compact``: each thread its own particle's list, the only one its pass
+        reads), and did the first iteration's λ pass itself where the density constraint allows it
+        (``DensityConstraint.first_in_visit``): then that pass runs the surface ghost's pass alone (the
+        colour gradients are the visit's), or nothing but the lists' second visit without the ghost."""
         for u in ti.static(range(per_launch)):
+            in_visit = ti.static(u == 0 and may_start and finish_lists and self.density.first_in_visit)
             for i in range(ti.static(self.density.error.shape[0])):
                 if ti.static(u == 0 and finish_lists):
                     if start == 0:
@@ -216,14 +220,21 @@ class JacobiIterations:
                 k = start + u
                 running, from_second, index = self._loop_state(measure, k)
                 if k < iterations and i < self.active[None] * running:
-                    first_iteration = 0
-                    if ti.static(u == 0 and may_start):
-                        first_iteration = ti.select(k == 0, 1, 0)
                     weight = self._weight(index)
-                    self.density.multiplier_pass(
-                        first, second, from_second, i, neighbours, measure, first_iteration, weight
-                    )
-            if ti.static(u == 0 and may_start):  # the surface ghost's pass, in a substep's first iteration only
+                    if ti.static(in_visit):
+                        if k == 0:  # λ̂ of the substep's first iteration waits for the ghost, or is done
+                            if i < self.density.surface_count(1):
+                                self.density.surface_pass(first, i, neighbours, measure, 1, weight)
+                        else:
+                            self.density.multiplier_pass(first, second, from_second, i, neighbours, measure, 0, weight)
+                    else:
+                        first_iteration = 0
+                        if ti.static(u == 0 and may_start):
+                            first_iteration = ti.select(k == 0, 1, 0)
+                        self.density.multiplier_pass(
+                            first, second, from_second, i, neighbours, measure, first_iteration, weight
+                        )
+            if ti.static(u == 0 and may_start and not in_visit):  # the surface ghost, in a first iteration
                 for i in range(ti.static(self.density.error.shape[0])):
                     running, _, index = self._loop_state(measure, start)
                     if start == 0 and i < self.density.surface_count(1):

@@ -96,6 +96,12 @@ def _argument_setters(primal) -> tuple | None:
     return tuple(setters)
 
 
+def launch_from_context(program, compiled, context) -> None:
+    """The program's launch of ``compiled`` (its data for the launch) from a launch context: every direct
+    launch of a :class:`Launcher` goes through here, where ``pbf.study.common.TransferCounter`` counts it."""
+    program.launch_kernel(compiled, context)
+
+
 class Launcher:
     """``bound`` (a kernel of a ``ti.data_oriented`` object, as ``obj.kernel`` gives it) called with
     positional arguments, its compiled variants launched directly after their first call (the module
@@ -156,7 +162,7 @@ class Launcher:
             if context is None:  # an argument Taichi refuses (its call says how) or one this does not set
                 return self._bound(*args)
             try:
-                impl.get_runtime().prog.launch_kernel(entry[2], context)
+                launch_from_context(impl.get_runtime().prog, entry[2], context)
             except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
                 raise handle_exception_from_cpp(error) from None
             return None

@@ -49,8 +49,14 @@ class SubstepLaunches:
         grid, x = self.grid, self.integrator.predicted.first
         if grid.on_device and not grid.checking:
             self._launch_on_device(grid.neighbours, dt, *gravity, defer)
-        elif self._launch_visit(grid.neighbours, dt, *gravity):
+        elif self._launch_visit(grid.neighbours, dt, *gravity, defer):
             grid.build_compact(x)
+
+    def first_in_visit(self, defer: bool) -> bool:
+        """Whether the visit of lines 1-7 also does the first iteration's λ pass (``defer``: nothing between
+        the visit and the iterations moves x*; ``DensityConstraint.first_in_visit``): the iterations are
+        told the same (``JacobiIterations.iterate_loops``' ``finish_lists``)."""
+        return defer and self.iterations.density.first_in_visit
 
     @ti.func
     def _predict_and_sort(self, dt: ti.template(), gravity: ti.template()):
@@ -77,14 +83,24 @@ class SubstepLaunches:
         # a call than three values (benchmarks/kernel_arguments.py).
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
-        self.grid.visit_on_device(x, neighbours, self.state, ti.static(self.state.scratch_of(x)), defer)  # the lists
+        gathered = ti.static(self.state.scratch_of(x))
+        if ti.static(self.first_in_visit(defer)):  # the lists, and the first λ pass (DensityConstraint.first_in_visit)
+            self.grid.visit_on_device(x, neighbours, self.state, gathered, defer, self.iterations.density)
+        else:
+            self.grid.visit_on_device(x, neighbours, self.state, gathered, defer)
 
     @ti.kernel
-    def _predict_and_visit(self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32) -> ti.i32:
+    def _predict_and_visit(
+        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, defer: ti.template()
+    ) -> ti.i32:
         self.grid.overflow[None] = 0  # the sort clears it in its first thread, which an empty box lacks
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
-        self.grid.visit_first(ti.static(self.state.scratch_of(x)), neighbours, self.state)  # the lists' first visit
+        gathered = ti.static(self.state.scratch_of(x))
+        if ti.static(self.first_in_visit(defer)):  # the lists' first visit, and the first λ pass
+            self.grid.visit_first(gathered, neighbours, self.state, False, False, self.iterations.density)
+        else:
+            self.grid.visit_first(gathered, neighbours, self.state)
         return self.grid.overflow[None]
 
     def finish(self, neighbours, control, defer: bool, *finish) -> None:

@@ -60,7 +60,9 @@ class TransferCounter:
     A launch is every call of a ``@ti.kernel``, Taichi's own (``to_numpy``, ``fill``...) included;
     writing an element from Python (``field[None] = v``) launches a small writer kernel and is counted
     with the launches, not with the reads. ``ti.sync()`` is neither. Counted by wrapping Taichi's
-    ``Kernel.launch_kernel`` and its classes' ``__getitem__``/``__setitem__`` (Taichi 1.7.4, pinned)."""
+    ``Kernel.launch_kernel`` and its classes' ``__getitem__``/``__setitem__`` (Taichi 1.7.4, pinned), and
+    ``pbf.solver.launch.launch_from_context``, through which a ``Launcher`` launches its kernels past
+    Taichi's call (kernels that return nothing, so launches only)."""
 
     def __init__(self):
         self.launches = 0
@@ -73,6 +75,8 @@ class TransferCounter:
         from taichi.lang._ndarray import ScalarNdarray
         from taichi.lang.field import ScalarField
         from taichi.lang.matrix import MatrixField, MatrixNdarray, VectorNdarray
+
+        from pbf.solver import launch as launcher_module
 
         counter = self
 
@@ -100,7 +104,14 @@ class TransferCounter:
 
             return wrapped
 
-        targets = [(kernel_impl.Kernel, "launch_kernel", launch)]
+        def direct(original):
+            def wrapped(*args):
+                counter.launches += 1
+                return original(*args)
+
+            return wrapped
+
+        targets = [(kernel_impl.Kernel, "launch_kernel", launch), (launcher_module, "launch_from_context", direct)]
         for cls in (ScalarField, MatrixField, ScalarNdarray, VectorNdarray, MatrixNdarray):
             targets += [(cls, "__getitem__", lambda f: access(f, 1)), (cls, "__setitem__", lambda f: access(f, 0))]
         for cls, name, wrap in targets:

@@ -8,8 +8,9 @@ neighbours mostly comes from there, while what it streams (its own particle's ar
 order, read or written once) comes from the GPU's memory. The model counts both, per particle and
 substep, for two designs of the neighbour search:
 
-* ``lists`` (today): a pass over the grid writes each particle's neighbour indices, and every later
-  pass reads them back and gathers the neighbours through them;
+* ``lists`` (today's device path): a pass over the grid writes each particle's neighbour indices and
+  does the first iteration's λ pass with the pairs it finds (``DensityConstraint.first_in_visit``), and
+  every later pass reads the lists back and gathers the neighbours through them;
 * ``cells``: no lists; every pass walks the cells around the particle (contiguous slots in the sorted
   order: ``NeighbourGrid.column_range``) and tests each candidate's distance again.
 
@@ -40,6 +41,8 @@ class Pass:
     gathered: float
     """Bytes per particle read from other particles' slots (mostly from the L2 cache)."""
     per_iteration: bool = False
+    after_first: bool = False
+    """A pass of every iteration but the first (whose work another pass does)."""
 
 
 def passes(design: str, neighbours: float, candidates: float, cells: float) -> list[Pass]:
@@ -67,14 +70,17 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
             2 * SCALAR + CARRIED,
         ),
     ]
-    # The visit that follows the sort takes the carried arrays back from scratch (2 × CARRIED streamed).
+    # The visit that follows the sort takes the carried arrays back from scratch (2 × CARRIED streamed),
+    # and with lists does the first iteration's λ pass: the walls' ghost in, the denominator and λ, L,
+    # L before out (the ghost beyond the surface: C_i and the colour gradient instead, as many bytes).
     rows.append(
         Pass(
             "neighbour lists" if listed else "sort",
-            "visit the cells: x* in, candidates' x* gathered; indices, count, start, end out; carried taken back"
+            "visit the cells: x* in, candidates' x* gathered; indices, count, start, end out; carried taken back; "
+            "the first λ: the walls' ghost in, denominator, λ, L, L before out"
             if listed
             else "the carried arrays taken back from scratch",
-            (VECTOR + k * SCALAR + 3 * SCALAR if listed else 0.0) + 2 * CARRIED,
+            (VECTOR + k * SCALAR + 3 * SCALAR + SCALAR + VECTOR + 4 * SCALAR if listed else 0.0) + 2 * CARRIED,
             25 * 2 * SCALAR + c * VECTOR if listed else 0.0,
         )
     )
@@ -85,6 +91,7 @@ def passes(design: str, neighbours: float, candidates: float, cells: float) -> l
             VECTOR + 3 * SCALAR + SCALAR + VECTOR + 3 * SCALAR + visit_stream,
             visit_gather,
             True,
+            after_first=listed,
         ),
         Pass(
             "iterations",
@@ -114,7 +121,7 @@ def by_stage(rows: list[Pass], iterations: int) -> dict[str, tuple[float, float]
     ``iterations`` times."""
     stages: dict[str, tuple[float, float]] = {}
     for row in rows:
-        times = iterations if row.per_iteration else 1
+        times = (iterations - row.after_first) if row.per_iteration else 1
         streamed, gathered = stages.get(row.stage, (0.0, 0.0))
         stages[row.stage] = (streamed + times * row.streamed, gathered + times * row.gathered)
     return stages
