@@ -165,15 +165,17 @@ def test_the_device_path_reads_the_walls_ghost_at_the_positions_it_iterates(dive
     assert hook.worst < 1e-6
 
 
-def first_pass_from_the_visit_and_from_the_lists(scene):
+def first_pass_from_the_visit_and_from_the_lists(scene, checking):
     """On the device path, a substep's lines 1-7 whose visit also does the first λ pass
     (``DensityConstraint.first_in_visit``), then that pass over the lists as the host path runs it: the
-    denominators and, with the surface ghost, C_i and the colour gradients, else λ̂_i, of each."""
+    denominators and, with the surface ghost, C_i and the colour gradients, else λ̂_i, of each.
+    ``checking``: lines 1-7 as when the compact list runs full (the host reads the overflow flag)."""
     with decisions_on_device():
         sim = Simulation(scene)
     sim.step(6)  # the block in its fall onto the floor: every particle compressed or at a wall
     density, grid, x_star = sim.density, sim.grid, sim.integrator.predicted
     assert sim.launches.first_in_visit(True)  # not vacuous: the visit takes the pass
+    grid.checking = checking
     ghost = scene["solver"].get("surface_density", False)
     names = ("denominator", "plain_error", "colour_gradient") if ghost else ("denominator", "lam")
     sim.launches.predict_and_find_neighbours(sim.dt_s, sim.control.gravity_m_s2, True)
@@ -186,9 +188,11 @@ def first_pass_from_the_visit_and_from_the_lists(scene):
 
 
 @pytest.mark.parametrize(
-    "solver", [{"surface_density": True}, {"kernel_ratio": 3.6}], ids=["surface ghost", "lists past their slots"]
+    "solver, checking",
+    [({"surface_density": True}, False), ({"kernel_ratio": 3.6}, False), ({"kernel_ratio": 3.6}, True)],
+    ids=["surface ghost", "lists past their slots", "past their slots, checked"],
 )
-def test_the_device_paths_visit_does_the_first_lambda_pass(solver):
+def test_the_device_paths_visit_does_the_first_lambda_pass(solver, checking):
     # The visit meets every pair within h in the order the lists hold them, so its sums are the first λ
     # pass's up to rounding: each is inlined in another kernel, whose fused multiply-adds round each
     # term apart, a few ulps of ρ/ρ0 = 1 over 190 neighbours (C_i and λ̂_i then differ by 1e-5 of their
@@ -196,7 +200,7 @@ def test_the_device_paths_visit_does_the_first_lambda_pass(solver):
     # pair: one pair's term is 1e-3 to 1e-1 of ρ/ρ0.
     scene = small_dam_break(iterations=3)
     scene["solver"].update(solver)
-    sim, names, visited, walked = first_pass_from_the_visit_and_from_the_lists(scene)
+    sim, names, visited, walked = first_pass_from_the_visit_and_from_the_lists(scene, checking)
     if "kernel_ratio" in solver:
         assert max(map(len, sim.grid.neighbour_lists())) > 2 * SLOTS  # not vacuous: the lists overflowed
     for name, a, b in zip(names, visited, walked, strict=True):

@@ -56,6 +56,8 @@ class JacobiIterations:
         """Whether the last substep on the device path had a target (else it ran every iteration)."""
         self._launch_iterate = Launcher(self._iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         if on_device:
+            # The visit that may do the first λ pass weighs it by 1 (DensityConstraint.sums_in_visit_end).
+            assert weights.table[0] == 1.0, f"the first iteration's weight is 1 in every table, not {weights.table[0]}"
             self.table = ti.field(ti.f32, shape=len(weights.table))
             self.table.from_numpy(np.asarray(weights.table, np.float32))
             self.flags = ti.field(ti.i32, shape=5)
