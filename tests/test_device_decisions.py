@@ -187,6 +187,7 @@ def first_pass_from_the_visit_and_from_the_lists(scene, checking):
     return sim, names, visited, walked
 
 
+@pytest.mark.slow  # three more compiles of the device path in a worker: the default run's memory
 @pytest.mark.parametrize(
     "solver, checking",
     [({"surface_density": True}, False), ({"kernel_ratio": 3.6}, False), ({"kernel_ratio": 3.6}, True)],
