@@ -10,12 +10,13 @@ to a launch, never a launch of its own.
 
 The block sizes are the one choice per backend (:func:`block_sizes`). On the CPU level 0 has about
 1,024 blocks of n/1024 entries (64 at least; a prefix sum 256 of n/256): a thread walks a long stretch
-of memory in order, and one thread adds up the block results, two levels in all (a prefix sum's pass
-down has each block add up the sums before its own instead, two passes in all). On a GPU every block
-has 32 entries: tens of thousands of threads at level 0, a few levels more (a million cells: 32,768,
-1,024, 32). Float sums on CUDA take a shorter way (:meth:`TreeSum._reduce_in_blocks`): each block of
-256 threads adds up its entries and then halves its partial sums in shared memory, so that a sum is
-one launch up to 16,384 entries and two above, in a fixed order all the same.
+of memory in order, and one thread adds up the block results, two levels in all. On a GPU every block
+has 32 entries: tens of thousands of threads at level 0, a few levels more (four million cells: 131,072,
+4,096, 128, 4). A prefix sum goes up the tree a pass a level, and down it in one pass: each level-0
+block adds up its own start from the sums above it, at most a block's a level. Float sums on CUDA
+take a shorter way (:meth:`TreeSum._reduce_in_blocks`): each block of 256 threads adds up its entries
+and then halves its partial sums in shared memory, so that a sum is one launch up to 16,384 entries
+and two above, in a fixed order all the same.
 
 Sums of floats are compensated: each block keeps its sum as a float32 pair (high, low), Knuth's
 TwoSum carrying the rounding error of every addition into the low part, so a sum comes out as exact
@@ -137,8 +138,6 @@ class ExclusiveScan:
         self.tree = Tree(length, block, CPU_SCAN_BLOCKS)
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
-        self.starts = ti.field(ti.i32, shape=self.tree.scratch)
-        """Exclusive block starts of levels 1 … top − 1 (the top's are added up where they are needed)."""
 
     @ti.func
     def _entry(self, values: ti.template(), level: ti.template(), k):
@@ -181,14 +180,15 @@ class ExclusiveScan:
                     self.sums[self.tree.offsets[level + 1] + b] = total
 
     @ti.func
-    def start_of(self, values: ti.template(), k):
+    def start_of(self, values: ti.template(), k, lowest: ti.template() = 0):
         """Σ_{l<k} values[l] worked out by the calling thread alone, after :meth:`up`: the entries before k
         in its level-0 block, then before its block in the level above, and so on to the top (at most
         one block's entries a level). For a caller that needs a few starts, or each thread its own,
-        without the passes down (a task each)."""
+        without the passes down (a task each). ``lowest``: k is an entry of that level (1: the start of
+        level-0 block k)."""
         total = 0
         index = k
-        for level in ti.static(range(self.tree.top + 1)):
+        for level in ti.static(range(lowest, self.tree.top + 1)):
             block = ti.static(self.tree.blocks[level])
             above = index // block
             for e in range(above * block, index):
@@ -200,9 +200,11 @@ class ExclusiveScan:
     def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), counted: ti.template() = False):
         """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
         0-D field, a Python int or a value. Called at a kernel's top level. Up the tree each block sums
-        its entries; the first pass down has each block add up the top's entries before its own (at
-        most a block's: 255 on the CPU, 31 on a GPU), so the top needs no pass of its own; down the
-        tree each block writes the running sums of its entries from its own start.
+        its entries; then one pass down: each level-0 block adds up its own start from the block sums
+        above it (:meth:`start_of` from level 1: the sums before it in its block of the level above, and
+        so on to the top, at most a block's a level: 255 on the CPU, whose tree has two levels, 31 a
+        level on a GPU) and writes the running sums of its entries from there. A pass down per level
+        would cost a task each, a launch on a GPU (a million cells in blocks of 32: five levels).
 
         Every level loops over all of its blocks, a count the kernel knows, and skips those past the
         live entries, each thread reading the count itself: a loop bound or a count read at run time
@@ -210,34 +212,20 @@ class ExclusiveScan:
         were gathered by :meth:`add_to_block` (over all ``length`` entries), and the first pass up is
         skipped."""
         self.up(values, count, 1, counted)
-        for down in ti.static(range(self.tree.top)):  # down: each level's starts from its blocks' starts
-            level = ti.static(self.tree.top - 1 - down)
-            block = ti.static(self.tree.blocks[level])
-            for b in range(ti.static(self.tree.block_counts[level])):
+        if ti.static(self.tree.top > 0):
+            block = ti.static(self.tree.blocks[0])
+            for b in range(ti.static(self.tree.block_counts[0])):
                 total_count = read_count(count, 1)
-                live = total_count
-                for j in ti.static(range(level)):
-                    live = _live(live, self.tree.blocks[j])
-                if b < _live(live, block):
-                    running = 0
-                    if ti.static(level + 1 == self.tree.top):
-                        for k in range(b):  # the top level's sums before this block (fewer than a block)
-                            running += self.sums[self.tree.offsets[self.tree.top] + k]
-                    else:
-                        running = self.starts[self.tree.offsets[level + 1] + b]
-                    end = ti.min((b + 1) * block, live)
+                if b < _live(total_count, block):
+                    running = self.start_of(values, b, 1)
+                    end = ti.min((b + 1) * block, total_count)
                     for k in range(b * block, end):
-                        if ti.static(level == 0):
-                            starts[k] = running
-                        else:
-                            self.starts[self.tree.offsets[level] + k] = running
-                        running += self._entry(values, level, k)
-                    if ti.static(level == 0):
-                        if end == total_count:
-                            starts[total_count] = running
-                if ti.static(level == 0):
-                    if b == 0 and total_count == 0:  # no block is live: the total is 0
-                        starts[0] = 0
+                        starts[k] = running
+                        running += values[k]
+                    if end == total_count:
+                        starts[total_count] = running
+                if b == 0 and total_count == 0:  # no block is live: the total is 0
+                    starts[0] = 0
         if ti.static(self.tree.top == 0):  # a single block: one thread walks it
             for _ in range(1):
                 live = read_count(count, 1)
