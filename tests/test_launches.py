@@ -22,12 +22,11 @@ device path no task is a one-thread task (``pbf.solver.substep``); on the CPU on
 and the host's iterations return their error through some."""
 
 
-@pytest.fixture(scope="module")
-def counts() -> dict:
+def bench_counts(*options) -> dict:
     """The table of ``bench counts`` by case, from a process of its own (the profiler is chosen at
     ``ti.init``, and this suite's runtime runs without it)."""
     done = subprocess.run(
-        [sys.executable, "-m", "pbf.study.bench", "counts", "--arch", "cpu", "--threads", "1"],
+        [sys.executable, "-m", "pbf.study.bench", "counts", "--arch", "cpu", "--threads", "1", *options],
         capture_output=True,
         text=True,
         timeout=600,
@@ -39,6 +38,11 @@ def counts() -> dict:
         if match:
             rows[match.group(1)] = tuple(float(value) for value in match.groups()[1:])
     return rows
+
+
+@pytest.fixture(scope="module")
+def counts() -> dict:
+    return bench_counts()
 
 
 @pytest.mark.slow
@@ -76,3 +80,13 @@ def test_the_counts_see_every_kernel_call(counts):
     20-23. A count that missed the direct launches read 5 and 0."""
     assert counts["8,000, 4 iterations"][0] == 6
     assert counts["8,000, 4 its., device decisions"][0] == 3
+
+
+@pytest.mark.slow
+def test_a_gpus_blocks_add_few_launches():
+    """With a GPU's blocks of 32 the prefix sums have more levels, each a pass up and a launch (the pass
+    down is one whatever the levels): 18 tasks a substep at 4 iterations on the device path, 3 more than
+    the CPU's blocks, and still no one-thread task."""
+    calls, tasks, serial, iteration, _ = bench_counts("--gpu-blocks")["8,000, 4 its., device decisions"]
+    assert (calls, serial, iteration) == (3, 0, 4)
+    assert tasks <= 18, f"{tasks} offloaded tasks per substep in a GPU's blocks, at most 18"

@@ -60,6 +60,8 @@ _options: dict = {}
 """The ``ti.init`` options of the running backend, for ``restart_backend``."""
 _decisions_on_device_on_cpu = False
 """Tests run the GPU backends' device-resident substep on the CPU (:func:`decisions_on_device`)."""
+_gpu_blocks_on_cpu = False
+"""Counts of launches lay the sums out in a GPU's blocks on the CPU (:func:`in_gpu_blocks`)."""
 
 TAICHI_START_LINE = "[Taichi] Starting on arch="
 """The line ``ti.init`` prints (``taichi/lang/misc.py``, a plain ``print``) on every start."""
@@ -349,6 +351,25 @@ def running_device() -> Device:
 def on_gpu() -> bool:
     """Whether the running backend is a GPU one (CUDA, Vulkan, Metal), lavapipe included."""
     return _started is not None and _started.arch in GPU_ARCHES
+
+
+def gpu_blocks() -> bool:
+    """Whether prefix sums and tree sums built now take a GPU's blocks of 32 entries (``pbf.solver.scan``):
+    on a GPU backend, and on the CPU inside :func:`in_gpu_blocks`."""
+    return on_gpu() or _gpu_blocks_on_cpu
+
+
+@contextlib.contextmanager
+def in_gpu_blocks(enabled: bool = True):
+    """Sums built inside take a GPU backend's blocks on any backend: the same results (integer sums
+    exactly, float sums compensated), and the launches a GPU makes, which Taichi's profiler counts on
+    the CPU (``python -m pbf.study.bench counts --gpu-blocks``)."""
+    global _gpu_blocks_on_cpu
+    before, _gpu_blocks_on_cpu = _gpu_blocks_on_cpu, enabled
+    try:
+        yield
+    finally:
+        _gpu_blocks_on_cpu = before
 
 
 def sums_in_shared_memory() -> bool:

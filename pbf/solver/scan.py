@@ -31,7 +31,7 @@ import math
 import taichi as ti
 from taichi.lang.field import ScalarField
 
-from pbf.solver.backend import on_gpu, sums_in_shared_memory
+from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level."""
@@ -64,7 +64,7 @@ def block_sizes(length: int, blocks: int = CPU_BLOCKS) -> tuple[int, int]:
     measured as a 5% longer substep at 8,000 particles with levels of 32; one thread walks 1,024 block
     sums in about a microsecond. On a GPU a level costs a few microseconds and a long block idles
     thousands of threads."""
-    if on_gpu():
+    if gpu_blocks():
         return GPU_BLOCK, GPU_BLOCK
     return max(64, math.ceil(length / blocks)), blocks
 

@@ -5,7 +5,7 @@
     python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
     python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
     python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
-    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4]   (kernel calls, tasks per substep)
+    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4] [--gpu-blocks]   (kernel calls, tasks per substep)
     python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (see pbf.study.start)
     python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
     python -m pbf.study.bench frames  [options of python -m pbf.study.frames]   (the renderers and writer alone)
@@ -24,7 +24,9 @@ throughout: the machines are shared and noisy.
 ``counts`` runs substeps of the seed scene at a fixed iteration count, on the host's decisions and on
 the device's (as GPU backends take them), and of the shipped preset with its error target, under
 Taichi's kernel profiler, and prints the Python kernel calls and the offloaded tasks per substep
-(``pbf.study.launches``). ``start`` times cold and warm starts of every preset in fresh processes
+(``pbf.study.launches``); with ``--gpu-blocks`` the sums take a GPU backend's blocks of 32, whose
+extra levels are launches of their own on a GPU (the float sums as Vulkan and Metal add them up; CUDA
+takes one or two launches a sum). ``start`` times cold and warm starts of every preset in fresh processes
 (``pbf.study.start``). ``traffic`` measures the neighbour and candidate counts of the seed scene
 in its splash and prints the bytes a substep moves per particle by stage, with neighbour lists and
 without (``pbf.study.traffic``), scaled to ``--particles``.
@@ -388,7 +390,7 @@ def compare(paths: list[Path]) -> list[dict]:
 
 def counts(args) -> list:
     """``counts``: kernel calls and offloaded tasks per substep (``pbf.study.launches``)."""
-    from pbf.solver.backend import decisions_on_device
+    from pbf.solver.backend import decisions_on_device, in_gpu_blocks
     from pbf.study import launches
 
     rows = []
@@ -400,7 +402,7 @@ def counts(args) -> list:
             (f"{particles:,}, the preset's error target", dam_break(particles, 10, args.set), False),
             (f"{particles:,}, preset's target, device", dam_break(particles, 10, args.set), True),
         ):
-            with decisions_on_device(on_device or args.device_decisions):
+            with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
                 sim = Simulation(scene, arch=args.backend, quiet=True)
             sim.step(2)  # past the compile of every kernel variant the counted substeps use
             rows.append((name, launches.count_substeps(sim, COUNTED_FRAMES)))
@@ -482,6 +484,7 @@ OPTION_MODES: dict[str, tuple[str, ...]] = {
     # Only where a Simulation is built inside ``decisions_on_device``: terms, traffic and sweep build theirs
     # on the backend's own path (the device's only on a GPU, with or without the option).
     "--device-decisions": ("sizes", "presets", "counts"),
+    "--gpu-blocks": ("counts",),
     "--fast-compile": BACKEND_MODES,
     "--perturb": ("presets",),
     "--perturb-each-frame": ("presets",),
@@ -563,6 +566,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--device-decisions",
         action="store_true",
         help="keep the substep's decisions on the device, as GPU backends do, on any backend",
+    )
+    parser.add_argument(
+        "--gpu-blocks",
+        action="store_true",
+        help="lay the prefix sums and tree sums out in a GPU backend's blocks on any backend: a GPU's launches "
+        "(the float sums as on Vulkan and Metal; CUDA adds them up in shared memory, in 1-2 launches)",
     )
     parser.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
     parser.add_argument(
