@@ -302,9 +302,9 @@ class NeighbourGrid:
             room = ti.min(self.neighbour_start[i] + self.neighbour_count[i], capacity) - start
         found = 0
         with_sums = ti.static(not compact and not isinstance(sums, bool))
-        pair_sums, given = ti.Vector([0.0] * 5), ti.Vector([0.0] * 5)
+        summed, given = ti.Vector([0.0] * 5), ti.Vector([0.0] * 5)
         if ti.static(with_sums):
-            pair_sums, given = sums.sums_in_visit_begin()
+            summed, given = sums.sums_in_visit_begin()
         # Runtime loops over the columns, not unrolled: the 25 copies of the walk an unrolled loop made
         # took 2.3 s to compile in every kernel that visits, and ran 7% slower on the CPU.
         for dx in range(-self.reach, self.reach + 1):
@@ -321,7 +321,7 @@ class NeighbourGrid:
                                 neighbours[start + found * stride] = j
                             found += 1
                             if ti.static(with_sums):
-                                pair_sums = sums.sums_in_visit_add(pair_sums, xi, xj, given)
+                                summed = sums.sums_in_visit_add(summed, xi, xj, given)
                     else:
                         # Branch-free on the CPU: write every candidate to the next free entry and
                         # advance only past neighbours. A branch on the distance test mispredicts on
@@ -332,9 +332,9 @@ class NeighbourGrid:
                         found += ti.select(near, 1, 0)
                         if ti.static(with_sums):  # the device path on the CPU backend (its tests)
                             if near:
-                                pair_sums = sums.sums_in_visit_add(pair_sums, xi, xj, given)
+                                summed = sums.sums_in_visit_add(summed, xi, xj, given)
         if ti.static(with_sums):
-            sums.sums_in_visit_end(i, pair_sums)
+            sums.sums_in_visit_end(i, summed)
         if ti.static(not compact):  # the second visit finds the same count, which others may be reading
             self.neighbour_count[i] = found
             self.neighbour_start[i] = start

@@ -211,8 +211,9 @@ class JacobiIterations:
         ``finish_lists``: whether the substep's visit left an overflow's second visit to the first pass
         here (``NeighbourGrid.finish_compact``: each thread its own particle's list, the only one its pass
         reads), and did the first iteration's λ pass itself where the density constraint allows it
-        (``DensityConstraint.first_in_visit``): then that pass runs the surface ghost's pass alone (the
-        colour gradients are the visit's), or nothing but the lists' second visit without the ghost."""
+        (``DensityConstraint.first_in_visit``): then the loop of a call's first λ pass runs, in the
+        substep's first iteration, the surface ghost's pass (the colour gradients are the visit's) or,
+        without the ghost, only the lists' second visit, and in a later iteration its λ pass."""
         for u in ti.static(range(per_launch)):
             in_visit = ti.static(u == 0 and may_start and finish_lists and self.density.first_in_visit)
             for i in range(ti.static(self.density.error.shape[0])):
