@@ -90,3 +90,14 @@ def test_a_gpus_blocks_add_few_launches():
     calls, tasks, serial, iteration, _ = bench_counts("--gpu-blocks")["8,000, 4 its., device decisions"]
     assert (calls, serial, iteration) == (3, 0, 4)
     assert tasks <= 18, f"{tasks} offloaded tasks per substep in a GPU's blocks, at most 18"
+
+
+@pytest.mark.slow
+def test_the_divergence_pass_adds_no_call_on_the_device_path():
+    """The divergence pre-correction runs in the call of lines 1-7 on the device path, its loops over the
+    particles' bucket: still 3 calls and no one-thread task (it took 4 calls more and 3 such tasks)."""
+    calls, tasks, serial, _, _ = bench_counts("--set", "solver.divergence_iterations=1")[
+        "8,000, 4 its., device decisions"
+    ]
+    assert (calls, serial) == (3, 0)
+    assert tasks <= 22, f"{tasks} offloaded tasks per substep with the divergence pass, at most 22"

@@ -99,6 +99,26 @@ class DivergenceCorrection:
         dv += increment_i * h * wall_gradient
         return h_over_dt * dv
 
+    @ti.func
+    def multiplier_increment(self, x: ti.template(), i, neighbours: ti.template(), dt):
+        """δλ̂_i of an iteration from the current v (Λ_i kept as a pressure in ``State.multiplier``)."""
+        h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
+        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        xi, vi = x[i], self.state.v[i]
+        rate = 0.0
+        first, last, stride = self.grid.listed(i, neighbours)
+        upcoming = self.grid.upcoming(neighbours, first, last)
+        for k in range(first, last):
+            j = self.grid.neighbour(neighbours, k, upcoming)
+            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
+            rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
+        rate += h * self.wall_gradient[i].dot(vi - self.boundaries.velocity(xi))
+        carried = self.state.multiplier[i] * dt * dt
+        c = dt / h * rate + self.deficit[i]
+        total = ti.min(carried - omega * c / self.denominator[i], 0.0)
+        self.increment[i] = total - carried
+        self.state.multiplier[i] = total / (dt * dt)
+
     @ti.kernel
     def start(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
         """v += Δv of the warm start (the last substep's Λ), with min(C_i, 0) and the denominators at x."""
@@ -111,27 +131,31 @@ class DivergenceCorrection:
     def iterate(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
         """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
         for i in range(self.state.active[None]):
-            h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
-            scale = kernel_scale(h)  # once per particle, for the neighbour loop
-            xi, vi = x[i], self.state.v[i]
-            rate = 0.0
-            first, last, stride = self.grid.listed(i, neighbours)
-            upcoming = self.grid.upcoming(neighbours, first, last)
-            for k in range(first, last):
-                j = self.grid.neighbour(neighbours, k, upcoming)
-                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
-            rate += h * self.wall_gradient[i].dot(vi - self.boundaries.velocity(xi))
-            carried = self.state.multiplier[i] * dt * dt
-            c = dt / h * rate + self.deficit[i]
-            total = ti.min(carried - omega * c / self.denominator[i], 0.0)
-            self.increment[i] = total - carried
-            self.state.multiplier[i] = total / (dt * dt)
+            self.multiplier_increment(x, i, neighbours, dt)
         for i in range(self.state.active[None]):
             self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, False)
 
     def run(self, neighbours, dt: float, iterations: int) -> None:
-        """Warm start with the last substep's Λ, then ``iterations`` Jacobi iterations on state.v at state.x."""
+        """Warm start with the last substep's Λ, then ``iterations`` Jacobi iterations on state.v at state.x:
+        a call each, the host's path (the device's runs :meth:`run_loops` in the call of lines 1-7)."""
         self.start(self.state.x, neighbours, dt)
         for _ in range(iterations):
             self.iterate(self.state.x, neighbours, dt)
+
+    @ti.func
+    def run_loops(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
+        """:meth:`run`'s loops for the top level of a kernel (``pbf.solver.substep``), ``iterations`` of them
+        (a count known when it compiles), each over the particles' bucket (no one-thread task for a bound)."""
+        for i in range(self.state.live_bound()):
+            if i < self.state.active[None]:
+                self.increment[i] = self.state.multiplier[i] * dt * dt
+        for i in range(self.state.live_bound()):
+            if i < self.state.active[None]:
+                self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, True)
+        for _ in ti.static(range(iterations)):
+            for i in range(self.state.live_bound()):
+                if i < self.state.active[None]:
+                    self.multiplier_increment(x, i, neighbours, dt)
+            for i in range(self.state.live_bound()):
+                if i < self.state.active[None]:
+                    self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, False)

@@ -78,13 +78,20 @@ class Integrator:
             self.state.v[i] *= factor
 
     @ti.kernel
-    def _predict(self, x_pred: ti.template(), dt: ti.f32):
+    def _predict(self, dt: ti.f32):
         for i in range(self.state.active[None]):
-            x_pred[i] = self.boundaries.project_recorded(self.state.x[i] + dt * self.state.v[i], i, "start", 1.0)
+            self.predict_particle(dt, i)
+
+    @ti.func
+    def predict_particle(self, dt, i):
+        """x*_i ← x_i + Δt v_i, kept inside the boundaries; returns x*_i."""
+        x_star = self.boundaries.project_recorded(self.state.x[i] + dt * self.state.v[i], i, "start", 1.0)
+        self.predicted.first[i] = x_star
+        return x_star
 
     def predict(self, dt: float) -> None:
         """x* ← x + Δt v (line 3), kept inside the boundaries so the grid never sees a lost particle."""
-        self._predict(self.predicted.first, dt)
+        self._predict(dt)
 
     @ti.kernel
     def _push(self, point: ti.types.vector(3, ti.f32), velocity: ti.types.vector(3, ti.f32), radius: ti.f32):

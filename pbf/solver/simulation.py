@@ -154,7 +154,9 @@ class Simulation:
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.launches = SubstepLaunches(self.state, self.integrator, self.grid, self.iterations, self.postprocess)
+        self.launches = SubstepLaunches(
+            self.state, self.integrator, self.grid, self.iterations, self.postprocess, self.divergence
+        )
         """The stages composed into few kernel calls (``pbf.solver.substep``)."""
         self._finish_on_host = Launcher(self.postprocess.finish)  # lines 20-23 on the host's path
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
@@ -467,14 +469,15 @@ class Simulation:
         # On the device path an overflow's second visit can wait for the first λ pass when no divergence
         # pass reads the lists before it (NeighbourGrid.finish_compact): a launch fewer.
         defer = self.iterations.on_device and control.divergence_iterations == 0
-        with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch:
-            self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer)  # v += Δt g, x* = x + Δt v,
-            # the particles sorted by the cell of x*, and their neighbours
+        with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch: v += Δt g,
+            # x* = x + Δt v, the particles sorted by the cell of x*, and their neighbours (on the device
+            # path with the divergence pre-correction below in the same launch, and timed with them)
+            divergence = control.divergence_iterations
+            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, divergence)
         with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
-            if control.divergence_iterations > 0:  # warm-started), then x* = x + Δt v again
-                self.divergence.run(self.grid.neighbours, dt, control.divergence_iterations)
-                self.integrator.predict(dt)
-                self.density.look_up_walls(x_star.first)  # the walls' ghost at the new x*
+            if divergence > 0 and not corrected:  # warm-started), then x* = x + Δt v again
+                self.divergence.run(self.grid.neighbours, dt, divergence)
+                self.launches.predict_again(dt)
         on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
             # path all but the last call's: that runs with lines 20-23, timed with them)

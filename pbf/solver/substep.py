@@ -22,35 +22,51 @@ import taichi as ti
 from pbf.solver.grid import NeighbourList
 from pbf.solver.launch import Launcher
 
+MOST_DIVERGENCE_IN_CALL = 2
+"""The divergence pre-correction's iterations the device path runs in the call of lines 1-7 at most (each
+is a copy of its two loops there); more run a call each, as on the host's path."""
+
 
 @ti.data_oriented
 class SubstepLaunches:
     """The kernels that run consecutive stages of a substep in one call (the module docstring); the
     stages themselves are the objects given, each from its module."""
 
-    def __init__(self, state, integrator, grid, iterations, postprocess):
+    def __init__(self, state, integrator, grid, iterations, postprocess, divergence):
         self.state = state
         self.integrator = integrator
         self.grid = grid
         self.iterations = iterations
         self.postprocess = postprocess
+        self.divergence = divergence
         # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
         self._launch_on_device = Launcher(self._predict_and_find_neighbours_on_device)
         self._launch_visit = Launcher(self._predict_and_visit)
         self._launch_finish = Launcher(self._finish)
 
-    def predict_and_find_neighbours(self, dt: float, gravity, defer: bool = False) -> None:
+    def predict_and_find_neighbours(self, dt: float, gravity, defer: bool = False, divergence: int = 0) -> bool:
         """Algorithm 1, lines 1-7, in one call: v += Δt g, x* = x + Δt v (kept inside the boundaries),
         the particles and x* sorted by the cell of x*, and their exact neighbour lists. On the CPU the
         call returns whether a particle has more than SLOTS neighbours, and only then a second visit
         fills a compact list (``NeighbourGrid.build_compact``). On the device path ``defer`` leaves an
-        overflow's second visit to the first λ pass (``NeighbourGrid.finish_compact``), for a substep in
-        which nothing else reads the lists before it."""
+        overflow's second visit to the first pass of the iterations (``NeighbourGrid.finish_compact``),
+        for a substep in which nothing else reads the lists before it, and ``divergence`` iterations of
+        the divergence pre-correction (up to MOST_DIVERGENCE_IN_CALL) run in the same call, then x* is
+        predicted again and the walls' ghost looked up there. Returns whether the pre-correction ran."""
         grid, x = self.grid, self.integrator.predicted.first
         if grid.on_device and not grid.checking:
-            self._launch_on_device(grid.neighbours, dt, *gravity, defer)
-        elif self._launch_visit(grid.neighbours, dt, *gravity, defer):
+            in_call = divergence if divergence <= MOST_DIVERGENCE_IN_CALL else 0
+            self._launch_on_device(grid.neighbours, dt, *gravity, defer, in_call)
+            return in_call > 0
+        if self._launch_visit(grid.neighbours, dt, *gravity, defer):
             grid.build_compact(x)
+        return False
+
+    def predict_again(self, dt: float) -> None:
+        """x* = x + Δt v again after the divergence pre-correction changed v (a call), with the walls'
+        ghost looked up at the new x* on the device path (another: ``DensityConstraint.look_up_walls``)."""
+        self.integrator.predict(dt)
+        self.iterations.density.look_up_walls(self.integrator.predicted.first)
 
     def first_in_visit(self, defer: bool) -> bool:
         """Whether the visit of lines 1-7 also does the first iteration's λ pass (``defer``: nothing between
@@ -77,7 +93,14 @@ class SubstepLaunches:
 
     @ti.kernel
     def _predict_and_find_neighbours_on_device(
-        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, defer: ti.template()
+        self,
+        neighbours: NeighbourList,
+        dt: ti.f32,
+        gx: ti.f32,
+        gy: ti.f32,
+        gz: ti.f32,
+        defer: ti.template(),
+        divergence: ti.template(),
     ):
         # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
         # a call than three values (benchmarks/kernel_arguments.py).
@@ -88,6 +111,11 @@ class SubstepLaunches:
             self.grid.visit_on_device(x, neighbours, self.state, gathered, defer, self.iterations.density)
         else:
             self.grid.visit_on_device(x, neighbours, self.state, gathered, defer)
+        if ti.static(divergence > 0):  # ours: v made divergence-free at x (it reads the lists, so no defer),
+            self.divergence.run_loops(self.state.x, neighbours, dt, divergence)
+            for i in range(self.state.live_bound()):  # then x* = x + Δt v again, and the walls' ghost there
+                if i < self.state.active[None]:
+                    self.iterations.density.wall_ghost_at(i, self.integrator.predict_particle(dt, i))
 
     @ti.kernel
     def _predict_and_visit(
