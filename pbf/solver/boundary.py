@@ -33,6 +33,7 @@ import taichi as ti
 from pbf.solver import sph
 from pbf.solver.bodies import Bodies, component
 from pbf.solver.constants import scene_constants
+from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
 
 TABLE_SAMPLES = 512
@@ -207,6 +208,7 @@ class Container:
         """The piston's velocity over the coming substep (m/s, along x)."""
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
+        self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
         self._piston_x_host = float(np.float32(params.lower_m[0]))
         """piston_x as the device holds it (float32), kept on the host so that moving the piston reads
         nothing back from the device."""
@@ -228,9 +230,16 @@ class Container:
         ``dt`` is 0: placed, not moved)."""
         if self.wave_maker:
             position = self.piston_position_m(piston_time_s)
-            self.piston_v[None] = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
-            self.piston_x[None] = position
+            velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
+            self._launch_place(position, velocity)
             self._piston_x_host = float(np.float32(position))
+
+    @ti.kernel
+    def _place(self, position: ti.f32, velocity: ti.f32):
+        """Both of :meth:`move`'s values in one launch: set from Python, each would be a kernel call of
+        Taichi's own (a field's writer), every substep."""
+        self.piston_x[None] = position
+        self.piston_v[None] = velocity
 
     @ti.func
     def _lower(self):
