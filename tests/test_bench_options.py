@@ -101,6 +101,9 @@ def test_every_option_of_the_parser_is_in_the_table():
         (["sizes", "--rounds", "5"], "--rounds: applies to the terms mode only, not to sizes"),
         (["sweep", "--warmup", "5"], "--warmup: applies to the sizes, terms and traffic modes only, not to sweep"),
         (["sizes", "--perturb-each-frame"], "--perturb-each-frame: applies to the presets mode only, not to sizes"),
+        (["sizes", "--gpu-blocks"], "--gpu-blocks: applies to the counts mode only, not to sizes"),
+        (["counts", "--presets", "pour", "--sizes", "8000"], "--sizes: counts the seed scene scaled; with --presets"),
+        (["counts", "--presets", "pour", "--iterations", "3"], "--iterations: counts the seed scene scaled"),
         # Given at the default's value, abbreviated, or with "=": given all the same.
         (["start", "--frames", "60"], "--frames: applies to the sizes, sweep and presets modes only, not to start"),
         (["compare", "--rou=25"], "--rounds: applies to the terms mode only, not to compare"),

@@ -5,7 +5,7 @@
     python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
     python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
     python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
-    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4] [--gpu-blocks]   (kernel calls, tasks per substep)
+    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
     python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (see pbf.study.start)
     python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
     python -m pbf.study.bench frames  [options of python -m pbf.study.frames]   (the renderers and writer alone)
@@ -22,14 +22,15 @@ costs. Stages are timed by a hook inside the step (``pbf.study.common.StageTimer
 throughout: the machines are shared and noisy.
 
 ``counts`` runs substeps of the seed scene at a fixed iteration count, on the host's decisions and on
-the device's (as GPU backends take them), and of the shipped preset with its error target, under
-Taichi's kernel profiler, and prints the Python kernel calls and the offloaded tasks per substep
-(``pbf.study.launches``); with ``--gpu-blocks`` the sums take a GPU backend's blocks of 32, whose
-extra levels are launches of their own on a GPU (the float sums as Vulkan and Metal add them up; CUDA
-takes one or two launches a sum). ``start`` times cold and warm starts of every preset in fresh processes
-(``pbf.study.start``). ``traffic`` measures the neighbour and candidate counts of the seed scene
-in its splash and prints the bytes a substep moves per particle by stage, with neighbour lists and
-without (``pbf.study.traffic``), scaled to ``--particles``.
+the device's (as GPU backends take them), and of the shipped preset with its error target (or, with
+``--presets``, those presets as shipped), under Taichi's kernel profiler, and prints the Python
+kernel calls and the offloaded tasks per substep (``pbf.study.launches``); with ``--gpu-blocks`` the
+sums take a GPU backend's blocks of 32, whose extra levels are launches of their own on a GPU (the
+float sums as Vulkan and Metal add them up; CUDA takes one or two launches a sum). ``start`` times
+cold and warm starts of every preset in fresh processes (``pbf.study.start``). ``traffic`` measures
+the neighbour and candidate counts of the seed scene in its splash and prints the bytes a substep
+moves per particle by stage, with neighbour lists and without (``pbf.study.traffic``), scaled to
+``--particles``.
 
 ``presets`` runs every preset from its start on this backend and prints the means of its statistics
 over the second half of the frames, with reads and launches per substep; ``compare`` reads such
@@ -394,7 +395,14 @@ def counts(args) -> list:
     from pbf.study import launches
 
     rows = []
-    for particles in args.sizes or [8000]:
+    for name in args.presets or ():  # the presets as shipped, on each path
+        scene = load_scene(name, args.set)
+        for label, on_device in ((name, False), (f"{name}, device decisions", True)):
+            with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
+                sim = Simulation(scene, arch=args.backend, quiet=True)
+            sim.step(3)  # past the compile of every kernel variant the counted substeps use
+            rows.append((label, launches.count_substeps(sim, COUNTED_FRAMES)))
+    for particles in (args.sizes or [8000]) if not args.presets else ():
         fixed = dam_break(particles, args.iterations, ["solver.target_density_error=0", *args.set])
         for name, scene, on_device in (
             (f"{particles:,}, {args.iterations} iterations", fixed, False),
@@ -478,7 +486,7 @@ BACKEND_MODES = ("sizes", "sweep", "terms", "presets", "counts", "traffic")
 starts are processes of their own that are handed ``--arch`` alone."""
 OPTION_MODES: dict[str, tuple[str, ...]] = {
     "tables": ("compare",),
-    "--presets": ("presets", "start"),
+    "--presets": ("presets", "start", "counts"),
     "--no-shared": ("start",),
     "--first-calls": ("start",),
     # Only where a Simulation is built inside ``decisions_on_device``: terms, traffic and sweep build theirs
@@ -557,7 +565,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("mode", nargs="?", choices=MODES, default="sizes")
     parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
-    parser.add_argument("--presets", nargs="+", default=None, help="presets, start: which (default: all)")
+    parser.add_argument(
+        "--presets",
+        nargs="+",
+        default=None,
+        help="presets, start: which (default: all); counts: these presets as shipped, instead of the seed at --sizes",
+    )
     parser.add_argument("--no-shared", action="store_true", help="start: leave out the starts in one shared cache")
     parser.add_argument(
         "--first-calls", action="store_true", help="start: each kernel's first call (its compile) instead, per preset"
@@ -666,6 +679,9 @@ def main(argv=None):
         )
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
+    if args.mode == "counts" and args.presets and {"--sizes", "--iterations"} & given:
+        option = "--sizes" if "--sizes" in given else "--iterations"
+        parser.error(f"{option}: counts the seed scene scaled; with --presets each preset runs as shipped")
     if args.mode != "sweep" and len(args.iterations or [4]) > 1:
         parser.error(f"--iterations: {args.mode} takes one count (several are for sweep)")
     for name in args.presets or ():  # every scene read before any runs (each start reads its own again)
