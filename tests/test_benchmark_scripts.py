@@ -202,7 +202,7 @@ def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
     "argv, message",
     [
         (["sizes", "--perturb", "1"], "--perturb: applies to the presets mode only, not to sizes"),
-        (["sizes", "--presets", "pour"], "--presets: applies to the presets and start modes only, not to sizes"),
+        (["sizes", "--presets", "pour"], "--presets: applies to the presets, counts and start modes only"),
         (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
         (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
