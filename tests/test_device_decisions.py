@@ -39,7 +39,7 @@ def test_the_device_takes_the_hosts_decisions(step_back):
     # The same mean errors, formed in float32 on the device and float64 on the host, stop the same
     # iterations; positions then differ only by rounding, which the splash amplifies: 3e-7 m after the
     # first frame, 0.7-1.1e-4 m after the twelfth (the device path's first λ sums are the visit's, in a
-    # kernel of their own, so they round apart). A pair missed or counted twice moves them by millimetres.
+    # kernel of their own, so they round apart). Without the particle's own term in those sums it fails.
     assert device_used == host_used and max(host_used) > 2  # the target stopped some substep early
     assert np.abs(device.positions() - host.positions()).max() < 2.5e-4
     assert device.stats()["mean_density_error"] == pytest.approx(host.stats()["mean_density_error"], rel=0.02)
