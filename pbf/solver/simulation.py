@@ -472,11 +472,11 @@ class Simulation:
         with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch: v += Δt g,
             # x* = x + Δt v, the particles sorted by the cell of x*, and their neighbours (on the device
             # path with the divergence pre-correction below in the same launch, and timed with them)
-            divergence = control.divergence_iterations
-            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, divergence)
+            count = control.divergence_iterations
+            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, count)
         with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
-            if divergence > 0 and not corrected:  # warm-started), then x* = x + Δt v again
-                self.divergence.run(self.grid.neighbours, dt, divergence)
+            if count > 0 and not corrected:  # warm-started), then x* = x + Δt v again
+                self.divergence.run(self.grid.neighbours, dt, count)
                 self.launches.predict_again(dt)
         on_device = self.iterations.on_device
         with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
