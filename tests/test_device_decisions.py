@@ -34,14 +34,20 @@ def test_the_device_takes_the_hosts_decisions(step_back):
     with decisions_on_device():
         device = Simulation(scene)
     assert device.iterations.on_device and device.grid.on_device and not host.iterations.on_device
-    host_used, host_reads, _ = frames(host, 12)
-    device_used, device_reads, device_launches = frames(device, 12)
+    host_used, host_reads, _ = frames(host, 6)
+    device_used, device_reads, device_launches = frames(device, 6)
+    # Positions differ only by rounding (the device path's sums run in other kernels, whose fused
+    # multiply-adds round apart), which the splash then amplifies (5-7e-6 m after 6 frames, up to 1.1e-4
+    # after 12): compared in the fall, before it does.
+    assert np.abs(device.positions() - host.positions()).max() < 3e-5
+    more_host, host_reads_later, _ = frames(host, 6)
+    more_device, device_reads_later, device_launches_later = frames(device, 6)
     # The same mean errors, formed in float32 on the device and float64 on the host, stop the same
-    # iterations; positions then differ only by rounding, which the splash amplifies: 3e-7 m after the
-    # first frame, 0.7-1.1e-4 m after the twelfth (the device path's first λ sums are the visit's, in a
-    # kernel of their own, so they round apart). Without the particle's own term in those sums it fails.
+    # iterations through the impact.
+    host_used, device_used = host_used + more_host, device_used + more_device
+    host_reads, device_reads = min(host_reads, host_reads_later), max(device_reads, device_reads_later)
+    device_launches = max(device_launches, device_launches_later)
     assert device_used == host_used and max(host_used) > 2  # the target stopped some substep early
-    assert np.abs(device.positions() - host.positions()).max() < 2.5e-4
     assert device.stats()["mean_density_error"] == pytest.approx(host.stats()["mean_density_error"], rel=0.02)
     assert device_reads <= 1.0 < host_reads
     assert device_launches <= 10 + 8  # every iteration is launched (past the target over no particles)
