@@ -401,9 +401,9 @@ def decisions_on_device(enabled: bool = True):
 def light_compile():
     """Kernels that compile inside (their first call) skip Taichi's advanced IR optimisation, as every
     kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile.
-    The bodies' contacts are one thread over a few dozen candidates a substep, and the whole-kernel
-    simplification that takes 1.4 s of their first call on 2 cores (it grows faster than the kernel)
-    takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up"). A kernel compiled so is compiled so on
+    The bodies' rigid step is one thread over a few bodies and a few dozen contact candidates a
+    substep, and the whole-kernel simplification that took 1.4 s of the contacts' first call on 2
+    cores (it grows faster than the kernel) takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up"). A kernel compiled so is compiled so on
     every start (and loaded so from the offline cache), and rounds its own way, deterministically."""
     config = ti.lang.impl.current_cfg()
     before = config.advanced_optimization

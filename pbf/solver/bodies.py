@@ -50,6 +50,7 @@ import taichi as ti
 
 from pbf.solver import backend
 from pbf.solver.constants import scene_constants
+from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
 
 STATE_LAYOUT = (
@@ -262,6 +263,7 @@ class Bodies:
             pair_rows[: len(pairs)] = pairs
         self._describe(rows, pair_rows)
         self._rest_reach()
+        self._launch_step = Launcher(self._step)  # past Taichi's per-call Python (pbf.solver.launch)
         self.held = False
         """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
 
@@ -335,12 +337,10 @@ class Bodies:
         if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
             self._rest_reach()
         else:
-            # Three launches, not one kernel: Taichi's compile time grows faster than a kernel's length,
-            # and the contacts alone are most of it (docs/BODIES.md, Compile time).
-            self._advance(dt, gravity)
+            # The contacts are most of the step's compile: without Taichi's advanced IR optimisation it
+            # is a third (docs/BODIES.md, Compile time). Only the first call compiles.
             with backend.light_compile():
-                self._resolve_contacts()
-            self._update_reach(dt)
+                self._launch_step(dt, *gravity)
 
     @ti.kernel
     def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
@@ -377,31 +377,38 @@ class Bodies:
         r = self.rotation[b]
         return r @ ((r.transpose() @ vector) / self.inertia[b])
 
-    @ti.kernel
-    def _advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
-        for b in range(self.constants[None].count):
-            r = quaternion_matrix(self.quaternion[b])
-            v = self.linear_velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
-            inertia = self.inertia[b]
-            w_body = r.transpose() @ self.angular_velocity[b]
-            torque_body = r.transpose() @ self.torque[b]
-            w_body += dt * (torque_body - w_body.cross(inertia * w_body)) / inertia  # Euler's equations
-            w = r @ w_body
-            self.linear_velocity[b] = v
-            self.angular_velocity[b] = w
-            self.position[b] += dt * v
-            q = self.quaternion[b]
-            q += 0.5 * dt * quaternion_multiply(ti.Vector([0.0, w[0], w[1], w[2]]), q)
-            q = q.normalized()
-            self.quaternion[b] = q
-            self.rotation[b] = quaternion_matrix(q)
+    @ti.func
+    def _advance(self, b, dt, gravity):
+        """Body b's symplectic Euler step under gravity and the last reaction (module docstring)."""
+        r = quaternion_matrix(self.quaternion[b])
+        v = self.linear_velocity[b] + dt * (gravity + self.inverse_mass[b] * self.force[b])
+        inertia = self.inertia[b]
+        w_body = r.transpose() @ self.angular_velocity[b]
+        torque_body = r.transpose() @ self.torque[b]
+        w_body += dt * (torque_body - w_body.cross(inertia * w_body)) / inertia  # Euler's equations
+        w = r @ w_body
+        self.linear_velocity[b] = v
+        self.angular_velocity[b] = w
+        self.position[b] += dt * v
+        q = self.quaternion[b]
+        q += 0.5 * dt * quaternion_multiply(ti.Vector([0.0, w[0], w[1], w[2]]), q)
+        q = q.normalized()
+        self.quaternion[b] = q
+        self.rotation[b] = quaternion_matrix(q)
 
     @ti.kernel
-    def _resolve_contacts(self):
-        # One thread takes the contacts in a fixed order (a top-level loop of one iteration): their work
-        # grows with the bodies squared, a few dozen, not with the particles.
+    def _step(self, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32):
+        # One thread takes the whole rigid step (a top-level loop of one iteration): the bodies' motion,
+        # their contacts in a fixed order and their collision distances. The work grows with the bodies
+        # (squared, for the contacts), a few dozen, not with the particles, and a launch of its own for
+        # each part would cost a GPU more than the part: one call a substep and one task.
         for _ in range(1):
+            count = self.constants[None].count
+            for b in range(count):
+                self._advance(b, dt, ti.Vector([gx, gy, gz]))
             self._contacts()
+            for b in range(count):
+                self.reach[b] = self.collision_reach(b, dt)
 
     @ti.kernel
     def _describe(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2), pairs: ti.types.ndarray(dtype=ti.i32, ndim=2)):
@@ -420,11 +427,6 @@ class Bodies:
         # Not ``reach.fill(number)``: Taichi's fill takes its value as a template, compiled into the kernel.
         for b in range(self.constants[None].count):
             self.reach[b] = COLLISION_AT_REST * self.constants[None].particle_radius
-
-    @ti.kernel
-    def _update_reach(self, dt: ti.f32):
-        for b in range(self.constants[None].count):
-            self.reach[b] = self.collision_reach(b, dt)
 
     @ti.func
     def collision_reach(self, b, dt):
@@ -1007,31 +1009,35 @@ class Bodies:
         velocity_scale: ti.f32,
         push_scale: ti.f32,
     ):
-        for b, k in ti.ndrange(self.constants[None].count, self.constants[None].blocks):
-            block, volume = self.constants[None].block, self.constants[None].volume
-            force = ti.Vector([0.0, 0.0, 0.0])
-            torque = ti.Vector([0.0, 0.0, 0.0])
-            centre = self.position[b]
-            for i in range(k * block, ti.min((k + 1) * block, active[None])):
-                f = ti.Vector([0.0, 0.0, 0.0])
-                _density, gradient = self._ghost_of(x[i], b)
-                if gradient.norm_sqr() > 0.0:
-                    pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
-                    f = volume * pressure * gradient
-                if self.pusher[i] == b:
-                    f += push_scale * self.shift[i]
-                force += f
-                torque += (x[i] - centre).cross(f)
-            self.partial_force[b, k] = force
-            self.partial_torque[b, k] = torque
-        for b in range(self.constants[None].count):
-            force = ti.Vector([0.0, 0.0, 0.0])
-            torque = ti.Vector([0.0, 0.0, 0.0])
-            for k in range(self.constants[None].blocks):  # in order: the same sum on any thread count
-                force += self.partial_force[b, k]
-                torque += self.partial_torque[b, k]
-            self.force[b] = force
-            self.torque[b] = torque
+        # Both loops run over the arrays' slots, bounds the kernel knows, and skip the slots past the
+        # bodies: a bound read at run time would be a one-thread task of its own (a launch on a GPU).
+        for b, k in ti.ndrange(self.partial_force.shape[0], self.partial_force.shape[1]):
+            if b < self.constants[None].count:
+                block, volume = self.constants[None].block, self.constants[None].volume
+                force = ti.Vector([0.0, 0.0, 0.0])
+                torque = ti.Vector([0.0, 0.0, 0.0])
+                centre = self.position[b]
+                for i in range(k * block, ti.min((k + 1) * block, active[None])):
+                    f = ti.Vector([0.0, 0.0, 0.0])
+                    _density, gradient = self._ghost_of(x[i], b)
+                    if gradient.norm_sqr() > 0.0:
+                        pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
+                        f = volume * pressure * gradient
+                    if self.pusher[i] == b:
+                        f += push_scale * self.shift[i]
+                    force += f
+                    torque += (x[i] - centre).cross(f)
+                self.partial_force[b, k] = force
+                self.partial_torque[b, k] = torque
+        for b in range(self.force.shape[0]):
+            if b < self.constants[None].count:
+                force = ti.Vector([0.0, 0.0, 0.0])
+                torque = ti.Vector([0.0, 0.0, 0.0])
+                for k in range(self.partial_force.shape[1]):  # in order: the same sum on any thread count
+                    force += self.partial_force[b, k]
+                    torque += self.partial_torque[b, k]
+                self.force[b] = force
+                self.torque[b] = torque
 
     def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
         """The fluid's reaction on every body over the substep just solved, F_b = Σ_i V p_i ∇ψ_b(x_i)
