@@ -5,10 +5,10 @@ import pytest
 import taichi as ti
 
 from pbf.solver import scan
-from pbf.solver.backend import decisions_on_device
+from pbf.solver.backend import decisions_on_device, in_gpu_blocks
 from pbf.solver.grid import SLOTS, NeighbourGrid
 from pbf.solver.model import GridParams
-from pbf.solver.scan import ExclusiveScan, TreeSum
+from pbf.solver.scan import GPU_SCAN_TOP, ExclusiveScan, TreeSum
 
 
 def brute_force(points, h):
@@ -184,13 +184,15 @@ def test_exclusive_scan_in_gpu_blocks_of_some_entries(length, count):
     assert np.array_equal(starts.to_numpy()[: live + 1], np.concatenate([[0], np.cumsum(values[:live])]))
 
 
-@pytest.mark.parametrize("block", [None, 4, 32])
+@pytest.mark.parametrize("block", [None, 4, 32, "gpu"])
 @pytest.mark.parametrize("length", [1, 33, 1025, 40_000])
 def test_a_scan_whose_caller_counted_the_blocks(block, length):
     # The sort's way: each value added to its level-0 block's sum by atomics where it is counted
     # (add_to_block), the first pass up skipped (counted=True), the block sums cleared after
     # (clear_block); twice, so that a sum left over from the first count would show in the second.
-    scan = ExclusiveScan(length, block=block)
+    # "gpu": a GPU backend's tree, blocks of 32 under a top level of up to GPU_SCAN_TOP entries.
+    with in_gpu_blocks(block == "gpu"):
+        scan = ExclusiveScan(length, block=None if block == "gpu" else block)
     source = ti.field(ti.i32, shape=length)
     starts = ti.field(ti.i32, shape=length + 1)
 
@@ -220,6 +222,26 @@ def test_a_scan_whose_caller_counted_the_blocks(block, length):
         starts.fill(-1)
         count_and_start_each()
         assert np.array_equal(starts.to_numpy()[:length], np.concatenate([[0], np.cumsum(values)])[:length])
+
+
+@pytest.mark.parametrize(
+    ("length", "lengths"),
+    [
+        (500, [500, 16]),  # level 0 keeps its blocks of 32 however short
+        (16_384, [16_384, 512]),  # the seed's neighbour counts: 512 block sums are the top
+        (65_536, [65_536, 2_048, 64]),  # the seed's cells
+        (4_194_304, [4_194_304, 131_072, 4_096, 128]),  # a million particles' cells
+    ],
+)
+def test_a_gpus_prefix_sum_stops_at_a_top_level_of_a_few_hundred(length, lengths):
+    # On a GPU each level above the first is a pass up, a launch: the tree stops at the first level of
+    # at most GPU_SCAN_TOP block sums, which start_of reads whole. The float sums keep their blocks.
+    with in_gpu_blocks():
+        tree = ExclusiveScan(length).tree
+        assert TreeSum(length, block=32).tree.lengths[-1] <= 32
+    assert tree.lengths == lengths
+    assert tree.blocks[:-1] == [32] * (len(lengths) - 1) and tree.blocks[-1] >= lengths[-1]
+    assert lengths[-1] <= GPU_SCAN_TOP
 
 
 @pytest.mark.parametrize("block", [None, 32])

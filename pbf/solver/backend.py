@@ -403,8 +403,9 @@ def light_compile():
     kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile.
     The bodies' rigid step is one thread over a few bodies and a few dozen contact candidates a
     substep, and the whole-kernel simplification that took 1.4 s of the contacts' first call on 2
-    cores (it grows faster than the kernel) takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up"). A kernel compiled so is compiled so on
-    every start (and loaded so from the offline cache), and rounds its own way, deterministically."""
+    cores (it grows faster than the kernel) takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up").
+    A kernel compiled so is compiled so on every start (and loaded so from the offline cache), and
+    rounds its own way, deterministically."""
     config = ti.lang.impl.current_cfg()
     before = config.advanced_optimization
     config.advanced_optimization = False

@@ -11,8 +11,9 @@ to a launch, never a launch of its own.
 The block sizes are the one choice per backend (:func:`block_sizes`). On the CPU level 0 has about
 1,024 blocks of n/1024 entries (64 at least; a prefix sum 256 of n/256): a thread walks a long stretch
 of memory in order, and one thread adds up the block results, two levels in all. On a GPU every block
-has 32 entries: tens of thousands of threads at level 0, a few levels more (four million cells: 131,072,
-4,096, 128, 4). A prefix sum goes up the tree a pass a level, and down it in one pass: each level-0
+has 32 entries: tens of thousands of threads at level 0, a few levels more (four million values: 131,072,
+4,096, 128, 4), and a prefix sum's top level holds up to GPU_SCAN_TOP (four million cells: 131,072,
+4,096, 128). A prefix sum goes up the tree a pass a level, and down it in one pass: each level-0
 block adds up its own start from the sums above it, at most a block's a level. Float sums on CUDA
 take a shorter way (:meth:`TreeSum._reduce_in_blocks`): each block of 256 threads adds up its entries
 and then halves its partial sums in shared memory, so that a sum is one launch up to 16,384 entries
@@ -34,7 +35,14 @@ from taichi.lang.field import ScalarField
 from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 
 GPU_BLOCK = 32
-"""Entries per block of a prefix sum on a GPU backend, at every level."""
+"""Entries per block of a prefix sum on a GPU backend, at every level but the top."""
+GPU_SCAN_TOP = 512
+"""The most entries the top level of a prefix sum's tree holds on a GPU backend, as one block: the tree
+stops at the first level above 0 that holds no more, so a level of a few hundred block sums is not
+summed up once more (a pass up, a launch) but read by :meth:`ExclusiveScan.start_of`, up to 511 adds
+for each thread that works out a start (sums in the L1 cache, a few microseconds at most, about
+what a launch costs). The cells' scan of the seed scene (65,536 cells: 2,048 and 64 block sums)
+and the neighbour counts' (16,384 particles: 512) then take a pass up fewer each."""
 GPU_SUM_THREADS = 256
 """Threads of a GPU block that adds up a float sum in shared memory (a work-group size every GPU backend
 takes): each adds up its entries, then the block halves its partial sums 8 times."""
@@ -75,14 +83,17 @@ class Tree:
     live count at run time (``live``), its partition never does: block k of level j always covers the
     same entries, so a result depends only on the values."""
 
-    def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS):
+    def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS, top: int = 0):
+        """``top``: the most entries the top level may hold as one block, if more than a block's above level
+        0 (fewer levels, so fewer passes up; :data:`GPU_SCAN_TOP`)."""
         self.length = max(int(length), 1)
         first, above = block_sizes(self.length, cpu_blocks) if block is None else (block, block)
         self.blocks = [first]
         self.lengths = [self.length]
-        while self.lengths[-1] > self.blocks[-1]:
+        while self.lengths[-1] > (first if len(self.lengths) == 1 else max(above, top)):
             self.lengths.append(math.ceil(self.lengths[-1] / self.blocks[-1]))
             self.blocks.append(above)
+        self.blocks[-1] = max(self.blocks[-1], self.lengths[-1])  # the top level is one block
         self.top = len(self.lengths) - 1
         self.block_counts = self.lengths[1:] + [1]
         """Blocks of each level, the top's one."""
@@ -135,7 +146,7 @@ class ExclusiveScan:
 
     def __init__(self, length: int, block: int | None = None):
         self.length = length
-        self.tree = Tree(length, block, CPU_SCAN_BLOCKS)
+        self.tree = Tree(length, block, CPU_SCAN_BLOCKS, GPU_SCAN_TOP if block is None and gpu_blocks() else 0)
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
 
