@@ -28,13 +28,14 @@ class Diagnostics:
 
     @ti.kernel
     def _reduce(self, neighbours: NeighbourList):
-        for i in range(self.state.active[None]):
-            ratio = self.density.density_ratio(self.state.x, i, neighbours)
-            speed2 = self.state.v[i].norm_sqr()
-            self.terms[0][i] = ti.max(ratio - 1.0, 0.0)
-            self.terms[1][i] = speed2
-            self.terms[2][i] = ti.cast(self.grid.neighbour_listed[i], ti.f32)
-            self.speed[i] = ti.sqrt(speed2)
+        for i in range(self.state.live_bound()):  # the bucket on a GPU: no one-thread task for a bound
+            if i < self.state.active[None]:
+                ratio = self.density.density_ratio(self.state.x, i, neighbours)
+                speed2 = self.state.v[i].norm_sqr()
+                self.terms[0][i] = ti.max(ratio - 1.0, 0.0)
+                self.terms[1][i] = speed2
+                self.terms[2][i] = ti.cast(self.grid.neighbour_listed[i], ti.f32)
+                self.speed[i] = ti.sqrt(speed2)
         for k in ti.static(range(3)):
             self.sums.sum(self.terms[k], k, self.state.active)
         self.sums.maximum(self.terms[0], 3, self.state.active)
@@ -43,9 +44,9 @@ class Diagnostics:
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
-        for i in range(self.state.active[None]):
-            ratio = self.density.density_ratio(self.state.x, i, neighbours)
-            self.density_ratio[i] = ratio
+        for i in range(self.state.live_bound()):
+            if i < self.state.active[None]:
+                self.density_ratio[i] = self.density.density_ratio(self.state.x, i, neighbours)
 
     def density_ratios(self, neighbours):
         """ρ/ρ0 of every particle at the current positions, with the last substep's neighbour lists;
@@ -55,8 +56,9 @@ class Diagnostics:
 
     @ti.kernel
     def _max_speed(self) -> tuple[ti.f32, ti.i32, ti.i32]:
-        for i in range(self.state.active[None]):
-            self.speed[i] = self.state.v[i].norm()
+        for i in range(self.state.live_bound()):
+            if i < self.state.active[None]:
+                self.speed[i] = self.state.v[i].norm()
         self.sums.maximum(self.speed, 4, self.state.active)
         status = self.grid.take_status()
         return self.sums.high[4], status[0], status[1]
