@@ -214,8 +214,8 @@ class ExclusiveScan:
         its entries; then one pass down: each level-0 block adds up its own start from the block sums
         above it (:meth:`start_of` from level 1: the sums before it in its block of the level above, and
         so on to the top, at most a block's a level: 255 on the CPU, whose tree has two levels, 31 a
-        level on a GPU) and writes the running sums of its entries from there. A pass down per level
-        would cost a task each, a launch on a GPU (a million cells in blocks of 32: five levels).
+        level on a GPU and up to 511 at its top) and writes the running sums of its entries from there.
+        A pass down per level would cost a task each, a launch on a GPU (a million cells: four levels).
 
         Every level loops over all of its blocks, a count the kernel knows, and skips those past the
         live entries, each thread reading the count itself: a loop bound or a count read at run time
