@@ -326,3 +326,39 @@ def test_a_box_and_a_sphere_come_to_rest_on_an_obstacle_and_on_each_other():
         assert rows[2, 1] == pytest.approx(0.035, abs=0.2 * SPACING)  # a sphere on the floor
         # The sphere dropped on it rolls off to the floor, or rests on it: never inside it.
         assert np.linalg.norm(rows[3, 0:3] - rows[2, 0:3]) > 0.07 - 0.2 * SPACING
+
+
+@pytest.mark.slow
+def test_the_frames_one_read_brings_the_bodies_fastest_point():
+    """The CFL limit counts the fastest point of any body, |v| + |ω| r_bound, and reads it with the
+    water's fastest speed in the frame's one transfer (``Diagnostics.frame_speeds``): the value the
+    launches that move the bodies keep on the device must be the bodies' as they are now, after the
+    start, the substeps, the hand and a restore."""
+    half = (0.05, 0.06, 0.06)
+    scene = pool(
+        [box(half, 700, [0.2, 0.3, 0.2], velocity_m_s=[0.3, 0.1, 0.0], angular_velocity_rad_s=[0.0, 2.0, 1.0])],
+        depth=0.1,
+    )
+    sim = Simulation(scene, quiet=True)
+
+    def expected():
+        row = sim.body_states()[0]
+        return np.linalg.norm(row[7:10]) + np.linalg.norm(row[10:13]) * np.linalg.norm(half)
+
+    def read():
+        return sim.diagnostics.frame_speeds(sim.bodies)[1]
+
+    assert read() == pytest.approx(expected(), rel=1e-5) and read() > 0.3  # the start: its initial spin
+    start = sim.snapshot()
+    for _ in range(3):
+        sim.substep()
+        assert read() == pytest.approx(expected(), rel=1e-5)
+    from pbf.solver import Push
+
+    sim.control.push = Push((0.2, 0.37, 0.2), (1.5, 0.0, 0.0), 0.05)  # the hand, before the rigid step
+    sim.substep()
+    assert read() == pytest.approx(expected(), rel=1e-5) and read() > 1.0
+    sim.control.push = None
+    sim.restore(start)
+    assert read() == pytest.approx(expected(), rel=1e-5) and read() > 0.3
+    assert sim.boundaries.speed_limit_m_s(read()) == pytest.approx(sim.bodies.speed_limit_m_s())

@@ -222,6 +222,8 @@ class Bodies:
         self.bounding = ti.field(ti.f32, shape=slots)
         """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
         self.fastest = ti.field(ti.f32, shape=())
+        """The fastest any point of a body moves now (m/s, :meth:`speed_limit_m_s`), kept by the launches
+        that change the bodies' velocities."""
         self.has_spheres = "sphere" in bodies.shapes
         self.has_boxes = "box" in bodies.shapes or not bodies.shapes
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
@@ -302,6 +304,8 @@ class Bodies:
             self.force[b] = ti.Vector([rows[b, i] for i in ti.static(range(13, 16))])
             self.torque[b] = ti.Vector([rows[b, i] for i in ti.static(range(16, 19))])
             self.rotation[b] = quaternion_matrix(self.quaternion[b])
+        for _ in range(1):
+            self._set_fastest()
 
     @ti.kernel
     def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
@@ -319,18 +323,19 @@ class Bodies:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
 
     def speed_limit_m_s(self) -> float:
-        """The fastest any point of a body moves, |v| + |ω| r_bound (one small read from the device,
-        once a frame): the CFL limit counts it, so no body crosses more than time.max_cfl spacings."""
-        return float(self._speed_limit()) if self.count else 0.0
+        """The fastest any point of a body moves, |v| + |ω| r_bound (a read from the device): the CFL limit
+        counts it, so no body crosses more than time.max_cfl spacings. The frame's one read brings it with
+        the water's fastest speed (``Diagnostics.frame_speeds``)."""
+        return float(self.fastest[None]) if self.count else 0.0
 
-    @ti.kernel
-    def _speed_limit(self) -> ti.f32:
-        # A maximum over a handful of bodies, once a frame: the atomic into one address is not in the
-        # substep, and a maximum does not depend on the order.
-        self.fastest[None] = 0.0
+    @ti.func
+    def _set_fastest(self):
+        """``fastest`` for the bodies as they move now: by the one thread of a launch that has just changed
+        their velocities (the rigid step, a restore, the hand), so that the frame's read finds it."""
+        top = 0.0
         for b in range(self.constants[None].count):
-            ti.atomic_max(self.fastest[None], self.fastest_point(b))
-        return self.fastest[None]
+            top = ti.max(top, self.fastest_point(b))
+        self.fastest[None] = top
 
     def advance(self, dt: float, gravity) -> None:
         """One rigid step of Δt under gravity and the last reaction, then the contacts (module docstring)."""
@@ -357,6 +362,8 @@ class Bodies:
                 w = (1.0 - q2) ** 3
                 self.linear_velocity[b] += w * (hand - self.linear_velocity[b])
                 self.angular_velocity[b] *= 1.0 - w
+        for _ in range(1):
+            self._set_fastest()
 
     def grab(self, push, speed_limit_m_s: float) -> None:
         """The hand in the water (``model.Push``) carries the bodies it touches as it does the water: each
@@ -409,6 +416,7 @@ class Bodies:
             self._contacts()
             for b in range(count):
                 self.reach[b] = self.collision_reach(b, dt)
+            self._set_fastest()
 
     @ti.kernel
     def _describe(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2), pairs: ti.types.ndarray(dtype=ti.i32, ndim=2)):

@@ -449,9 +449,13 @@ class Boundaries:
         for part in self.parts:
             part.move(clock_s, dt)
 
-    def speed_limit_m_s(self) -> float:
-        """The fastest any boundary moves (the CFL limit counts it)."""
-        return max(part.speed_limit_m_s() for part in self.parts)
+    def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
+        """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as
+        already read from the device (``Diagnostics.frame_speeds``), instead of a read of its own."""
+        return max(
+            bodies_m_s if bodies_m_s is not None and part is self.bodies else part.speed_limit_m_s()
+            for part in self.parts
+        )
 
     @ti.func
     def project(self, p):

@@ -55,21 +55,25 @@ class Diagnostics:
         return self.density_ratio
 
     @ti.kernel
-    def _max_speed(self) -> tuple[ti.f32, ti.i32, ti.i32]:
+    def _max_speed(self, bodies: ti.template()) -> tuple[ti.f32, ti.i32, ti.i32, ti.f32]:
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 self.speed[i] = self.state.v[i].norm()
         self.sums.maximum(self.speed, 4, self.state.active)
         status = self.grid.take_status()
-        return self.sums.high[4], status[0], status[1]
+        solids = 0.0
+        if ti.static(hasattr(bodies, "fastest")):  # None when the scene has no bodies
+            solids = bodies.fastest[None]
+        return self.sums.high[4], status[0], status[1], solids
 
-    def max_speed(self) -> float:
-        """The largest particle speed, m/s (one reduction, no neighbour pass), read once a frame for the
-        CFL limit. The same transfer brings the grid's record of the frame's neighbour lists
-        (``NeighbourGrid.settle_frame``), so that a frame reads the device once."""
-        speed, most_entries, truncated = self._max_speed()
+    def frame_speeds(self, bodies=None) -> tuple[float, float]:
+        """The largest particle speed and the fastest point of any of ``bodies`` (``pbf.solver.bodies``,
+        or None), m/s, read once a frame for the CFL limit: one reduction, no neighbour pass. The same
+        transfer brings the grid's record of the frame's neighbour lists (``NeighbourGrid.settle_frame``),
+        so that a frame reads the device once."""
+        speed, most_entries, truncated, solids = self._max_speed(bodies)
         self.grid.settle_frame(most_entries, bool(truncated))
-        return float(speed)
+        return float(speed), float(solids)
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts.

@@ -412,11 +412,11 @@ class Simulation:
         no tunnelling into the pile at a wall, no compression piling up faster than the iterations
         remove it)."""
         t = self.scene.time
-        fastest = self.diagnostics.max_speed()
+        fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
             fastest = min(fastest, t.max_speed_m_s)
         speed = (
-            max(fastest, self.boundaries.speed_limit_m_s())
+            max(fastest, self.boundaries.speed_limit_m_s(bodies))
             + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
         )
         travel = self.scene.travel_per_substep_m(self.control.iterations)
