@@ -104,13 +104,18 @@ def test_the_divergence_pass_adds_no_call_on_the_device_path():
 
 
 @pytest.mark.slow
-def test_the_bodies_add_two_calls_and_no_one_thread_task():
-    """A scene with rigid bodies adds two calls a substep on the device path, the rigid step (one thread
+def test_moving_boundaries_add_few_calls_and_no_one_thread_task():
+    """On the device path a scene with rigid bodies adds two calls a substep, the rigid step (one thread
     over the few bodies: their motion, contacts and collision distances) and the water's reaction, and
     no one-thread task that reads a count for a loop's bound: ``floating_boxes`` makes the 6 calls of its
-    10 iterations' substep and these 2 (the rigid step alone took 3 calls and 5 tasks, 2 of them such)."""
-    rows = bench_counts("--presets", "floating_boxes")
+    10 iterations' substep and these 2 (the rigid step alone took 3 calls and 5 tasks, 2 of them such).
+    The wave maker adds no call: the substep's first launch places the piston (``wave_tank``: 6 calls,
+    one one-thread task, where a call of its own made 7)."""
+    rows = bench_counts("--presets", "floating_boxes", "wave_tank")
     calls, tasks, serial, _, _ = rows["floating_boxes, device decisions"]
     assert (calls, serial) == (8, 0), (calls, serial)
     assert tasks <= 51, f"{tasks} offloaded tasks per substep, at most 51"
     assert rows["floating_boxes"][0] <= 15, rows["floating_boxes"]
+    calls, tasks, serial, _, _ = rows["wave_tank, device decisions"]
+    assert (calls, serial) == (6, 1), (calls, serial)
+    assert rows["wave_tank"][0] <= 14, rows["wave_tank"]

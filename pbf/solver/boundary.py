@@ -223,21 +223,32 @@ class Container:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move(self, piston_time_s: float, dt: float = 0.0) -> None:
+    def move(self, piston_time_s: float, dt: float = 0.0, launch: bool = True) -> tuple[float, float]:
         """Place moving walls where they stand at the end of the coming substep of ``dt``, where x* is
         projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt);
         the piston's velocity over that substep is what the divergence pre-correction sees (0 when
-        ``dt`` is 0: placed, not moved)."""
-        if self.wave_maker:
-            position = self.piston_position_m(piston_time_s)
-            velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
+        ``dt`` is 0: placed, not moved). Returns the piston's place and velocity; with ``launch`` False
+        they are not set on the device here but left to the substep's first launch
+        (:meth:`set_piston`, ``pbf.solver.substep``), a kernel call fewer a substep."""
+        if not self.wave_maker:
+            return self._piston_x_host, 0.0
+        position = self.piston_position_m(piston_time_s)
+        velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
+        if launch:
             self._launch_place(position, velocity)
-            self._piston_x_host = float(np.float32(position))
+        self._piston_x_host = float(np.float32(position))
+        return position, velocity
 
     @ti.kernel
     def _place(self, position: ti.f32, velocity: ti.f32):
         """Both of :meth:`move`'s values in one launch: set from Python, each would be a kernel call of
-        Taichi's own (a field's writer), every substep."""
+        Taichi's own (a field's writer)."""
+        self.set_piston(position, velocity)
+
+    @ti.func
+    def set_piston(self, position, velocity):
+        """The piston's place (m) and its velocity over the coming substep (m/s), for the top level of a
+        kernel, before any loop that reads them (a one-thread task)."""
         self.piston_x[None] = position
         self.piston_v[None] = velocity
 
@@ -443,11 +454,14 @@ class Boundaries:
             self.bodies = Bodies(self.params, self.tables, self.obstacles, capacity)
             self.parts += (self.bodies,)
 
-    def move(self, clock_s: float, dt: float = 0.0) -> None:
+    def move(self, clock_s: float, dt: float = 0.0, launch: bool = True) -> tuple[float, float]:
         """Place moving boundaries where they stand at the end of the coming substep of ``dt``
-        (``clock_s``: the wave maker's clock, which stops while it is switched off)."""
-        for part in self.parts:
+        (``clock_s``: the wave maker's clock, which stops while it is switched off). Returns the piston's
+        place and velocity, which with ``launch`` False the substep's first launch sets
+        (``Container.move``)."""
+        for part in self.parts[1:]:
             part.move(clock_s, dt)
+        return self.container.move(clock_s, dt, launch)
 
     def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
         """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as

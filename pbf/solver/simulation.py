@@ -435,10 +435,11 @@ class Simulation:
         """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
         self.grid.sort_and_permute(x, self.state.index, self.state)
 
-    def _outside_inputs(self, dt: float) -> None:
+    def _outside_inputs(self, dt: float) -> tuple[float, float]:
         """What acts on the water from outside Algorithm 1, before its prediction: new water from the
         nozzles, the user's hand (velocities, capped so the CFL limit holds), and moving walls placed
-        where they stand at the end of the substep, where x* is projected."""
+        where they stand at the end of the substep, where x* is projected: returns the piston's place and
+        velocity, which the substep's first launch sets (``Boundaries.move``)."""
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
@@ -449,7 +450,7 @@ class Simulation:
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
-        self.boundaries.move(self.piston_time_s, dt)
+        return self.boundaries.move(self.piston_time_s, dt, launch=False)
 
     def substep(self, dt: float | None = None) -> None:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
@@ -465,7 +466,7 @@ class Simulation:
                 )
         dt = dt or self.scene.time.frame_dt_s / control.substeps
         x_star = self.integrator.predicted
-        self._outside_inputs(dt)  # emitters, the mouse, moving walls
+        piston = self._outside_inputs(dt)  # emitters, the mouse, moving walls
         # On the device path an overflow's second visit can wait for the first λ pass when no divergence
         # pass reads the lists before it (NeighbourGrid.finish_compact): a launch fewer.
         defer = self.iterations.on_device and control.divergence_iterations == 0
@@ -473,7 +474,7 @@ class Simulation:
             # x* = x + Δt v, the particles sorted by the cell of x*, and their neighbours (on the device
             # path with the divergence pre-correction below in the same launch, and timed with them)
             count = control.divergence_iterations
-            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, count)
+            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, count, piston)
         with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
             if count > 0 and not corrected:  # warm-started), then x* = x + Δt v again
                 self.divergence.run(self.grid.neighbours, dt, count)

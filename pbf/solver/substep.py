@@ -44,7 +44,9 @@ class SubstepLaunches:
         self._launch_visit = Launcher(self._predict_and_visit)
         self._launch_finish = Launcher(self._finish)
 
-    def predict_and_find_neighbours(self, dt: float, gravity, defer: bool = False, divergence: int = 0) -> bool:
+    def predict_and_find_neighbours(
+        self, dt: float, gravity, defer: bool = False, divergence: int = 0, piston=None
+    ) -> bool:
         """Algorithm 1, lines 1-7, in one call: v += Δt g, x* = x + Δt v (kept inside the boundaries),
         the particles and x* sorted by the cell of x*, and their exact neighbour lists. On the CPU the
         call returns whether a particle has more than SLOTS neighbours, and only then a second visit
@@ -52,13 +54,17 @@ class SubstepLaunches:
         overflow's second visit to the first pass of the iterations (``NeighbourGrid.finish_compact``),
         for a substep in which nothing else reads the lists before it, and ``divergence`` iterations of
         the divergence pre-correction (up to MOST_DIVERGENCE_IN_CALL) run in the same call, then x* is
-        predicted again and the walls' ghost looked up there. Returns whether the pre-correction ran."""
+        predicted again and the walls' ghost looked up there. ``piston``: the wave maker's place and
+        velocity for this substep (``Boundaries.move``'s, not yet set), set first in the same call.
+        Returns whether the pre-correction ran."""
         grid, x = self.grid, self.integrator.predicted.first
+        place = piston is not None and self.integrator.boundaries.container.wave_maker
+        piston_x, piston_v = piston if place else (0.0, 0.0)
         if grid.on_device and not grid.checking:
             in_call = divergence if divergence <= MOST_DIVERGENCE_IN_CALL else 0
-            self._launch_on_device(grid.neighbours, dt, *gravity, defer, in_call)
+            self._launch_on_device(grid.neighbours, dt, *gravity, defer, in_call, place, piston_x, piston_v)
             return in_call > 0
-        if self._launch_visit(grid.neighbours, dt, *gravity, defer):
+        if self._launch_visit(grid.neighbours, dt, *gravity, defer, place, piston_x, piston_v):
             grid.build_compact(x)
         return False
 
@@ -101,9 +107,14 @@ class SubstepLaunches:
         gz: ti.f32,
         defer: ti.template(),
         divergence: ti.template(),
+        place: ti.template(),
+        piston_x: ti.f32,
+        piston_v: ti.f32,
     ):
         # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
         # a call than three values (benchmarks/kernel_arguments.py).
+        if ti.static(place):  # the wave maker where the substep ends (Container.move): a task, not a call
+            self.integrator.boundaries.container.set_piston(piston_x, piston_v)
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
         gathered = ti.static(self.state.scratch_of(x))
@@ -119,9 +130,20 @@ class SubstepLaunches:
 
     @ti.kernel
     def _predict_and_visit(
-        self, neighbours: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, defer: ti.template()
+        self,
+        neighbours: NeighbourList,
+        dt: ti.f32,
+        gx: ti.f32,
+        gy: ti.f32,
+        gz: ti.f32,
+        defer: ti.template(),
+        place: ti.template(),
+        piston_x: ti.f32,
+        piston_v: ti.f32,
     ) -> ti.i32:
         self.grid.overflow[None] = 0  # the sort clears it in its first thread, which an empty box lacks
+        if ti.static(place):  # and the wave maker where the substep ends, in the same one-thread task
+            self.integrator.boundaries.container.set_piston(piston_x, piston_v)
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
         gathered = ti.static(self.state.scratch_of(x))
