@@ -111,10 +111,10 @@ class SubstepLaunches:
         piston_x: ti.f32,
         piston_v: ti.f32,
     ):
-        # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
-        # a call than three values (benchmarks/kernel_arguments.py).
         if ti.static(place):  # the wave maker where the substep ends (Container.move): a task, not a call
             self.integrator.boundaries.container.set_piston(piston_x, piston_v)
+        # g as three numbers: Taichi 1.7.4 sets a vector argument through Python objects, about 15 µs more
+        # a call than three values (benchmarks/kernel_arguments.py).
         self._predict_and_sort(dt, ti.Vector([gx, gy, gz]))
         x = ti.static(self.integrator.predicted.first)
         gathered = ti.static(self.state.scratch_of(x))
