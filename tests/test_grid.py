@@ -238,7 +238,7 @@ def test_a_gpus_prefix_sum_stops_at_a_top_level_of_a_few_hundred(length, lengths
     # at most GPU_SCAN_TOP block sums, which start_of reads whole. The float sums keep their blocks.
     with in_gpu_blocks():
         tree = ExclusiveScan(length).tree
-        assert TreeSum(length, block=32).tree.lengths[-1] <= 32
+        assert TreeSum(length, shared=False).tree.lengths[-1] <= 32  # a float sum keeps its tree of 32s
     assert tree.lengths == lengths
     assert tree.blocks[:-1] == [32] * (len(lengths) - 1) and tree.blocks[-1] >= lengths[-1]
     assert lengths[-1] <= GPU_SCAN_TOP
