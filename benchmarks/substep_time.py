@@ -10,8 +10,8 @@ timed whole, the device synchronised at each end, ``--rounds`` times: medians of
 of the time the host took to issue them (the same as the whole when the host is the limit, less when
 the device is), and of the CPU time the issuing thread spent (Python and the launches' own work:
 what a GPU backend costs the host per substep, whatever else the machine runs; on the CPU backend
-that thread also runs its share of the kernels). For an A/B of two checkouts run it from a folder outside both with
-``PYTHONPATH=<checkout>``, alternating.
+that thread also runs its share of the kernels). ``benchmarks/ab.py`` runs it for versions of the package
+against each other (folders or git revisions), alternated in fresh processes.
 
 ``--preset`` (with ``--set KEY=VALUE`` overrides of it, repeatable): 3 frames to warm up, then 30
 frames of the preset timed (frames of 1/60 s simulated per second of wall time), then 30 more with the

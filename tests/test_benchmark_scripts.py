@@ -364,3 +364,73 @@ def test_speed_cap_prints_its_table(capsys):
     script("speed_cap").main(["--particles", "8000", "--frames", "3", "--factors", "0", "2", "--divisor", "0"])
     out = capsys.readouterr().out
     assert "none" in out and "2 √(2gy)" in out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["HEAD", "--sizes", "300"], "give at least two"),
+        (["no-such-revision-or-folder", "HEAD", "--sizes", "300"], "neither a folder nor a git revision"),
+        ([str(BENCHMARKS), "HEAD", "--sizes", "300"], "holds no pbf/__init__.py"),
+        (["HEAD", "HEAD"], "give --sizes, --preset or both"),
+        (["HEAD", "HEAD", "--sizes", "300", "--rounds", "0"], "--rounds: at least 1"),
+        (["HEAD", "HEAD", "--arch", "tpu", "--sizes", "300"], "unknown backend"),
+    ],
+)
+def test_ab_refuses_what_it_cannot_compare_before_running_anything(argv, message, capsys):
+    with pytest.raises(SystemExit) as stop:
+        script("ab").main(argv)
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ab_alternates_a_revision_and_a_folder(capsys):
+    ab = script("ab")
+    if ab.revision("HEAD") is None:
+        pytest.skip("needs this checkout's git history (a revision is exported with git archive)")
+    checkout = str(BENCHMARKS.parent)
+    argv = ["HEAD", checkout, "--arch", "cpu", "--sizes", "300", "--rounds", "2", "--inner", "1", "--substeps", "2"]
+    assert ab.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "round 1 of 2: A, B" in out and "round 2 of 2: B, A" in out  # the order rotates
+    assert f"B: {checkout}" in out
+    rows = [words for words in map(str.split, out.splitlines()) if words and words[0].replace(",", "").isdigit()]
+    # A row a version: particles, the version, ms, its range, host CPU ms, the ratio to A and its range.
+    assert [row[1] for row in rows] == ["A", "B"] and all(len(row) == 7 for row in rows), out
+    assert rows[0][-2:] == ["1.00", "(1.00-1.00)"] and float(rows[1][-2]) > 0
+
+
+TRACE = """Generating SQLite file substeps.sqlite
+"Start (ns)","Duration (ns)","CorrId","GrdX","Name"
+1000,500,1,4,"predict"
+1600,400,2,4,"visit"
+2000,100,3,0,"[CUDA memcpy Host-to-Device]"
+2500,1000,4,4,"iterate"
+3000,200,5,4,"inside iterate's time"
+4000,500,6,4,"predict"
+"""
+
+
+def test_kernel_gaps_adds_up_busy_and_idle_time(tmp_path, capsys):
+    gaps = script("kernel_gaps")
+    result = gaps.analyse(gaps.operations(TRACE), None)
+    # 1,000-4,500 ns; idle 1,500-1,600, 2,100-2,500 and 3,500-4,000; the fifth runs inside the fourth.
+    assert (result["window"], result["busy"], result["idle"]) == (3500, 2500, 1000)
+    assert result["gaps"][0] == (500, "iterate", "predict")
+    assert dict(result["by_name"])["predict"] == [2, 1000]
+    assert gaps.analyse(gaps.operations(TRACE), 0.0021)["operations"] == 3  # began from 2,400 ns on
+    (tmp_path / "trace.csv").write_text(TRACE)
+    assert gaps.main([str(tmp_path / "trace.csv"), "--substeps", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "nothing ran: 0.5 µs a substep (29% of the window, 3 gaps)" in out
+    assert "iterate → predict" in out
+
+
+def test_kernel_gaps_says_what_is_not_a_trace(tmp_path, capsys):
+    (tmp_path / "notes.csv").write_text("a,b\n1,2\n")
+    assert script("kernel_gaps").main([str(tmp_path / "notes.csv")]) == 1
+    assert "not a cuda_gpu_trace report" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        script("kernel_gaps").main([str(tmp_path / "missing.nsys-rep")])
+    assert stop.value.code == 2

@@ -1,0 +1,286 @@
+"""Versions of the simulator timed against each other, alternated in fresh processes: medians and ratios.
+
+    python benchmarks/ab.py HEAD 3153ce8 --arch cpu --sizes 8000 64000 --rounds 5
+    python benchmarks/ab.py . ../base --arch cuda --sizes 8000 64000 1000000 --preset dam_break_large
+
+A version is a folder that holds the package (``pbf/``: a checkout, or a copy of one as a GPU machine
+gets it) or a git revision of the checkout this script lies in, exported with ``git archive`` into a
+temporary folder that is removed at the end. The first version is the base of the ratios.
+
+Each round runs every version once, each in a fresh process: this checkout's
+``benchmarks/substep_time.py`` with the version's folder first on PYTHONPATH, from a scratch working
+folder (so that neither the current folder nor an installed copy of the package is imported instead),
+in an order that rotates from round to round, so that a machine's drift (its load, its clock) touches
+every version alike. Per version and size it prints the median over the rounds of the milliseconds per
+substep (each round's figure itself the median of ``--inner`` timed stretches of ``--substeps``
+substeps), their range, and the median and range of the rounds' ratios to the base: each ratio pairs two runs
+of the same round, close in time, which a loaded machine disturbs less than it does the medians. The
+host's CPU time per substep comes beside it (the issuing thread's: what bounds a GPU's small scenes).
+
+``--preset`` adds the preset's frames of 1/60 s simulated per second (``substep_time.py --preset``),
+with its substeps a frame and mean density error, which say whether the versions did the same work.
+
+The versions run the same ``substep_time.py`` (this checkout's), so they must have the package
+interface it calls: ``Simulation``, ``Simulation.substep``, ``pbf.study.common.dam_break`` and
+``pbf.solver.start_backend``. A version's run that fails stops the comparison with its last words.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+CHECKOUT = HERE.parent
+TIMER = HERE / "substep_time.py"
+RUN_TIMEOUT_S = 3600
+"""One version's run of one round: a million particles on the CPU backend with a preset takes minutes."""
+
+SIZE_ROW = re.compile(r"^\s*([\d,]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s*$")
+"""substep_time.py's row for a size: particles, ms/substep, host issue ms, host CPU ms, built s."""
+PRESET_ROW = re.compile(
+    r"([\d.]+) frames of simulation a second, ([\d.]+) substeps a frame; mean density error ([\d.]+)%"
+)
+
+
+class Version:
+    """A version as given, the folder its package is imported from, and what its runs printed."""
+
+    def __init__(self, given: str, folder: Path, label: str):
+        self.given, self.folder, self.label = given, folder, label
+        self.particles: dict[int, int] = {}
+        """size asked → the particles its scene holds"""
+        self.ms: dict[int, list[float]] = {}
+        """size asked → ms per substep, a round each"""
+        self.host_cpu_ms: dict[int, list[float]] = {}
+        self.frames_per_s: list[float] = []
+        self.substeps: list[float] = []
+        self.errors: list[float] = []
+
+
+def is_package_folder(path: Path) -> bool:
+    return (path / "pbf" / "__init__.py").is_file()
+
+
+def revision(given: str) -> str | None:
+    """The commit ``given`` names in this checkout, or None where git does not know it (or is absent)."""
+    try:
+        done = subprocess.run(
+            ["git", "-C", str(CHECKOUT), "rev-parse", "--verify", "--quiet", f"{given}^{{commit}}"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if done.returncode != 0:
+        return None
+    return done.stdout.strip() or None
+
+
+def export(commit: str, into: Path) -> Path:
+    """The package and its data at ``commit``, written under ``into`` (``git archive``, no work tree)."""
+    archive = into / f"{commit[:12]}.tar"
+    with archive.open("wb") as out:
+        subprocess.run(["git", "-C", str(CHECKOUT), "archive", commit], stdout=out, check=True, timeout=600)
+    folder = into / commit[:12]
+    folder.mkdir()
+    with tarfile.open(archive) as tar:
+        try:
+            tar.extractall(folder, filter="data")  # the archive's own files only (Python 3.11.4 and later)
+        except TypeError:  # an older Python: git's own archive of its own commit
+            tar.extractall(folder)
+    archive.unlink()
+    return folder
+
+
+def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentParser) -> list[Version]:
+    """Every version's folder, after checking them all (nothing is exported before every one is known)."""
+    found = []
+    for given in given_versions:
+        path = Path(given).expanduser()
+        if path.is_dir():
+            if not is_package_folder(path):
+                parser.error(f"version {given!r}: the folder holds no pbf/__init__.py; give a checkout of the project")
+            found.append((given, path.resolve(), None))
+            continue
+        commit = revision(given)
+        if commit is None:
+            parser.error(
+                f"version {given!r}: neither a folder nor a git revision of {CHECKOUT}; give a checkout's "
+                "folder or a commit, branch or tag"
+            )
+        found.append((given, None, commit))
+    versions, exported = [], {}
+    for n, (given, folder, commit) in enumerate(found):
+        if folder is None:
+            if commit not in exported:  # a commit named twice (say, to see two runs' spread) is one export
+                exported[commit] = export(commit, scratch)
+            folder = exported[commit]
+            if not is_package_folder(folder):
+                parser.error(f"version {given!r}: commit {commit[:12]} holds no pbf/__init__.py")
+        label = chr(ord("A") + n)
+        versions.append(Version(given, folder, label))
+    return versions
+
+
+def run_once(version: Version, timer_args: list[str], workdir: Path) -> str:
+    """One fresh process of substep_time.py with ``version``'s package; its standard output."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(version.folder)] + [p for p in [env.get("PYTHONPATH")] if p])
+    try:
+        done = subprocess.run(
+            [sys.executable, str(TIMER), *timer_args],
+            cwd=workdir,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT_S,
+        )
+    except subprocess.TimeoutExpired:
+        raise RunFailed(f"version {version.label} ({version.given}): its run took over {RUN_TIMEOUT_S} s") from None
+    if done.returncode != 0:
+        last = [line for line in (done.stderr or done.stdout).splitlines() if line.strip()][-1:] or ["no output"]
+        raise RunFailed(f"version {version.label} ({version.given}): its run failed: {last[0].strip()}")
+    return done.stdout
+
+
+class RunFailed(Exception):
+    """A version's run that did not print its table."""
+
+
+def record(version: Version, output: str, sizes: list[int], preset: str | None) -> None:
+    rows = [SIZE_ROW.match(line) for line in output.splitlines()]
+    rows = [row for row in rows if row]
+    if len(rows) != len(sizes):
+        raise RunFailed(f"version {version.label} ({version.given}): {len(rows)} size rows printed, not {len(sizes)}")
+    for size, row in zip(sizes, rows):
+        version.particles[size] = int(row.group(1).replace(",", ""))
+        version.ms.setdefault(size, []).append(float(row.group(2)))
+        version.host_cpu_ms.setdefault(size, []).append(float(row.group(4)))
+    if preset is not None:
+        found = PRESET_ROW.search(output)
+        if found is None:
+            raise RunFailed(f"version {version.label} ({version.given}): no frame rate printed for {preset}")
+        version.frames_per_s.append(float(found.group(1)))
+        version.substeps.append(float(found.group(2)))
+        version.errors.append(float(found.group(3)))
+
+
+def paired_ratio(values: list[float], base: list[float]) -> str:
+    """The median of round-by-round ratios (each round ran both, close in time), and their range: how
+    far one round's pair can stray says how much a single pair is worth on this machine."""
+    ratios = [v / b for v, b in zip(values, base)]
+    return f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
+
+
+def spread(values: list[float], digits: int) -> str:
+    return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f}-{max(values):.{digits}f})"
+
+
+def report(versions: list[Version], sizes: list[int], preset: str | None, args) -> None:
+    base = versions[0]
+    print()
+    for version in versions:
+        print(f"  {version.label}: {version.given} ({version.folder})")
+    print(
+        f"  {args.arch or 'the default backend'}; {args.rounds} rounds, alternated; a round's figure: the "
+        f"median of {args.inner} stretches of {args.substeps} substeps"
+    )
+    if sizes:
+        print()
+        ratio_head = f"ratio to {base.label} (range)"
+        print(f"{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
+        for size in sizes:
+            for version in versions:
+                ratio = paired_ratio(version.ms[size], base.ms[size])
+                print(
+                    f"{base.particles[size]:>10,} {version.label:<8} {spread(version.ms[size], 3):>26} "
+                    f"{statistics.median(version.host_cpu_ms[size]):>12.3f} {ratio:>20}"
+                )
+    if preset is not None:
+        print()
+        head = f"{'version':<8} {preset + ': frames/s (range)':>36} {'substeps a frame':>17} {'mean error':>11}"
+        print(head + f" {'ratio to ' + base.label + ' (range)':>20}")
+        for version in versions:
+            ratio = paired_ratio(version.frames_per_s, base.frames_per_s)
+            print(
+                f"{version.label:<8} {spread(version.frames_per_s, 1):>36} "
+                f"{statistics.median(version.substeps):>17.2f} {statistics.median(version.errors):>10.3f}% "
+                f"{ratio:>20}"
+            )
+
+
+def parse(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("versions", nargs="+", help="folders holding pbf/, or git revisions of this checkout")
+    parser.add_argument("--arch", default=None, help="Taichi's backend for every run (default: as the program picks)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[], help="the seed dam break scaled to these")
+    parser.add_argument("--preset", default=None, help="also the frame rate of this preset")
+    parser.add_argument("--rounds", type=int, default=3, help="runs of each version, alternated (default 3)")
+    parser.add_argument("--inner", type=int, default=3, help="timed stretches in a run, their median kept")
+    parser.add_argument("--substeps", type=int, default=40, help="substeps of a timed stretch (default 40)")
+    args = parser.parse_args(argv)
+    if len(args.versions) < 2:
+        parser.error("versions: give at least two to compare (the first is the base of the ratios)")
+    if len(args.versions) > 8:
+        parser.error("versions: at most 8 a comparison")
+    if not args.sizes and args.preset is None:
+        parser.error("give --sizes, --preset or both")
+    for name in ("rounds", "inner", "substeps"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name}: at least 1, not {getattr(args, name)}")
+    if any(size < 1 for size in args.sizes):
+        parser.error(f"--sizes: particle counts of at least 1, not {args.sizes}")
+    from pbf.scene import SceneError, load_scene
+    from pbf.solver.backend import ARCHES
+
+    if args.arch is not None and args.arch.lower() not in ARCHES:
+        parser.error(f"--arch {args.arch!r}: unknown backend; allowed: {', '.join(ARCHES)}")
+    if args.preset is not None:
+        try:
+            load_scene(args.preset)
+        except SceneError as error:
+            parser.error(str(error))
+    return parser, args
+
+
+def main(argv=None) -> int:
+    parser, args = parse(argv)
+    timer_args = ["--rounds", str(args.inner), "--substeps", str(args.substeps)]
+    if args.arch is not None:
+        timer_args += ["--arch", args.arch]
+    if args.sizes:
+        timer_args += ["--sizes", *map(str, args.sizes)]
+    if args.preset is not None:
+        timer_args += ["--preset", args.preset]
+    with tempfile.TemporaryDirectory(prefix="pbf-ab-") as scratch:
+        scratch = Path(scratch)
+        versions = resolve(args.versions, scratch, parser)
+        workdir = scratch / "work"
+        workdir.mkdir()
+        try:
+            for round_ in range(args.rounds):
+                order = versions[round_ % len(versions) :] + versions[: round_ % len(versions)]
+                print(f"round {round_ + 1} of {args.rounds}: " + ", ".join(v.label for v in order), flush=True)
+                for version in order:
+                    record(version, run_once(version, timer_args, workdir), args.sizes, args.preset)
+        except RunFailed as failure:
+            print(f"ab: {failure}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            print("ab: interrupted; nothing reported", file=sys.stderr)
+            return 130
+    report(versions, args.sizes, args.preset, args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

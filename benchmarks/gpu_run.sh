@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# The GPU figures docs/BENCHMARKS.md lacks, in one run on an NVIDIA machine (CUDA), from the project root:
+#
+#   bash benchmarks/gpu_run.sh [BASE]       # about 8 minutes; BUDGET=SECONDS caps it (default 500)
+#
+# BASE: an earlier version's folder to time this one against (benchmarks/ab.py; without git on the GPU
+# machine, export it here first: mkdir -p .gpu/base && git archive REV pbf | tar -x -C .gpu/base).
+# Where .gpu/whl holds wheels (../shared/gpu/prepare.sh), Taichi and the rest are installed from them
+# into /tmp/site first, as that machine reaches no package registry. Each step runs under its own time
+# limit, so one that fails or hangs leaves the others; everything lands in $OUT (default ./gpu_out):
+# summary.txt with each step's table, a log per step, cuda.npz (the physics, for
+# ../shared/gpu/judge.py here) and the Nsight Systems trace where nsys is installed.
+#
+# Steps: the physics on CUDA (tests/vulkan_run.py: kernel, prefix sums, the grid against brute force,
+# the seed scene's statistics, the pool at rest); the launches a substep as CUDA counts them; the
+# substep at 8,000, 64,000 and 1,000,000 particles against BASE, alternated; dam_break_large's frame
+# rate; 10 M particles; Nsight Systems' timeline of a million particles' substeps, and the time the
+# device spent between its kernels (benchmarks/kernel_gaps.py).
+set -u
+export PYTHONUNBUFFERED=1 TQDM_MININTERVAL=5
+ROOT=$PWD
+OUT=${OUT:-$ROOT/gpu_out}
+BUDGET=${BUDGET:-500}
+BASE=${1:-}
+PY=${PY:-python3}
+# Smaller and elsewhere, to try the script itself: ARCH=cpu SIZES=1000 BIG=2000 LARGE=dam_break
+ARCH=${ARCH:-cuda} SIZES=${SIZES:-8000 64000 1000000} BIG=${BIG:-10000000} LARGE=${LARGE:-dam_break_large}
+T0=$(date +%s)
+mkdir -p "$OUT"
+S=$OUT/summary.txt
+: >"$S"
+if [[ -n $BASE && ! -f $BASE/pbf/__init__.py ]]; then
+  echo "gpu_run: BASE '$BASE' holds no pbf/__init__.py; give an exported version's folder (see the header)" >&2
+  exit 2
+fi
+
+left() { echo $((BUDGET - ($(date +%s) - T0))); }
+step() { # step NAME LIMIT COMMAND...: the command's output in $OUT/NAME.log, its last lines in the summary
+  local name=$1 limit=$2 rem t rc
+  shift 2
+  rem=$(left)
+  if ((rem < 20)); then echo "$name: skipped, $rem s of the budget left" | tee -a "$S"; return; fi
+  ((limit > rem - 10)) && limit=$((rem - 10))
+  t=$(date +%s)
+  timeout -k 5 "$limit" "$@" >"$OUT/$name.log" 2>&1
+  rc=$?
+  echo "== $name: rc $rc, $(($(date +%s) - t)) s (limit $limit s)" | tee -a "$S"
+  tr '\r' '\n' <"$OUT/$name.log" | grep -v "%|" | tail -"${LINES_KEPT:-14}" | tee -a "$S"
+}
+
+if [[ -d .gpu/whl ]]; then
+  for f in .gpu/gl/*.deb; do [[ -f $f ]] && dpkg -x "$f" /; done
+  ldconfig 2>/dev/null
+  $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+    .gpu/whl/*.whl >"$OUT/pip.log" 2>&1 || echo "pip install failed ($OUT/pip.log)" | tee -a "$S"
+  export PYTHONPATH=/tmp/site:$ROOT
+else
+  export PYTHONPATH=$ROOT${PYTHONPATH:+:$PYTHONPATH}
+fi
+command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.max.sm --format=csv 2>&1 | tee -a "$S"
+
+step physics 150 $PY tests/vulkan_run.py "$OUT/$ARCH.npz" "$ARCH" kernel scan grid seed rest
+step counts 60 $PY -m pbf.study.bench counts --arch "$ARCH" --sizes 8000
+if [[ -n $BASE ]]; then
+  step ab 200 $PY benchmarks/ab.py "$BASE" "$ROOT" --arch "$ARCH" --sizes $SIZES --rounds 2 --inner 7
+else
+  step sizes 120 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $SIZES
+fi
+step large 90 $PY benchmarks/substep_time.py --arch "$ARCH" --preset "$LARGE"
+step ten_million 90 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $BIG --rounds 3
+if command -v nsys >/dev/null; then
+  # The trace ends with the 40 timed substeps (3 ms or so each at a million): the last 60 ms lie inside them.
+  step nsys 90 nsys profile --trace cuda --force-overwrite true --output "$OUT/substeps" \
+    $PY benchmarks/substep_time.py --arch "$ARCH" --sizes 1000000 --rounds 1 --substeps 40
+  LINES_KEPT=40 step gaps 60 $PY benchmarks/kernel_gaps.py "$OUT/substeps.nsys-rep" --last-ms 60
+else
+  echo "== nsys: not installed here; no timeline" | tee -a "$S"
+fi
+echo "total $(($(date +%s) - T0)) s" | tee -a "$S"
