@@ -11,11 +11,12 @@ Each round runs every version once, each in a fresh process: this checkout's
 ``benchmarks/substep_time.py`` with the version's folder first on PYTHONPATH, from a scratch working
 folder (so that neither the current folder nor an installed copy of the package is imported instead),
 in an order that rotates from round to round, so that a machine's drift (its load, its clock) touches
-every version alike. Per version and size it prints the median over the rounds of the milliseconds per
-substep (each round's figure itself the median of ``--inner`` timed stretches of ``--substeps``
-substeps), their range, and the median and range of the rounds' ratios to the base: each ratio pairs two runs
-of the same round, close in time, which a loaded machine disturbs less than it does the medians. The
-host's CPU time per substep comes beside it (the issuing thread's: what bounds a GPU's small scenes).
+every version alike. Per version and size it prints the median over the rounds of the milliseconds
+per substep (each round's figure itself the median of ``--inner`` timed stretches of ``--substeps``
+substeps), their range, and the median and range of the rounds' ratios to the base: each ratio pairs
+two runs of the same round, close in time, which a loaded machine disturbs less than it does the
+medians. The host's CPU time per substep comes beside it (the issuing thread's: what bounds a GPU's
+small scenes).
 
 ``--preset`` adds the preset's frames of 1/60 s simulated per second (``substep_time.py --preset``),
 with its substeps a frame and mean density error, which say whether the versions did the same work.
@@ -122,7 +123,10 @@ def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentP
     for n, (given, folder, commit) in enumerate(found):
         if folder is None:
             if commit not in exported:  # a commit named twice (say, to see two runs' spread) is one export
-                exported[commit] = export(commit, scratch)
+                try:
+                    exported[commit] = export(commit, scratch)
+                except (OSError, subprocess.SubprocessError, tarfile.TarError) as error:
+                    parser.error(f"version {given!r}: exporting commit {commit[:12]} failed: {error}")
             folder = exported[commit]
             if not is_package_folder(folder):
                 parser.error(f"version {given!r}: commit {commit[:12]} holds no pbf/__init__.py")

@@ -6,9 +6,9 @@
 # BASE: an earlier version's folder to time this one against (benchmarks/ab.py; without git on the GPU
 # machine, export it here first: mkdir -p .gpu/base && git archive REV pbf | tar -x -C .gpu/base).
 # Where .gpu/whl holds wheels (../shared/gpu/prepare.sh), Taichi and the rest are installed from them
-# into /tmp/site first, as that machine reaches no package registry. Each step runs under its own time
-# limit, so one that fails or hangs leaves the others; everything lands in $OUT (default ./gpu_out):
-# summary.txt with each step's table, a log per step, cuda.npz (the physics, for
+# into a temporary folder first, as that machine reaches no package registry. Each step runs under its
+# own time limit, so one that fails or hangs leaves the others; everything lands in $OUT (default
+# out/gpu): summary.txt with each step's table, a log per step, cuda.npz (the physics, for
 # ../shared/gpu/judge.py here) and the Nsight Systems trace where nsys is installed.
 #
 # Steps: the physics on CUDA (tests/vulkan_run.py: kernel, prefix sums, the grid against brute force,
@@ -19,20 +19,20 @@
 set -u
 export PYTHONUNBUFFERED=1 TQDM_MININTERVAL=5
 ROOT=$PWD
-OUT=${OUT:-$ROOT/gpu_out}
+OUT=${OUT:-$ROOT/out/gpu}
 BUDGET=${BUDGET:-500}
 BASE=${1:-}
 PY=${PY:-python3}
 # Smaller and elsewhere, to try the script itself: ARCH=cpu SIZES=1000 BIG=2000 LARGE=dam_break
 ARCH=${ARCH:-cuda} SIZES=${SIZES:-8000 64000 1000000} BIG=${BIG:-10000000} LARGE=${LARGE:-dam_break_large}
-T0=$(date +%s)
-mkdir -p "$OUT"
-S=$OUT/summary.txt
-: >"$S"
 if [[ -n $BASE && ! -f $BASE/pbf/__init__.py ]]; then
   echo "gpu_run: BASE '$BASE' holds no pbf/__init__.py; give an exported version's folder (see the header)" >&2
   exit 2
 fi
+T0=$(date +%s)
+mkdir -p "$OUT"
+S=$OUT/summary.txt
+: >"$S"
 
 left() { echo $((BUDGET - ($(date +%s) - T0))); }
 step() { # step NAME LIMIT COMMAND...: the command's output in $OUT/NAME.log, its last lines in the summary
@@ -48,12 +48,12 @@ step() { # step NAME LIMIT COMMAND...: the command's output in $OUT/NAME.log, it
   tr '\r' '\n' <"$OUT/$name.log" | grep -v "%|" | tail -"${LINES_KEPT:-14}" | tee -a "$S"
 }
 
-if [[ -d .gpu/whl ]]; then
-  for f in .gpu/gl/*.deb; do [[ -f $f ]] && dpkg -x "$f" /; done
-  ldconfig 2>/dev/null
-  $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+if [[ -d .gpu/whl ]]; then # into a temporary folder, removed at the end (no Vulkan step: no GL packages)
+  SITE=$(mktemp -d)
+  trap 'rm -rf "$SITE"' EXIT
+  $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target "$SITE" \
     .gpu/whl/*.whl >"$OUT/pip.log" 2>&1 || echo "pip install failed ($OUT/pip.log)" | tee -a "$S"
-  export PYTHONPATH=/tmp/site:$ROOT
+  export PYTHONPATH=$SITE:$ROOT
 else
   export PYTHONPATH=$ROOT${PYTHONPATH:+:$PYTHONPATH}
 fi

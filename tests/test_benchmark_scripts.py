@@ -434,3 +434,19 @@ def test_kernel_gaps_says_what_is_not_a_trace(tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
         script("kernel_gaps").main([str(tmp_path / "missing.nsys-rep")])
     assert stop.value.code == 2
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="gpu_run.sh is a bash script")
+def test_gpu_run_refuses_a_base_without_the_package_before_writing(tmp_path):
+    out = tmp_path / "out"
+    done = subprocess.run(
+        ["bash", str(BENCHMARKS / "gpu_run.sh"), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "OUT": str(out)},
+        cwd=BENCHMARKS.parent,
+    )
+    assert done.returncode == 2
+    assert "holds no pbf/__init__.py" in done.stderr
+    assert not out.exists()

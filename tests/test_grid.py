@@ -333,3 +333,26 @@ def test_a_list_cut_short_is_reported_grown_and_exact_after():
     assert (most_entries, truncated) == (n * (n - 1), 0)
     grid.settle_frame(most_entries, False)  # two thirds full: unchecked builds go on
     assert not grid.checking
+
+
+def test_the_gpu_checks_scan_task_runs_on_a_cpu_for_the_judges_references(tmp_path):
+    """tests/vulkan_run.py's prefix sums and float sums on the CPU backend, as ../shared/gpu/judge.py runs
+    them for its references: the shared-memory sums, a GPU's alone, are left out there, not failed."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    worker = Path(__file__).resolve().parent / "vulkan_run.py"
+    out = tmp_path / "cpu.npz"
+    done = subprocess.run(
+        [sys.executable, str(worker), str(out), "cpu", "--fast-compile", "scan"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    runs = np.load(out)
+    for length in (1, 33, 1025, 100_003):
+        counts = runs[f"scan_{length}_counts"]
+        assert np.array_equal(runs[f"scan_{length}_starts"], np.concatenate([[0], np.cumsum(counts)]))
+        assert f"scan_{length}_block_sums" not in runs.files
