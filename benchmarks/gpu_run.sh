@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The GPU figures docs/BENCHMARKS.md lacks, in one run on an NVIDIA machine (CUDA), from the project root:
+# The GPU figures docs/BENCHMARKS.md lacks, in one run on an NVIDIA machine (CUDA):
 #
-#   bash benchmarks/gpu_run.sh [BASE]       # about 8 minutes; BUDGET=SECONDS caps it (default 500)
+#   bash benchmarks/gpu_run.sh [BASE]       # about 9 minutes; BUDGET=SECONDS caps it (default 520)
 #
 # BASE: an earlier version's folder to time this one against (benchmarks/ab.py; without git on the GPU
 # machine, export it here first: mkdir -p .gpu/base && git archive REV pbf | tar -x -C .gpu/base).
@@ -12,23 +12,27 @@
 # ../shared/gpu/judge.py here) and the Nsight Systems trace where nsys is installed.
 #
 # Steps: the physics on CUDA (tests/vulkan_run.py: kernel, prefix sums, the grid against brute force,
-# the seed scene's statistics, the pool at rest); the launches a substep as CUDA counts them; the
-# substep at 8,000, 64,000 and 1,000,000 particles against BASE, alternated; dam_break_large's frame
-# rate; 10 M particles; Nsight Systems' timeline of a million particles' substeps, and the time the
-# device spent between its kernels (benchmarks/kernel_gaps.py).
+# the seed scene's statistics, the pool at rest); the substep at 8,000, 64,000 and 1,000,000 particles
+# against BASE, alternated; Nsight Systems' timeline of a million particles' substeps, and the time the
+# device spent between its kernels (benchmarks/kernel_gaps.py); dam_break_large's frame rate; 10 M
+# particles; the launches a substep as CUDA counts them. A device run of it: timeout 560 s.
 set -u
 export PYTHONUNBUFFERED=1 TQDM_MININTERVAL=5
-ROOT=$PWD
-OUT=${OUT:-$ROOT/out/gpu}
-BUDGET=${BUDGET:-500}
 BASE=${1:-}
-PY=${PY:-python3}
-# Smaller and elsewhere, to try the script itself: ARCH=cpu SIZES=1000 BIG=2000 LARGE=dam_break
-ARCH=${ARCH:-cuda} SIZES=${SIZES:-8000 64000 1000000} BIG=${BIG:-10000000} LARGE=${LARGE:-dam_break_large}
 if [[ -n $BASE && ! -f $BASE/pbf/__init__.py ]]; then
   echo "gpu_run: BASE '$BASE' holds no pbf/__init__.py; give an exported version's folder (see the header)" >&2
   exit 2
 fi
+# Paths as given from here, then everything runs from the project's root.
+[[ -n $BASE ]] && BASE=$(realpath "$BASE")
+OUT=${OUT:+$(realpath -m "$OUT")}
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+cd "$ROOT" || exit 1
+OUT=${OUT:-$ROOT/out/gpu}
+BUDGET=${BUDGET:-520}
+PY=${PY:-python3}
+# Smaller and elsewhere, to try the script itself: ARCH=cpu SIZES=1000 BIG=2000 LARGE=dam_break
+ARCH=${ARCH:-cuda} SIZES=${SIZES:-8000 64000 1000000} BIG=${BIG:-10000000} LARGE=${LARGE:-dam_break_large}
 T0=$(date +%s)
 mkdir -p "$OUT"
 S=$OUT/summary.txt
@@ -59,21 +63,22 @@ else
 fi
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.max.sm --format=csv 2>&1 | tee -a "$S"
 
-step physics 150 $PY tests/vulkan_run.py "$OUT/$ARCH.npz" "$ARCH" kernel scan grid seed rest
-step counts 60 $PY -m pbf.study.bench counts --arch "$ARCH" --sizes 8000
+# In the order of what the docs lack most, as the budget may not reach the last steps.
+step physics 120 $PY tests/vulkan_run.py "$OUT/$ARCH.npz" "$ARCH" kernel scan grid seed rest
 if [[ -n $BASE ]]; then
-  step ab 200 $PY benchmarks/ab.py "$BASE" "$ROOT" --arch "$ARCH" --sizes $SIZES --rounds 2 --inner 7
+  step ab 180 $PY benchmarks/ab.py "$BASE" "$ROOT" --arch "$ARCH" --sizes $SIZES --rounds 2 --inner 7
 else
   step sizes 120 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $SIZES
 fi
-step large 90 $PY benchmarks/substep_time.py --arch "$ARCH" --preset "$LARGE"
-step ten_million 90 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $BIG --rounds 3
 if command -v nsys >/dev/null; then
   # The trace ends with the 40 timed substeps (3 ms or so each at a million): the last 60 ms lie inside them.
   step nsys 90 nsys profile --trace cuda --force-overwrite true --output "$OUT/substeps" \
     $PY benchmarks/substep_time.py --arch "$ARCH" --sizes 1000000 --rounds 1 --substeps 40
-  LINES_KEPT=40 step gaps 60 $PY benchmarks/kernel_gaps.py "$OUT/substeps.nsys-rep" --last-ms 60
+  LINES_KEPT=40 step gaps 30 $PY benchmarks/kernel_gaps.py "$OUT/substeps.nsys-rep" --last-ms 60
 else
   echo "== nsys: not installed here; no timeline" | tee -a "$S"
 fi
+step large 60 $PY benchmarks/substep_time.py --arch "$ARCH" --preset "$LARGE"
+step ten_million 60 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $BIG --rounds 3
+step counts 45 $PY -m pbf.study.bench counts --arch "$ARCH" --sizes 8000
 echo "total $(($(date +%s) - T0)) s" | tee -a "$S"

@@ -450,3 +450,26 @@ def test_gpu_run_refuses_a_base_without_the_package_before_writing(tmp_path):
     assert done.returncode == 2
     assert "holds no pbf/__init__.py" in done.stderr
     assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("bash") is None, reason="gpu_run.sh is a bash script")
+def test_gpu_run_runs_its_steps_on_the_cpu_at_small_sizes(tmp_path):
+    """The GPU run's plumbing, here: every step at a small size on the CPU backend, from another folder,
+    against the checkout itself as the base; each step's status and table land in the summary."""
+    out = tmp_path / "out"
+    small = {"ARCH": "cpu", "SIZES": "300", "BIG": "400", "LARGE": "pour", "PY": sys.executable, "OUT": "out"}
+    done = subprocess.run(
+        ["bash", str(BENCHMARKS / "gpu_run.sh"), str(BENCHMARKS.parent)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env={**os.environ, **small},
+        cwd=tmp_path,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    summary = (out / "summary.txt").read_text()
+    for step in ("physics", "ab", "large", "ten_million", "counts"):
+        assert f"== {step}: rc 0" in summary, summary
+    assert "ratio to A (range)" in summary and "pour, cpu:" in summary
+    assert (out / "cpu.npz").is_file()
