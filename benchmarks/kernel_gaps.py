@@ -37,15 +37,16 @@ def trace_csv(path: Path) -> str:
     nsys = shutil.which("nsys")
     if nsys is None:
         raise ValueError(f"{path}: an Nsight Systems report needs nsys on PATH to read (or give its CSV)")
-    done = subprocess.run(
-        [nsys, "stats", "--report", "cuda_gpu_trace", "--format", "csv", "--output", "-", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    if done.returncode != 0:
-        raise ValueError(f"{path}: nsys stats failed: {(done.stderr or done.stdout).strip()[-300:]}")
-    return done.stdout
+    for report in ("cuda_gpu_trace", "gputrace"):  # the report's name since Nsight Systems 2021.5, and before
+        done = subprocess.run(
+            [nsys, "stats", "--report", report, "--format", "csv", "--output", "-", str(path)],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        if done.returncode == 0 and any(is_header(line) for line in done.stdout.splitlines()):
+            return done.stdout
+    raise ValueError(f"{path}: nsys stats gave no GPU trace: {(done.stderr or done.stdout).strip()[-300:]}")
 
 
 def is_header(line: str) -> bool:

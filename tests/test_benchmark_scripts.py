@@ -473,3 +473,18 @@ def test_gpu_run_runs_its_steps_on_the_cpu_at_small_sizes(tmp_path):
         assert f"== {step}: rc 0" in summary, summary
     assert "ratio to A (range)" in summary and "pour, cpu:" in summary
     assert (out / "cpu.npz").is_file()
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="the stand-in nsys is a bash script")
+def test_kernel_gaps_reads_a_report_through_nsys_stats(tmp_path, monkeypatch, capsys):
+    # A stand-in nsys that knows only the report's older name: the newer one is tried first, then that.
+    (tmp_path / "trace.csv").write_text(TRACE)
+    nsys = tmp_path / "bin" / "nsys"
+    nsys.parent.mkdir()
+    nsys.write_text(f'#!/bin/bash\n[[ "$3" == gputrace ]] && cat "{tmp_path / "trace.csv"}" && exit 0\nexit 1\n')
+    nsys.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{nsys.parent}{os.pathsep}{os.environ['PATH']}")
+    report = tmp_path / "substeps.nsys-rep"
+    report.write_bytes(b"")
+    assert script("kernel_gaps").main([str(report)]) == 0
+    assert "6 operations in a window of 3.5 µs" in capsys.readouterr().out
