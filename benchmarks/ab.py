@@ -206,7 +206,7 @@ def report(versions: list[Version], sizes: list[int], preset: str | None, args) 
             for version in versions:
                 ratio = paired_ratio(version.ms[size], base.ms[size])
                 print(
-                    f"{base.particles[size]:>10,} {version.label:<8} {spread(version.ms[size], 3):>26} "
+                    f"{version.particles[size]:>10,} {version.label:<8} {spread(version.ms[size], 3):>26} "
                     f"{statistics.median(version.host_cpu_ms[size]):>12.3f} {ratio:>20}"
                 )
     if preset is not None:
@@ -253,6 +253,8 @@ def parse(argv=None):
             load_scene(args.preset)
         except SceneError as error:
             parser.error(str(error))
+        if Path(args.preset).is_file():  # a scene file of the user's: the runs start in a scratch folder
+            args.preset = str(Path(args.preset).resolve())
     return parser, args
 
 

@@ -71,9 +71,10 @@ else
   step sizes 120 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $SIZES
 fi
 if command -v nsys >/dev/null; then
-  # The trace ends with the 40 timed substeps (3 ms or so each at a million): the last 60 ms lie inside them.
+  # The last of SIZES (a million): the trace ends with its 40 timed substeps, 3 ms or so each at a
+  # million particles, so the last 60 ms lie inside them.
   step nsys 90 nsys profile --trace cuda --force-overwrite true --output "$OUT/substeps" \
-    $PY benchmarks/substep_time.py --arch "$ARCH" --sizes 1000000 --rounds 1 --substeps 40
+    $PY benchmarks/substep_time.py --arch "$ARCH" --sizes "${SIZES##* }" --rounds 1 --substeps 40
   LINES_KEPT=40 step gaps 30 $PY benchmarks/kernel_gaps.py "$OUT/substeps.nsys-rep" --last-ms 60
 else
   echo "== nsys: not installed here; no timeline" | tee -a "$S"

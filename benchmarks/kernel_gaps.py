@@ -85,6 +85,8 @@ def analyse(ops: list[tuple[float, float, str]], last_ms: float | None) -> dict:
     if last_ms is not None:
         end = max(s + d for s, d, _ in ops)
         ops = [op for op in ops if op[0] >= end - last_ms * 1e6]
+        if not ops:  # the last operation began before the window: it alone outlasts it
+            raise ValueError(f"no operation began in the last {last_ms:g} ms of the trace; give a longer --last-ms")
     begin, end = ops[0][0], max(s + d for s, d, _ in ops)
     by_name: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
     busy, gaps, reach, before = 0.0, [], begin, ops[0][2]

@@ -384,6 +384,14 @@ def test_ab_refuses_what_it_cannot_compare_before_running_anything(argv, message
     assert message in capsys.readouterr().err
 
 
+def test_ab_passes_a_scene_file_on_by_its_full_path(tmp_path, monkeypatch):
+    # Each run starts in a scratch folder, where a path relative to the caller's folder would not resolve.
+    (tmp_path / "mine.toml").write_text('extends = "dam_break"\nname = "mine"\n')
+    monkeypatch.chdir(tmp_path)
+    _, args = script("ab").parse(["HEAD", "HEAD", "--preset", "mine.toml"])
+    assert args.preset == str(tmp_path / "mine.toml")
+
+
 @pytest.mark.slow
 def test_ab_alternates_a_revision_and_a_folder(capsys):
     ab = script("ab")
@@ -431,6 +439,10 @@ def test_kernel_gaps_says_what_is_not_a_trace(tmp_path, capsys):
     (tmp_path / "notes.csv").write_text("a,b\n1,2\n")
     assert script("kernel_gaps").main([str(tmp_path / "notes.csv")]) == 1
     assert "not a cuda_gpu_trace report" in capsys.readouterr().err
+    # A window shorter than the last operation, which began 500 ns before the trace's end, holds none.
+    (tmp_path / "trace.csv").write_text(TRACE)
+    assert script("kernel_gaps").main([str(tmp_path / "trace.csv"), "--last-ms", "0.0001"]) == 1
+    assert "no operation began in the last 0.0001 ms" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stop:
         script("kernel_gaps").main([str(tmp_path / "missing.nsys-rep")])
     assert stop.value.code == 2
