@@ -277,6 +277,19 @@ class NeighbourGrid:
         return following
 
     @ti.func
+    def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
+        """``task(i, j, acc)`` for every neighbour j of sorted particle i in the lists ``entries`` (the
+        ndarray :attr:`neighbours`, passed to the kernel as a ``NeighbourList``), in the list's order;
+        ``acc`` is the caller's accumulator, passed by reference. The one walk of the lists that every
+        pass of the solver and the renderers' neighbour sums use."""
+        first, last, stride = self.listed(i, entries)
+        upcoming = self.upcoming(entries, first, last)
+        for k in range(first, last):
+            j = self.neighbour(entries, k, upcoming)
+            upcoming = self.read_ahead(entries, first, last, stride, k, upcoming)
+            task(i, j, acc)
+
+    @ti.func
     def _visit_particle(
         self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i, sums: ti.template() = False
     ):

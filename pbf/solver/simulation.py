@@ -80,6 +80,38 @@ class Readout:
     """(n,) vector(3, f32) field, m/s."""
 
 
+@dataclass(frozen=True)
+class Neighbourhood:
+    """The neighbour lists of the last neighbour search, for code on the same device (renderers), in the
+    order of :class:`Readout`, valid until the next step. A kernel walks them with the grid's one
+    neighbour loop::
+
+        @ti.kernel
+        def sums(self, grid: ti.template(), x: ti.template(), entries: pbf.solver.NeighbourList, n: ti.i32):
+            for i in range(n):
+                acc = ti.Vector([0.0, 0.0, 0.0])
+                grid.for_each_neighbour(i, entries, self.pair, acc)   # self.pair(i, j, acc): a ti.func
+
+        sums(hood.grid, hood.positions, hood.entries, hood.count)
+
+    Each particle's list holds every other particle within ``support_m`` of it where the lists were
+    built (x* at the start of the last substep; the particles have moved a little since), itself
+    excluded, none dropped."""
+
+    count: int
+    """Particles the lists cover (the first ``count`` of the readout's fields)."""
+    support_m: float
+    """h, the radius the lists were searched within, m."""
+    positions: object
+    """(n,) vector(3, f32) field of positions, m (the readout's)."""
+    grid: object
+    """The neighbour grid: a ``ti.template()`` argument whose ``for_each_neighbour(i, entries, task, acc)``
+    calls ``task(i, j, acc)`` for each neighbour j of i."""
+    entries: object
+    """The lists themselves, an ndarray for a ``pbf.solver.NeighbourList`` kernel argument (it may be
+    replaced by a longer one between steps: pass it at each call)."""
+
+
 def _particle_array(name: str, values) -> np.ndarray:
     """A snapshot's per-particle array as float32 (NumPy's rounding, as snapshot() itself stores them),
     or a TypeError for what holds no real numbers."""
@@ -553,6 +585,16 @@ class Simulation:
     def readout(self) -> Readout:
         """The particles' device fields, for renderers (no copy to the host)."""
         return Readout(self.particle_count, self.scene.particle_radius_m, self.state.x, self.state.v)
+
+    def neighbourhood(self) -> Neighbourhood:
+        """The last neighbour search's lists, for renderers on the device (no copy to the host)."""
+        return Neighbourhood(
+            self.particle_count,
+            self.model.grid.kernel_radius_m,
+            self.state.x,
+            self.grid,
+            self.grid.neighbours,
+        )
 
     def density_ratios(self):
         """ρ/ρ0 of every particle as a device field in the order of :meth:`readout`."""
