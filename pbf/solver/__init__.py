@@ -7,8 +7,8 @@ import only the scene schema (``pbf.scene``), Taichi and NumPy: no plotting, com
 from pbf.solver.backend import ARCHES, ENV_VAR, BackendError, start_backend
 from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
 from pbf.solver.constants import scene_constants
-from pbf.solver.model import Control, Model, Push, allocation
 from pbf.solver.grid import NeighbourList
+from pbf.solver.model import Control, Model, Push, allocation
 from pbf.solver.simulation import STAGES, Neighbourhood, Readout, Simulation, StageHook
 from pbf.solver.state import Snapshot
 
