@@ -19,11 +19,11 @@ the same column stays under 0.11 m/s.
 Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
 (into a second buffer: the iterations alternate between two, ``PredictedPositions``),
 accelerated by the weights of ``pbf.solver.acceleration``.
-The denominator of λ̂_i is computed in a substep's first iteration and kept for the rest: it only
+The denominator of λ̂_i is computed once a substep, at x* before the first iteration, and kept: it only
 scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
 and Δx still follows the current gradients), and the positions move by a few per cent of h within
-a substep, so it changes by little. Later λ passes then sum the density alone, without the
-gradients, so a later iteration costs less than the first (docs/METHOD.md, "Speed on a CPU"). The
+a substep, so it changes by little. The λ passes then sum the density alone, without the gradients
+(docs/METHOD.md, "Speed on a CPU"). The
 price: a deep tank at 1-2 substeps with a fixed iteration count, already at the edge of stability,
 sloshes (every preset holds still as before).
 
@@ -35,9 +35,10 @@ wall, ψ_i supplies the ghost fluid beyond the free surface, C_i = ρ_i/ρ0 + ψ
 layer pushes back at a lattice layer's height. Where the surface lies is read from the colour
 gradient: a particle's own |ĝ_i| is 0.1-0.2 of noise in a disordered interior against 0.7-1.1 in the
 top layer, and ψ read from it made the surface jitter at 0.2 m/s, so it is smoothed over the
-neighbourhood first, which needs every ĝ_j: in the substep's first iteration the λ pass stores ĝ_i,
-a second loop smooths it into ψ_i and only then forms λ̂_i. ψ is a constant of the substep (like the
-denominator): with its own gradient the top layer stopped pushing itself up and the tank boiled.
+neighbourhood first, which needs every ĝ_j: the pass that finds the denominators (:meth:`prepare`)
+stores ĝ_i, and the first iteration's λ pass smooths it into ψ_i before it forms λ̂_i. ψ is a
+constant of the substep (like the denominator): with its own gradient the top layer stopped pushing
+itself up and the tank boiled.
 
 The walls (``solver.wall_mirror``). By default the ghost fluid behind the container's walls is a fixed
 lattice, its density and gradient looked up in tables (``Container.ghost``). A particle at a wall
@@ -64,10 +65,9 @@ waves, which carry most of the density error, still converge.
 import taichi as ti
 
 from pbf.solver.constants import scene_constants
-from pbf.solver.grid import NeighbourList
-from pbf.solver.launch import Launcher
+from pbf.solver.grid import named
 from pbf.solver.model import SCORR_N, DensityParams
-from pbf.solver.scan import TreeSum, read_count
+from pbf.solver.scan import TreeSum
 from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient
 
 SURFACE_RAMP = (0.25, 0.75)
@@ -83,7 +83,7 @@ def position(x: ti.template(), j):
     """x_j of ``x``: a field, or the triple (first, second, from_second) of the iterations' two buffers,
     read from the one ``from_second`` picks. The choice is made per neighbour, inside the walk, so that a
     kernel holds one copy of each walk, not one per buffer: a branch every thread takes the same way,
-    which costs nothing measurable, where the copies doubled the compile of the density iteration."""
+    where the copies doubled the compile of the density iteration."""
     xj = ti.Vector([0.0, 0.0, 0.0])
     if ti.static(isinstance(x, tuple)):
         if x[2]:
@@ -97,7 +97,8 @@ def position(x: ti.template(), j):
 
 @ti.data_oriented
 class DensityConstraint:
-    """The constraint's kernels and scratch: λ̂ per particle, its sum over a substep, the error sum."""
+    """The constraint's passes (``@ti.func``, composed into kernels by ``pbf.solver.substep``) and scratch:
+    λ̂ per particle, its sum over a substep, the error sum."""
 
     def __init__(self, params: DensityParams, boundaries, grid):
         particle_count = params.particle_count
@@ -106,7 +107,8 @@ class DensityConstraint:
         self.boundaries = boundaries
         self.grid = grid
         self.wall_mirror = params.wall_mirror
-        """Whether the container's walls mirror the fluid: a switch that compiles the images' code in."""
+        """Whether the container's walls mirror the fluid: fixed when the solver is built, it compiles the
+        images' code in."""
         self.with_scorr = params.scorr_k > 0.0
         """Whether s_corr is added: a switch that compiles its term in (its strength k is data)."""
         g_below, g_top, psi_top = params.surface_calibration
@@ -124,64 +126,45 @@ class DensityConstraint:
             surface_top=psi_top,
         )
         """The scene's constants as data (``pbf.solver.constants``): h (m), V (m³), ε̂, ω, k, 1/W(Δq),
-        the largest correction (in h), whether the surface ghost is on (a flag, not a switch: its pass
-        runs over no particles when off, so a scene with it and one without share the kernels) and its
-        smoothstep's offset, slope and ψ_top."""
-        scratch = particle_count
-        self.surface = ti.field(ti.f32, shape=scratch)
+        the largest correction (in h), whether the surface ghost is on (a flag, not a switch, so that a
+        scene with it and one without share the kernels) and its smoothstep's offset, slope and ψ_top."""
+        self.surface = ti.field(ti.f32, shape=particle_count)
         """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
-        iteration."""
-        self.colour_gradient = ti.Vector.field(3, ti.f32, shape=scratch)
-        """ĝ_i = Σ_j ĝ_ij + ĝ_wall of the substep's first iteration, which ψ is smoothed from."""
-        self.plain_error = ti.field(ti.f32, shape=scratch)
-        """ρ_i/ρ0 − 1 (walls included, the ghost not) of the substep's first iteration."""
+        iteration (0 with the ghost off)."""
+        self.colour_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
+        """ĝ_i = Σ_j ĝ_ij + ĝ_wall at x* (:meth:`prepare`), which ψ is smoothed from."""
+        self.plain_error = ti.field(ti.f32, shape=particle_count)
+        """ρ_i/ρ0 − 1 (walls included, the ghost not) at x* (:meth:`prepare`): the first iteration's C_i."""
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
-        self.walls_where_written = grid.on_device
-        """Where the walls' ghost at x_i is looked up: on the device path (the GPU backends') where x_i is
-        written (:meth:`wall_ghost_at`: the sort's gather, each Δx pass, :meth:`look_up_walls`), for
-        the λ and Δx passes that read x_i next; on the host path in the λ pass, for its Δx pass. The
-        ghost of the container's edges and corners is trilinear tables, and that of obstacles and bodies
-        long code: in the λ pass it set the registers of the whole neighbour walk on a GPU (72 where the
-        walk alone needs 34, ptxas for sm_90: ``benchmarks/registers.py``), while looked up there the
-        kernels inline one copy of it fewer, which the CPU's compile of a scene with bodies feels (its
-        cold start 1.3-2.5 s longer with the lookups where written)."""
-        self.first_in_visit = self.walls_where_written and not self.wall_mirror
-        """Whether, on the device path, the neighbour visit may also do the substep's first λ pass
-        (:meth:`sums_in_visit_begin`, ``NeighbourGrid.visit_first``): it meets every pair the pass would
-        walk, in the list's order, at the positions the pass reads, so the pass's walk of the lists, one of
-        the substep's neighbour passes, is saved where nothing between the visit and the iterations
-        moves x* (``Simulation.substep``'s ``defer``). Mirrored walls keep the pass (their images' sums)."""
-        self.wall_density = ti.field(ti.f32, shape=particle_count if self.walls_where_written else 1)
-        """The held-still ghost's ρ/ρ0 behind the walls (:meth:`fixed_walls`) at x_i, on the device path
-        (:attr:`walls_where_written`; one unused entry on the host's)."""
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
-        """Its gradient at x_i (1/m), for the λ pass and the Δx pass, which read the same positions."""
+        """The held-still ghost's gradient at x_i (1/m), looked up by the λ pass for the Δx pass that
+        reads the same positions (:meth:`walls`)."""
         self.error = ti.field(ti.f32, shape=particle_count)
         """max(C_i, 0) of the last λ pass that measured it."""
         self.error_sum = TreeSum(particle_count)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
-        self._launch_iterate = Launcher(self.iterate)  # past Taichi's per-call Python (pbf.solver.launch)
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
         impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
         x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (``pbf.solver.acceleration``), so the multiplier
         they have moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for
-        plain Jacobi (w = 1). The plain sum under accelerated (Chebyshev) weights read the `hydrostatic`
-        tank's gradient 35% low; this reads it within 2% once averaged over a frame's substeps
-        (docs/VALIDATION.md)."""
+        plain Jacobi (w = 1). The plain sum under accelerated weights read the `hydrostatic` tank's
+        gradient low; this one reads it once averaged over a frame's substeps (docs/VALIDATION.md)."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
-        """|∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂ of λ̂_i (Eq. 10), from the substep's first iteration: with the
-        ghost tables |Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂; with mirrored walls the images' terms too
-        (:meth:`pair_sums`)."""
+        """|∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂ of λ̂_i (Eq. 10) at x* (:meth:`prepare`): with the ghost
+        tables |Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂; with mirrored walls the images' terms too."""
 
     @ti.func
-    def fixed_walls(self, xi):
-        """The ghost density ρ/ρ0 behind the walls that is held still, and its gradient (1/m): the ghost
-        tables of the container and the obstacles, or with ``solver.wall_mirror`` the obstacles' only."""
-        return self.boundaries.ghost(xi, True)
+    def walls(self, i, xi):
+        """The ghost density ρ/ρ0 behind the walls held still at xi, and its gradient, which is kept for
+        the Δx pass that reads the same positions: the ghost tables of the container and the
+        obstacles, or with ``solver.wall_mirror`` the obstacles' only."""
+        wall, gradient = self.boundaries.ghost(xi, True)
+        self.wall_gradient[i] = gradient
+        return wall
 
     @ti.func
     def image_sums(self, xi, xj, near, plane, h, scale, gradients: ti.template()):
@@ -189,8 +172,7 @@ class DensityConstraint:
         each, one across each edge, one across the corner (with the fluid they fill the space around a
         lattice in a corner). With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the image's
         reflection (∂/∂x_j of W(x_i − x') is −R∇W). ``h`` and its ``scale = kernel_scale(h)`` come from the
-        caller, read once per particle: read here, once per neighbour, h cost the `hydrostatic` tank 14%
-        of its time."""
+        caller, read once per particle."""
         w_sum = 0.0
         g_sum = ti.Vector([0.0, 0.0, 0.0])
         reflected_sum = ti.Vector([0.0, 0.0, 0.0])
@@ -214,177 +196,95 @@ class DensityConstraint:
         return w_sum, g_sum, reflected_sum
 
     @ti.func
+    def particle_constants(self):
+        """h, V and the kernel's scale for a walk of a particle's neighbours, read once per particle: read
+        once per neighbour, h cost the `hydrostatic` tank a seventh of its time."""
+        h, volume = self.constants[None].h, self.constants[None].volume
+        return h, volume, kernel_scale(h)
+
+    @ti.func
+    def density_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s V W_ij into ρ_i/ρ0, and with ``p.gradients`` ĝ_ij = V h ∇W_ij into Σ_j ĝ_ij and
+        |ĝ_ij|² into Σ_j |∂C_i/∂x_j|²."""
+        xj = position(p.x, j)
+        if ti.static(p.gradients):
+            w, grad_w = scaled_kernel_and_gradient(p.xi - xj, p.scale)
+            g = p.volume * p.h * grad_w
+            p.sums += ti.Vector([p.volume * w, g[0], g[1], g[2], g.norm_sqr()])
+        else:
+            p.sums[0] += p.volume * scaled_kernel((p.xi - xj).norm_sqr(), p.scale)
+
+    @ti.func
+    def mirrored_density_pair(self, i, j, p: ti.template()):
+        """:meth:`density_pair` with x_j's mirror images in the walls near x_i: they act like the pair,
+        and ∂C_i/∂x_j sums their reflected gradients."""
+        xj = position(p.x, j)
+        if ti.static(p.gradients):
+            w, grad_w = scaled_kernel_and_gradient(p.xi - xj, p.scale)
+            w_images, g_images, reflected = self.image_sums(p.xi, xj, p.near, p.plane, p.h, p.scale, True)
+            g = p.volume * p.h * (grad_w + g_images)
+            sq = (p.volume * p.h * (grad_w + reflected)).norm_sqr()
+            p.sums += ti.Vector([p.volume * (w + w_images), g[0], g[1], g[2], sq])
+        else:
+            w_images, g_images, reflected = self.image_sums(p.xi, xj, p.near, p.plane, p.h, p.scale, False)
+            p.sums[0] += p.volume * (scaled_kernel((p.xi - xj).norm_sqr(), p.scale) + w_images)
+
+    @ti.func
     def pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
         """The fluid's part of ρ_i/ρ0 for particle i at xi (its own term included, and with
         ``solver.wall_mirror`` the mirror images in the container's walls); with ``gradients`` also
         Σ_j ĝ_ij (the pairs' part of ∂C_i/∂x_i), Σ_j |∂C_i/∂x_j|² and ĝ_self, the gradient of the
-        particle's own images held still (they move with it, so ∂C_i/∂x_i counts them twice)."""
-        ratio, gradient_i, sum_sq = 0.0, ti.Vector([0.0, 0.0, 0.0]), 0.0
-        own_images = ti.Vector([0.0, 0.0, 0.0])
+        particle's own images held still (they move with it, so ∂C_i/∂x_i counts them twice). Returns
+        (ρ_i/ρ0, Σ_j ĝ_ij, Σ_j |∂C_i/∂x_j|², ĝ_self)."""
+        h, volume, scale = self.particle_constants()
+        near, plane = ti.Vector([0, 0, 0]), ti.Vector([0.0, 0.0, 0.0])
+        w_self, g_self = 0.0, ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
             near, plane = self.boundaries.container.mirror_walls(xi)
-            # A loop of its own for the particles at a wall: with the images' code in the common loop,
+            if near.sum() > 0:
+                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, gradients)
+        sums = ti.Vector([volume * (scaled_kernel(0.0, scale) + w_self), 0.0, 0.0, 0.0, 0.0])
+        p = ti.static(
+            named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, gradients=gradients, sums=sums)
+        )
+        if ti.static(self.wall_mirror):
+            # A walk of its own for the particles at a wall: with the images' code in the common walk,
             # every particle's pairs took 2.5 times as long, the few at a wall or not.
             if near.sum() > 0:
-                ratio, gradient_i, sum_sq, own_images = self.mirrored_pair_sums(
-                    x, xi, i, neighbours, near, plane, gradients
-                )
+                self.grid.for_each_neighbour(i, neighbours, self.mirrored_density_pair, p)
             else:
-                ratio, gradient_i, sum_sq = self.plain_pair_sums(x, xi, i, neighbours, gradients)
+                self.grid.for_each_neighbour(i, neighbours, self.density_pair, p)
         else:
-            ratio, gradient_i, sum_sq = self.plain_pair_sums(x, xi, i, neighbours, gradients)
-        return ratio, gradient_i, sum_sq, own_images
-
-    @ti.func
-    def plain_pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
-        """:meth:`pair_sums` without mirror images."""
-        h, volume = self.constants[None].h, self.constants[None].volume
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
-        ratio = volume * scaled_kernel(0.0, scale)
-        gradient_i = ti.Vector([0.0, 0.0, 0.0])
-        sum_sq = 0.0
-        first, last, stride = self.grid.listed(i, neighbours)
-        upcoming = self.grid.upcoming(neighbours, first, last)
-        for k in range(first, last):
-            j = self.grid.neighbour(neighbours, k, upcoming)
-            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            if ti.static(gradients):
-                w, g = self.pair_density_and_gradient(xi, position(x, j), scale, volume, h)
-                ratio += w
-                gradient_i += g
-                sum_sq += g.norm_sqr()
-            else:
-                ratio += volume * scaled_kernel((xi - position(x, j)).norm_sqr(), scale)
-        return ratio, gradient_i, sum_sq
-
-    @ti.func
-    def pair_density_and_gradient(self, xi, xj, scale, volume, h):
-        """V W_ij and ĝ_ij = V h ∇W_ij of one pair (h, V and ``scale = kernel_scale(h)`` from the caller,
-        read once per particle): a term of the first iteration's sums (:meth:`plain_pair_sums`)."""
-        w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
-        return volume * w, volume * h * grad_w
-
-    @ti.func
-    def sums_in_visit_begin(self):
-        """The first iteration's sums of :meth:`plain_pair_sums` as the neighbour visit finds the pairs
-        (:attr:`first_in_visit`): (the sums, the particle's own term in; what their pairs need), each a
-        vector the visit carries without reading it."""
-        h, volume = self.constants[None].h, self.constants[None].volume
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
-        sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])  # ratio, Σ ĝ_ij, Σ |ĝ_ij|²
-        return sums, ti.Vector([scale[0], scale[1], scale[2], volume, h])
-
-    @ti.func
-    def sums_in_visit_add(self, sums, xi, xj, given):
-        """:meth:`sums_in_visit_begin`'s sums with the pair (x_i, x_j) added, in the visit's order, which is
-        the list's: the same sums as the first λ pass's."""
-        scale = ti.Vector([given[0], given[1], given[2]])
-        w, g = self.pair_density_and_gradient(xi, xj, scale, given[3], given[4])
-        return sums + ti.Vector([w, g[0], g[1], g[2], g.norm_sqr()])
-
-    @ti.func
-    def sums_in_visit_end(self, i, sums):
-        """The first iteration's λ pass for particle i from the visit's sums (:attr:`first_in_visit`):
-        C_i, the denominator and the colour gradient kept for the substep, and λ̂_i, or with the surface
-        ghost C_i alone (λ̂_i waits for the ghost: :meth:`surface_pass`). Its weight is w_1 = 1, the
-        first of every table (``pbf.solver.acceleration``); its error is kept whether measured or not."""
-        c = self.first_constraint(
-            i,
-            sums[0],
-            ti.Vector([sums[1], sums[2], sums[3]]),
-            sums[4],
-            ti.Vector([0.0, 0.0, 0.0]),
-            self.wall_density[i],
-            self.wall_gradient[i],
-        )
-        if self.constants[None].surface_density:
-            self.plain_error[i] = c
-        else:
-            self.lagrange_multiplier(i, c, True, 1, 1.0)
-
-    @ti.func
-    def mirrored_pair_sums(
-        self, x: ti.template(), xi, i, neighbours: ti.template(), near, plane, gradients: ti.template()
-    ):
-        """:meth:`pair_sums` with the mirror images in the walls ``near`` xi."""
-        h, volume = self.constants[None].h, self.constants[None].volume
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
-        w_self, g_self, _ = self.image_sums(xi, xi, near, plane, h, scale, gradients)
-        ratio = volume * (scaled_kernel(0.0, scale) + w_self)
-        own_images = volume * h * g_self
-        gradient_i = ti.Vector([0.0, 0.0, 0.0])
-        sum_sq = 0.0
-        first, last, stride = self.grid.listed(i, neighbours)
-        upcoming = self.grid.upcoming(neighbours, first, last)
-        for k in range(first, last):
-            j = self.grid.neighbour(neighbours, k, upcoming)
-            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            xj = position(x, j)
-            if ti.static(gradients):
-                w, grad_w = scaled_kernel_and_gradient(xi - xj, scale)
-                w_images, g_images, reflected = self.image_sums(xi, xj, near, plane, h, scale, True)
-                ratio += volume * (w + w_images)
-                gradient_i += volume * h * (grad_w + g_images)
-                sum_sq += (volume * h * (grad_w + reflected)).norm_sqr()
-            else:
-                w_images, _, _ = self.image_sums(xi, xj, near, plane, h, scale, False)
-                ratio += volume * (scaled_kernel((xi - xj).norm_sqr(), scale) + w_images)
-        return ratio, gradient_i, sum_sq, own_images
+            self.grid.for_each_neighbour(i, neighbours, self.density_pair, p)
+        return sums[0], ti.Vector([sums[1], sums[2], sums[3]]), sums[4], volume * h * g_self
 
     @ti.func
     def density_ratio(self, x: ti.template(), i, neighbours: ti.template()):
         """ρ_i/ρ0 of particle i: the fluid and the ghost fluid behind the walls."""
         xi = x[i]
-        ratio, _, _, _ = self.pair_sums(x, xi, i, neighbours, False)
-        wall, _ = self.fixed_walls(xi)
+        ratio, gradient_i, sum_sq, own_images = self.pair_sums(x, xi, i, neighbours, False)
+        wall, wall_gradient = self.boundaries.ghost(xi, True)
         return ratio + wall
 
     @ti.func
-    def own_position(self, first: ti.template(), second: ti.template(), from_second, i):
-        """x_i from the buffer ``from_second`` picks."""
-        xi = first[i]
-        if from_second:
-            xi = second[i]
-        return xi
-
-    @ti.func
-    def constraint(
-        self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(), first_iteration
-    ):
-        """C_i = ρ_i/ρ0 − 1 (walls included, the surface ghost not) at the positions in the buffer
-        ``from_second`` picks; in the ``first_iteration`` also the denominator of λ̂_i, kept for the
-        substep (module docstring), and the colour gradient the surface ghost is smoothed from."""
-        xi = self.own_position(first, second, from_second, i)
-        wall, wall_gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.walls_where_written):
-            wall, wall_gradient = self.wall_density[i], self.wall_gradient[i]  # at xi (wall_ghost_at)
-        else:
-            wall, wall_gradient = self.fixed_walls(xi)
-            self.wall_gradient[i] = wall_gradient  # for this iteration's Δx pass (jacobi_step)
-        c = 0.0
-        if first_iteration:  # always from the first buffer (x* starts a substep there)
-            ratio, gradient_i, sum_sq, own_images = self.pair_sums(first, xi, i, neighbours, True)
-            c = self.first_constraint(i, ratio, gradient_i, sum_sq, own_images, wall, wall_gradient)
-        else:
-            ratio, _, _, _ = self.pair_sums((first, second, from_second), xi, i, neighbours, False)
-            c = ratio + wall - 1.0
-        return c
-
-    @ti.func
-    def first_constraint(self, i, ratio, gradient_i, sum_sq, own_images, wall, wall_gradient):
-        """C_i of the substep's first iteration from its sums (:meth:`pair_sums` with gradients), with the
-        denominator of λ̂_i and the colour gradient kept for the substep."""
+    def prepare(self, x: ti.template(), i, neighbours: ti.template()):
+        """The substep's constants of particle i's constraint at x* (before the first iteration): C_i, the
+        denominator of λ̂_i (Eq. 10) and the colour gradient the surface ghost is smoothed from, and
+        the walls' gradient for the first Δx pass."""
+        xi = x[i]
+        h, relaxation = self.constants[None].h, self.constants[None].relaxation
+        wall = self.walls(i, xi)
+        ratio, gradient_i, sum_sq, own_images = self.pair_sums(x, xi, i, neighbours, True)
         # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
-        (h, relaxation, surface_density) = (
-            self.constants[None].h,
-            self.constants[None].relaxation,
-            self.constants[None].surface_density,
-        )
-        colour = gradient_i + own_images + h * wall_gradient
+        colour = gradient_i + own_images + h * self.wall_gradient[i]
         self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
-        if surface_density:
-            self.colour_gradient[i] = colour
-        return ratio + wall - 1.0
+        self.colour_gradient[i] = colour
+        self.plain_error[i] = ratio + wall - 1.0
+
+    @ti.func
+    def colour_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s V W_ij ĝ_j into the smoothed colour gradient."""
+        p.smoothed += p.volume * scaled_kernel((p.xi - p.x[j]).norm_sqr(), p.scale) * self.colour_gradient[j]
 
     @ti.func
     def surface_ghost(self, x: ti.template(), i, neighbours: ti.template()):
@@ -394,29 +294,53 @@ class DensityConstraint:
         layer below, a smoothstep between (SURFACE_RAMP; ``pbf.solver.sph.surface_ghost_calibration``).
         ψ fills at most twice the particle's deficit 1 − ρ_i/ρ0: a layer squeezed against a wall at an
         impact, whose colour gradient the wall term turns outward, lacks nothing; a particle above
-        0.999 ρ0 (most of a pool) is left at 0 without the neighbour loop (SURFACE_SKIP)."""
+        0.999 ρ0 (most of a pool) is left at 0 without the neighbour loop (SURFACE_SKIP). 0 with the
+        ghost off (``solver.surface_density``)."""
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
-        if cap > SURFACE_SKIP:
-            (h, volume, surface_offset, surface_slope, surface_top) = (
-                self.constants[None].h,
-                self.constants[None].volume,
+        if self.constants[None].surface_density and cap > SURFACE_SKIP:
+            (surface_offset, surface_slope, surface_top) = (
                 self.constants[None].surface_offset,
                 self.constants[None].surface_slope,
                 self.constants[None].surface_top,
             )
-            scale = kernel_scale(h)  # once per particle, for the neighbour loop
-            xi = x[i]
+            h, volume, scale = self.particle_constants()
             smoothed = volume * scaled_kernel(0.0, scale) * self.colour_gradient[i]
-            first, last, stride = self.grid.listed(i, neighbours)
-            upcoming = self.grid.upcoming(neighbours, first, last)
-            for k in range(first, last):
-                j = self.grid.neighbour(neighbours, k, upcoming)
-                upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                smoothed += volume * scaled_kernel((xi - x[j]).norm_sqr(), scale) * self.colour_gradient[j]
+            p = ti.static(named(x=x, xi=x[i], volume=volume, scale=scale, smoothed=smoothed))
+            self.grid.for_each_neighbour(i, neighbours, self.colour_pair, p)
             u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
             psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
         return psi
+
+    @ti.func
+    def multiplier_pass(
+        self,
+        first: ti.template(),
+        second: ti.template(),
+        from_second,
+        i,
+        neighbours: ti.template(),
+        measure: ti.template(),
+        k,
+        weight,
+    ):
+        """λ̂_i of iteration k (Eq. 10): C_i at the positions in the buffer ``from_second`` picks (the
+        first iteration's from :meth:`prepare`, with the surface ghost found then), combined into the
+        substep's L with this iteration's ``weight``."""
+        c = 0.0
+        if k == 0:  # x* in the first buffer, its sums made by prepare()
+            self.surface[i] = self.surface_ghost(first, i, neighbours)
+            c = self.plain_error[i]
+        else:
+            xi = first[i]
+            if from_second:
+                xi = second[i]
+            wall = self.walls(i, xi)
+            ratio, gradient_i, sum_sq, own_images = self.pair_sums(
+                (first, second, from_second), xi, i, neighbours, False
+            )
+            c = ratio + wall - 1.0
+        self.lagrange_multiplier(i, c + self.surface[i], measure, k == 0, weight)
 
     @ti.func
     def lagrange_multiplier(self, i, c, measure: ti.template(), first_iteration, weight):
@@ -435,56 +359,50 @@ class DensityConstraint:
         self.lam_total[i] = earlier + weight * (total + lam - earlier)
 
     @ti.func
-    def pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template()):
+    def correction_term(self, j, p: ti.template()):
+        """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) of pair (i, j)."""
+        w, grad_w = scaled_kernel_and_gradient(p.xi - position(p.x, j), p.scale)
+        s_corr = 0.0
+        if ti.static(self.with_scorr):
+            s_corr = -p.scorr[0] * (w * p.scorr[1]) ** ti.static(SCORR_N)
+        return (p.lam_i + self.lam[j] + s_corr) * p.volume * p.h * grad_w
+
+    @ti.func
+    def correction_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s term into Δx_i."""
+        p.dx += self.correction_term(j, p)
+
+    @ti.func
+    def mirrored_correction_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s term and its mirror images' with (λ̂_i + λ̂_j) into Δx_i."""
+        w_images, g_images, reflected = self.image_sums(p.xi, position(p.x, j), p.near, p.plane, p.h, p.scale, True)
+        p.dx += self.correction_term(j, p) + (p.lam_i + self.lam[j]) * p.volume * p.h * g_images
+
+    @ti.func
+    def correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template()):
         """Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) for particle i at xi, with ``solver.wall_mirror``
         also the pairs' mirror images with (λ̂_i + λ̂_j) and the particle's own with 2 λ̂_i (they move
         with it); Jacobi, so x is only read."""
-        h, volume = self.constants[None].h, self.constants[None].volume
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        h, volume, scale = self.particle_constants()
         scorr = ti.Vector([self.constants[None].scorr_k, self.constants[None].inverse_w_dq])
+        near, plane = ti.Vector([0, 0, 0]), ti.Vector([0.0, 0.0, 0.0])
         dx = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(self.wall_mirror):
             near, plane = self.boundaries.container.mirror_walls(xi)
-            if near.sum() > 0:  # a loop of its own, as in pair_sums
-                # Unused results named, not "_": Taichi gives one "_" a single type, and a second "_"
-                # of another type (a float, then a vector) broke its compile without optimisation.
+            if near.sum() > 0:
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
-                dx = 2.0 * lam_i * volume * h * g_self
-                first, last, stride = self.grid.listed(i, neighbours)
-                upcoming = self.grid.upcoming(neighbours, first, last)
-                for k in range(first, last):
-                    j = self.grid.neighbour(neighbours, k, upcoming)
-                    upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                    w_images, g_images, reflected = self.image_sums(xi, position(x, j), near, plane, h, scale, True)
-                    images = (lam_i + self.lam[j]) * volume * h * g_images
-                    dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr) + images
+                dx += 2.0 * lam_i * volume * h * g_self
+        p = ti.static(
+            named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, lam_i=lam_i, scorr=scorr, dx=dx)
+        )
+        if ti.static(self.wall_mirror):
+            if near.sum() > 0:  # a walk of its own, as in pair_sums
+                self.grid.for_each_neighbour(i, neighbours, self.mirrored_correction_pair, p)
             else:
-                dx = self.plain_pair_correction(x, xi, i, lam_i, neighbours, h, scale, volume, scorr)
+                self.grid.for_each_neighbour(i, neighbours, self.correction_pair, p)
         else:
-            dx = self.plain_pair_correction(x, xi, i, lam_i, neighbours, h, scale, volume, scorr)
+            self.grid.for_each_neighbour(i, neighbours, self.correction_pair, p)
         return dx
-
-    @ti.func
-    def plain_pair_correction(self, x: ti.template(), xi, i, lam_i, neighbours: ti.template(), h, scale, volume, scorr):
-        """:meth:`pair_correction` without mirror images."""
-        dx = ti.Vector([0.0, 0.0, 0.0])
-        first, last, stride = self.grid.listed(i, neighbours)
-        upcoming = self.grid.upcoming(neighbours, first, last)
-        for k in range(first, last):
-            j = self.grid.neighbour(neighbours, k, upcoming)
-            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            dx += self.pair_term(x, xi, lam_i, j, h, scale, volume, scorr)
-        return dx
-
-    @ti.func
-    def pair_term(self, x: ti.template(), xi, lam_i, j, h, scale, volume, scorr):
-        """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12); h, V and (k, 1/W(Δq)) of s_corr from the caller, which
-        reads them once per particle."""
-        w, grad_w = scaled_kernel_and_gradient(xi - position(x, j), scale)
-        s_corr = 0.0
-        if ti.static(self.with_scorr):
-            s_corr = -scorr[0] * (w * scorr[1]) ** ti.static(SCORR_N)
-        return (lam_i + self.lam[j] + s_corr) * volume * h * grad_w
 
     @ti.func
     def jacobi_step(
@@ -493,13 +411,12 @@ class DensityConstraint:
         """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
         other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
         h, max_correction = self.constants[None].h, self.constants[None].max_correction
-        xi = self.own_position(first, second, from_second, i)
-        lam_i = self.lam[i]
-        dx = self.pair_correction((first, second, from_second), xi, i, lam_i, neighbours)
-        earlier = second[i]
+        xi, earlier = first[i], second[i]
         if from_second:
-            earlier = first[i]
-        dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi (walls_where_written)
+            xi, earlier = second[i], first[i]
+        lam_i = self.lam[i]
+        dx = self.correction((first, second, from_second), xi, i, lam_i, neighbours)
+        dx += lam_i * h * self.wall_gradient[i]  # the ghost's gradient at xi (walls)
         # A bound on one iteration's move (in units of h): particles piled on one point have tiny
         # gradients and huge λ, and their product would throw them out at thousands of m/s.
         dx *= ti.min(1.0, max_correction / (dx.norm() + 1e-12))
@@ -511,150 +428,23 @@ class DensityConstraint:
             first[i] = moved
         else:
             second[i] = moved
-        if ti.static(self.walls_where_written):
-            self.wall_ghost_at(i, moved)  # for the next λ pass
-
-    @ti.func
-    def wall_ghost_at(self, i, xi):
-        """On the device path (:attr:`walls_where_written`) the held-still ghost behind the walls at
-        particle i's new position xi, for the λ and Δx passes that read it next; nothing on the host's."""
-        if ti.static(self.walls_where_written):
-            wall, wall_gradient = self.fixed_walls(xi)
-            self.wall_density[i] = wall
-            self.wall_gradient[i] = wall_gradient
-
-    @ti.kernel
-    def _look_up_walls(self, x: ti.template()):
-        for i in range(read_count(self.grid.loop_bound, 1)):  # the bucket: no one-thread task for the bound
-            if i < self.grid.active[None]:
-                self.wall_ghost_at(i, x[i])
-
-    def look_up_walls(self, x) -> None:
-        """:meth:`wall_ghost_at` every live particle's position in ``x`` on the device path: after a pass
-        that wrote x* anew outside the sort (the divergence pre-correction's prediction)."""
-        if self.walls_where_written:
-            self._look_up_walls(x)
-
-    @ti.func
-    def multiplier_pass(
-        self,
-        first: ti.template(),
-        second: ti.template(),
-        from_second,
-        i,
-        neighbours: ti.template(),
-        measure: ti.template(),
-        first_iteration,
-        weight,
-    ):
-        """C_i and λ̂_i of particle i; with the surface ghost, in the first iteration only C_i (λ̂ waits
-        for the ghost, which needs every ĝ_j: :meth:`surface_pass`)."""
-        c = self.constraint(first, second, from_second, i, neighbours, first_iteration)
-        if self.constants[None].surface_density:
-            if first_iteration:
-                self.plain_error[i] = c
-            else:
-                self.lagrange_multiplier(i, c + self.surface[i], measure, first_iteration, weight)
-        else:
-            self.lagrange_multiplier(i, c, measure, first_iteration, weight)
-
-    @ti.func
-    def surface_pass(
-        self, first: ti.template(), i, neighbours: ti.template(), measure: ti.template(), first_iteration, weight
-    ):
-        """ψ_i and λ̂_i in a substep's first iteration, which always starts from the first buffer."""
-        self.surface[i] = self.surface_ghost(first, i, neighbours)
-        self.lagrange_multiplier(i, self.plain_error[i] + self.surface[i], measure, first_iteration, weight)
-
-    @ti.kernel
-    def iterate(
-        self,
-        first: ti.template(),
-        second: ti.template(),
-        from_second: ti.i32,
-        neighbours: NeighbourList,
-        measure: ti.template(),
-        first_iteration: ti.i32,
-        weight: ti.f32,
-    ) -> tuple[ti.f32, ti.f32, ti.i32]:
-        """One Jacobi iteration as one kernel: all λ from x, then all corrected positions, weighted
-        against the other buffer (which holds the positions of the iteration before) and collided with
-        the boundaries (Algorithm 1, line 15), into that buffer; x is ``second`` when ``from_second``, else
-        ``first``. With ``measure`` returns Σ max(C_i, 0) as a float32 pair (high, low) and the particle
-        count, from which the host forms the mean (:meth:`project`); else zeros. On a GPU backend
-        ``pbf.solver.iterations`` runs the same passes in a kernel of its own.
-
-        The buffers come in a fixed order and the direction as a flag, branched on around the neighbour
-        sums only (the same way for every particle, so predicted), so that the kernel compiles once
-        (``PredictedPositions``), and the wall and collision code, which obstacles make long, once in
-        it. One launch, and the error comes back as its return value: a launch costs 30-100 µs on a
-        2-core CPU, and reading a field from Python after a launch 40 µs more."""
-        for i in range(self.grid.active[None]):
-            self.multiplier_pass(first, second, from_second, i, neighbours, measure, first_iteration, weight)
-        for i in range(self.surface_count(first_iteration)):  # an empty loop after the first, or without it
-            self.surface_pass(first, i, neighbours, measure, first_iteration, weight)
-        for i in range(self.grid.active[None]):
-            self.jacobi_step(first, second, from_second, i, neighbours, weight)
-        high, low = 0.0, 0.0
-        if ti.static(measure):
-            self.error_sum.sum(self.error, 0, self.grid.active)
-            high, low = self.error_sum.high[0], self.error_sum.low[0]
-        return high, low, self.grid.active[None]
-
-    @ti.func
-    def surface_count(self, first_iteration):
-        """The particles the surface pass loops over: all in a substep's first iteration with the surface
-        ghost on, else none."""
-        return self.grid.active[None] * first_iteration * self.constants[None].surface_density
 
     @ti.func
     def between(self, first: ti.template(), second: ti.template(), newer_in_second, fraction, i):
-        """x*_i = newer + fraction (older − newer), collided, into the first buffer, and L_i alike
-        (:meth:`step_back`)."""
+        """x*_i = newer + fraction (older − newer), collided, into the first buffer, and L_i alike: the
+        step back (``pbf.solver.iterations``). With an error target the count of iterations jumps by a
+        whole one as the error crosses the target, and in a pool at rest, whose error hovers at the
+        target, the count flips from substep to substep, a relay that kept a small tank moving
+        (docs/VALIDATION.md). Stepping back by the fraction of the last step the target did not need,
+        (target − e_k) / (e_{k−1} − e_k), makes the result continuous in the error. The collision again,
+        as a point between two outside an obstacle may lie in it."""
         newer, older = first[i], second[i]
         if newer_in_second:
             newer, older = second[i], first[i]
         first[i] = self.boundaries.project_recorded(newer + fraction * (older - newer), i, "between", fraction)
         self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
 
-    @ti.kernel
-    def _between(self, first: ti.template(), second: ti.template(), newer_in_second: ti.i32, fraction: ti.f32):
-        for i in range(self.grid.active[None]):
-            self.between(first, second, newer_in_second, fraction, i)
-
-    def step_back(self, predicted, fraction: float) -> None:
-        """Take back ``fraction`` of the last iteration: x* = x^{k+1} + fraction (x^k − x^{k+1}), and L
-        alike, into the first buffer (the iteration before is still in the other; the collision again,
-        as a point between two outside an obstacle may lie in it).
-
-        Why (``Simulation.substep``): with an error target the count of iterations jumps by a whole one
-        as the error crosses the target, and in a pool at rest, whose error hovers at the target, the
-        count flips from substep to substep, a relay that kept a small tank moving at 0.6% of sqrt(g H)
-        (median over six tanks; docs/VALIDATION.md). Stepping back by the fraction of the last step the
-        target did not need, (target − e_k) / (e_{k−1} − e_k), makes the result continuous in the error:
-        0.2%. One launch, only in substeps the target stopped after more than the least iterations."""
-        self._between(predicted.first, predicted.second, predicted.in_second, fraction)
-        predicted.in_second = False
-
     def pressure_scale(self, dt: float) -> float:
         """p_i = −ρ0 h² L_i / Δt² (Pa per unit ρ0, L_i = lam_total): matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
         with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
         return -(self.h**2) / dt**2
-
-    def project(self, predicted, neighbours, measure: bool = False, first: bool = False, weight: float = 1.0):
-        """One Jacobi iteration of the density constraint (Algorithm 1, lines 9-19) on the x* of
-        ``predicted`` (a ``PredictedPositions``): reads the buffer that holds x*, writes the corrected
-        positions into the other (which holds the positions of the iteration before) as
-        x_prev + weight (x + Δx − x_prev), the accelerated step (``pbf.solver.acceleration``), plain
-        Jacobi at weight 1, and swaps them.
-
-        ``first`` starts the substep's sum of multipliers afresh. With ``measure``, returns the mean
-        density error max(ρ/ρ0 − 1, 0) the iteration started from.
-        """
-        assert not (first and predicted.in_second), "a substep's x* starts in the first buffer"
-        high, low, count = self._launch_iterate(
-            predicted.first, predicted.second, predicted.in_second, neighbours, bool(measure), first, weight
-        )
-        predicted.swap()
-        # The pair's sum in float64 on the host: the same mean as a float64 sum of the errors to ~1e-13.
-        return (float(high) + float(low)) / max(count, 1) if measure else None

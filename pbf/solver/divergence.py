@@ -32,21 +32,22 @@ the kernel gives pairs beyond h nothing).
 
 import taichi as ti
 
-from pbf.solver.grid import NeighbourList
+from pbf.solver.grid import named
 from pbf.solver.model import DensityParams
+from pbf.solver.scan import read_count
 from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient, scaled_kernel_gradient
 
 
 @ti.data_oriented
 class DivergenceCorrection:
-    """The pass's kernels and scratch. Λ persists between substeps as ``State.multiplier`` = Λ/Δt² (1/s²),
-    a pressure, which needs no record of the Δt it was found with."""
+    """The pass's loops (``@ti.func``, run in the substep's first kernel) and scratch. Λ persists between
+    substeps as ``State.multiplier`` = Λ/Δt² (1/s²), a pressure, which needs no record of the Δt it was
+    found with."""
 
     def __init__(self, params: DensityParams, state, boundaries, grid, density):
         self.state = state
         self.boundaries = boundaries
         self.grid = grid
-        self.density = density
         self.constants = density.constants
         """h, V, ω and ε̂ as data: the density constraint's (``DensityConstraint.constants``)."""
         self.denominator = ti.field(ti.f32, shape=params.particle_count)
@@ -56,62 +57,65 @@ class DivergenceCorrection:
         self.increment = ti.field(ti.f32, shape=params.particle_count)
         """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
         self.wall_gradient = density.wall_gradient
-        """ĝ_wall at x_i, looked up by :meth:`start` and read by every iteration (x stays put while v is
+        """ĝ_wall at x_i, looked up by the warm start and read by every iteration (x stays put while v is
         corrected): the density constraint's field, free outside its iterations, which come after this
-        pass. The ghost of obstacles and bodies is long code: looked up in both loops of the iteration's
-        kernel as well, it took 1.8 s of ``wave_tank_float``'s cold start to compile."""
+        pass."""
 
     @ti.func
-    def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), h_over_dt, start: ti.template()):
+    def change_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s (δλ̂_i + δλ̂_j) ĝ_ij into Δv_i; at the ``start`` also its density and gradient."""
+        if ti.static(p.start):
+            w, grad_w = scaled_kernel_and_gradient(p.xi - p.x[j], p.scale)
+            g = p.volume * p.h * grad_w
+            p.sums += ti.Vector([p.volume * w, g[0], g[1], g[2], g.norm_sqr()])
+            p.dv += (p.increment_i + self.increment[j]) * g
+        else:
+            p.dv += (
+                (p.increment_i + self.increment[j]) * p.volume * p.h * scaled_kernel_gradient(p.xi - p.x[j], p.scale)
+            )
+
+    @ti.func
+    def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), dt, start: ti.template()):
         """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
         min(C_i, 0) and the denominator of δλ̂_i."""
-        xi = x[i]
-        h, volume, relaxation = self.constants[None].h, self.constants[None].volume, self.constants[None].relaxation
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
-        increment_i = self.increment[i]
+        h, volume = self.constants[None].h, self.constants[None].volume
+        scale = kernel_scale(h)  # once per particle, not per neighbour
+        sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])
         dv = ti.Vector([0.0, 0.0, 0.0])
-        ratio = volume * scaled_kernel(0.0, scale)
-        gradient_i = ti.Vector([0.0, 0.0, 0.0])
-        sum_sq = 0.0
-        first, last, stride = self.grid.listed(i, neighbours)
-        upcoming = self.grid.upcoming(neighbours, first, last)
-        for k in range(first, last):
-            j = self.grid.neighbour(neighbours, k, upcoming)
-            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            if ti.static(start):
-                w, grad_w = scaled_kernel_and_gradient(xi - x[j], scale)
-                g = volume * h * grad_w
-                ratio += volume * w
-                gradient_i += g
-                sum_sq += g.norm_sqr()
-                dv += (increment_i + self.increment[j]) * g
-            else:
-                dv += (increment_i + self.increment[j]) * volume * h * scaled_kernel_gradient(xi - x[j], scale)
+        increment_i = self.increment[i]
+        p = ti.static(
+            named(x=x, xi=x[i], h=h, volume=volume, scale=scale, start=start, increment_i=increment_i, sums=sums, dv=dv)
+        )
+        self.grid.for_each_neighbour(i, neighbours, self.change_pair, p)
         wall_gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(start):
-            wall, at_start = self.boundaries.ghost(xi, False)
+            wall, at_start = self.boundaries.ghost(x[i], False)
             wall_gradient = at_start
             self.wall_gradient[i] = wall_gradient
-            self.deficit[i] = ti.min(ratio + wall - 1.0, 0.0)
-            self.denominator[i] = (gradient_i + h * wall_gradient).norm_sqr() + sum_sq + relaxation
+            gradient_i = ti.Vector([sums[1], sums[2], sums[3]])
+            self.deficit[i] = ti.min(sums[0] + wall - 1.0, 0.0)
+            self.denominator[i] = (
+                (gradient_i + h * wall_gradient).norm_sqr() + sums[4] + self.constants[None].relaxation
+            )
         else:
             wall_gradient = self.wall_gradient[i]
         dv += increment_i * h * wall_gradient
-        return h_over_dt * dv
+        return h / dt * dv
+
+    @ti.func
+    def rate_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s ĝ_ij · (v_i − v_j) into the rate of compression."""
+        p.rate += p.volume * p.h * scaled_kernel_gradient(p.xi - p.x[j], p.scale).dot(p.vi - self.state.v[j])
 
     @ti.func
     def multiplier_increment(self, x: ti.template(), i, neighbours: ti.template(), dt):
         """δλ̂_i of an iteration from the current v (Λ_i kept as a pressure in ``State.multiplier``)."""
         h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
-        scale = kernel_scale(h)  # once per particle, for the neighbour loop
+        scale = kernel_scale(h)  # once per particle, not per neighbour
         xi, vi = x[i], self.state.v[i]
         rate = 0.0
-        first, last, stride = self.grid.listed(i, neighbours)
-        upcoming = self.grid.upcoming(neighbours, first, last)
-        for k in range(first, last):
-            j = self.grid.neighbour(neighbours, k, upcoming)
-            upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            rate += volume * h * scaled_kernel_gradient(xi - x[j], scale).dot(vi - self.state.v[j])
+        p = ti.static(named(x=x, xi=xi, vi=vi, h=h, volume=volume, scale=scale, rate=rate))
+        self.grid.for_each_neighbour(i, neighbours, self.rate_pair, p)
         rate += h * self.wall_gradient[i].dot(vi - self.boundaries.velocity(xi))
         carried = self.state.multiplier[i] * dt * dt
         c = dt / h * rate + self.deficit[i]
@@ -119,43 +123,23 @@ class DivergenceCorrection:
         self.increment[i] = total - carried
         self.state.multiplier[i] = total / (dt * dt)
 
-    @ti.kernel
-    def start(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
-        """v += Δv of the warm start (the last substep's Λ), with min(C_i, 0) and the denominators at x."""
-        for i in range(self.state.active[None]):
-            self.increment[i] = self.state.multiplier[i] * dt * dt
-        for i in range(self.state.active[None]):
-            self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, True)
-
-    @ti.kernel
-    def iterate(self, x: ti.template(), neighbours: NeighbourList, dt: ti.f32):
-        """One Jacobi iteration: all δλ̂ from the current v, then all Δv."""
-        for i in range(self.state.active[None]):
-            self.multiplier_increment(x, i, neighbours, dt)
-        for i in range(self.state.active[None]):
-            self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, False)
-
-    def run(self, neighbours, dt: float, iterations: int) -> None:
-        """Warm start with the last substep's Λ, then ``iterations`` Jacobi iterations on state.v at state.x:
-        a call each, the host's path (the device's runs :meth:`run_loops` in the call of lines 1-7)."""
-        self.start(self.state.x, neighbours, dt)
-        for _ in range(iterations):
-            self.iterate(self.state.x, neighbours, dt)
-
     @ti.func
-    def run_loops(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
-        """:meth:`run`'s loops for the top level of a kernel (``pbf.solver.substep``), ``iterations`` of them
-        (a count known when it compiles), each over the particles' bucket (no one-thread task for a bound)."""
-        for i in range(self.state.live_bound()):
+    def correct(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
+        """The pass's loops for the top level of a kernel: v += Δv of the warm start (the last substep's
+        Λ, with min(C_i, 0) and the denominators at x), then ``iterations`` Jacobi iterations, each all
+        δλ̂ from the current v, then all Δv. Every loop runs over the particles' bucket (no one-thread
+        task for a bound)."""
+        bound = ti.static(self.state.loop_bound)
+        for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
                 self.increment[i] = self.state.multiplier[i] * dt * dt
-        for i in range(self.state.live_bound()):
+        for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
-                self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, True)
+                self.state.v[i] += self.velocity_change(x, i, neighbours, dt, True)
         for _ in ti.static(range(iterations)):
-            for i in range(self.state.live_bound()):
+            for i in range(read_count(bound, 1)):
                 if i < self.state.active[None]:
                     self.multiplier_increment(x, i, neighbours, dt)
-            for i in range(self.state.live_bound()):
+            for i in range(read_count(bound, 1)):
                 if i < self.state.active[None]:
-                    self.state.v[i] += self.velocity_change(x, i, neighbours, self.constants[None].h / dt, False)
+                    self.state.v[i] += self.velocity_change(x, i, neighbours, dt, False)

@@ -15,20 +15,21 @@ Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
    as needed) and filled by a second visit. No capacity can overflow: 8,000 particles in one cell
    still give exact neighbours, only a little slower.
 
-On the CPU the host reads after the first visit whether a second is needed. On a GPU backend the
-substep's build leaves that to the device (both visits in one launch, the second over no particles
-unless needed) and the host learns once a frame how full the compact list got
-(``build_neighbours``, ``settle_frame``). No step uses an atomic into one address: the overflow is a
-flag that only overflowing particles set, the counts per cell are atomics into many addresses.
+Both visits run in one launch on every backend, the second over no particles unless the first
+overflowed: the device decides, the host reads nothing. The host learns once a frame how full the
+compact list got (``settle_frame``) and grows it ahead of need. No step uses an atomic into one
+address: the overflow is a flag that only overflowing particles set, the counts per cell are
+atomics into many addresses.
 """
 
+import collections
+import functools
 import math
 import warnings
 
 import numpy as np
 import taichi as ti
 
-from pbf.solver.backend import keeps_decisions_on_device, on_gpu
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan, read_count
@@ -37,16 +38,30 @@ SLOTS = 64
 """Neighbours stored per particle on the one-visit path; about twice the typical 30-40 at h = 2.2 s."""
 MOST_ENTRIES, TRUNCATED = range(2)
 """Entries of ``NeighbourGrid.status``."""
-CHECK_ABOVE = 0.75
-"""Unchecked builds read the overflow flag anyway while the compact list is this full (``build_neighbours``)."""
+GROW_ABOVE = 0.75
+"""The compact list is grown by half once a frame's longest need passed this share of it (``settle_frame``)."""
 NeighbourList = ti.types.ndarray(dtype=ti.i32, ndim=1)
 """The kernel argument type of :attr:`NeighbourGrid.neighbours` (an ndarray, so that growing it after
 an overflow recompiles nothing)."""
 
 
+def named(**values):
+    """Taichi values by name, for a walk's task (:meth:`NeighbourGrid.for_each_neighbour`) or a kernel's
+    arguments handed to its stages. Made inside ``ti.static`` in Taichi code, ``p = ti.static(named(xi=xi,
+    sums=sums))``, so that the variables given stay themselves (not copies): a task's ``p.sums += …``
+    adds to the caller's ``sums``, and a kernel argument is read where it is used (a copy at a
+    kernel's top level would be a one-thread task)."""
+    return _named_type(tuple(values))(**values)
+
+
+@functools.cache
+def _named_type(names: tuple[str, ...]):
+    return collections.namedtuple("Named", names)
+
+
 @ti.data_oriented
 class NeighbourGrid:
-    def __init__(self, params: GridParams, active):
+    def __init__(self, params: GridParams, active, slot_major: bool, loop_bound):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         allocated = params.allocated_particles or particle_count
         self.particle_count = particle_count
@@ -82,24 +97,15 @@ class NeighbourGrid:
         """Entries of particle i's neighbours in the list (``neighbour_count`` unless cut at the list's end)."""
         self.overflow = ti.field(ti.i32, shape=())
         """1 when the last visit found a particle with more than SLOTS neighbours."""
-        self.deferred = ti.field(ti.i32, shape=())
-        """1 while an overflow's second visit waits for the first λ pass (:meth:`visit_on_device` with
-        ``defer``, :meth:`finish_compact`)."""
         self.status = ti.field(ti.i32, shape=2)
-        """What unchecked builds saw since the host last asked (:meth:`take_status`)."""
-        self.on_device = keeps_decisions_on_device()
-        self.loop_bound = allocated if self.on_device else active
-        """What loops over the live particles run to (as ``State.loop_bound``)."""
-        self.slot_major = on_gpu()
+        """What the builds saw since the host last asked (:meth:`take_status`)."""
+        self.loop_bound = loop_bound
+        """What loops over the live particles run to (``State.loop_bound``)."""
+        self.slot_major = slot_major
         """How the one-visit list lies (fixed for a backend at compile time): on a GPU slot-major, the k-th
         neighbours of all particles side by side (entry i + k·n), so that the threads of a warp, which
         walk their lists in step, read one contiguous run per k; on the CPU particle-major (entry
         i·SLOTS + k), so that one thread reads its list from one stretch of memory."""
-        self.checking = False
-        """Whether unchecked builds read the overflow flag anyway (the last frame's compact list was over
-        CHECK_ABOVE full)."""
-        self.most_entries_in_frame = 0
-        """The longest compact list of the checked builds since the last :meth:`settle_frame`."""
         self.neighbour_scan = ExclusiveScan(particle_count)
         self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
         """Flat neighbour list: the neighbours of sorted particle i, itself excluded, are the
@@ -125,20 +131,10 @@ class NeighbourGrid:
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
         """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch), particles of one
-        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The solver uses
-        :meth:`sort_and_permute`; this is the sort alone, for a caller with arrays of its own (the grid's
-        tests check it against brute force)."""
+        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The substep sorts
+        inside its first kernel (``pbf.solver.substep``); this is the sort alone, for a caller with
+        arrays of its own (the grid's tests check it against brute force)."""
         self.sort_loops(x, key, False)
-
-    @ti.kernel
-    def sort_and_permute(self, x: ti.template(), key: ti.template(), mover: ti.template()):
-        """:meth:`sort`, with ``mover`` (the ``State``) gathering every per-particle array it carries, ``x``
-        included, into sorted order and taking them back, in the same launch. A launch costs 50-100 µs
-        on a 2-core CPU, about what the reorder's own work does at 8,000 particles."""
-        self.sort_loops(x, key, mover)
-        for slot in range(read_count(self.loop_bound, 1)):
-            if slot < self.active[None]:
-                mover.take_gathered(slot)
 
     @ti.func
     def sort_loops(self, x: ti.template(), key: ti.template(), mover: ti.template()):
@@ -156,12 +152,11 @@ class NeighbourGrid:
     def clear_for_visit(self, i):
         """Thread i of a loop over the particles' bucket before a visit (the sort's counting loop) clears
         what the visit gathers: the lists' overflow flag (thread 0) and the sum of i's block of the
-        overflow's prefix sum (:meth:`visit_on_device`). Stores outside the loops would be a one-thread
+        overflow's prefix sum (:meth:`find_neighbours`). Stores outside the loops would be a one-thread
         task; the sums stay until here because the second visit reads them in a loop that cannot also
         clear them."""
         if i == 0:
             self.overflow[None] = 0
-            self.deferred[None] = 0
         self.neighbour_scan.clear_block(i)
 
     @ti.func
@@ -228,15 +223,9 @@ class NeighbourGrid:
 
     @ti.func
     def listed(self, i, neighbours: ti.template()):
-        """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride), walked as
-
-            upcoming = grid.upcoming(neighbours, first, last)
-            for k in range(first, last):
-                j = grid.neighbour(neighbours, k, upcoming)
-                upcoming = grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-
-        Slot-major (:attr:`slot_major`, a stride of the list's length over SLOTS, at least the particle
-        count) after the one-visit build; entries in a row after an overflow's compact build and on the CPU."""
+        """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride). Slot-major
+        (:attr:`slot_major`, a stride of the list's length over SLOTS) after a one-visit build; entries
+        in a row after an overflow's compact build and on the CPU. Walked by :meth:`for_each_neighbour`."""
         first = self.neighbour_start[i]
         stride = 1
         if ti.static(self.slot_major):
@@ -256,8 +245,8 @@ class NeighbourGrid:
     @ti.func
     def neighbour(self, neighbours: ti.template(), k, upcoming):
         """The k-th entry of a range of :meth:`listed`: on the CPU ``neighbours[k]`` itself, the loop the
-        compiler knows best (an index worked out from a stride made the CPU's iterations 5% slower at
-        64,000 particles); on a GPU ``upcoming``, read at the step before (:meth:`read_ahead`)."""
+        compiler knows best (an index worked out from a stride made the CPU's walk slower); on a GPU
+        ``upcoming``, read at the step before (:meth:`read_ahead`)."""
         j = upcoming
         if ti.static(not self.slot_major):
             j = neighbours[k]
@@ -267,9 +256,9 @@ class NeighbourGrid:
     def read_ahead(self, neighbours: ti.template(), first, last, stride, k, upcoming):
         """On a GPU the entry after the k-th, asked for before the thread gathers and uses x_j of the k-th,
         so that its load is in flight meanwhile: a walk is two dependent loads a neighbour (the index,
-        then what it points at), and the iterations' passes wait on that latency more than on
-        bandwidth at a million particles (docs/BENCHMARKS.md, "On a GPU"). The order of every sum stays
-        the same. On the CPU, whose cores read ahead themselves, ``upcoming`` as it is (unused)."""
+        then what it points at), and the passes wait on that latency more than on bandwidth at a
+        million particles. The order of every sum stays the same. On the CPU, whose cores read ahead
+        themselves, ``upcoming`` as it is (unused)."""
         following = upcoming
         if ti.static(self.slot_major):
             if k + 1 < last:
@@ -280,8 +269,9 @@ class NeighbourGrid:
     def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
         """``task(i, j, acc)`` for every neighbour j of sorted particle i in the lists ``entries`` (the
         ndarray :attr:`neighbours`, passed to the kernel as a ``NeighbourList``), in the list's order;
-        ``acc`` is the caller's accumulator, passed by reference. The one walk of the lists that every
-        pass of the solver and the renderers' neighbour sums use."""
+        ``acc`` is the caller's accumulator (a Taichi vector, or :func:`named` values of the particle and
+        its sums), passed by reference. The one walk of the lists: every pass of the solver
+        and the renderers' neighbour sums go through it."""
         first, last, stride = self.listed(i, entries)
         upcoming = self.upcoming(entries, first, last)
         for k in range(first, last):
@@ -290,17 +280,12 @@ class NeighbourGrid:
             task(i, j, acc)
 
     @ti.func
-    def _visit_particle(
-        self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i, sums: ti.template() = False
-    ):
-        """Find the neighbours of particle i: into its SLOTS entries
-        (first visit: slot-major on a GPU, a row of its own on the CPU; :attr:`slot_major`) or, when
-        ``compact``, into the prefix-summed row neighbour_start[i] (second visit, only after an
-        overflow), never past the list's end. A particle with more than SLOTS sets ``overflow``: a
-        plain store of the same 1 by every such thread, no atomic into one address. ``sums`` (the first
-        visit only): an object whose ``sums_in_visit_begin``, ``sums_in_visit_add`` and
-        ``sums_in_visit_end`` are handed every neighbour found, in the list's order, uncut by its room
-        (``DensityConstraint.first_in_visit``); False for none."""
+    def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):
+        """Find the neighbours of particle i: into its SLOTS entries (first visit: slot-major on a GPU, a
+        row of its own on the CPU; :attr:`slot_major`) or, when ``compact``, into the prefix-summed row
+        neighbour_start[i] (second visit, only after an overflow), never past the list's end. A particle
+        with more than SLOTS sets ``overflow``: a plain store of the same 1 by every such thread, no
+        atomic into one address."""
         capacity = neighbours.shape[0]
         kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
         h2 = kernel_radius * kernel_radius
@@ -314,12 +299,8 @@ class NeighbourGrid:
             stride = 1
             room = ti.min(self.neighbour_start[i] + self.neighbour_count[i], capacity) - start
         found = 0
-        with_sums = ti.static(not compact and not isinstance(sums, bool))
-        summed, given = ti.Vector([0.0] * 5), ti.Vector([0.0] * 5)
-        if ti.static(with_sums):
-            summed, given = sums.sums_in_visit_begin()
-        # Runtime loops over the columns, not unrolled: the 25 copies of the walk an unrolled loop made
-        # took 2.3 s to compile in every kernel that visits, and ran 7% slower on the CPU.
+        # Runtime loops over the columns, not unrolled: the unrolled copies of the walk took seconds to
+        # compile in every kernel that visits, and ran slower on the CPU.
         for dx in range(-self.reach, self.reach + 1):
             for dy in range(-self.reach, self.reach + 1):
                 first, last = self.column_range(c, resolution, dx, dy)
@@ -333,21 +314,13 @@ class NeighbourGrid:
                             if found < room:
                                 neighbours[start + found * stride] = j
                             found += 1
-                            if ti.static(with_sums):
-                                summed = sums.sums_in_visit_add(summed, xi, xj, given)
                     else:
                         # Branch-free on the CPU: write every candidate to the next free entry and
                         # advance only past neighbours. A branch on the distance test mispredicts on
                         # most candidates.
                         if found < room:
                             neighbours[start + found] = j
-                        near = j != i and (xj - xi).norm_sqr() < h2
-                        found += ti.select(near, 1, 0)
-                        if ti.static(with_sums):  # the device path on the CPU backend (its tests)
-                            if near:
-                                summed = sums.sums_in_visit_add(summed, xi, xj, given)
-        if ti.static(with_sums):
-            sums.sums_in_visit_end(i, summed)
+                        found += ti.select(j != i and (xj - xi).norm_sqr() < h2, 1, 0)
         if ti.static(not compact):  # the second visit finds the same count, which others may be reading
             self.neighbour_count[i] = found
             self.neighbour_start[i] = start
@@ -355,131 +328,55 @@ class NeighbourGrid:
                 self.overflow[None] = 1
         self.neighbour_listed[i] = ti.min(found, room)
 
-    @ti.kernel
-    def _visit(self, x: ti.template(), neighbours: NeighbourList, compact: ti.template()) -> ti.i32:
-        """:meth:`_visit_particle` over the live particles; returns whether some particle has more than SLOTS
-        neighbours (after the first visit; the flag stays set through the second, :meth:`listed`)."""
-        if ti.static(not compact):
-            self.overflow[None] = 0
-        for i in range(self.active[None]):
-            self._visit_particle(x, neighbours, compact, i)
-        return self.overflow[None]
-
-    @ti.kernel
-    def _visit_on_device(self, x: ti.template(), neighbours: NeighbourList):
-        """:meth:`visit_on_device` as a launch of its own (which clears what the visit gathers itself: it may
-        come without a sort before it)."""
-        for i in range(read_count(self.loop_bound, 1)):
-            self.clear_for_visit(i)
-        self.visit_on_device(x, neighbours, False, x)
-
     @ti.func
-    def visit_first(
-        self,
-        x: ti.template(),
-        neighbours: ti.template(),
-        mover: ti.template(),
-        count_blocks: ti.template() = False,
-        defer: ti.template() = False,
-        sums: ti.template() = False,
+    def find_neighbours(
+        self, gathered: ti.template(), x: ti.template(), neighbours: ti.template(), mover: ti.template()
     ):
-        """The first visit over the live particles, for the top level of a kernel (the flag of an overflow
-        was cleared by the sort). After a sort whose ``mover`` gathered into scratch
-        (:meth:`order_loops`), ``x`` is the sorted positions' scratch and each thread first takes its
-        particle's arrays back (``mover.take_gathered``): no loop of its own for the copy; else ``mover``
-        is False. ``count_blocks``: each particle's count also goes into its block of the overflow's
-        prefix sum (``ExclusiveScan.add_to_block``, that sum's first pass up), for :meth:`visit_on_device`;
-        ``defer``: an overflow also sets :attr:`deferred`; ``sums``: as in :meth:`_visit_particle`."""
+        """Step 4 over the live particles, both visits, for the top level of a kernel whose loop before
+        cleared what they gather (:meth:`clear_for_visit`). After a sort whose ``mover`` gathered into
+        scratch (:meth:`order_loops`), ``gathered`` is the sorted positions' scratch, and each thread of the
+        first visit first takes its particle's arrays back (``mover.take_gathered``): no loop of its own
+        for the copy; without a mover (False) ``gathered`` is ``x``. The second visit runs over no
+        particles unless the first overflowed; its starts come from a prefix sum of the counts whose
+        first pass up the first visit did (``ExclusiveScan.add_to_block``), whose levels above are summed
+        only after an overflow, and whose pass down each thread does for itself
+        (``ExclusiveScan.start_of``): no pass runs every substep for a rare event. A compact list longer
+        than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 if ti.static(not isinstance(mover, bool)):
                     mover.take_gathered(i)
-                self._visit_particle(x, neighbours, False, i, sums)
-                if ti.static(count_blocks):
-                    self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
-                if ti.static(defer):
-                    if self.neighbour_count[i] > SLOTS:
-                        self.deferred[None] = 1
-
-    @ti.func
-    def visit_on_device(
-        self,
-        x: ti.template(),
-        neighbours: ti.template(),
-        mover: ti.template(),
-        gathered: ti.template(),
-        defer: ti.template() = False,
-        sums: ti.template() = False,
-    ):
-        """Both visits in one launch, the second over no particles unless the first overflowed: the device
-        decides, the host reads nothing. A compact list longer than the array is cut at its end and
-        ``status`` says so, for :meth:`settle_frame`. The overflow flag was cleared by the sort; the
-        loops run over the bucket (no one-thread task, as in :meth:`sort_loops`). For the top level of a
-        kernel. ``mover`` and ``gathered`` as in :meth:`visit_first` (the sorted positions' scratch, read
-        by the first visit; the second reads ``x``, taken back by then).
-
-        With ``defer`` the second visit is left to the substep's first pass that walks the lists
-        (:meth:`finish_compact`, each thread for its own particle, which is all that pass reads of the
-        lists): a loop fewer, for a substep with nothing between the lists and the iterations that reads
-        them. ``sums``: as in :meth:`_visit_particle`."""
-        self.visit_first(gathered, neighbours, mover, True, defer, sums)
-        # The compact list's starts: the first visit summed each block of counts; the levels above are
-        # summed only after an overflow, and each thread of the second visit adds up its own start
-        # (ExclusiveScan.start_of), so that no pass down runs in every substep for a rare event.
+                self._visit_particle(gathered, neighbours, False, i)
+                self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
         self.neighbour_scan.up(self.neighbour_count, self.active, self.overflow, True)
-        if ti.static(not defer):
-            for i in range(ti.static(self.particle_cell.shape[0])):
-                self.finish_compact(x, neighbours, i, self.overflow)
+        for i in range(ti.static(self.particle_cell.shape[0])):
+            count = self.active[None]
+            if i < count * self.overflow[None]:
+                start = self.neighbour_scan.start_of(self.neighbour_count, i)
+                self.neighbour_start[i] = start
+                self._visit_particle(x, neighbours, True, i)
+                if i == count - 1:  # the last particle's list ends where the compact list does
+                    total = start + self.neighbour_count[i]
+                    self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
+                    if total > neighbours.shape[0]:
+                        self.status[TRUNCATED] = 1
 
-    @ti.func
-    def finish_compact(self, x: ti.template(), neighbours: ti.template(), i, gate: ti.template()):
-        """The second visit for particle i after a first visit that overflowed (the 0-D field ``gate``: the
-        overflow flag, or :attr:`deferred`): its start in the compact list, worked out by this thread
-        (``ExclusiveScan.start_of``), then its neighbours written there; the last particle's thread
-        records how long the list got."""
-        count = self.active[None]
-        if i < count * gate[None]:
-            start = self.neighbour_scan.start_of(self.neighbour_count, i)
-            self.neighbour_start[i] = start
-            self._visit_particle(x, neighbours, True, i)
-            if i == count - 1:  # the last particle's list ends where the compact list does
-                total = start + self.neighbour_count[i]
-                self.status[MOST_ENTRIES] = ti.max(self.status[MOST_ENTRIES], total)
-                if total > neighbours.shape[0]:
-                    self.status[TRUNCATED] = 1
+    @ti.kernel
+    def _build(self, x: ti.template(), neighbours: NeighbourList):
+        for i in range(read_count(self.loop_bound, 1)):
+            self.clear_for_visit(i)
+        self.find_neighbours(x, x, neighbours, False)
 
-    def build_neighbours(self, x, checked: bool = True) -> None:
-        """Exact neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell.
-
-        One visit of the grid when no particle has more than SLOTS neighbours; otherwise a compact
-        list sized by a prefix sum and a second visit. ``checked`` reads the first visit's overflow
-        flag (one device-to-host read) and grows the list before the second. Unchecked, on a backend
-        that keeps decisions on the device (``pbf.solver.backend``), both visits run in one launch
-        with no read: exact while the compact list fits the SLOTS·n entries the first visit uses, that
-        is while particles have fewer than SLOTS neighbours on average (35-45 in water). The host
-        learns once a frame how full the compact list got (:meth:`settle_frame`) and builds checked
-        while it is over CHECK_ABOVE full, so that a list cut short takes a rise of the mean
-        neighbour count by a third within one frame, and is then reported.
-        """
-        if not checked and self.on_device and not self.checking:
-            self._visit_on_device(x, self.neighbours)
-            return
-        if self._visit(x, self.neighbours, False):
-            self.build_compact(x)
-
-    def build_compact(self, x) -> None:
-        """After a first visit that overflowed: the compact list, sized by a prefix sum of the counts
-        (grown as needed), filled by a second visit."""
-        total = self.neighbour_scan.run(self.neighbour_count, self.neighbour_start)
-        self.most_entries_in_frame = max(self.most_entries_in_frame, total)
-        if total > self.neighbours.shape[0]:
-            self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(total * 1.5)))
-        self._visit(x, self.neighbours, True)
+    def build_neighbours(self, x) -> None:
+        """Exact neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell
+        (:meth:`sort`), as the substep builds them: for the grid's tests and tools. The host learns how
+        full the compact list got from :meth:`take_status` (once a frame in the solver)."""
+        self._build(x, self.neighbours)
 
     @ti.func
     def take_status(self):
-        """The device's record of the unchecked builds since the last call, (MOST_ENTRIES, TRUNCATED),
-        cleared: for a kernel that reads it back with other figures in one transfer."""
+        """The device's record of the builds since the last call, (MOST_ENTRIES, TRUNCATED), cleared: for
+        a kernel that reads it back with other figures in one transfer."""
         status = ti.Vector([self.status[MOST_ENTRIES], self.status[TRUNCATED]])
         for k in ti.static(range(2)):
             self.status[k] = 0
@@ -487,19 +384,19 @@ class NeighbourGrid:
 
     def settle_frame(self, most_entries: int, truncated: bool) -> None:
         """Act on the record of the frame's builds (:meth:`take_status`, read by the host once a frame):
-        a list cut short is grown, with a warning (that substep's sums missed pairs), and builds are
-        checked while the compact list is over CHECK_ABOVE of the array."""
-        most_entries = max(int(most_entries), self.most_entries_in_frame)
+        a compact list over GROW_ABOVE of the array is grown by half, so that the mean neighbour count
+        may rise by a third within a frame before a list is cut; one cut short is grown the same way,
+        with a warning (that substep's sums missed pairs)."""
+        most_entries = int(most_entries)
+        if truncated or most_entries > GROW_ABOVE * self.neighbours.shape[0]:
+            self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(max(most_entries, 1) * 1.5)))
         if truncated:
-            self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(most_entries * 1.5)))
             warnings.warn(
                 f"the neighbour list needed {most_entries:,} entries, more than the {SLOTS} per particle "
                 f"it held; a substep of the last frame missed neighbours. Grown: exact from here on",
                 RuntimeWarning,
                 stacklevel=3,
             )
-        self.checking = most_entries > CHECK_ABOVE * self.neighbours.shape[0]
-        self.most_entries_in_frame = 0
 
     def neighbour_lists(self):
         """Neighbour lists as a list of NumPy arrays of sorted indices (for tests and inspection)."""

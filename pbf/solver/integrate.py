@@ -8,39 +8,18 @@ import taichi as ti
 @ti.data_oriented
 class PredictedPositions:
     """x*, the predicted positions (m): two (n,) vector(3, f32) buffers, :attr:`first` and
-    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other
-    (:attr:`in_second` says which holds x* now), which saves a copy per iteration. :meth:`gather`
-    brings x* back into the first after the iterations, so that every other kernel only ever sees
-    the first buffer.
+    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other,
+    which saves a copy per iteration, and the iterations' last call settles x* back into the first
+    (``JacobiIterations.settle``), so that every other pass only ever sees the first buffer.
 
-    Why not pass "the current buffer" around: a Taichi kernel compiles once per field it is given,
-    so each kernel that took the current buffer compiled twice, the second time when an iteration
-    count of the other parity first came, which could be seconds into a run (a 2 s freeze of the
-    window at the first frame with an odd count, in `double_dam_break` and `wave_tank`). Now the
-    iterations take both buffers in a fixed order and a flag, and the rest take the first: one
-    compile each, at the first substep."""
+    Why not pass "the current buffer" around: a Taichi kernel compiles once per field it is given, so
+    each kernel that took the current buffer compiled twice, the second time when an iteration count
+    of the other parity first came, seconds into a run. The iterations take both buffers in a fixed
+    order and read which holds x* as data."""
 
-    def __init__(self, particle_count: int, active):
+    def __init__(self, particle_count: int):
         self.first = ti.Vector.field(3, ti.f32, shape=particle_count)
         self.second = ti.Vector.field(3, ti.f32, shape=particle_count)
-        self.active = active
-        self.in_second = False
-        """Whether x* is in :attr:`second` (after an odd number of iterations)."""
-
-    def swap(self) -> None:
-        """An iteration wrote x* into the other buffer."""
-        self.in_second = not self.in_second
-
-    @ti.kernel
-    def _copy_back(self):
-        for i in range(self.active[None]):
-            self.first[i] = self.second[i]
-
-    def gather(self) -> None:
-        """Make the first buffer hold x* (a copy after an odd number of iterations)."""
-        if self.in_second:
-            self._copy_back()
-            self.in_second = False
 
 
 @ti.data_oriented
@@ -50,17 +29,8 @@ class Integrator:
     def __init__(self, state, boundaries):
         self.state = state
         self.boundaries = boundaries
-        self.predicted = PredictedPositions(state.capacity, state.active)
+        self.predicted = PredictedPositions(state.capacity)
         state.carry(self.predicted.first)
-
-    @ti.kernel
-    def advance(self, dt: ti.f32, gravity: ti.types.vector(3, ti.f32)):
-        """v ← v + Δt g and x* ← x + Δt v (Algorithm 1, lines 2-3), x* kept inside the boundaries as in
-        :meth:`predict`; one launch for both. The substep does the same in the loop that also counts each
-        particle's cell (``pbf.solver.substep``)."""
-        for i in range(self.state.live_bound()):
-            if i < self.state.active[None]:
-                self.advance_particle(dt, gravity, i)
 
     @ti.func
     def advance_particle(self, dt, gravity, i):
@@ -77,21 +47,12 @@ class Integrator:
         for i in range(self.state.active[None]):
             self.state.v[i] *= factor
 
-    @ti.kernel
-    def _predict(self, dt: ti.f32):
-        for i in range(self.state.active[None]):
-            self.predict_particle(dt, i)
-
     @ti.func
     def predict_particle(self, dt, i):
         """x*_i ← x_i + Δt v_i, kept inside the boundaries; returns x*_i."""
         x_star = self.boundaries.project_recorded(self.state.x[i] + dt * self.state.v[i], i, "start", 1.0)
         self.predicted.first[i] = x_star
         return x_star
-
-    def predict(self, dt: float) -> None:
-        """x* ← x + Δt v (line 3), kept inside the boundaries so the grid never sees a lost particle."""
-        self._predict(dt)
 
     @ti.kernel
     def _push(self, point: ti.types.vector(3, ti.f32), velocity: ti.types.vector(3, ti.f32), radius: ti.f32):

@@ -139,7 +139,12 @@ class Launcher:
         """key → (the compiled kernel, the template arguments it was compiled for, kept alive, and the
         compiled kernel's data for the program's launch, or None where ``launch_kernel`` launches it)."""
 
-    def __call__(self, *args):
+    def __call__(self, *args, **kwargs):
+        if kwargs:  # by name: put in the kernel's order
+            import inspect
+
+            names = tuple(inspect.signature(self._bound._primal.func).parameters)[1:]
+            args = args + tuple(kwargs[name] for name in names[len(args) :])
         if self._primal is None or len(args) != self._count:  # another count: Taichi's call says so
             return self._bound(*args)
         key = tuple(_variant(args[i]) for i in self._templates)

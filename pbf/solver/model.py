@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import numbers
 from dataclasses import dataclass
@@ -348,6 +349,49 @@ class Control:
             scene.gravity_m_s2,
         )
         return control
+
+
+@dataclass(frozen=True)
+class Features:
+    """What a substep's kernels compile in, as one frozen, hashable value (a compile-time argument of
+    the substep's kernels: each distinct value is one compile). The terms the control may switch
+    (an error target, confinement, XSPH, the divergence pre-correction's iterations) come from the
+    control; the wave maker, the bodies and mirrored walls are fixed when the solver is built (they
+    shape ``Boundaries`` and ``DensityConstraint``) and are named here so that the description is whole.
+    Build it with :meth:`of`, which hands out one object per value."""
+
+    measure: bool
+    """An error target is set: the iterations' error sums and the stopping rule."""
+    divergence_iterations: int
+    """Iterations of the divergence pre-correction; 0 leaves the pass out."""
+    vorticity: bool
+    """Vorticity confinement (Eqs. 13-14)."""
+    xsph: bool
+    """XSPH viscosity (Eq. 15)."""
+    wave_maker: bool
+    bodies: bool
+    wall_mirror: bool
+
+    @classmethod
+    def of(cls, model: Model, control: Control, in_place: bool = False) -> Features:
+        """The features of ``model``'s scene under ``control``; ``in_place``: for a substep of Δt = 0 that
+        only sorts and finds neighbours (a restore), without the divergence pre-correction."""
+        return _features(
+            control.target_density_error > 0.0,
+            0 if in_place else control.divergence_iterations,
+            control.vorticity > 0.0,
+            control.xsph > 0.0,
+            model.boundary.piston_stroke_m > 0.0,
+            bool(model.scene.bodies),
+            model.density.wall_mirror,
+        )
+
+
+@functools.cache
+def _features(*values) -> Features:
+    """One Features object per value: Taichi tells compile-time arguments that are objects apart by
+    identity, so an equal value must be the same object, or every substep would compile anew."""
+    return Features(*values)
 
 
 def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]:

@@ -20,14 +20,16 @@ there, not from x_j, so it also moves x to x*: no loop of its own for line 23 (a
 import taichi as ti
 
 from pbf.solver.constants import scene_constants
-from pbf.solver.grid import NeighbourList
+from pbf.solver.grid import named
 from pbf.solver.model import VelocityParams
+from pbf.solver.scan import read_count
 from pbf.solver.sph import kernel_scale, scaled_kernel_and_gradient, scaled_kernel_gradient
 
 
 @ti.data_oriented
 class VelocityPostprocess:
-    """Lines 20-23 of Algorithm 1 and their scratch: ω and |ω| per particle."""
+    """Lines 20-23 of Algorithm 1 as loops for the substep's last kernel, and their scratch: ω and |ω|
+    per particle."""
 
     def __init__(self, params: VelocityParams, state, grid):
         self.state = state
@@ -46,144 +48,109 @@ class VelocityPostprocess:
         return (x_pred[i] - self.state.x[i]) * inverse_dt
 
     @ti.func
-    def particle(self, x_pred: ti.template(), i, dt):
-        """What a pass over particle i's neighbours reads once for the particle: h, V, the kernel's scale,
+    def particle(self, x_pred: ti.template(), i, run: ti.template()):
+        """What a walk of particle i's neighbours reads once for the particle: h, V, the kernel's scale,
         1/Δt, x*_i and v_i."""
         h, volume = self.constants[None].h, self.constants[None].volume
-        inverse_dt = 1.0 / dt
+        inverse_dt = 1.0 / run.dt
         return h, volume, kernel_scale(h), inverse_dt, x_pred[i], self.velocity(x_pred, i, inverse_dt)
 
-    @ti.kernel
-    def finish(
-        self,
-        x_pred: ti.template(),
-        neighbours: NeighbourList,
-        dt: ti.f32,
-        vorticity: ti.f32,
-        xsph: ti.f32,
-        with_vorticity: ti.template(),
-        with_xsph: ti.template(),
-        impulse: ti.template(),
-        pressure_per_impulse: ti.f32,
-        first_of_frame: ti.i32,
-        max_speed: ti.f32,
-    ):
-        """Lines 20-23 of Algorithm 1 in one launch: v = (x* − x)/Δt, confinement (``with_vorticity``, at
-        ε = ``vorticity``) and XSPH (``with_xsph``, c = ``xsph``) on v, v capped at ``max_speed`` (m/s,
-        ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of the multipliers
-        ``impulse`` (L, per particle) and Λ, at ``pressure_per_impulse`` Pa per unit of L, added to
-        ``State.pressure_sum`` (which starts again at the ``first_of_frame`` substep). Every loop runs
-        over the particles' bucket and reads what it needs itself: a loop bound or a value worked out
-        outside the loops would be a one-thread task, a launch on a GPU."""
-        self.finish_loops(
-            x_pred,
-            neighbours,
-            dt,
-            vorticity,
-            xsph,
-            with_vorticity,
-            with_xsph,
-            impulse,
-            pressure_per_impulse,
-            first_of_frame,
-            max_speed,
+    @ti.func
+    def curl_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s V ∇_i W_ij × (v_j − v_i) into ω_i (Eq. 13)."""
+        p.omega += p.volume * scaled_kernel_gradient(p.xi - p.x[j], p.scale).cross(
+            self.velocity(p.x, j, p.inverse_dt) - p.vi
         )
 
     @ti.func
-    def finish_loops(
-        self,
-        x_pred: ti.template(),
-        neighbours: ti.template(),
-        dt: ti.template(),
-        vorticity: ti.template(),
-        xsph: ti.template(),
-        with_vorticity: ti.template(),
-        with_xsph: ti.template(),
-        impulse: ti.template(),
-        pressure_per_impulse: ti.template(),
-        first_of_frame: ti.template(),
-        max_speed: ti.template(),
-    ):
-        """The loops of :meth:`finish`, for the top level of a kernel (``pbf.solver.substep`` runs them in
-        the launch that ends the iterations). Every argument is a template: a value argument of a
-        ``ti.func`` is copied at the call, outside the loops, which is a one-thread task."""
-        if ti.static(with_vorticity):
-            for i in range(self.state.live_bound()):
+    def smoothing_pair(self, i, j, p: ti.template()):
+        """Pair (i, j)'s XSPH term V (v_j − v_i) W_ij (Eq. 15) and its term of the location vector η
+        (Eq. 14)."""
+        w, grad_w = scaled_kernel_and_gradient(p.xi - p.x[j], p.scale)
+        if ti.static(p.with_xsph):
+            vj = ti.Vector([0.0, 0.0, 0.0])
+            if ti.static(p.kept):
+                vj = self.velocity_now[j]
+            else:
+                vj = self.velocity(p.x, j, p.inverse_dt)
+            p.smoothing += p.volume * (vj - p.vi) * w
+        if ti.static(p.with_vorticity):
+            p.eta += p.volume * (self.omega_norm[j] - p.omega_i_norm) * grad_w
+
+    @ti.func
+    def finish(self, x_pred: ti.template(), neighbours: ti.template(), impulse: ti.template(), run: ti.template()):
+        """Lines 20-23 for the top level of a kernel: v = (x* − x)/Δt, confinement (``run.vorticity``, at
+        ε = ``run.epsilon``) and XSPH (``run.xsph``, c = ``run.xsph_c``) on v, v capped at
+        ``run.max_speed`` (m/s, ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of
+        the multipliers ``impulse`` (L, per particle) and Λ, at ``run.pressure_per_impulse`` Pa per unit
+        of L, added to ``State.pressure_sum`` (which starts again at the ``run.first_of_frame``
+        substep). Every loop runs over the particles' bucket and reads what it needs itself: a loop bound
+        or a value worked out outside the loops would be a one-thread task, a launch on a GPU."""
+        bound = ti.static(self.state.loop_bound)
+        if ti.static(run.vorticity):
+            for i in range(read_count(bound, 1)):
                 if i < self.state.active[None]:
-                    h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
+                    h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
                     omega = ti.Vector([0.0, 0.0, 0.0])
-                    first, last, stride = self.grid.listed(i, neighbours)
-                    upcoming = self.grid.upcoming(neighbours, first, last)
-                    for k in range(first, last):
-                        j = self.grid.neighbour(neighbours, k, upcoming)
-                        upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                        omega += volume * scaled_kernel_gradient(xi - x_pred[j], scale).cross(
-                            self.velocity(x_pred, j, inverse_dt) - vi
-                        )
+                    p = ti.static(
+                        named(x=x_pred, xi=xi, vi=vi, volume=volume, scale=scale, inverse_dt=inverse_dt, omega=omega)
+                    )
+                    self.grid.for_each_neighbour(i, neighbours, self.curl_pair, p)
                     self.omega[i] = omega
                     self.omega_norm[i] = omega.norm()
                     self.velocity_now[i] = vi
         # x = x* in the pass below when it reads no x_j: with confinement (v_j kept by the ω pass) or
         # without neighbour sums at all.
-        moves_x = ti.static(with_vorticity or not with_xsph)
-        for i in range(self.state.live_bound()):
+        moves_x = ti.static(run.vorticity or not run.xsph)
+        for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
-                h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, dt)
+                h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
                 dv = ti.Vector([0.0, 0.0, 0.0])
-                if ti.static(with_vorticity or with_xsph):
-                    eta = ti.Vector([0.0, 0.0, 0.0])
-                    smoothing = ti.Vector([0.0, 0.0, 0.0])
-                    omega_i = ti.Vector([0.0, 0.0, 0.0])
-                    omega_i_norm = 0.0
-                    if ti.static(with_vorticity):
-                        omega_i = self.omega[i]
-                        omega_i_norm = self.omega_norm[i]
-                    first, last, stride = self.grid.listed(i, neighbours)
-                    upcoming = self.grid.upcoming(neighbours, first, last)
-                    for k in range(first, last):
-                        j = self.grid.neighbour(neighbours, k, upcoming)
-                        upcoming = self.grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-                        w, grad_w = scaled_kernel_and_gradient(xi - x_pred[j], scale)
-                        if ti.static(with_xsph):
-                            vj = ti.Vector([0.0, 0.0, 0.0])
-                            if ti.static(moves_x):
-                                vj = self.velocity_now[j]
-                            else:
-                                vj = self.velocity(x_pred, j, inverse_dt)
-                            smoothing += volume * (vj - vi) * w
-                        if ti.static(with_vorticity):
-                            eta += volume * (self.omega_norm[j] - omega_i_norm) * grad_w
-                    dv = xsph * smoothing
-                    if ti.static(with_vorticity):
+                if ti.static(run.vorticity or run.xsph):
+                    omega_i, omega_i_norm = ti.Vector([0.0, 0.0, 0.0]), 0.0
+                    if ti.static(run.vorticity):
+                        omega_i, omega_i_norm = self.omega[i], self.omega_norm[i]
+                    eta, smoothing = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
+                    p = ti.static(
+                        named(
+                            x=x_pred,
+                            xi=xi,
+                            vi=vi,
+                            volume=volume,
+                            scale=scale,
+                            inverse_dt=inverse_dt,
+                            omega_i_norm=omega_i_norm,
+                            eta=eta,
+                            smoothing=smoothing,
+                            with_xsph=run.xsph,
+                            with_vorticity=run.vorticity,
+                            kept=moves_x,
+                        )
+                    )
+                    self.grid.for_each_neighbour(i, neighbours, self.smoothing_pair, p)
+                    dv = run.xsph_c * smoothing
+                    if ti.static(run.vorticity):
                         eta_norm = eta.norm()
                         if eta_norm > 0.0:
-                            dv += dt * vorticity * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
+                            dv += run.dt * run.epsilon * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
                 v = vi + dv
-                if max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
+                if run.max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
                     speed = v.norm()
-                    if speed > max_speed:
-                        v *= max_speed / speed
+                    if speed > run.max_speed:
+                        v *= run.max_speed / speed
                 self.state.v[i] = v
                 if ti.static(moves_x):
-                    self.move(x_pred, i, dt, impulse, pressure_per_impulse, first_of_frame)
+                    self.move(x_pred, i, impulse, run)
         if ti.static(not moves_x):
-            for i in range(self.state.live_bound()):
+            for i in range(read_count(bound, 1)):
                 if i < self.state.active[None]:
-                    self.move(x_pred, i, dt, impulse, pressure_per_impulse, first_of_frame)
+                    self.move(x_pred, i, impulse, run)
 
     @ti.func
-    def move(
-        self,
-        x_pred: ti.template(),
-        i,
-        dt: ti.template(),
-        impulse: ti.template(),
-        pressure_per_impulse: ti.template(),
-        first_of_frame: ti.template(),
-    ):
+    def move(self, x_pred: ti.template(), i, impulse: ti.template(), run: ti.template()):
         """x_i = x*_i (line 23), and the substep's pressure added to particle i's sum."""
         self.state.x[i] = x_pred[i]
         # The pressure of this substep, from the position iterations' multiplier L and the
         # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
-        pressure = pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * dt * dt)
-        self.state.pressure_sum[i] = ti.select(first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
+        pressure = run.pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * run.dt * run.dt)
+        self.state.pressure_sum[i] = ti.select(run.first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure

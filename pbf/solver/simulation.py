@@ -16,8 +16,7 @@ import numpy as np
 from pbf import scene as schema
 from pbf.scene.schema import _show
 from pbf.solver import buckets, settled
-from pbf.solver.acceleration import Weights
-from pbf.solver.backend import keeps_decisions_on_device, start_backend
+from pbf.solver.backend import keeps_decisions_on_device, on_gpu, start_backend
 from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
 from pbf.solver.density import DensityConstraint
@@ -27,15 +26,13 @@ from pbf.solver.emit import Emitters
 from pbf.solver.grid import NeighbourGrid
 from pbf.solver.integrate import Integrator
 from pbf.solver.iterations import JacobiIterations
-from pbf.solver.launch import Launcher
-from pbf.solver.model import Control, Model
+from pbf.solver.model import Control, Features, Model
 from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
-from pbf.solver.substep import SubstepLaunches
+from pbf.solver.substep import SubstepKernels
 
 STAGES = (
     "predict, sort by cell, neighbour lists",
-    "divergence pre-correction",
     "solver iterations",
     "velocity, vorticity, XSPH, x = x*",
 )
@@ -167,30 +164,39 @@ class Simulation:
         # names a kernel by the shapes and the places of the fields it touches, so a scene of other
         # sizes or constants, with or without those features, finds the kernels a run before compiled
         # (pbf.solver.constants, pbf.solver.model.allocation).
+        # What differs by backend, chosen here: on a GPU backend (or the CPU told to act as one, for the
+        # tests) loops over the particles' bucket, two iterations a call and no decision read by the host;
+        # on the CPU loops over the live count, an iteration a call and the error target's decision read
+        # after each. The lists lie slot-major on a GPU (NeighbourGrid.slot_major).
+        on_device = keeps_decisions_on_device()
         self.state = State(model.allocated)
         self.boundaries = Boundaries(model.boundary, solids=False)
         """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
-        self.grid = NeighbourGrid(model.grid, self.state.active)
+        self.grid = NeighbourGrid(model.grid, self.state.active, on_gpu(), self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
-        self.weights = Weights(model.iteration_weights)
-        """The iterations' weights (solver.expert.acceleration), restarted at each substep."""
-        self.iterations = JacobiIterations(self.density, self.weights, self.state.active, keeps_decisions_on_device())
-        """The substep's Jacobi iterations, steered by the host (CPU) or on the device (GPU backends)."""
+        self.iterations = JacobiIterations(
+            self.density,
+            model.iteration_weights,
+            self.state.active,
+            self.state.loop_bound,
+            per_call=2 if on_device else 1,
+            reads_decisions=not on_device,
+        )
+        """The substep's Jacobi iterations and the rules that stop them (``pbf.solver.iterations``)."""
         self.boundaries.allocate_solids(model.allocated)
         self.bodies = self.boundaries.bodies
         """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.launches = SubstepLaunches(
-            self.state, self.integrator, self.grid, self.iterations, self.postprocess, self.divergence
+        self.kernels = SubstepKernels(
+            self.state, self.integrator, self.grid, self.density, self.divergence, self.iterations, self.postprocess
         )
-        """The stages composed into few kernel calls (``pbf.solver.substep``)."""
-        self._finish_on_host = Launcher(self.postprocess.finish)  # lines 20-23 on the host's path
+        """The stages composed into three kernels (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (settling is deterministic, so later
@@ -421,12 +427,23 @@ class Simulation:
         self.iterations_used = 0
         self.pressure_substeps = 0
         """Substeps summed in ``State.pressure_sum`` since the frame began (pressures())."""
-        self._sort_by_cell(self.state.x)  # neighbour lists for stats() before the first step
-        self.grid.build_neighbours(self.state.x)
+        self._find_neighbours_in_place()
+
+    def _find_neighbours_in_place(self) -> None:
+        """The particles sorted by cell and their neighbour lists where they stand, for stats() and the
+        renderers before the first step: the substep's first kernel with Δt = 0. Outside the substep the
+        host may read, so a list that would not fit is grown and made again here."""
+        features = Features.of(self.model, self.control, in_place=True)
+        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+        most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
+        if truncated:
+            self.grid.settle_frame(most_entries, False)
+            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+        self.grid.status.fill(0)
 
     @property
     def iterations_used(self) -> int:
-        """Jacobi iterations the last substep ran (read from the device on a GPU backend)."""
+        """Jacobi iterations the last substep ran (read from the device)."""
         return self.iterations.used
 
     @iterations_used.setter
@@ -463,15 +480,10 @@ class Simulation:
             )
         return min(needed, t.max_substeps)
 
-    def _sort_by_cell(self, x) -> None:
-        """Counting-sort the particles by the cell of ``x``, and reorder the state and x* alike."""
-        self.grid.sort_and_permute(x, self.state.index, self.state)
-
-    def _outside_inputs(self, dt: float) -> tuple[float, float]:
+    def _outside_inputs(self, dt: float) -> None:
         """What acts on the water from outside Algorithm 1, before its prediction: new water from the
-        nozzles, the user's hand (velocities, capped so the CFL limit holds), and moving walls placed
-        where they stand at the end of the substep, where x* is projected: returns the piston's place and
-        velocity, which the substep's first launch sets (``Boundaries.move``)."""
+        nozzles, the user's hand (velocities, capped so the CFL limit holds), the bodies' rigid step, and
+        moving walls placed where they stand at the end of the substep, where x* is projected."""
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
@@ -482,12 +494,12 @@ class Simulation:
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
-        return self.boundaries.move(self.piston_time_s, dt, launch=False)
+        self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
         most frame_dt_s."""
-        control, hook = self.control, self.hook
+        control, hook, kernels = self.control, self.hook, self.kernels
         if dt is not None:
             frame_dt = self.scene.time.frame_dt_s
             if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
@@ -497,42 +509,22 @@ class Simulation:
                     f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), got {_show(dt)}"
                 )
         dt = dt or self.scene.time.frame_dt_s / control.substeps
-        x_star = self.integrator.predicted
-        piston = self._outside_inputs(dt)  # emitters, the mouse, moving walls
-        # On the device path an overflow's second visit can wait for the first λ pass when no divergence
-        # pass reads the lists before it (NeighbourGrid.finish_compact): a launch fewer.
-        defer = self.iterations.on_device and control.divergence_iterations == 0
-        with hook.stage("predict, sort by cell, neighbour lists"):  # lines 1-7, one launch: v += Δt g,
-            # x* = x + Δt v, the particles sorted by the cell of x*, and their neighbours (on the device
-            # path with the divergence pre-correction below in the same launch, and timed with them)
-            count = control.divergence_iterations
-            corrected = self.launches.predict_and_find_neighbours(dt, control.gravity_m_s2, defer, count, piston)
-        with hook.stage("divergence pre-correction"):  # ours: v made divergence-free (at x,
-            if count > 0 and not corrected:  # warm-started), then x* = x + Δt v again
-                self.divergence.run(self.grid.neighbours, dt, count)
-                self.launches.predict_again(dt)
-        on_device = self.iterations.on_device
-        with hook.stage("solver iterations"):  # lines 8-19, until the error target (on the device
-            # path all but the last call's: that runs with lines 20-23, timed with them)
-            self.iterations.run(x_star, self.grid.neighbours, control, defer)
-            x_star.gather()  # x* back in the first buffer (the device path's last launch does it)
+        features = Features.of(self.model, control)  # what the kernels compile in
+        self._outside_inputs(dt)  # emitters, the mouse, the bodies, moving walls
+        with hook.stage("predict, sort by cell, neighbour lists"):
+            # Lines 1-7: v += Δt g, x* = x + Δt v; the particles sorted by the cell of x* and their
+            # neighbours; ours: v made divergence-free, x* again; the denominators of λ (Eq. 10) at x*.
+            kernels.find_neighbours(dt, control.gravity_m_s2, features)
+        with hook.stage("solver iterations"):
+            # Lines 8-19 until the error target: λ (Eq. 10), Δx with s_corr (Eqs. 11-12), collisions,
+            # x* += Δx; all calls but the last.
+            last = kernels.iterate(features, control)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
-            finish = (
-                dt,  # lines 20-23: v = (x* − x)/Δt,
-                control.vorticity,
-                control.xsph,  # confinement, XSPH, x = x*;
-                control.vorticity > 0.0,
-                control.xsph > 0.0,
-                self.density.lam_total,  # and the pressure, summed
-                self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3,
-                self.pressure_substeps == 0,
-                self.scene.time.max_speed_m_s,  # and v capped (0: not)
-            )
-            if on_device:  # the iterations' last call, x* settled, then lines 20-23: one launch
-                self.launches.finish(self.grid.neighbours, control, defer, *finish)
-                x_star.in_second = False
-            else:
-                self._finish_on_host(x_star.first, self.grid.neighbours, *finish)
+            # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
+            # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
+            pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
+            first = self.pressure_substeps == 0
+            kernels.iterate_and_finish(last, dt, features, control, pressure, first, self.scene.time.max_speed_m_s)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1
