@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from pbf import Simulation
-from pbf.solver.acceleration import REVERSAL, Weights, chebyshev_weights, stable_weights
+from pbf.solver.acceleration import REVERSAL, chebyshev_weights, stable_weights
+from pbf.solver.iterations import DONE, FRACTION, IN_SECOND, STEPPING_BACK
+from pbf.solver.model import Features
 from pbf.study.common import colour_surface_height, fill_height_m
 from scenes import column_scene, small_dam_break
 
@@ -61,27 +63,25 @@ def test_stable_weights_reverse_no_mode_by_more_than_a_quarter():
     assert all(polynomials[k][slow] < chebyshev[k][slow] for k in range(4, 20))
 
 
-def test_weights_restart_from_the_first():
-    weights = Weights((1.0, 1.5, 1.7))
-    assert [weights.next() for _ in range(4)] == [1.0, 1.5, 1.7, 1.7]
-    weights.restart()
-    assert weights.next() == 1.0
-
-
 def test_the_step_back_lands_between_the_last_two_iterations():
     sim = Simulation(small_dam_break())
     sim.step(20)  # mid-splash: the iterations move particles
-    x_star, neighbours = sim.integrator.predicted, sim.grid.neighbours
-    sim.launches.predict_and_find_neighbours(sim.dt_s, sim.control.gravity_m_s2)  # a substep's lines 1-7
-    for k, weight in enumerate((1.0, 1.25, 1.5)):
-        sim.density.project(x_star, neighbours, measure=True, first=k == 0, weight=weight)
-    newer = (x_star.second if x_star.in_second else x_star.first).to_numpy()
-    older = (x_star.first if x_star.in_second else x_star.second).to_numpy()
+    x_star, kernels, control = sim.integrator.predicted, sim.kernels, sim.control
+    control.target_density_error = 0.0
+    features = Features.of(sim.model, control)
+    kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features)  # a substep's lines 1-7
+    for start in range(3):  # three iterations, an iteration a call: x* ends in the second buffer
+        kernels._iterate(kernels.grid.neighbours, features, start, 3, 0.0, 1, 1)
+    newer, older = x_star.second.to_numpy(), x_star.first.to_numpy()
     pressure_newer, pressure_older = sim.density.lam_total.to_numpy(), sim.density.lam_before.to_numpy()
     assert np.abs(newer - older).max() > 1e-4
-    sim.density.step_back(x_star, 0.25)
-    assert not x_star.in_second
-    np.testing.assert_allclose(x_star.first.to_numpy(), newer + 0.25 * (older - newer), atol=1e-6)
+    # The target's decision as the error sum's thread would have left it: met, a quarter back.
+    flags, values = sim.iterations.flags, sim.iterations.values
+    flags[DONE], flags[IN_SECOND], flags[STEPPING_BACK], values[FRACTION] = 1, 1, 1, 0.25
+    control.target_density_error = 0.001
+    kernels.iterate_and_finish(3, sim.dt_s, Features.of(sim.model, control), control, 1.0, True, 0.0)
+    n = sim.particle_count
+    np.testing.assert_allclose(sim.state.x.to_numpy()[:n], (newer + 0.25 * (older - newer))[:n], atol=1e-6)
     np.testing.assert_allclose(
         sim.density.lam_total.to_numpy(), pressure_newer + 0.25 * (pressure_older - pressure_newer), atol=1e-6
     )

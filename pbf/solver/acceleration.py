@@ -88,23 +88,3 @@ def chebyshev_weights(rho: float, count: int) -> tuple[float, ...]:
         last = weights[-1]
         weights.append(1.0 if rho2 == 0.0 else 2.0 / (2.0 - rho2) if last == 1.0 else 4.0 / (4.0 - rho2 * last))
     return tuple(weights)
-
-
-class Weights:
-    """The weight of each next iteration of a substep, from a table (:func:`stable_weights`,
-    :func:`chebyshev_weights`, or all 1 for plain Jacobi); :meth:`restart` begins the table again
-    (plain), for when the error rose."""
-
-    def __init__(self, table: tuple[float, ...]):
-        self.table = table
-        self.done = 0
-
-    def next(self) -> float:
-        """The weight of the next iteration."""
-        weight = self.table[min(self.done, len(self.table) - 1)]
-        self.done += 1
-        return weight
-
-    def restart(self) -> None:
-        """Begin again at w_1 = 1."""
-        self.done = 0
