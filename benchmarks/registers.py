@@ -94,7 +94,7 @@ try:
 except BackendError as error:
     print(f"Taichi did not start on the fake CUDA driver (it was not loaded): {{error}}", file=sys.stderr)
     sys.exit({NOT_ON_CUDA})
-if ti.lang.impl.current_cfg().arch != ti.cuda:
+if ti.cfg.arch != ti.cuda:
     print("Taichi runs on the CPU, not on the fake CUDA driver: it was not loaded", file=sys.stderr)
     sys.exit({NOT_ON_CUDA})
 Simulation(load_scene(sys.argv[1], sys.argv[2:]), quiet=True).step({FRAMES})

@@ -66,7 +66,7 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
 
 def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
     """(task, launches per substep, µs each) of ``substeps`` substeps, in the order the tasks first ran."""
-    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+    from pbf.solver.launch import profiled_tasks
 
     sim = Simulation(dam_break(particles, 4), quiet=True)
     sim.step(WARMUP_FRAMES)
@@ -76,12 +76,10 @@ def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
     for _ in range(substeps):
         sim.substep(dt)
     ti.sync()
-    profiler = get_default_kernel_profiler()
-    profiler._update_records()  # Taichi 1.7.4, pinned (pbf.study.launches does the same)
     totals: dict[str, list] = defaultdict(lambda: [0, 0.0])
-    for record in profiler._traced_records:
-        totals[record.name][0] += 1
-        totals[record.name][1] += record.kernel_time
+    for task, ms in profiled_tasks():
+        totals[task][0] += 1
+        totals[task][1] += ms
     return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in totals.items()]
 
 

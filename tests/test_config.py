@@ -136,7 +136,7 @@ def test_restart_frees_the_runtime_and_keeps_the_backend():
         "restart_backend()\n"
         "after = ti.field(ti.f32, shape=4)\n"
         "after.fill(2.0)\n"
-        "print('arch', ti.lang.impl.current_cfg().arch.name, 'sum', after.to_numpy().sum(), 'freed', held - rss_mb())\n"
+        "print('arch', ti.cfg.arch.name, 'sum', after.to_numpy().sum(), 'freed', held - rss_mb())\n"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr

@@ -1,5 +1,7 @@
 """The substep's kernels launched past Taichi's per-call Python (``pbf.solver.launch.Launcher``) run as
-ordinary calls do: the variant the template arguments select, the arguments of this call, the same bits."""
+ordinary calls do: the variant the template arguments select, the arguments of this call, the same bits.
+Only on the Taichi the launch was written for, and not under ``PBF_PUBLIC_LAUNCH=1``: elsewhere every
+call is Taichi's own. Arguments by name as by position; what the studies see of the launches."""
 
 import numpy as np
 import pytest
@@ -7,8 +9,17 @@ import taichi as ti
 
 from pbf.solver import Simulation, launch
 from pbf.solver.backend import decisions_on_device
-from pbf.solver.launch import Launcher
+from pbf.solver.launch import PUBLIC_LAUNCH_VAR, Launcher, Observer, knows_taichi, watching
 from tests.scenes import small_dam_break
+
+
+@pytest.fixture(autouse=True)
+def fast(monkeypatch):
+    """The fast launch on for each test here, whatever the environment says (CI runs the suite with it
+    off too): these tests are about it. A test of the gate turns it off again."""
+    if not knows_taichi():
+        pytest.skip(f"the fast launch reads Taichi {launch.WRITTEN_FOR}'s internals; this is {ti.__version__}")
+    monkeypatch.delenv(PUBLIC_LAUNCH_VAR, raising=False)
 
 
 @ti.data_oriented
@@ -157,3 +168,119 @@ def test_a_template_argument_equal_to_nothing_is_not_kept_without_end(monkeypatc
         call(writer.out, value, 1.0, 1)
     assert len(call._variants) == 4
     np.testing.assert_array_equal(writer.out.to_numpy(), 2.0 * (1.0 + np.arange(4, dtype=np.float32)))
+
+
+class Seen(Observer):
+    """Every launch and compile an observer is told of."""
+
+    def __init__(self):
+        self.launches, self.waits, self.compiles, self.accesses = [], 0, [], []
+
+    def launched(self, kernel, waits):
+        self.launches.append(kernel)
+        self.waits += waits
+
+    def accessed(self, read):
+        self.accesses.append(read)
+
+    def compiled(self, kernel, seconds):
+        assert seconds > 0
+        self.compiles.append(kernel)
+
+
+def counting_up():
+    """An ndarray of 0, 1, 2, 3."""
+    values = ti.ndarray(ti.f32, 4)
+    values.from_numpy(np.arange(4, dtype=np.float32))
+    return values
+
+
+@pytest.mark.parametrize("switch", ["1", "yes"])
+def test_the_environment_switch_takes_taichis_public_call(monkeypatch, switch):
+    monkeypatch.setenv(PUBLIC_LAUNCH_VAR, switch)
+    assert not launch.fast_launch()
+    writer = Writer()
+    call = Launcher(writer.write)
+    for value in (1.0, 2.0, 3.0):
+        assert call(writer.out, False, value, 3) == value * 3
+    np.testing.assert_array_equal(writer.out.to_numpy(), 9.0 + np.arange(4, dtype=np.float32))
+    assert call._primal is None and not call._variants  # nothing kept: every call Taichi's own
+
+
+def test_another_taichi_version_takes_taichis_public_call(monkeypatch):
+    # Another build with the same public API may lay out its internals otherwise: the gate is the
+    # version, not whether the names exist (they do here).
+    monkeypatch.setattr(ti, "__version__", (1, 7, 5))
+    assert not launch.knows_taichi() and not launch.fast_launch()
+    writer = Writer()
+    call = Launcher(writer.mix)
+    values = counting_up()
+    for value in (1.0, 2.0):
+        call(writer.out, value, 2, 1, values)
+    np.testing.assert_array_equal(writer.out.to_numpy(), 5.0 + np.arange(4, dtype=np.float32))
+    assert call._primal is None and not call._variants
+    with pytest.raises(RuntimeError, match="1.7.5"):  # the studies' hooks say why they cannot watch
+        with watching(Seen()):
+            pass
+
+
+@pytest.mark.parametrize("fast_launch", [True, False], ids=["fast", "public"])
+def test_arguments_by_name_land_where_their_names_say(monkeypatch, fast_launch):
+    if not fast_launch:
+        monkeypatch.setenv(PUBLIC_LAUNCH_VAR, "1")
+    writer = Writer()
+    call = Launcher(writer.mix)
+    values = counting_up()
+    calls = [
+        ((writer.out, 1.5, 2, 3, values), {}),
+        ((writer.out,), {"values": values, "count": 3, "scale": 2, "value": 1.5}),
+        ((), {"target": writer.out, "value": 1.5, "scale": 2, "count": 3, "values": values}),
+        ((writer.out, 1.5), {"count": 3, "scale": 2, "values": values}),
+    ]
+    for args, kwargs in calls * 2:  # each twice: the first call of the variant, then the direct launch
+        writer.out.fill(0.0)
+        call(*args, **kwargs)
+        np.testing.assert_array_equal(writer.out.to_numpy(), 1.5 * 2 + 3.0 + np.arange(4, dtype=np.float32))
+    # Two neighbouring values of one type, swapped by name: each where its name says.
+    call(writer.out, 0.0, count=7, scale=1, values=values)
+    np.testing.assert_array_equal(writer.out.to_numpy(), 7.0 + np.arange(4, dtype=np.float32))
+    assert len(call._variants) == (1 if fast_launch else 0)
+
+
+def test_a_name_taichi_refuses_is_refused_in_taichis_words():
+    writer = Writer()
+    call = Launcher(writer.mix)
+    values = counting_up()
+    call(writer.out, 1.0, 1, 1, values)  # the variant kept: what follows would be launched directly
+    for args, kwargs in [
+        ((writer.out, 1.0, 1, 1), {"wrong": values}),  # an unknown name
+        ((writer.out, 1.0, 1, 1, values), {"value": 2.0}),  # a value twice
+        ((writer.out, 1.0), {"scale": 1, "values": values}),  # one missing
+    ]:
+        with pytest.raises(Exception) as direct:
+            call(*args, **kwargs)
+        with pytest.raises(Exception) as ordinary:
+            writer.mix(*args, **kwargs)
+        assert type(direct.value) is type(ordinary.value) and str(direct.value).strip() == str(ordinary.value).strip()
+
+
+@pytest.mark.parametrize("fast_launch", [True, False], ids=["fast", "public"])
+def test_an_observer_sees_each_launch_and_each_compile_once(monkeypatch, fast_launch):
+    # The studies count launches and time compiles through these: the same counts on either path.
+    if not fast_launch:
+        monkeypatch.setenv(PUBLIC_LAUNCH_VAR, "1")
+    writer = Writer()
+    mix, write = Launcher(writer.mix), Launcher(writer.write)
+    values = counting_up()
+    with watching(Seen()) as seen:
+        for value in (1.0, 2.0, 3.0):
+            mix(writer.out, value, 1, 1, values)  # launched from its context after the first
+            write(writer.other, False, value, 1)  # returns a value: the host waits on it
+        write(writer.other, True, 1.0, 1)  # another variant: compiled
+        writer.out[0] = 1.0  # an element written from Python, then one read
+        assert writer.out[0] == 1.0
+    assert seen.launches.count("Writer.mix") == 3 and seen.launches.count("Writer.write") == 4
+    assert seen.waits == 4
+    assert seen.compiles.count("Writer.write") == 2 and seen.compiles.count("Writer.mix") == 1
+    assert seen.accesses == [False, True]
+    assert not launch._observers and not launch._wrapped  # Taichi's classes as they were

@@ -430,7 +430,7 @@ def kernel_cache() -> tuple[bool, Path]:
     (``TI_OFFLINE_CACHE``, ``TI_OFFLINE_CACHE_FILE_PATH``; by default ~/.cache/taichi/ticache)."""
     import taichi as ti
 
-    config = ti.lang.impl.current_cfg()
+    config = ti.cfg
     return bool(config.offline_cache), Path(config.offline_cache_file_path)
 
 

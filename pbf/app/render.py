@@ -177,7 +177,7 @@ class SphereRenderer:
         self.packed = np.zeros((self.width, self.height), np.uint32)
         """The image: packed RGBA words, (W, H), y up (GGUI's canvas layout), in host memory, where GGUI
         (Taichi 1.7.4) takes it from."""
-        on_cpu = ti.lang.impl.current_cfg().arch in (ti.x64, ti.arm64)
+        on_cpu = ti.cfg.arch in (ti.x64, ti.arm64)
         self.image = self.packed if on_cpu else ti.ndarray(ti.u32, shape=(self.width, self.height))
         """What the kernels draw into: ``packed`` itself on the CPU, a device ndarray on a GPU, copied
         into ``packed`` by one kernel that writes every pixel. A NumPy array given to a kernel is copied

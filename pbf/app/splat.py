@@ -19,7 +19,7 @@ import taichi as ti
 
 def per_item() -> bool:
     """Whether the running backend splats per item (every backend but the CPU)."""
-    return ti.lang.impl.current_cfg().arch not in (ti.x64, ti.arm64)
+    return ti.cfg.arch not in (ti.x64, ti.arm64)
 
 
 @ti.data_oriented

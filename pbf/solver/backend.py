@@ -14,7 +14,7 @@ The choice is printed once, in one line that names the device and Taichi's versi
 ``[pbf] Starting on vulkan (llvmpipe (LLVM 15.0.6, 256 bits), a software Vulkan driver, requested),
 Taichi 1.7.4``. Taichi's own lines stay silent: its banner (``[Taichi] version …``, printed when
 Taichi is imported) is switched off by ``pbf/__init__.py``, and the ``[Taichi] Starting on arch=…``
-that ``ti.init`` prints is caught here (``_init``).
+that ``ti.init`` prints is caught by ``pbf.solver.launch.start_taichi``.
 
 On a GPU backend the substep keeps its decisions on the device (:func:`keeps_decisions_on_device`):
 the Jacobi iterations' stopping test, the neighbour lists' overflow; the CPU backend decides on the
@@ -24,13 +24,14 @@ host, where reading a result costs nothing and skipping a launch saves one.
 import contextlib
 import ctypes
 import ctypes.util
-import io
 import os
 import struct
 import sys
 from dataclasses import dataclass
 
 import taichi as ti
+
+from pbf.solver.launch import compile_config, current_arch, start_taichi
 
 ARCHES = ("auto", "cpu", "gpu", "cuda", "vulkan", "metal")
 GPU_ARCHES = ("cuda", "vulkan", "metal")
@@ -63,25 +64,12 @@ _decisions_on_device_on_cpu = False
 _gpu_blocks_on_cpu = False
 """Counts of launches lay the sums out in a GPU's blocks on the CPU (:func:`in_gpu_blocks`)."""
 
-TAICHI_START_LINE = "[Taichi] Starting on arch="
-"""The line ``ti.init`` prints (``taichi/lang/misc.py``, a plain ``print``) on every start."""
 SOFTWARE_VULKAN = ("llvmpipe", "lavapipe", "swiftshader")
 """Names of software Vulkan devices (Mesa's lavapipe reports "llvmpipe (LLVM …)")."""
 
 
 def taichi_version() -> str:
     return ".".join(map(str, ti.__version__))
-
-
-def _init(**options) -> None:
-    """``ti.init(**options)`` without Taichi's "Starting on" line; anything else it prints passes."""
-    printed = io.StringIO()
-    try:
-        with contextlib.redirect_stdout(printed):
-            ti.init(**options)
-    finally:
-        rest = [line for line in printed.getvalue().splitlines(keepends=True) if not line.startswith(TAICHI_START_LINE)]
-        sys.stdout.write("".join(rest))
 
 
 # ---------------------------------------------------------------------------------------------- devices
@@ -106,8 +94,8 @@ def _cuda_device() -> Device | None:
     except (OSError, AttributeError):
         pass
     try:
-        _init(arch=ti.cuda, log_level=ti.ERROR)
-        found = ti.lang.impl.current_cfg().arch == ti.cuda
+        start_taichi(arch=ti.cuda, log_level=ti.ERROR)
+        found = current_arch() == ti.cuda
     except Exception:  # Taichi raises several types when the driver is missing
         found = False
     ti.reset()
@@ -312,8 +300,8 @@ def start_backend(
         **({"kernel_profiler": True} if kernel_profiler else {}),
     )
     try:
-        _init(**_options)
-        running = ti.lang.impl.current_cfg().arch
+        start_taichi(**_options)
+        running = current_arch()
     except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
         raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
     if device.arch != "cpu" and running != getattr(ti, device.arch):
@@ -336,7 +324,7 @@ def describe(device: Device, arch_name: str | None = None) -> str:
     """The start line's device: x64 or arm64 for the CPU backend (Taichi's name for its arch, once
     started), else the device's name."""
     if device.arch == "cpu":
-        return arch_name or ti.lang.impl.current_cfg().arch.name
+        return arch_name or current_arch().name
     memory = f", {device.memory_bytes / 2**30:.1f} GiB" if device.memory_bytes else ""
     return f"{device.name}{memory}{', a software Vulkan driver' if device.software else ''}"
 
@@ -406,7 +394,7 @@ def light_compile():
     cores (it grows faster than the kernel) takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up").
     A kernel compiled so is compiled so on every start (and loaded so from the offline cache), and
     rounds its own way, deterministically."""
-    config = ti.lang.impl.current_cfg()
+    config = compile_config()
     before = config.advanced_optimization
     config.advanced_optimization = False
     try:
@@ -470,4 +458,4 @@ def restart_backend() -> None:
     """
     if _started is None:
         raise BackendError("restart_backend(): no backend has been started in this process")
-    _init(**_options)  # ti.init begins with ti.reset(), which frees the runtime
+    start_taichi(**_options)  # ti.init begins with ti.reset(), which frees the runtime

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import taichi as ti
+from pbf.solver.launch import compile_config
 
 FILE = "pbf_buckets.txt"
 """The record, in Taichi's offline cache folder."""
@@ -33,7 +33,7 @@ REUSE_LIMIT_BYTES = 64 << 20
 
 def _path() -> Path | None:
     """The record's path: None while Taichi's offline cache is off."""
-    config = ti.lang.impl.current_cfg()
+    config = compile_config()
     if not config.offline_cache:
         return None
     return Path(config.offline_cache_file_path) / FILE

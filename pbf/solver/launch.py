@@ -1,50 +1,246 @@
-"""The substep's kernel calls with less of Taichi's Python in them: on a GPU, small scenes wait on it.
+"""Taichi's internals in one module: the substep's kernel calls with less of Taichi's Python in them,
+what the studies see of Taichi's launches, and the running backend's configuration.
 
-A call of a Taichi kernel first works out, in Python, which compiled variant its arguments select
-(``Kernel.ensure_compiled``: every argument's features, the template arguments by value or by
-identity, each through a chain of type tests), then sets the arguments and launches. In Taichi 1.7.4
-the first part costs about 8 µs a call and 0.6 µs an argument on this 2-core VM, as much as the
-second (a kernel of 14 arguments: 35 µs a call, 19.5 µs launched directly; Vulkan). At 8,000
-particles a GPU substep took as much host time to issue as the device took to run it
-(docs/BENCHMARKS.md, "On a GPU"), and a substep's three calls on the device path carry 40 arguments.
+Every read of Taichi's private names (``taichi.lang``, ``taichi._lib``, a kernel's ``_primal``, its
+``compiled_kernels`` …) is here and nowhere else in the project (``tests/test_private_taichi.py``), so
+that a Taichi other than the one this was written for changes one file's behaviour, not the solver's.
 
-:class:`Launcher` calls a bound kernel the ordinary way the first time a variant is asked for (so
-the compile, Taichi's offline cache and whatever wraps ``Kernel.__call__`` see it), keeps the
-compiled kernel under the variant's template arguments (plain values by value, fields and objects by
-identity, kept alive so that no other object takes their identity), and from then on launches it
-directly. A kernel that returns nothing and takes only scalars and ndarrays besides its templates
-(the device path's three) is launched from a launch context whose arguments the Launcher sets itself,
-as ``Kernel.launch_kernel`` sets them but without the closures and the type dispatch that function
-builds a call, and with Taichi's lookup of the compiled code done once; any other goes through
-``Kernel.launch_kernel``. A call with an argument Taichi would refuse, or with another count of
-arguments, is an ordinary call, so that Taichi refuses it in its own words. The same kernel, the
-same arguments: the same launch, bit for bit (``tests/test_launch.py``).
-The host's CPU time per substep on the device path (Vulkan, 125 particles): 24% less through
-``launch_kernel`` than through Taichi's call, and 29% less again from the context (docs/BENCHMARKS.md,
-"Host time per substep").
+The gate. :func:`knows_taichi`: the running Taichi is the version this module was written for
+(``WRITTEN_FOR``, from Taichi's public ``ti.__version__``) and its internals imported. Only then does a
+:class:`Launcher` launch past Taichi's call, and only where the environment does not say
+``PBF_PUBLIC_LAUNCH=1`` (:func:`fast_launch`); on any other Taichi, or with the switch, every launch
+is Taichi's public call, ``bound(*args, **kwargs)``. Another build of Taichi with the same public API
+may lay out its internals otherwise (one did: its ``launch_kernel`` took other arguments), so the
+names existing is no test.
 
-This reads Taichi's own classes (``_BoundedDifferentiableMethod``, ``Kernel.ensure_compiled``,
-``compiled_kernels``, ``launch_kernel``, ``template_slot_locations``, and for the context the C++
-kernel's ``make_launch_context``, its ``set_arg_*`` and the program's ``compile_kernel`` and
-``launch_kernel``), which the pinned Taichi 1.7.4 has; where one is missing a Launcher calls its
-kernel the ordinary way.
+The launch. A call of a Taichi kernel first works out, in Python, which compiled variant its arguments
+select (``Kernel.ensure_compiled``: every argument's features, the template arguments by value or by
+identity, each through a chain of type tests), then sets the arguments and launches; on a GPU, a small
+scene's substep waits on the first part as long as on the device (docs/BENCHMARKS.md, "Host time per
+substep"). :class:`Launcher` calls a bound kernel the ordinary way the first time a variant is asked
+for (so the compile, Taichi's offline cache and the observers see it), keeps the compiled kernel under
+the variant's template arguments (plain values by value, fields and objects by identity, kept alive so
+that no other object takes their identity), and from then on launches it directly. A kernel that
+returns nothing and takes only scalars and ndarrays besides its templates is launched from a launch
+context whose arguments the Launcher sets itself, as ``Kernel.launch_kernel`` sets them but without
+the closures and the type dispatch that function builds a call, and with Taichi's lookup of the
+compiled code done once; any other goes through ``Kernel.launch_kernel``. A call with an argument
+Taichi would refuse, or with another count of arguments, is an ordinary call, so that Taichi refuses
+it in its own words. The same kernel, the same arguments: the same launch, bit for bit
+(``tests/test_launch.py``).
+
+What the studies see (:class:`Observer`, :func:`watching`): every kernel launch, whether the host
+waits on it, every element of a field or ndarray read or written from Python, and every call that
+compiled a new variant with its time. Taichi 1.7.4 has no public hook for these (its profiler records
+the device's tasks, not the host's calls or reads), so while an observer watches, this module wraps
+Taichi's kernel class and its fields' element access, and its Launchers report their own launches;
+the studies patch nothing. Taichi's profiler's records, task by task, are :func:`profiled_tasks`.
+
+The configuration. Taichi's public ``ti.cfg`` is the running program's configuration (None before
+``ti.init``): :func:`current_arch`, :func:`compile_config`. :func:`start_taichi` is ``ti.init``
+without the line it prints.
 """
 
 from __future__ import annotations
 
-import numpy as np
-from taichi.lang import impl
-from taichi.lang._ndarray import Ndarray
-from taichi.lang.exception import handle_exception_from_cpp
-from taichi.lang.util import cook_dtype
-from taichi.types import primitive_types
-from taichi.types.annotations import template as template_type
-from taichi.types.ndarray_type import NdarrayType
+import contextlib
+import inspect
+import io
+import os
+import sys
+import time
 
-try:  # Taichi's own test of a signed integer type, as its argument setting uses it
+import numpy as np
+import taichi as ti
+
+try:  # the internals this module reads, in the Taichi it was written for (knows_taichi)
     from taichi._lib.core.taichi_python import is_signed
-except ImportError:  # pragma: no cover - another Taichi: every variant launches through launch_kernel
-    is_signed = None
+    from taichi.lang import impl
+    from taichi.lang.exception import handle_exception_from_cpp
+    from taichi.lang.kernel_impl import Kernel
+    from taichi.lang.util import cook_dtype
+    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
+    from taichi.types import primitive_types
+    from taichi.types.annotations import template as template_type
+    from taichi.types.ndarray_type import NdarrayType
+except ImportError:  # pragma: no cover - another Taichi: its public call only
+    impl = None
+
+WRITTEN_FOR = (1, 7, 4)
+"""The Taichi version whose internals this module reads (``ti.__version__``)."""
+PUBLIC_LAUNCH_VAR = "PBF_PUBLIC_LAUNCH"
+"""An environment variable: set to anything but "" or "0", every Launcher made afterwards takes Taichi's
+public call (the tests run so in CI, to see that the two launches agree)."""
+
+
+def knows_taichi() -> bool:
+    """Whether the running Taichi is the one this module was written for, its internals imported."""
+    return impl is not None and tuple(ti.__version__) == WRITTEN_FOR
+
+
+def fast_launch() -> bool:
+    """Whether a Launcher made now launches past Taichi's call: on the Taichi this was written for,
+    unless ``PBF_PUBLIC_LAUNCH`` says otherwise."""
+    return knows_taichi() and os.environ.get(PUBLIC_LAUNCH_VAR, "") in ("", "0")
+
+
+# ------------------------------------------------------------------------------------- configuration
+
+
+def compile_config():
+    """The running program's configuration (Taichi's public ``ti.cfg``: arch, offline cache, the
+    compiler's switches), None before Taichi starts. Its fields may be set, as ``ti.init`` sets them."""
+    return ti.cfg
+
+
+def current_arch():
+    """The running backend's arch (``ti.x64``, ``ti.cuda`` …), None before Taichi starts."""
+    config = ti.cfg
+    return None if config is None else config.arch
+
+
+TAICHI_START_LINE = "[Taichi] Starting on arch="
+"""The line ``ti.init`` prints on every start, a plain ``print`` no option silences."""
+
+
+def start_taichi(**options) -> None:
+    """``ti.init(**options)`` without Taichi's "Starting on" line; anything else it prints passes."""
+    printed = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed):
+            ti.init(**options)
+    finally:
+        rest = [line for line in printed.getvalue().splitlines(keepends=True) if not line.startswith(TAICHI_START_LINE)]
+        sys.stdout.write("".join(rest))
+
+
+# ------------------------------------------------------------------------------------------ observers
+
+
+class Observer:
+    """What a study is told while it watches (:func:`watching`). Each method does nothing here; only
+    those a subclass overrides are watched for (watching compiles wraps every kernel call)."""
+
+    def launched(self, kernel: str, waits: bool) -> None:
+        """A kernel launch (``kernel``: the kernel's qualified name, Taichi's own kernels included:
+        ``to_numpy``, ``fill`` …). ``waits``: the host waits on the device for a result, as after a
+        kernel that returns a value or one given a NumPy array (copied to the device and, on a GPU
+        backend, back)."""
+
+    def accessed(self, read: bool) -> None:
+        """An element of a field or ndarray read (``read``) or written from Python (``field[None]``):
+        a read waits on the device; a write is a small launch of its own."""
+
+    def compiled(self, kernel: str, seconds: float) -> None:
+        """A kernel call that compiled a new variant: its wall time, Taichi's front end, the compile and
+        one run, the device synchronised."""
+
+
+_observers: list[Observer] = []
+_wrapped: list[tuple[type, str, object]] = []
+"""(class, attribute, Taichi's own) for each wrapper in place while observers watch."""
+_depth = 0
+"""Element accesses under way: what one does inside (a writer kernel's launch) is part of it."""
+
+
+def _overrides(observer: Observer, name: str) -> bool:
+    return getattr(type(observer), name) is not getattr(Observer, name)
+
+
+def _tell(name: str, *args) -> None:
+    for observer in list(_observers):
+        getattr(observer, name)(*args)
+
+
+def _wrap_launch(original):
+    def launch_kernel(kernel, compiled, *args):
+        waits = _depth == 0 and (kernel.return_type is not None or any(isinstance(a, np.ndarray) for a in args))
+        _tell("launched", kernel.func.__qualname__, waits)
+        return original(kernel, compiled, *args)
+
+    return launch_kernel
+
+
+def _wrap_access(original, read: bool):
+    def access(obj, *args):
+        global _depth
+        if _depth == 0:
+            _tell("accessed", read)
+        _depth += 1
+        try:
+            return original(obj, *args)
+        finally:
+            _depth -= 1
+
+    return access
+
+
+def _wrap_call(original):
+    def call(kernel, *args, **kwargs):
+        variants = len(kernel.compiled_kernels)
+        began = time.perf_counter()
+        result = original(kernel, *args, **kwargs)
+        if len(kernel.compiled_kernels) > variants:
+            ti.sync()
+            _tell("compiled", kernel.func.__qualname__, time.perf_counter() - began)
+        return result
+
+    return call
+
+
+def _rewrap() -> None:
+    """Taichi's classes wrapped for what the observers now watching want, and only for that."""
+    for cls, name, original in reversed(_wrapped):
+        setattr(cls, name, original)
+    _wrapped.clear()
+    targets = []
+    if any(_overrides(o, "launched") for o in _observers):
+        targets.append((Kernel, "launch_kernel", _wrap_launch))
+    if any(_overrides(o, "accessed") for o in _observers):
+        for cls in (ti.ScalarField, ti.MatrixField, ti.ScalarNdarray, ti.VectorNdarray, ti.MatrixNdarray):
+            targets.append((cls, "__getitem__", lambda f: _wrap_access(f, True)))
+            targets.append((cls, "__setitem__", lambda f: _wrap_access(f, False)))
+    if any(_overrides(o, "compiled") for o in _observers):
+        targets.append((Kernel, "__call__", _wrap_call))
+    for cls, name, wrap in targets:
+        original = cls.__dict__[name]
+        _wrapped.append((cls, name, original))
+        setattr(cls, name, wrap(original))
+
+
+def _require(what: str) -> None:
+    if not knows_taichi():
+        raise RuntimeError(
+            f"{what} reads Taichi {'.'.join(map(str, WRITTEN_FOR))}'s internals; "
+            f"this is Taichi {'.'.join(map(str, ti.__version__))}"
+        )
+
+
+@contextlib.contextmanager
+def watching(observer: Observer):
+    """``observer`` told of what Taichi does while inside (:class:`Observer`); observers nest. On
+    another Taichi than the one this module was written for, a RuntimeError that says so."""
+    _require("watching Taichi's launches")
+    _observers.append(observer)
+    _rewrap()
+    try:
+        yield observer
+    finally:
+        _observers.remove(observer)
+        _rewrap()
+
+
+def profiled_tasks() -> list[tuple[str, float]]:
+    """(task, milliseconds) of every offloaded task Taichi's kernel profiler recorded since it was last
+    cleared (``ti.profiler.clear_kernel_profiler_info()``), in the order they ran. Taichi's public
+    profiler prints these or sums them by name; the list itself is its own."""
+    _require("reading the kernel profiler's records")
+    profiler = get_default_kernel_profiler()
+    profiler._update_records()
+    return [(record.name, record.kernel_time) for record in profiler._traced_records]
+
+
+# ------------------------------------------------------------------------------------------- launches
 
 MOST_VARIANTS = 64
 """Variants a Launcher keeps; past them it calls the ordinary way (a template argument that never
@@ -75,7 +271,7 @@ def _argument_setters(primal) -> tuple | None:
     template, else (kind, index). None for the whole kernel when an argument is of a kind this does not
     set (a matrix, a struct, a texture...), or when the kernel returns values or prints (Taichi waits
     for the device after those): such a kernel launches through ``launch_kernel``."""
-    if is_signed is None or primal.return_type is not None or getattr(primal, "has_print", True):
+    if primal.return_type is not None or getattr(primal, "has_print", True):
         return None
     setters, place = [], 0
     for argument in primal.arguments[1:]:  # the owner, a template, is not passed at the call site
@@ -96,30 +292,28 @@ def _argument_setters(primal) -> tuple | None:
     return tuple(setters)
 
 
-def launch_from_context(program, compiled, context) -> None:
-    """The program's launch of ``compiled`` (its data for the launch) from a launch context: every direct
-    launch of a :class:`Launcher` goes through here, where ``pbf.study.common.TransferCounter`` counts it."""
-    program.launch_kernel(compiled, context)
-
-
 class Launcher:
-    """``bound`` (a kernel of a ``ti.data_oriented`` object, as ``obj.kernel`` gives it) called with
-    positional arguments, its compiled variants launched directly after their first call (the module
-    docstring). Keyword arguments are not taken: the call sites pass every argument in order."""
+    """``bound`` (a kernel of a ``ti.data_oriented`` object, as ``obj.kernel`` gives it) called with its
+    arguments by position or by name, as Taichi's call takes them; its compiled variants launched
+    directly after their first call where :func:`fast_launch` allows (the module docstring), else
+    Taichi's public call every time. Whatever else it is given is called as it is."""
 
     def __init__(self, bound):
         self._bound = bound
-        primal = getattr(bound, "_primal", None)
+        primal = getattr(bound, "_primal", None) if fast_launch() else None
         owner = getattr(bound, "_kernel_owner", None)
-        needed = ("ensure_compiled", "compiled_kernels", "launch_kernel", "template_slot_locations", "arguments")
         direct = (
             primal is not None
             and owner is not None
             and not getattr(bound, "_is_staticmethod", True)
-            and all(hasattr(primal, name) for name in needed)
+            and isinstance(primal, Kernel)
         )
         self._primal = primal if direct else None
+        """Taichi's kernel, None where every call is Taichi's public one."""
         self._owner = owner
+        self._name = primal.func.__qualname__ if direct else ""
+        # The parameters the call site passes, by name in order (the owner, ``self``, is not one).
+        self._names = tuple(inspect.signature(primal.func).parameters)[1:] if direct else ()
         # The template arguments' places among those the call site passes (Taichi's count the owner first).
         self._templates = tuple(i - 1 for i in primal.template_slot_locations if i > 0) if direct else ()
         # Ndarray arguments select a variant by element type and dimensions (Taichi's features of them).
@@ -139,13 +333,23 @@ class Launcher:
         """key → (the compiled kernel, the template arguments it was compiled for, kept alive, and the
         compiled kernel's data for the program's launch, or None where ``launch_kernel`` launches it)."""
 
-    def __call__(self, *args, **kwargs):
-        if kwargs:  # by name: put in the kernel's order
-            import inspect
+    def _in_order(self, args: tuple, kwargs: dict) -> tuple | None:
+        """The arguments by position, those given by name put at their parameter's place; None where
+        they do not fill the parameters once each (Taichi's call then says what is wrong)."""
+        rest = self._names[len(args) :]
+        if len(args) > len(self._names) or set(kwargs) != set(rest):
+            return None
+        return args + tuple(kwargs[name] for name in rest)
 
-            names = tuple(inspect.signature(self._bound._primal.func).parameters)[1:]
-            args = args + tuple(kwargs[name] for name in names[len(args) :])
-        if self._primal is None or len(args) != self._count:  # another count: Taichi's call says so
+    def __call__(self, *args, **kwargs):
+        if self._primal is None:
+            return self._bound(*args, **kwargs)
+        if kwargs:
+            in_order = self._in_order(args, kwargs)
+            if in_order is None:
+                return self._bound(*args, **kwargs)
+            args = in_order
+        if len(args) != self._count:  # another count: Taichi's call says so
             return self._bound(*args)
         key = tuple(_variant(args[i]) for i in self._templates)
         if self._arrays:
@@ -166,8 +370,10 @@ class Launcher:
             context = self._context(entry[0], args)
             if context is None:  # an argument Taichi refuses (its call says how) or one this does not set
                 return self._bound(*args)
+            if _observers:  # Taichi's launch_kernel, which observers see, is not on this path
+                _tell("launched", self._name, False)
             try:
-                launch_from_context(impl.get_runtime().prog, entry[2], context)
+                impl.get_runtime().prog.launch_kernel(entry[2], context)
             except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
                 raise handle_exception_from_cpp(error) from None
             return None
@@ -187,7 +393,7 @@ class Launcher:
                     return None
                 context.set_arg_float(index, float(value))
             elif kind == "ndarray":
-                if not isinstance(value, Ndarray) or value.grad is not None:
+                if not isinstance(value, ti.Ndarray) or value.grad is not None:
                     return None
                 context.set_arg_ndarray(index, value.arr)
             else:

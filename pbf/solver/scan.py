@@ -30,7 +30,6 @@ the compiler cannot see (``_opaque``), which costs two bit casts and keeps the a
 import math
 
 import taichi as ti
-from taichi.lang.field import ScalarField
 
 from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 
@@ -116,11 +115,11 @@ def read_count(count: ti.template(), gate: ti.template()):
     """A count given as a 0-D field, a Python int or a value, read where it is used (inside a loop), times
     the 0-D field ``gate`` (0 or 1) if one is given."""
     value = 0
-    if ti.static(isinstance(count, ScalarField)):
+    if ti.static(isinstance(count, ti.ScalarField)):
         value = count[None]
     else:
         value = count
-    if ti.static(isinstance(gate, ScalarField)):
+    if ti.static(isinstance(gate, ti.ScalarField)):
         value *= gate[None]
     return value
 

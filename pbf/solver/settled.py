@@ -31,9 +31,9 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-import taichi as ti
 
 from pbf.solver import backend
+from pbf.solver.launch import compile_config
 from pbf.solver.state import Snapshot
 
 FOLDER = "pbf_settled"
@@ -79,7 +79,7 @@ def settled_key(scene) -> str:
 
 def _folder() -> Path | None:
     """Where settled starts are kept: None while Taichi's offline cache is off."""
-    config = ti.lang.impl.current_cfg()
+    config = compile_config()
     if not config.offline_cache:
         return None
     return Path(config.offline_cache_file_path) / FOLDER

@@ -14,6 +14,7 @@ import taichi as ti
 
 from pbf.scene import Scene, load_scene
 from pbf.solver import STAGES, Simulation
+from pbf.solver.launch import Observer, watching
 from pbf.solver.sph import kernel_np
 
 
@@ -49,7 +50,7 @@ def timed(function, *args):
     return time.perf_counter() - start
 
 
-class TransferCounter:
+class TransferCounter(Observer):
     """Counts Taichi's kernel launches and device-to-host reads while active (a context manager).
 
     A device-to-host read is anything that makes the host wait for a result from the device:
@@ -59,71 +60,30 @@ class TransferCounter:
     - reading an element of a field or ndarray from Python (``field[None]``, ``field[i]``).
     A launch is every call of a ``@ti.kernel``, Taichi's own (``to_numpy``, ``fill``...) included;
     writing an element from Python (``field[None] = v``) launches a small writer kernel and is counted
-    with the launches, not with the reads. ``ti.sync()`` is neither. Counted by wrapping Taichi's
-    ``Kernel.launch_kernel`` and its classes' ``__getitem__``/``__setitem__`` (Taichi 1.7.4, pinned), and
-    ``pbf.solver.launch.launch_from_context``, through which a ``Launcher`` launches its kernels past
-    Taichi's call (kernels that return nothing, so launches only)."""
+    with the launches, not with the reads. ``ti.sync()`` is neither. What Taichi does is seen through
+    ``pbf.solver.launch.watching``, the one place that reads Taichi's internals."""
 
     def __init__(self):
         self.launches = 0
         self.reads = 0
-        self._saved = []
-        self._depth = 0
+        self._watching = None
+
+    def launched(self, kernel: str, waits: bool) -> None:
+        self.launches += 1
+        self.reads += waits
+
+    def accessed(self, read: bool) -> None:
+        self.launches += 1
+        self.reads += read
 
     def __enter__(self):
-        from taichi.lang import kernel_impl
-        from taichi.lang._ndarray import ScalarNdarray
-        from taichi.lang.field import ScalarField
-        from taichi.lang.matrix import MatrixField, MatrixNdarray, VectorNdarray
-
-        from pbf.solver import launch as launcher_module
-
-        counter = self
-
-        def launch(original):
-            def wrapped(kernel, t_kernel, *args):
-                counter.launches += 1
-                if counter._depth == 0 and (
-                    kernel.return_type is not None or any(isinstance(a, np.ndarray) for a in args)
-                ):
-                    counter.reads += 1
-                return original(kernel, t_kernel, *args)
-
-            return wrapped
-
-        def access(original, is_read):
-            def wrapped(obj, *args):
-                if counter._depth == 0:
-                    counter.reads += is_read
-                    counter.launches += 1
-                counter._depth += 1
-                try:
-                    return original(obj, *args)
-                finally:
-                    counter._depth -= 1
-
-            return wrapped
-
-        def direct(original):
-            def wrapped(*args):
-                counter.launches += 1
-                return original(*args)
-
-            return wrapped
-
-        targets = [(kernel_impl.Kernel, "launch_kernel", launch), (launcher_module, "launch_from_context", direct)]
-        for cls in (ScalarField, MatrixField, ScalarNdarray, VectorNdarray, MatrixNdarray):
-            targets += [(cls, "__getitem__", lambda f: access(f, 1)), (cls, "__setitem__", lambda f: access(f, 0))]
-        for cls, name, wrap in targets:
-            original = cls.__dict__[name]
-            self._saved.append((cls, name, original))
-            setattr(cls, name, wrap(original))
+        self._watching = watching(self)
+        self._watching.__enter__()
         return self
 
     def __exit__(self, *exc):
-        for cls, name, original in reversed(self._saved):
-            setattr(cls, name, original)
-        self._saved.clear()
+        self._watching.__exit__(*exc)
+        self._watching = None
         return False
 
 

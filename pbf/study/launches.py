@@ -47,8 +47,8 @@ def count_substeps(sim, substeps: int, dt: float | None = None) -> SubstepCounts
     """Run ``substeps`` substeps of ``sim`` and count what they launched. Taichi must have been started
     with its kernel profiler (``start_backend(kernel_profiler=True)``)."""
     import taichi as ti
-    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
 
+    from pbf.solver.launch import profiled_tasks
     from pbf.study.common import TransferCounter
 
     ti.sync()
@@ -57,9 +57,7 @@ def count_substeps(sim, substeps: int, dt: float | None = None) -> SubstepCounts
         for _ in range(substeps):
             sim.substep(dt)
     ti.sync()
-    profiler = get_default_kernel_profiler()
-    profiler._update_records()  # the records of every task since the clear (Taichi 1.7.4, pinned)
-    tasks = [record.name for record in profiler._traced_records]
+    tasks = [task for task, _ in profiled_tasks()]  # every task since the clear
     serial = [task for task in tasks if task.endswith("_serial")]
     iteration = [task for task in tasks if kernel_of(task) in ITERATION_KERNELS]
     by_kernel = Counter(kernel_of(task) for task in tasks)

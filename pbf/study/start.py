@@ -105,27 +105,19 @@ def first_calls_here(preset: str, arch: str | None) -> None:
     on kernels already compiled) and stepped one substep, each kernel's first call per compiled
     variant timed in wall seconds; prints the total and the FIRST_CALLS_SHOWN longest."""
     import taichi as ti
-    import taichi.lang.kernel_impl as kernel_impl  # Taichi's own class: a call that adds a variant compiles it
 
     from pbf.scene import load_scene
     from pbf.solver import Simulation, start_backend
+    from pbf.solver.launch import Observer, watching
 
     start_backend(arch or "cpu", quiet=True)
     seconds: dict[str, float] = {}
-    call = kernel_impl.Kernel.__call__
 
-    def timed(kernel, *args, **kwargs):
-        variants = len(kernel.compiled_kernels)
-        began = time.perf_counter()
-        result = call(kernel, *args, **kwargs)
-        if len(kernel.compiled_kernels) > variants:
-            ti.sync()
-            name = kernel.func.__qualname__
-            seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - began
-        return result
+    class FirstCalls(Observer):
+        def compiled(self, kernel: str, spent: float) -> None:
+            seconds[kernel] = seconds.get(kernel, 0.0) + spent
 
-    kernel_impl.Kernel.__call__ = timed
-    try:
+    with watching(FirstCalls()):
         scene = load_scene(preset)
         off = ["time.settle_s=0", "time.settle_substeps=0"] if scene.time.settle_s > 0 else []
         began = time.perf_counter()
@@ -133,8 +125,6 @@ def first_calls_here(preset: str, arch: str | None) -> None:
         sim.substep()
         ti.sync()
         total = time.perf_counter() - began
-    finally:
-        kernel_impl.Kernel.__call__ = call
     firsts, kernels = sum(seconds.values()), len(seconds)
     print(
         f"{preset}: built and one substep in {total:.2f} s, {firsts:.2f} s of it the first calls of {kernels} kernels"
