@@ -35,7 +35,9 @@ NOT_FILES = {
 
 DOTTED = re.compile(r"(?<![\w./-])(python -m )?(pbf(?:\.[A-Za-z_]\w*)+)")
 PATH = re.compile(r"(?<![\w./~$<>:-])((?:" + "|".join(re.escape(r) for r in ROOTS) + r")/[\w./*<>-]*[\w*/])(::\w+)?")
-LINK = re.compile(r"\]\(([^)\s#]+)(?:#[^)]*)?\)")
+LINK = re.compile(r"\]\(([^)\s#]+)(?:#([^)]*))?\)")
+SECTION = re.compile(r"([\w/]*\b[A-Z][A-Z_]+\.md)`?\)?,? \"([^\"]+)\"")
+"""A section named after its document: ``docs/BENCHMARKS.md, "On a GPU"`` (a heading that starts so)."""
 NAMED = re.compile(r"(?<![\w./:-])([A-Z][A-Z_]+\.md|LICENSE|run\.py|pyproject\.toml)(?![\w/-])")
 """A document or top-level file named alone: ``METHOD.md`` beside docs/METHOD.md, ``run.py``."""
 
@@ -111,6 +113,25 @@ def path_stale(text: str, base: Path) -> str | None:
     return None if target.exists() else "no such file or folder"
 
 
+def headings(path: Path) -> list[str]:
+    return [line.lstrip("#").strip() for _, line in lines(path) if re.match(r"#{1,4} ", line)]
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
+
+
+def section_stale(document: Path, section: str | None, anchor: str | None) -> str | None:
+    if not document.is_file() or document.suffix != ".md":
+        return None  # the path itself is checked apart
+    if section is not None and not any(h.startswith(section) for h in headings(document)):
+        return f"{document.name} has no section {section!r}"
+    if anchor is not None and anchor not in {slug(h) for h in headings(document)}:
+        return f"{document.name} has no heading #{anchor}"
+    return None
+
+
 def references(path: Path, folder: Path | None = None):
     """(line, what, why stale) for each stale reference of ``path``, whose links are relative to
     ``folder`` (its own by default)."""
@@ -135,9 +156,15 @@ def references(path: Path, folder: Path | None = None):
             target = match.group(1)
             if re.match(r"[a-z]+:", target):
                 continue  # a URL
-            why = path_stale(target, folder)
+            why = path_stale(target, folder) or section_stale((folder / target).resolve(), None, match.group(2))
             if why:
-                yield number, f"link ({target})", why
+                yield number, f"link ({target}{'#' + match.group(2) if match.group(2) else ''})", why
+        for match in SECTION.finditer(line):
+            name, section = match.groups()
+            document = next((d for d in (folder / name, ROOT / name, ROOT / "docs" / name) if d.is_file()), None)
+            why = section_stale(document, section, None) if document else None
+            if why:
+                yield number, f'{name}, "{section}"', why
         for match in NAMED.finditer(line):
             name = match.group(1)
             if not (folder / name).exists() and not (ROOT / name).exists():
@@ -194,6 +221,7 @@ def test_a_stale_path_and_a_missing_test_are_found(tmp_path):
     fake.write_text(
         "`benchmarks/no_such.py`, `tests/test_readme.py::test_nothing_here`, [x](nowhere.md), in NOWHERE.md\n"
         "as METHOD.md says, and README.md, `pbf/solver/grid.py`, [y](BENCHMARKS.md#bodies): all there\n"
+        '(docs/BENCHMARKS.md, "On a GPU"), (`docs/METHOD.md`, "No such part"), [z](METHOD.md#no-such-part)\n'
     )
     found = [(what, why) for _, what, why in references(fake, ROOT / "docs")]
     assert [what for what, _ in found] == [
@@ -201,6 +229,8 @@ def test_a_stale_path_and_a_missing_test_are_found(tmp_path):
         "tests/test_readme.py::test_nothing_here",
         "link (nowhere.md)",
         "NOWHERE.md",
+        "link (METHOD.md#no-such-part)",
+        'docs/METHOD.md, "No such part"',
     ]
 
 
