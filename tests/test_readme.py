@@ -49,3 +49,13 @@ def test_the_presets_table_is_the_presets(capsys):
         name, particles, description = re.fullmatch(r"(\w+)\s+(.+?) particles  (.+)", line).groups()
         listed[name] = (particles, description)
     assert presets_table() == listed
+
+
+def test_the_readme_is_a_front_door():
+    """Short, and usage before measurements: no benchmark figure ahead of the first usage section
+    (the figures live in docs/BENCHMARKS.md, each with its command)."""
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 220
+    before_usage = text[: text.index("## Three ways to use it")]
+    figures = re.findall(r"\d[\d,.]*\s?(?:ms|µs|fps|frames a second)\b|H200|H100", before_usage)
+    assert not figures, f"benchmark figures before the usage sections: {figures}"
