@@ -275,7 +275,7 @@ def test_bench_start_first_calls_names_the_kernels_a_cold_start_compiles(capsys)
     names = [row[2] for row in rows]
     assert len(rows) == start.FIRST_CALLS_SHOWN and all(t > 0 for t in seconds), lines
     assert seconds == sorted(seconds, reverse=True), lines
-    assert "DensityConstraint.iterate" in names and "SubstepLaunches._predict_and_visit" in names, lines
+    assert "SubstepKernels._find_neighbours_kernel" in names and "SubstepKernels._iterations_kernel" in names, lines
 
 
 def test_traffic_model_counts_a_lattice():

@@ -67,11 +67,11 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     sim = Simulation(small_dam_break())
     sim.step(20)  # mid-splash: the iterations move particles
     x_star, kernels, control = sim.integrator.predicted, sim.kernels, sim.control
-    control.target_density_error = 0.0
+    control.target_density_error, control.iterations = 0.0, 3
     features = Features.of(sim.model, control)
     kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features)  # a substep's lines 1-7
     for start in range(3):  # three iterations, an iteration a call: x* ends in the second buffer
-        kernels._iterate(kernels.grid.neighbours, features, start, 3, 0.0, 1, 1)
+        kernels._call(features, control, start, finish=False)
     newer, older = x_star.second.to_numpy(), x_star.first.to_numpy()
     pressure_newer, pressure_older = sim.density.lam_total.to_numpy(), sim.density.lam_before.to_numpy()
     assert np.abs(newer - older).max() > 1e-4

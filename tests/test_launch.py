@@ -140,7 +140,7 @@ def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_devic
     # with every Launcher calling its kernel the ordinary way. One set of kernels, not two.
     with decisions_on_device(on_device):
         sim = Simulation(small_dam_break(), quiet=True)
-    assert len(launchers(sim)) == 3
+    assert len(launchers(sim)) == 2
     start = sim.positions()
     sim.step(10)
     assert sum(len(launcher._variants) for launcher in launchers(sim)) >= 3  # launched directly

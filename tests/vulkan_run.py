@@ -115,6 +115,7 @@ def scan_task(out: dict) -> None:
 def grid_task(out: dict) -> None:
     import taichi as ti
 
+    from pbf.solver.backend import on_gpu
     from pbf.solver.grid import NeighbourGrid
     from pbf.solver.model import NEIGHBOUR_REACH, GridParams
 
@@ -122,7 +123,11 @@ def grid_task(out: dict) -> None:
     n = len(points)
     active = ti.field(ti.i32, shape=())
     active[None] = n
-    grid = NeighbourGrid(GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, NEIGHBOUR_REACH), active)
+    # The solver's choices for this backend: a GPU's slot-major lists and loops over the bucket.
+    gpu = on_gpu()
+    grid = NeighbourGrid(
+        GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, NEIGHBOUR_REACH), active, gpu, n if gpu else active
+    )
     x = ti.Vector.field(3, ti.f32, shape=n)
     key = ti.field(ti.i32, shape=n)
     x.from_numpy(points.astype(np.float32))
@@ -131,8 +136,11 @@ def grid_task(out: dict) -> None:
     order = grid.sorted_from.to_numpy()
     x.from_numpy(points[order].astype(np.float32))
     out["grid_order"] = order
-    for checked in (True, False):
-        grid.build_neighbours(x, checked=checked)
+    for checked in (True, False):  # exact (read and grown), and as a substep builds them
+        if checked:
+            grid.build_neighbours(x)
+        else:
+            grid.build(x)
         lists = grid.neighbour_lists()
         name = f"grid_{'checked' if checked else 'unchecked'}"
         out[name + "_counts"] = np.array([len(entries) for entries in lists])

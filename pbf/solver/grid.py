@@ -367,11 +367,21 @@ class NeighbourGrid:
             self.clear_for_visit(i)
         self.find_neighbours(x, x, neighbours, False)
 
-    def build_neighbours(self, x) -> None:
-        """Exact neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell
-        (:meth:`sort`), as the substep builds them: for the grid's tests and tools. The host learns how
-        full the compact list got from :meth:`take_status` (once a frame in the solver)."""
+    def build(self, x) -> None:
+        """Neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell (:meth:`sort`),
+        as the substep builds them, reading nothing: exact unless the compact list outgrew its array,
+        which :meth:`take_status` then says (once a frame in the solver)."""
         self._build(x, self.neighbours)
+
+    def build_neighbours(self, x) -> None:
+        """:meth:`build`, made again in a longer array if the compact list did not fit: exact lists, for
+        the grid's tests and tools (one read)."""
+        self.build(x)
+        most_entries, truncated = (int(v) for v in self.status.to_numpy())
+        if truncated:
+            self.settle_frame(most_entries, False)
+            self.build(x)
+        self.status.fill(0)
 
     @ti.func
     def take_status(self):

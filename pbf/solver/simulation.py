@@ -439,7 +439,7 @@ class Simulation:
         if truncated:
             self.grid.settle_frame(most_entries, False)
             self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
-        self.grid.status.fill(0)
+        self.grid.status.fill(0)  # the frames' record starts here
 
     @property
     def iterations_used(self) -> int:

@@ -6,13 +6,13 @@ of its own, composed into few calls, the same on every backend.
   exact neighbour lists (``pbf.solver.grid``), our divergence pre-correction and x* predicted again
   (``pbf.solver.divergence``), and the constraint's constants of the substep at x* (the denominators
   of λ, Eq. 10: ``DensityConstraint.prepare``);
-* :meth:`SubstepKernels.iterate`, lines 8-19: ``per_call`` Jacobi iterations
-  (``pbf.solver.iterations``, ``pbf.solver.density``), as many calls as the iterations need;
-* :meth:`SubstepKernels.iterate_and_finish`: the last call's iterations, x* settled into the first
-  buffer, then lines 20-23 (``pbf.solver.postprocess``).
+* :meth:`SubstepKernels.iterate`, lines 8-19: ``per_call`` Jacobi iterations a call
+  (``pbf.solver.iterations``, ``pbf.solver.density``), as many calls as the iterations need but the last;
+* :meth:`SubstepKernels.iterate_and_finish`: the same kernel with the end compiled in, the last call's
+  iterations, x* settled into the first buffer, then lines 20-23 (``pbf.solver.postprocess``).
 
-On a GPU every kernel call costs the host tens of microseconds, so at 8,000 particles the calls, not
-the work, set the cost of a substep: with two iterations a call a substep of 4 iterations is 3 calls.
+On a GPU every kernel call costs the host time, and small scenes wait on it: with two iterations a
+call a substep of 4 iterations is 3 calls (docs/BENCHMARKS.md, "Launches per substep").
 """
 
 import taichi as ti
@@ -36,8 +36,7 @@ class SubstepKernels:
         self.postprocess = postprocess
         # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
-        self._iterate = Launcher(self._iterate_kernel)
-        self._iterate_and_finish = Launcher(self._iterate_and_finish_kernel)
+        self._iterations = Launcher(self._iterations_kernel)
 
     def find_neighbours(self, dt: float, gravity, features) -> None:
         """Lines 1-7 and what the iterations need before they start (the module docstring), one call.
@@ -49,19 +48,9 @@ class SubstepKernels:
     def iterate(self, features, control) -> int:
         """Every call of the substep's iterations but the last; returns the first iteration of the last
         call, which :meth:`iterate_and_finish` runs."""
-
-        def launch(start: int) -> None:
-            self._iterate(
-                entries=self.grid.neighbours,
-                features=features,
-                start=start,
-                iterations=control.iterations,
-                target=control.target_density_error,
-                min_iterations=control.min_iterations,
-                step_back=int(control.step_back),
-            )
-
-        return self.iterations.calls(control.iterations, features.measure, launch)
+        return self.iterations.calls(
+            control.iterations, features.measure, lambda start: self._call(features, control, start, finish=False)
+        )
 
     def iterate_and_finish(
         self,
@@ -77,9 +66,15 @@ class SubstepKernels:
         at ε = control.vorticity, XSPH at c = control.xsph, v capped at ``max_speed`` (0: not), x = x*,
         and the pressure at ``pressure_per_impulse`` Pa per unit of the multipliers (``State.pressure_sum``
         starts again at the ``first_of_frame`` substep)."""
-        self._iterate_and_finish(
+        self._call(features, control, start, True, dt, pressure_per_impulse, first_of_frame, max_speed)
+
+    def _call(
+        self, features, control, start, finish, dt=0.0, pressure_per_impulse=0.0, first_of_frame=False, max_speed=0.0
+    ):
+        self._iterations(
             entries=self.grid.neighbours,
             features=features,
+            finish=finish,
             start=start,
             iterations=control.iterations,
             target=control.target_density_error,
@@ -118,34 +113,11 @@ class SubstepKernels:
                 self.density.prepare(x_star, i, entries)
 
     @ti.kernel
-    def _iterate_kernel(
+    def _iterations_kernel(
         self,
         entries: NeighbourList,
         features: ti.template(),
-        start: ti.i32,
-        iterations: ti.i32,
-        target: ti.f32,
-        min_iterations: ti.i32,
-        step_back: ti.i32,
-    ):
-        x = self.integrator.predicted
-        run = ti.static(
-            named(
-                measure=features.measure,
-                start=start,
-                iterations=iterations,
-                target=target,
-                min_iterations=min_iterations,
-                step_back=step_back,
-            )
-        )
-        self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
-
-    @ti.kernel
-    def _iterate_and_finish_kernel(
-        self,
-        entries: NeighbourList,
-        features: ti.template(),
+        finish: ti.template(),
         start: ti.i32,
         iterations: ti.i32,
         target: ti.f32,
@@ -177,6 +149,7 @@ class SubstepKernels:
                 max_speed=max_speed,
             )
         )
-        self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19, the last call's
-        self.iterations.settle(x.first, x.second, run)  # x* back in the first buffer
-        self.postprocess.finish(x.first, entries, self.density.lam_total, run)  # lines 20-23
+        self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
+        if ti.static(finish):  # the substep's last call:
+            self.iterations.settle(x.first, x.second, run)  # x* back in the first buffer,
+            self.postprocess.finish(x.first, entries, self.density.lam_total, run)  # lines 20-23
