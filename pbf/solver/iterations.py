@@ -117,7 +117,7 @@ class JacobiIterations:
                     density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
             if ti.static(run.measure):
                 # The run's values as they are (a tuple of the kernel's arguments), read where they are used.
-                context = (run.start + u, run.iterations, run.target, run.min_iterations, run.step_back)
+                context = ti.static((run.start + u, run.iterations, run.target, run.min_iterations, run.step_back))
                 density.error_sum.sum_then(density.error, 0, self.active, self, context)
 
     @ti.func

@@ -5,8 +5,8 @@
 A Python kernel call is one call of a ``@ti.kernel`` (Taichi's own ``fill`` and copies included).
 Taichi splits each kernel into offloaded tasks: every top-level loop is one, and every run of
 statements outside loops is one more, a one-thread ``serial`` task. On a GPU each task is a launch
-of its own (a few microseconds each, however little it does), so at 8,000 particles the count, not
-the work, sets the cost of a substep. Taichi's kernel profiler lists every task it ran, on the CPU
+of its own, however little it does, so at 8,000 particles the count, not the work, sets the cost of
+a substep. Taichi's kernel profiler lists every task it ran, on the CPU
 backend as on CUDA, so the counts measured here are the GPU's.
 
 The tasks are split by where they run: inside the Jacobi iterations (Algorithm 1, lines 8-19: they
@@ -18,11 +18,10 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 
-ITERATION_KERNELS = ("iterate", "_iterate")
-"""Kernels whose tasks repeat with the iteration count (``DensityConstraint.iterate`` on the host's
-decisions, ``JacobiIterations._iterate`` on the device's). On the device's, the substep's last call of
-iterations runs in the kernel that ends the substep (``SubstepLaunches.finish``), whose tasks are not
-counted here: the column undercounts that path's iterations by that call's."""
+ITERATION_KERNELS = ("_iterations_kernel",)
+"""The kernel whose tasks repeat with the iteration count (``SubstepKernels.iterate``); its last call
+of a substep also holds lines 20-23 (``SubstepKernels.iterate_and_finish``), whose few tasks the
+column counts too."""
 
 
 @dataclass(frozen=True)
