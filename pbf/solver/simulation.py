@@ -500,15 +500,7 @@ class Simulation:
         """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
         most frame_dt_s."""
         control, hook, kernels = self.control, self.hook, self.kernels
-        if dt is not None:
-            frame_dt = self.scene.time.frame_dt_s
-            if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
-                raise TypeError(f"substep: dt: expected a number of seconds, got {_show(dt)}")
-            if not 0.0 < dt <= frame_dt:
-                raise ValueError(
-                    f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), got {_show(dt)}"
-                )
-        dt = dt or self.scene.time.frame_dt_s / control.substeps
+        dt = self._checked_dt(dt)
         features = Features.of(self.model, control)  # what the kernels compile in
         self._outside_inputs(dt)  # emitters, the mouse, the bodies, moving walls
         with hook.stage("predict, sort by cell, neighbour lists"):
@@ -530,6 +522,17 @@ class Simulation:
         self.pressure_substeps += 1
         self.time_s += dt
         self.last_dt_s = dt
+
+    def _checked_dt(self, dt) -> float:
+        """A substep's Δt: ``dt`` checked, or frame_dt_s / control.substeps for None."""
+        frame_dt = self.scene.time.frame_dt_s
+        if dt is None:
+            return frame_dt / self.control.substeps
+        if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
+            raise TypeError(f"substep: dt: expected a number of seconds, got {_show(dt)}")
+        if not 0.0 < dt <= frame_dt:
+            raise ValueError(f"substep: dt: expected a value in (0, {frame_dt:g}] s (time.frame_dt_s), got {_show(dt)}")
+        return float(dt)
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``scene.time.frame_dt_s`` each (substeps_needed() substeps per frame)."""
