@@ -56,23 +56,24 @@ def grid_neighbours(points, lower, upper, h, reach=1, checked=True, slot_major=F
 SIGNATURE_MODULUS = 1_000_003
 
 
+@ti.func
+def _sign(i, j, acc: ti.template()):
+    acc[0] += 1
+    acc[1] = (acc[1] + acc[0] * (j + 1)) % SIGNATURE_MODULUS
+
+
 @ti.kernel
 def _walk(grid: ti.template(), neighbours: ti.types.ndarray(dtype=ti.i32, ndim=1), signature: ti.template()):
     for i in range(grid.active[None]):
-        first, last, stride = grid.listed(i, neighbours)
-        upcoming = grid.upcoming(neighbours, first, last)
-        total = 0
-        for k in range(first, last):
-            j = grid.neighbour(neighbours, k, upcoming)
-            upcoming = grid.read_ahead(neighbours, first, last, stride, k, upcoming)
-            total = (total + (k - first + 1) * (j + 1)) % SIGNATURE_MODULUS
-        signature[i] = total
+        acc = ti.Vector([0, 0])  # (entries met, signature)
+        grid.for_each_neighbour(i, neighbours, _sign, acc)
+        signature[i] = acc[1]
 
 
 def check_walk(grid, lists):
-    """The solver's walk of a list (``listed``, ``upcoming``, ``neighbour``, ``read_ahead``: one entry ahead
-    on a GPU) meets every entry of ``neighbour_lists`` in its order: a signature Σ (k + 1)(j + 1) per particle
-    (modulo a prime, so that a pile's long lists stay inside int32)."""
+    """The solver's walk of a list (``for_each_neighbour``: one entry ahead on a GPU) meets every entry of
+    ``neighbour_lists`` in its order: a signature Σ (k + 1)(j + 1) per particle (modulo a prime, so that a
+    pile's long lists stay inside int32)."""
     signature = ti.field(ti.i32, shape=max(len(lists), 1))
     _walk(grid, grid.neighbours, signature)
     expected = [int(((np.arange(len(l)) + 1) * (l.astype(np.int64) + 1)).sum() % SIGNATURE_MODULUS) for l in lists]

@@ -225,59 +225,38 @@ class NeighbourGrid:
     def listed(self, i, neighbours: ti.template()):
         """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride). Slot-major
         (:attr:`slot_major`, a stride of the list's length over SLOTS) after a one-visit build; entries
-        in a row after an overflow's compact build and on the CPU. Walked by :meth:`for_each_neighbour`."""
+        in a row after an overflow's compact build and on the CPU."""
         first = self.neighbour_start[i]
-        stride = 1
-        if ti.static(self.slot_major):
-            stride = ti.select(self.overflow[None] > 0, 1, neighbours.shape[0] // SLOTS)
+        slot_stride = neighbours.shape[0] // SLOTS if ti.static(self.slot_major) else 1
+        stride = ti.select(self.overflow[None] > 0, 1, slot_stride)
         return first, first + self.neighbour_listed[i], stride
-
-    @ti.func
-    def upcoming(self, neighbours: ti.template(), first, last):
-        """Before a walk of :meth:`listed`'s range on a GPU, its first entry (:meth:`read_ahead`); nothing on
-        the CPU."""
-        index = 0
-        if ti.static(self.slot_major):
-            if first < last:
-                index = neighbours[first]
-        return index
-
-    @ti.func
-    def neighbour(self, neighbours: ti.template(), k, upcoming):
-        """The k-th entry of a range of :meth:`listed`: on the CPU ``neighbours[k]`` itself, the loop the
-        compiler knows best (an index worked out from a stride made the CPU's walk slower); on a GPU
-        ``upcoming``, read at the step before (:meth:`read_ahead`)."""
-        j = upcoming
-        if ti.static(not self.slot_major):
-            j = neighbours[k]
-        return j
-
-    @ti.func
-    def read_ahead(self, neighbours: ti.template(), first, last, stride, k, upcoming):
-        """On a GPU the entry after the k-th, asked for before the thread gathers and uses x_j of the k-th,
-        so that its load is in flight meanwhile: a walk is two dependent loads a neighbour (the index,
-        then what it points at), and the passes wait on that latency more than on bandwidth at a
-        million particles. The order of every sum stays the same. On the CPU, whose cores read ahead
-        themselves, ``upcoming`` as it is (unused)."""
-        following = upcoming
-        if ti.static(self.slot_major):
-            if k + 1 < last:
-                following = neighbours[first + (k + 1 - first) * stride]
-        return following
 
     @ti.func
     def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
         """``task(i, j, acc)`` for every neighbour j of sorted particle i in the lists ``entries`` (the
         ndarray :attr:`neighbours`, passed to the kernel as a ``NeighbourList``), in the list's order;
         ``acc`` is the caller's accumulator (a Taichi vector, or :func:`named` values of the particle and
-        its sums), passed by reference. The one walk of the lists: every pass of the solver
-        and the renderers' neighbour sums go through it."""
+        its sums), passed by reference. The one walk of the lists: every pass of the solver and the
+        renderers' neighbour sums go through it.
+
+        On a GPU the walk asks for the entry after the k-th before the task gathers x_j of the k-th, so
+        that its load is in flight meanwhile: a neighbour is two dependent loads (the index, then what
+        it points at), and the passes wait on that latency more than on bandwidth at a million
+        particles. On the CPU, whose cores read ahead themselves, ``entries[k]`` itself: the loop the
+        compiler knows best. The order of every sum is the same."""
         first, last, stride = self.listed(i, entries)
-        upcoming = self.upcoming(entries, first, last)
-        for k in range(first, last):
-            j = self.neighbour(entries, k, upcoming)
-            upcoming = self.read_ahead(entries, first, last, stride, k, upcoming)
-            task(i, j, acc)
+        if ti.static(self.slot_major):
+            upcoming = 0
+            if first < last:
+                upcoming = entries[first]
+            for k in range(first, last):
+                j = upcoming
+                if k + 1 < last:
+                    upcoming = entries[first + (k + 1 - first) * stride]
+                task(i, j, acc)
+        else:
+            for k in range(first, last):
+                task(i, entries[k], acc)
 
     @ti.func
     def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):
@@ -291,9 +270,10 @@ class NeighbourGrid:
         h2 = kernel_radius * kernel_radius
         xi = x[i]
         c = self.cell_of(xi)
-        start, stride, room = i * SLOTS, 1, SLOTS
-        if ti.static(self.slot_major):
-            start, stride = i, capacity // SLOTS
+        # Slot-major on a GPU: entry i + k·(capacity / SLOTS); a row of SLOTS on the CPU: i·SLOTS + k.
+        start = i if ti.static(self.slot_major) else i * SLOTS
+        stride = capacity // SLOTS if ti.static(self.slot_major) else 1
+        room = SLOTS
         if ti.static(compact):
             start = ti.min(self.neighbour_start[i], capacity)
             stride = 1
