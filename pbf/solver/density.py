@@ -320,13 +320,12 @@ class DensityConstraint:
         from_second,
         i,
         neighbours: ti.template(),
-        measure: ti.template(),
         k,
         weight,
     ):
         """λ̂_i of iteration k (Eq. 10): C_i at the positions in the buffer ``from_second`` picks (the
         first iteration's from :meth:`prepare`, with the surface ghost found then), combined into the
-        substep's L with this iteration's ``weight``."""
+        substep's L with this iteration's ``weight``, and its error kept for the sum."""
         c = 0.0
         if k == 0:  # x* in the first buffer, its sums made by prepare()
             self.surface[i] = self.surface_ghost(first, i, neighbours)
@@ -340,16 +339,14 @@ class DensityConstraint:
                 (first, second, from_second), xi, i, neighbours, False
             )
             c = ratio + wall - 1.0
-        self.lagrange_multiplier(i, c + self.surface[i], measure, k == 0, weight)
+        self.lagrange_multiplier(i, c + self.surface[i], k == 0, weight)
 
     @ti.func
-    def lagrange_multiplier(self, i, c, measure: ti.template(), first_iteration, weight):
+    def lagrange_multiplier(self, i, c, first_iteration, weight):
         """λ̂_i (Eq. 10, dimensionless) for the constraint value ``c``, combined into the substep's L with
-        this iteration's ``weight`` (lam_total). With ``measure``, max(C_i, 0) is kept for
-        error_sum."""
-        if ti.static(measure):
-            self.error[i] = ti.max(c, 0.0)
+        this iteration's ``weight`` (lam_total); max(C_i, 0) is kept for error_sum."""
         c = ti.max(c, 0.0)  # only compressed particles push: no attraction at the free surface
+        self.error[i] = c
         lam = -self.constants[None].omega * c / self.denominator[i]
         self.lam[i] = lam
         # The multiplier the positions have moved by, combined as the positions are (see lam_total).

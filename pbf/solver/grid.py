@@ -134,19 +134,20 @@ class NeighbourGrid:
         cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The substep sorts
         inside its first kernel (``pbf.solver.substep``); this is the sort alone, for a caller with
         arrays of its own (the grid's tests check it against brute force)."""
-        self.sort_loops(x, key, False)
-
-    @ti.func
-    def sort_loops(self, x: ti.template(), key: ti.template(), mover: ti.template()):
-        """The loops of :meth:`sort` (``mover``: as in :meth:`order_loops`), at the top level of the kernel
-        that calls it (so parallel)."""
-        # Every loop runs to loop_bound (the bucket on the GPU backends' path: no one-thread task for a
-        # bound read at run time) and skips the slots past the live particles.
         for i in range(read_count(self.loop_bound, 1)):
             self.clear_for_visit(i)
             if i < self.active[None]:
                 self.count_in_cell(x[i], i)
-        self.order_loops(key, mover)
+        self.order_loops(key, self)
+
+    @ti.func
+    def gather(self, slot, i):
+        """What :meth:`sort` moves with a particle: nothing (its caller reorders its own arrays)."""
+        pass
+
+    @ti.func
+    def take_gathered(self, slot):
+        pass
 
     @ti.func
     def clear_for_visit(self, i):
@@ -189,7 +190,7 @@ class NeighbourGrid:
                 cell = self.particle_cell[i]
                 self.cell_members[self.cell_start[cell] + self.rank_in_cell[i]] = i
                 # Clear the counts for the next sort here rather than in a loop over all cells of its
-                # own: the scan has read them, and a parallel loop costs 20-40 µs on a 2-core CPU.
+                # own: the scan has read them, and a loop of its own is a launch more.
                 self.cell_particles[cell] = 0
                 self.cell_scan.clear_block(cell)
         for slot in range(read_count(self.loop_bound, 1)):
@@ -204,8 +205,7 @@ class NeighbourGrid:
                     key_other = key[other]
                     place += ti.select(key_other < key_i or (key_other == key_i and other < i), 1, 0)
                 self.sorted_from[place] = i
-                if ti.static(not isinstance(mover, bool)):
-                    mover.gather(place, i)
+                mover.gather(place, i)
 
     @ti.func
     def column_range(self, c, resolution, dx, dy):
@@ -324,8 +324,7 @@ class NeighbourGrid:
         than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
-                if ti.static(not isinstance(mover, bool)):
-                    mover.take_gathered(i)
+                mover.take_gathered(i)
                 self._visit_particle(gathered, neighbours, False, i)
                 self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
         self.neighbour_scan.up(self.neighbour_count, self.active, self.overflow, True)
@@ -345,7 +344,7 @@ class NeighbourGrid:
     def _build(self, x: ti.template(), neighbours: NeighbourList):
         for i in range(read_count(self.loop_bound, 1)):
             self.clear_for_visit(i)
-        self.find_neighbours(x, x, neighbours, False)
+        self.find_neighbours(x, x, neighbours, self)
 
     def build(self, x) -> None:
         """Neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell (:meth:`sort`),

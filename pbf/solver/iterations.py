@@ -36,8 +36,8 @@ class JacobiIterations:
         self.loop_bound = loop_bound
         """What loops over the live particles run to (``State.loop_bound``)."""
         self.per_call = per_call
-        """Iterations a kernel call runs: more save host time per substep (a call costs tens of µs on a
-        GPU) and cost compile time (each is a copy of an iteration's code)."""
+        """Iterations a kernel call runs: more save the host's time per substep on a GPU and cost compile
+        time (each is a copy of an iteration's code)."""
         self.reads_decisions = reads_decisions
         """Whether the host reads after each call if the target was met (and launches no more)."""
         # The first iteration weighs its λ by 1 (DensityConstraint.multiplier_pass starts L afresh there).
@@ -107,9 +107,7 @@ class JacobiIterations:
                 k = run.start + u
                 running, from_second, index = self._loop_state(run.measure, k)
                 if k < run.iterations and i < self.active[None] * running:
-                    density.multiplier_pass(
-                        first, second, from_second, i, neighbours, run.measure, k, self._weight(index)
-                    )
+                    density.multiplier_pass(first, second, from_second, i, neighbours, k, self._weight(index))
             for i in range(read_count(self.loop_bound, 1)):
                 k = run.start + u
                 running, from_second, index = self._loop_state(run.measure, k)

@@ -172,12 +172,10 @@ class State:
     @ti.func
     def reset_new(self, slot):
         """A new particle's fields, except position and velocity, at their initial values (the emitters)."""
-        for k in ti.static(range(len(self.fields))):
-            if ti.static(self.fields[k].name not in ("x", "v")):
-                if ti.static(self.fields[k].initial == "creation"):
-                    self._carried[k][0][slot] = slot
-                else:
-                    self._carried[k][0][slot] = ti.cast(0, self.fields[k].dtype)
+        for k in ti.static([k for k, spec in enumerate(self.fields) if spec.name not in ("x", "v")]):
+            # The creation index for "creation", else zero: a number the compile knows, not a branch.
+            creation = ti.static(int(self.fields[k].initial == "creation"))
+            self._carried[k][0][slot] = ti.cast(slot * creation, self.fields[k].dtype)
 
     @ti.kernel
     def _unsort(self, values: ti.template()):
