@@ -458,7 +458,26 @@ def report_written(sim, args, viewer) -> None:
 
 
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status (0, or 2 after one line on stderr)."""
+    """Run the command line; returns the exit status (0, or 2 after one line on stderr). A reader that
+    stops early (``pbf --list | head -1``) ends it quietly, with 0."""
+    return quiet_when_the_reader_closes(lambda: _main(argv))
+
+
+def quiet_when_the_reader_closes(command) -> int:
+    """``command()``'s exit status, or 0 without a traceback when the pipe its output goes to closes
+    (``| head -1``): the reader has what it wanted."""
+    try:
+        status = command()
+        sys.stdout.flush()  # here, where a closed pipe is caught, not in Python's flush at exit
+        return status
+    except BrokenPipeError:
+        # Python flushes stdout again at exit, which would fail the same way: what is left goes to
+        # devnull instead (the recipe of the signal module's docs).
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+def _main(argv) -> int:
     try:
         args = parse_args(argv)
         if args.list:
