@@ -8,10 +8,14 @@ import dataclasses
 import os
 import re
 import sys
-import tomllib
 import typing
 from importlib import resources
 from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # tomllib is tomli, taken into the standard library in 3.11
+    import tomli as tomllib
 
 from pbf.scene.root import Scene
 from pbf.scene.schema import SceneError, _clip, _closest, _show, _table_values, echo
