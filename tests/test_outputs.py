@@ -63,7 +63,7 @@ def test_a_folder_where_a_frame_goes(here, capsys):
 
 
 def test_the_default_folder_is_the_scene_files_name_inside_out():
-    assert outputs.default_folder("pbf/scenes/dam_break.toml") == Path("out/dam_break")
+    assert outputs.default_folder("scenes/dam_break.toml") == Path("out/dam_break")
     assert outputs.default_folder("/tmp/../x/my scene!.toml") == Path("out/my_scene_")
     assert outputs.default_folder("..toml") == Path("out/scene")
     assert outputs.default_folder("/a/.hidden.toml") == Path("out/hidden")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pbf
 from pbf.app import cli
+from pbf.scene import SCENES_DIR
 from pbf.scene.files import tomllib  # the standard library's, or tomli before Python 3.11
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,3 +60,12 @@ def test_build_output_is_ignored_by_git():
     for path in ("build/lib/pbf/__init__.py", "build/bdist.linux-x86_64/wheel", "pbf_fluids.egg-info/PKG-INFO"):
         done = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, timeout=60)
         assert done.returncode == 0, f"{path} is not ignored by git"
+
+
+def test_the_presets_live_in_the_top_level_scenes_folder():
+    assert sorted(p.name for p in (ROOT / "scenes").glob("*.toml")), "no preset in scenes/"
+    assert not (ROOT / "pbf" / "scenes").exists()
+    assert SCENES_DIR.resolve() == (ROOT / "scenes").resolve()  # a checkout's (editable) install finds them there
+    # and a wheel ships them inside the package (tests/test_wheel.py builds one)
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert setuptools["package-dir"] == {"pbf.scenes": "scenes"} and "pbf.scenes" in setuptools["packages"]

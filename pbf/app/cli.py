@@ -40,7 +40,7 @@ EPILOG = "\n".join(
         "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
         "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
         "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
-        "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from pbf/scenes/)",
+        "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
         "  %(prog)s --list            the presets",
         "",
         "in the window:",
