@@ -2,6 +2,9 @@
 does, never by how busy the machine it runs on is."""
 
 import ast
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -54,3 +57,23 @@ def test_no_test_asserts_a_wall_clock_time(path):
         f"{path.name}: lines {lines} assert a wall-clock time, which fails on a busy machine; count the "
         f"work instead (calls, launches, compiles), or time it in a benchmark script under benchmarks/"
     )
+
+
+def test_a_test_run_shows_no_noise_of_taichis():
+    # One test in one pytest-xdist worker, as the default run starts its workers, in an environment
+    # without this run's settings: Taichi's expected deprecation warning and its log line about a
+    # "graphical python shell" (pytest's stdout is not the console's) must not show.
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "TI_ENABLE_PYBUF"))}
+    test = "tests/test_suite_rules.py::test_the_rule_sees_a_clock_directly_and_through_a_name"
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-n", "1", "-p", "no:cacheprovider", test],
+        cwd=TESTS.parent,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    output = done.stdout + done.stderr
+    assert done.returncode == 0, output[-3000:]
+    assert "Graphical python shell" not in output, output[-3000:]
+    assert "DeprecationWarning" not in output and "warning" not in output.splitlines()[-1], output[-3000:]
