@@ -9,7 +9,13 @@ import os
 
 import pytest
 
-from pbf.solver.backend import restart_backend, start_backend
+# Under pytest (a worker's stdout is pytest-xdist's, not the console's) Taichi takes itself to be in a
+# graphical shell and logs "[I …] Graphical python shell detected, using wrapped sys.stdout", which
+# then shows after the run's summary. Its own print buffer is for notebooks; the tests print nothing
+# from kernels, so it is switched off before Taichi is imported.
+os.environ.setdefault("TI_ENABLE_PYBUF", "0")
+
+from pbf.solver.backend import restart_backend, start_backend  # noqa: E402 (after Taichi's setting)
 
 # Taichi's on-disk kernel cache (~/.cache/taichi) keeps 100 MB by default, and the suite's kernels take
 # more, so each run evicted what the next needed and a second run took as long as the first. With room

@@ -185,7 +185,7 @@ def test_screenshots_says_what_is_missing(tmp_path):
 
 
 def test_every_preset_has_a_moment_in_the_gallery():
-    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "pbf" / "scenes").glob("*.toml")}
+    assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
 
 
 def test_bench_refuses_a_thread_count_it_cannot_use(capsys):

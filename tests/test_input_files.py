@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from pbf import SceneError, load_scene
 from pbf.scene import MAX_SCENE_BYTES
 
-VALID = Path(__file__).resolve().parent.parent / "pbf" / "scenes" / "dam_break.toml"
+VALID = Path(__file__).resolve().parent.parent / "scenes" / "dam_break.toml"
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,7 @@
 """Every output path is checked before the simulation starts; a scene's name never steers where
 files go; a rerun never mixes its frames with an earlier run's, and deletes nothing unless asked."""
 
+import errno
 import os
 from pathlib import Path
 
@@ -52,6 +53,31 @@ def test_a_folder_that_cannot_be_written(here, capsys, monkeypatch):
     refused(capsys, ["dam_break", "--headless", "--video", "locked/v.mp4"], "no permission to write in", cwd=here)
 
 
+@pytest.mark.parametrize(
+    "error, filesystem, why",
+    [
+        (errno.EROFS, "ext4", "{folder} is on a read-only filesystem (Read-only file system)"),
+        (errno.EACCES, "nfs", "no permission to write in {folder} (Permission denied)"),
+        (
+            errno.ENOENT,
+            "sysfs",
+            "{folder} is the kernel's sysfs filesystem, which holds only the kernel's own files "
+            "(No such file or directory)",
+        ),
+        (errno.EIO, "ext4", "{folder} refuses new files (Input/output error)"),
+    ],
+)
+def test_a_folder_that_cannot_be_created_says_why(here, capsys, monkeypatch, error, filesystem, why):
+    # A mount that refuses new files, simulated: the probe's file cannot be made, for the reason given.
+    def refuse(*args, **kwargs):
+        raise OSError(error, os.strerror(error))
+
+    monkeypatch.setattr(outputs.tempfile, "mkstemp", refuse)
+    monkeypatch.setattr(outputs, "_filesystem", lambda folder: filesystem)
+    line = refused(capsys, ["dam_break", "--headless", "--out", "frames"], cwd=here)
+    assert line == f"error: --out 'frames': the folder cannot be created in {here}: {why.format(folder=here)}"
+
+
 def test_a_folder_where_a_frame_goes(here, capsys):
     (here / "frames" / "frame_00001.png").mkdir(parents=True)
     refused(
@@ -63,7 +89,7 @@ def test_a_folder_where_a_frame_goes(here, capsys):
 
 
 def test_the_default_folder_is_the_scene_files_name_inside_out():
-    assert outputs.default_folder("pbf/scenes/dam_break.toml") == Path("out/dam_break")
+    assert outputs.default_folder("scenes/dam_break.toml") == Path("out/dam_break")
     assert outputs.default_folder("/tmp/../x/my scene!.toml") == Path("out/my_scene_")
     assert outputs.default_folder("..toml") == Path("out/scene")
     assert outputs.default_folder("/a/.hidden.toml") == Path("out/hidden")

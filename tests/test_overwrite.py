@@ -73,12 +73,22 @@ def test_an_existing_video_is_replaced_only_with_overwrite(here, capsys):
     assert (here / "v.mp4").read_bytes() == b"a film of mine"
 
 
+PROC = "/proc is the kernel's proc filesystem, which holds only the kernel's own files"
+
+
 @pytest.mark.parametrize(
     "argv, names",
     [
-        (["--headless", "--out", "/proc/x"], ["--out '/proc/x': cannot write in /proc"]),
-        (["--headless", "--out", "/proc"], ["--out '/proc':", "cannot write in /proc"]),
-        (["--headless", "--video", "/proc/x.mp4", "--out", "frames"], ["--video '/proc/x.mp4': cannot write in /proc"]),
+        (["--headless", "--out", "/proc/x"], ["--out '/proc/x': the folder cannot be created in /proc: ", PROC]),
+        (
+            ["--headless", "--out", "/proc/pbf/frames"],
+            ["--out '/proc/pbf/frames': the folder cannot be created in /proc"],
+        ),
+        (["--headless", "--out", "/proc"], ["--out '/proc': cannot write in /proc: ", PROC]),
+        (
+            ["--headless", "--video", "/proc/x.mp4", "--out", "frames"],
+            ["--video '/proc/x.mp4': the video file cannot be created in /proc: ", PROC],
+        ),
     ],
 )
 def test_a_place_that_refuses_writes_is_refused_before_the_run(here, capsys, argv, names):

@@ -78,10 +78,11 @@ def test_the_readme_commands_are_found_in_order():
 
 @pytest.mark.slow
 def test_the_readme_commands_run_in_order_from_a_fresh_copy(tmp_path):
-    # What a clone gives the commands (run.py, and the package with its presets in pbf/scenes/), in a
-    # folder of its own, so nothing is written into the repo.
+    # What a clone gives the commands (run.py, the package and the presets in scenes/), in a folder of
+    # its own, so nothing is written into the repo.
     (tmp_path / "run.py").write_text((ROOT / "run.py").read_text())
     (tmp_path / "pbf").symlink_to(ROOT / "pbf")
+    (tmp_path / "scenes").symlink_to(ROOT / "scenes")
     bin_dir = tmp_path / ".bin"
     bin_dir.mkdir()
     python = bin_dir / "python"

@@ -92,7 +92,7 @@ def test_orbit_camera_round_trip():
     assert np.allclose(again.eye, view.eye) and np.allclose(again.target, view.target)
 
 
-def test_headless_run_writes_frames_video_and_particles(tmp_path):
+def test_headless_run_writes_frames_video_and_particles(tmp_path, capsys):
     out = tmp_path / "frames"
     argv = [
         "dam_break",
@@ -115,6 +115,11 @@ def test_headless_run_writes_frames_video_and_particles(tmp_path):
     assert [p.name for p in frames] == [f"frame_{k:05d}.png" for k in range(4)]
     assert iio.imread(frames[0]).shape == (90, 160, 3)
     assert len(list(iio.imiter(tmp_path / "v.mp4"))) == 4
+    size = cli._size(sum(path.stat().st_size for path in [*out.iterdir(), tmp_path / "v.mp4"]))
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"[pbf] wrote 4 frames in {out}/, video {tmp_path / 'v.mp4'}, ply files in {out}/: {size} "
+        f"(PNG frames at 160×90)"
+    )
     ply = PlyData.read(str(out / "particles_00003.ply"))
     assert ply["vertex"].count == load_scene("dam_break", ["fluid.spacing_m=0.05"]).particle_count
     assert np.isfinite(ply["vertex"]["vy"]).all() and ply["vertex"]["vy"].min() < -0.1  # falling
@@ -162,7 +167,11 @@ def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch
         f"[pbf] rendering 2 frames (the start and 1 step) into {tmp_path}/",
     ], output
     assert lines[4].startswith("[pbf] kernels ready and the first frame drawn in "), output
-    assert lines[5:] == [f"[pbf] wrote 2 frames in {tmp_path}/"], output
+    size = cli._size(sum(path.stat().st_size for path in tmp_path.glob("frame_*.png")))
+    assert lines[5:] == [
+        f"[pbf] wrote 2 frames in {tmp_path}/: {size} (PNG frames at 64×48); a video as well: "
+        f"--video {tmp_path}.mp4; fewer or smaller frames: --frames N, --size WxH"
+    ], output
     assert len(list(tmp_path.glob("frame_*.png"))) == 2
     assert "((" not in output
 

@@ -1,6 +1,7 @@
-"""A built wheel ships the presets: it installs into a fresh virtual environment, and from a folder
-outside the source tree its ``pbf`` command runs a preset by name, finding the scene inside the
-installed package rather than in this checkout."""
+"""A built wheel ships the presets (the checkout's top-level ``scenes/``, inside the package as
+``pbf/scenes/``): it installs into a fresh virtual environment, and from a folder outside the source
+tree its ``pbf`` command runs a preset by name, finding the scene inside the installed package rather
+than in this checkout."""
 
 import os
 import shutil
@@ -8,6 +9,7 @@ import subprocess
 import sys
 import sysconfig
 import venv
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -27,11 +29,16 @@ def test_a_wheel_ships_the_presets_and_runs_one_by_name(tmp_path):
     # and would leave build/ in the checkout.
     source = tmp_path / "source"
     shutil.copytree(ROOT / "pbf", source / "pbf", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "scenes", source / "scenes")
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, source / name)
     wheels = tmp_path / "wheels"
     run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(source)])
     (wheel,) = wheels.glob("pbf_fluids-*.whl")
+    presets = sorted(path.stem for path in (ROOT / "scenes").glob("*.toml"))
+    with zipfile.ZipFile(wheel) as archive:  # the top-level scenes/ inside the package, as package data
+        shipped = sorted(Path(name).stem for name in archive.namelist() if name.startswith("pbf/scenes/"))
+    assert shipped == presets, (shipped, presets)
 
     # The fresh environment borrows this one's dependencies (Taichi is 80 MB) through a path file: a
     # folder added that way is not a site folder, so the editable install's own path file there is not
@@ -55,7 +62,6 @@ def test_a_wheel_ships_the_presets_and_runs_one_by_name(tmp_path):
     assert (Path(where[1]) / "dam_break.toml").is_file()
     # Every preset of the checkout is found by name in the installed package and loads there (each
     # `extends` included); running one shows the rest would run the same way.
-    presets = sorted(path.stem for path in (ROOT / "pbf" / "scenes").glob("*.toml"))
     load_each = "import sys; from pbf.scene import load_scene; print(*[load_scene(n).name for n in sys.argv[1:]])"
     loaded = run(
         [python, "-c", load_each, *presets],

@@ -40,7 +40,7 @@ EPILOG = "\n".join(
         "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
         "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
         "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
-        "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from pbf/scenes/)",
+        "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
         "  %(prog)s --list            the presets",
         "",
         "in the window:",
@@ -454,11 +454,45 @@ def report_written(sim, args, viewer) -> None:
         written += f", video {args.video}"
     if args.export:
         written += f", {' and '.join(args.export)} files in {viewer.out_dir}/"
+    # The folder held none of a run's own files before this one (outputs.check_folder), so those it
+    # holds now are what this run wrote: a bare run's 181 frames take some 50 MB, every time.
+    files = outputs.earlier_files(viewer.out_dir) + ([Path(args.video)] if args.video else [])
+    size = sum(path.stat().st_size for path in files if path.is_file())
+    render = sim.scene.render
+    written += f": {_size(size)} (PNG frames at {render.width_px}×{render.height_px})"
+    if not args.video:
+        written += f"; a video as well: --video {viewer.out_dir}.mp4; fewer or smaller frames: --frames N, --size WxH"
     print(f"[pbf] wrote {written}")
 
 
+def _size(size: int) -> str:
+    """Bytes as a reader reads them: 52.5 MB, 840 kB."""
+    if size >= 1e6:
+        return f"{size / 1e6:.1f} MB"
+    return f"{size / 1e3:.0f} kB" if size >= 1e3 else f"{size} bytes"
+
+
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status (0, or 2 after one line on stderr)."""
+    """Run the command line; returns the exit status (0, or 2 after one line on stderr). A reader that
+    stops early (``pbf --list | head -1``) ends it quietly, with 0."""
+    return quiet_when_the_reader_closes(lambda: _main(argv))
+
+
+def quiet_when_the_reader_closes(command) -> int:
+    """``command()``'s exit status, or 0 without a traceback when the pipe its output goes to closes
+    (``| head -1``): the reader has what it wanted."""
+    try:
+        status = command()
+        sys.stdout.flush()  # here, where a closed pipe is caught, not in Python's flush at exit
+        return status
+    except BrokenPipeError:
+        # Python flushes stdout again at exit, which would fail the same way: what is left goes to
+        # devnull instead (the recipe of the signal module's docs).
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+def _main(argv) -> int:
     try:
         args = parse_args(argv)
         if args.list:

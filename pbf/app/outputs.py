@@ -18,6 +18,7 @@ another. Pure standard library: the command line checks its outputs without star
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import tempfile
@@ -85,27 +86,68 @@ def _shown(text: str) -> str:
     return repr(text if len(text) <= 80 else text[:79] + "…")
 
 
-def _probe(folder: Path, label: str) -> None:
+KERNEL_FILESYSTEMS = {"proc", "sysfs", "cgroup", "cgroup2", "debugfs", "tracefs", "securityfs", "configfs", "bpf"}
+"""Filesystems through which the kernel shows its own state (Linux): no user file can be made in them."""
+
+
+def _filesystem(folder: Path) -> str | None:
+    """The type of the filesystem ``folder`` is on, from the kernel's mount table (Linux), or None."""
+    try:
+        mounts = Path("/proc/self/mounts").read_text().splitlines()
+    except OSError:
+        return None
+    point = folder.resolve()
+    while not os.path.ismount(point) and point != point.parent:
+        point = point.parent
+    # The table escapes a space in a mount point as \040 (octal); the last mount on a point is the one in use.
+    types = [
+        fields[2]
+        for fields in map(str.split, mounts)
+        if len(fields) > 2 and re.sub(r"\\([0-7]{3})", lambda m: chr(int(m[1], 8)), fields[1]) == str(point)
+    ]
+    return types[-1] if types else None
+
+
+def _why_not(folder: Path, error: OSError) -> str:
+    """Why nothing can be created in ``folder``, as a reader needs it: the kind of place first, then the
+    system's own words (/proc answers a new file with "No such file or directory", which says nothing)."""
+    words = error.strerror or str(error)
+    kind = _filesystem(folder)
+    if kind in KERNEL_FILESYSTEMS:
+        return f"{folder} is the kernel's {kind} filesystem, which holds only the kernel's own files ({words})"
+    if error.errno == errno.EROFS:
+        return f"{folder} is on a read-only filesystem ({words})"
+    if error.errno in (errno.EACCES, errno.EPERM):
+        return f"no permission to write in {folder} ({words})"
+    return f"{folder} refuses new files ({words})"
+
+
+def _probe(folder: Path, label: str, what: str | None = None) -> None:
     """Create and remove a file in the existing ``folder``: the only test that a write will succeed
-    (os.access says yes to root everywhere, and /proc or a read-only mount refuse anyway)."""
+    (os.access says yes to root everywhere, and /proc or a read-only mount refuse anyway). ``what``:
+    the folder or file the run would create in it, for the message; None when it writes in ``folder``."""
     try:
         handle, name = tempfile.mkstemp(prefix=".pbf-probe-", dir=folder)
     except OSError as error:
-        raise OutputError(f"{label}: cannot write in {folder} ({error.strerror or error})") from None
+        if what is None:
+            raise OutputError(f"{label}: cannot write in {folder}: {_why_not(folder, error)}") from None
+        raise OutputError(f"{label}: the {what} cannot be created in {folder}: {_why_not(folder, error)}") from None
     os.close(handle)
     os.unlink(name)
 
 
-def _writable_place(path: Path, label: str) -> None:
-    """The nearest existing folder on the way to ``path`` must be a folder we may write in."""
+def _writable_place(path: Path, label: str, what: str) -> None:
+    """The nearest existing folder on the way to ``path`` must be a folder we may write in. ``what``:
+    what ``path`` is (the "folder", the "video file"), for the message."""
     ancestor = path.absolute().parent
     while not ancestor.exists():
         ancestor = ancestor.parent
+        what = "folder"  # the first thing the run would create is then a folder on the way
     if not ancestor.is_dir():
         raise OutputError(f"{label}: {ancestor} is a file, not a folder; choose another path")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise OutputError(f"{label}: cannot create it, no permission to write in {ancestor}")
-    _probe(ancestor, label)
+    _probe(ancestor, label, what)
 
 
 OVERWRITE_HINT = "add --overwrite to replace them (only the frame, particle and surface files of a run are removed)"
@@ -139,7 +181,7 @@ def check_folder(text: str, label: str, overwrite: bool = False) -> Path:
                 )
             _probe(path, f"{label} {_shown(text)}")
         else:
-            _writable_place(path, f"{label} {_shown(text)}")
+            _writable_place(path, f"{label} {_shown(text)}", "folder")
     except OSError as error:
         raise OutputError(f"{label} {_shown(text)}: {error.strerror or error}") from None
     return path
@@ -167,7 +209,7 @@ def check_video(text: str, label: str, overwrite: bool = False) -> Path:
                 raise OutputError(f"{label} {_shown(text)}: cannot replace it (no permission)")
             _probe(path.parent, f"{label} {_shown(text)}")
         else:
-            _writable_place(path, f"{label} {_shown(text)}")
+            _writable_place(path, f"{label} {_shown(text)}", "video file")
     except OSError as error:
         raise OutputError(f"{label} {_shown(text)}: {error.strerror or error}") from None
     return path

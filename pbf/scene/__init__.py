@@ -1,6 +1,6 @@
 """The scene schema: one validated place for everything a preset sets.
 
-A scene is a TOML file (see ``pbf/scenes/``), a dict of the same shape or a :class:`Scene` built by hand.
+A scene is a TOML file (see ``scenes/``), a dict of the same shape or a :class:`Scene` built by hand.
 Every way in ends in ``Scene.__post_init__``, so no scene that fails a check exists: each key's type,
 its range (every number has a lower and an upper bound, derived from what the solver does with it)
 and what keys must agree on (geometry, time step, camera) are checked before anything runs. A

@@ -8,18 +8,30 @@ import dataclasses
 import os
 import re
 import sys
-import tomllib
 import typing
 from importlib import resources
 from pathlib import Path
 
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # tomllib is tomli, taken into the standard library in 3.11
+    import tomli as tomllib
+
 from pbf.scene.root import Scene
 from pbf.scene.schema import SceneError, _clip, _closest, _show, _table_values, echo
 
-SCENES_DIR = Path(str(resources.files("pbf") / "scenes"))
-"""The presets: package data inside ``pbf`` (``pbf/scenes/*.toml``), so that an editable install and a
-wheel find them the same way. ``importlib.resources`` names the installed package's own folder; the
-package is always installed as files (never zipped), so that folder is a real path for ``glob``."""
+
+def _presets_folder() -> Path:
+    """Where the presets are: inside the installed package (``pbf/scenes/``, where a wheel puts them),
+    else the checkout's top-level ``scenes/`` beside ``pbf/`` (an editable install, or the source tree
+    on the path). ``importlib.resources`` names the package's own folder; the package is always
+    installed as files (never zipped), so that folder is a real path for ``glob``."""
+    shipped = Path(str(resources.files("pbf"))) / "scenes"
+    return shipped if shipped.is_dir() else Path(__file__).resolve().parent.parent.parent / "scenes"
+
+
+SCENES_DIR = _presets_folder()
+"""The presets' folder: ``scenes/`` in a checkout, ``pbf/scenes/`` in an installed wheel."""
 
 MAX_SCENE_BYTES = 1 << 20
 """The largest scene file read (1 MiB; the presets are 1-2 kB): a bigger one is refused unread."""

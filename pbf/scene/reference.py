@@ -8,7 +8,7 @@ import dataclasses
 import typing
 
 from pbf.scene.root import Scene
-from pbf.scene.schema import _num, _show
+from pbf.scene.schema import MOVED, REMOVED, _num, _show
 
 HEADER = """# Scene keys
 
@@ -91,4 +91,11 @@ def reference() -> str:
         if rows:
             out.append("| key | type | default | allowed | meaning |\n|---|---|---|---|---|")
             out.extend(rows)
+    out.append(
+        "\n## Moved and removed keys\n\nKeys of earlier versions: a scene file, a `--set` or a dict that "
+        "sets one is refused with\nwhere it went, or why it was removed.\n"
+    )
+    out.append("| key | now |\n|---|---|")
+    out.extend(f"| `{old}` | moved to `{new}` |" for old, new in MOVED.items())
+    out.extend(f"| `{old}` | removed: {why} |" for old, why in REMOVED.items())
     return "\n".join(out).rstrip() + "\n"

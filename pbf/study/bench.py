@@ -55,7 +55,7 @@ from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study import sweep as speed_error
-from pbf.study.common import StageTimer, TransferCounter, dam_break, timed
+from pbf.study.common import StageTimer, TransferCounter, dam_break, run_command, timed
 
 COUNTED_FRAMES = 10
 """``sizes``: frames whose launches and reads are counted, after the timed ones."""
@@ -748,4 +748,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    run_command(main)

@@ -5,7 +5,9 @@ it imports no study module."""
 from __future__ import annotations
 
 import contextlib
+import os
 import statistics
+import sys
 import time
 from collections import defaultdict
 
@@ -39,6 +41,20 @@ def dam_break(particles: int, iterations: int, overrides=()) -> Scene:
     return scaled(
         "dam_break", particles, 8000, [f"solver.iterations={iterations}", f"time.substeps={substeps}", *overrides]
     )
+
+
+def run_command(main) -> None:
+    """Run a study's ``main()`` as its command and exit with its status; a reader that stops early
+    (``python -m pbf.study.bench --help | head -1``) ends it quietly, with 0. The same recipe as
+    ``pbf.app.cli``'s, kept here because a study imports the application only where it studies it."""
+    try:
+        status = main()
+        sys.stdout.flush()  # here, where a closed pipe is caught, not in Python's flush at exit
+    except BrokenPipeError:
+        # Python flushes stdout again at exit, which would fail the same way: what is left goes to devnull.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        status = 0
+    raise SystemExit(status)
 
 
 def timed(function, *args):

@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pbf.scene import load_scene
-from pbf.study.common import fill_height_m
+from pbf.study.common import fill_height_m, run_command
 
 KINEMATIC_VISCOSITY_M2_S = 1.0e-6
 """ν of water at 20 °C (1.004e-6 m²/s)."""
@@ -502,4 +502,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    run_command(main)

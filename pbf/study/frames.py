@@ -32,6 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from pbf.study.common import run_command
+
 STYLES = ("particles", "surface")
 LEVELS = (1, 3, 6)
 """zlib levels of the writer's encoder compared: its own (1), a middle one, and Pillow's default (6);
@@ -215,4 +217,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run_command(main)

@@ -30,7 +30,7 @@ import numpy as np
 from pbf.solver import Simulation, start_backend
 from pbf.solver.backend import taichi_version
 from pbf.study import validate
-from pbf.study.common import timed
+from pbf.study.common import run_command, timed
 
 SEED_SCENE = "dam_break"
 SEED_FRAMES = 60
@@ -181,4 +181,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_command(main)

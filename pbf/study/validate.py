@@ -25,7 +25,7 @@ import numpy as np
 from pbf.scene import load_scene
 from pbf.solver import Simulation, start_backend
 from pbf.study import spheric
-from pbf.study.common import colour_surface_height, fill_height_m
+from pbf.study.common import colour_surface_height, fill_height_m, run_command
 
 MARTIN_MOYCE_CSV = Path(__file__).resolve().parents[2] / "docs" / "data" / "martin_moyce_1952_surge_front.csv"
 SPRAY_NEIGHBOURS = 4
@@ -460,4 +460,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    run_command(main)
