@@ -104,10 +104,9 @@ class State:
         self.active = ti.field(ti.i32, shape=())
         self.loop_bound = capacity if keeps_decisions_on_device() else self.active
         """What loops over the live particles run to (:meth:`live_bound`, each skipping the slots past the
-        live count): on the GPU backends' path the capacity, a count the kernel knows (a bound read at
-        run time is a one-thread task, a launch on a GPU); on the CPU's the live count (loops over the
-        capacity made the seed's first second 1.24 s against 1.06, 8,000 particles in a bucket of
-        16,384, and a one-thread task costs nothing there)."""
+        live count): on a GPU the capacity, a count the kernel knows (a bound read at run time is a
+        one-thread task, a launch); on the CPU the live count, where that task costs little and idle
+        slots do (docs/BENCHMARKS.md, "Backends: the CPU's path and the GPU's")."""
         self._carried = []
         """(field, scratch) of every per-particle array the sort carries, the state's own first."""
         for spec in self.fields:
