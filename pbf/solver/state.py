@@ -88,15 +88,10 @@ class Snapshot:
 
 @ti.data_oriented
 class State:
-    """The particles of a simulation. Arrays are allocated once for the scene's capacity (its blocks
-    and everything its emitters will add); the first ``active[None]`` slots hold live particles, in
-    the current sorted order: the grid re-sorts them by cell every substep, so slot i holds particle
-    ``index[i]``. Emitters append particles after the live ones; the rest of the slots are never read.
-
-    Each entry of :data:`PARTICLE_FIELDS` is a (capacity,) field of its type here (``x``, ``v``,
-    ``index``, ``multiplier``, ``pressure_sum``); ``active`` is a () i32 field, the number of live
-    particles.
-    """
+    """The particles of a simulation: a (capacity,) field per entry of :data:`PARTICLE_FIELDS`, the
+    capacity holding the blocks and everything the emitters will add. The first ``active[None]``
+    slots hold the live particles in the grid's sorted order (slot i holds particle ``index[i]``);
+    emitters append after them."""
 
     def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
         self.capacity = capacity
