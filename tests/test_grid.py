@@ -160,7 +160,14 @@ def test_exclusive_scan(length):
     source = ti.field(ti.i32, shape=length)
     starts = ti.field(ti.i32, shape=length + 1)
     source.from_numpy(values)
-    total = ExclusiveScan(length).run(source, starts)
+    scan = ExclusiveScan(length)
+
+    @ti.kernel
+    def run():
+        scan.scan(source, starts, length)
+
+    run()
+    total = starts[length]
     expected = np.concatenate([[0], np.cumsum(values)])
     assert total == expected[-1]
     assert np.array_equal(starts.to_numpy(), expected)

@@ -82,11 +82,15 @@ def scan_task(out: dict) -> None:
         scan, sums = ExclusiveScan(length), TreeSum(length, 2)
 
         @ti.kernel
+        def prefix():
+            scan.scan(source, starts, length)
+
+        @ti.kernel
         def reduce():
             sums.sum(floats, 0, length)
             sums.maximum(floats, 1, length)
 
-        scan.run(source, starts)
+        prefix()
         reduce()
         out[f"scan_{length}_counts"], out[f"scan_{length}_starts"] = counts, starts.to_numpy()
         out[f"scan_{length}_values"] = values

@@ -16,19 +16,14 @@ negative: at ρ = 0.9, P_2 reaches −0.68 (at λ = 0) and P_3 −0.46. A PBF su
 into velocity, v = (x* − x)/Δt, so a mode whose compression c the iterations leave at P·(what the
 prediction brought) follows c_{n+1} = P (2 c_n − c_{n−1}) from substep to substep: its roots
 z = P ± √(P² − P) leave the unit circle when P < −1/3. A substep that stops after 2 or 3 Chebyshev
-iterations therefore pumps those modes. It does, measured: a 6 × 8 × 6 tank at rest under 8 substeps
-with a fixed 2 iterations moved at 5.1% of √(gH) rms, with 3 at 1.9% and with 4 (P_4 ≥ −0.30) at
-0.08%; with the error target, which stops after 1-5 iterations, at 0.9-1.1% with bursts to 4%
-(docs/VALIDATION.md).
+iterations therefore pumps those modes, as a tank at rest shows (docs/VALIDATION.md).
 
 The stable weights (the default). w_1 = 1, and each later weight is the largest for which P_k stays
 at or above −REVERSAL (1/4, inside the −1/3 bound) and within ±1 over the whole spectrum: the boldest
-extrapolation along the slow modes that reverses no mode enough to pump it. The weights rise from
-1.25 toward 1.8-1.9 (past Chebyshev's 1.39 limit at ρ = 0.9), so after 5 or more iterations the slow
-modes converge faster than under Chebyshev weights, and after 2-3 a little slower. The same tank
-holds still (0.00% with a fixed count of 2 or 3), and the seed preset's mean error halves at the
-same cost (docs/BENCHMARKS.md). One plain iteration (P_1 = λ) still reaches −0.8 in the shortest
-waves, which is why ``solver.min_iterations`` is 2 by default.
+extrapolation along the slow modes that reverses no mode enough to pump it. The weights rise toward
+WEIGHT_CAP (past Chebyshev's limit), so after several iterations the slow modes converge faster than
+under Chebyshev weights, and the same tank holds still (docs/BENCHMARKS.md). One plain iteration
+(P_1 = λ) still reverses the shortest waves, which is why ``solver.min_iterations`` is 2 by default.
 """
 
 from __future__ import annotations
@@ -42,10 +37,9 @@ REVERSAL = 0.25
 1/3 past which a substep pumps the mode (module docstring)."""
 WEIGHT_CAP = 1.9
 """The largest stable weight: in the two-step recurrence a mode's error decays by at least √(w − 1) per
-iteration (0.95 here); toward 2 the recurrence stops damping, and past 30 iterations the unbounded
-choice jumped between 1.1 and 3.4."""
+iteration; toward 2 the recurrence stops damping, and the unbounded choice jumps about."""
 SPECTRUM_SAMPLES = 4001
-"""Points of the spectrum the polynomials are checked on (their extremes move by < 1e-4 with more)."""
+"""Points of the spectrum the polynomials are checked on."""
 
 
 def stable_weights(lowest: float, count: int, reversal: float = REVERSAL) -> tuple[float, ...]:

@@ -4,21 +4,15 @@
 
 - ``auto`` (the default): CUDA when an NVIDIA GPU answers, else a hardware Vulkan device (or Metal on
   macOS), else Taichi's CPU backend. A software Vulkan driver (Mesa's lavapipe, device name
-  "llvmpipe") is never taken over the CPU backend: it runs the same kernels 5-18 times slower.
+  "llvmpipe") is never taken over the CPU backend, which runs the same kernels faster.
 - ``gpu``: the best GPU backend that starts, in the order CUDA, Metal, Vulkan (a software Vulkan
   device included, named as such in the start line); an error when none does.
 - ``cpu``, ``cuda``, ``vulkan``, ``metal``: that backend, or an error saying why it cannot start.
   Taichi itself falls back to the CPU when a GPU backend fails; that is caught and reported.
 
-The choice is printed once, in one line that names the device and Taichi's version:
-``[pbf] Starting on vulkan (llvmpipe (LLVM 15.0.6, 256 bits), a software Vulkan driver, requested),
-Taichi 1.7.4``. Taichi's own lines stay silent: its banner (``[Taichi] version …``, printed when
-Taichi is imported) is switched off by ``pbf/__init__.py``, and the ``[Taichi] Starting on arch=…``
-that ``ti.init`` prints is caught by ``pbf.solver.launch.start_taichi``.
-
-On a GPU backend the substep keeps its decisions on the device (:func:`keeps_decisions_on_device`):
-the Jacobi iterations' stopping test, the neighbour lists' overflow; the CPU backend decides on the
-host, where reading a result costs nothing and skipping a launch saves one.
+The choice is printed once, in one line that names the device and Taichi's version. Taichi's own
+lines stay silent: its banner is switched off by ``pbf/__init__.py``, and the line ``ti.init``
+prints is caught by ``pbf.solver.launch.start_taichi``.
 """
 
 import contextlib
@@ -77,8 +71,7 @@ def taichi_version() -> str:
 
 def _cuda_device() -> Device | None:
     """The first CUDA device (the one Taichi uses), from NVIDIA's driver library; None without one.
-    Taichi is then started once to be sure it can use it (where that fails, it says it started on the
-    CPU: a second such line next to the real start)."""
+    Taichi is then started once to be sure it can use it."""
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
         return None
     name, memory = "CUDA GPU", None
@@ -268,12 +261,9 @@ def start_backend(
     """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto"; see the module docstring) and
     return the backend's name: "cpu", "cuda", "vulkan" or "metal". ``cpu_threads`` caps the CPU
     backend's threads (default: one per core). ``fast_compile`` turns off Taichi's advanced IR
-    optimisation: a Simulation compiles in 1.6 s instead of 6.2 s on 2 cores but may step a few per
-    cent slower; the test suite, which builds many short-lived Simulations, uses it. The arithmetic
-    is the same up to rounding, not bit for bit: the seed scene's positions differ by 3e-8 m after
-    one frame and, the splash being chaotic, by up to 0.8 m after 60. Each mode is deterministic by
-    itself. ``kernel_profiler`` starts Taichi's kernel profiler, which records every offloaded task
-    (``pbf.study.launches`` counts them).
+    optimisation: a much shorter compile and a slightly slower step (the test suite uses it); the
+    arithmetic is the same up to rounding, not bit for bit, and each mode is deterministic by
+    itself. ``kernel_profiler`` starts Taichi's kernel profiler (``pbf.study.launches`` counts its tasks).
 
     Taichi can only run one backend per process: a second call with a different explicit request
     raises BackendError; a matching, "auto" or (on a GPU backend) "gpu" request returns the backend
@@ -362,15 +352,15 @@ def in_gpu_blocks(enabled: bool = True):
 
 def sums_in_shared_memory() -> bool:
     """Whether float sums add up in each GPU block's shared memory (``pbf.solver.scan.TreeSum``): on
-    CUDA. Taichi 1.7.4's SPIR-V code generator (Vulkan, Metal) fails on a kernel whose second loop holds
-    a shared array ("Value tmp2 does not yet exist"), and the substep's kernels hold several sums."""
+    CUDA only, as Taichi's SPIR-V code generator (Vulkan, Metal) fails on a kernel whose second loop
+    holds a shared array, and the substep's kernels hold several sums."""
     return _started is not None and _started.arch == "cuda"
 
 
 def keeps_decisions_on_device() -> bool:
-    """Whether a Simulation built now keeps the substep's decisions on the device (the iterations'
-    stopping test, the neighbour lists' overflow) and reads the device once per frame: on a GPU
-    backend, and on the CPU inside :func:`decisions_on_device` (tests compare the two paths)."""
+    """Whether a Simulation built now takes the GPU backends' choices (loops over the bucket, two
+    iterations a call, the stopping test read on the device): on a GPU backend, and on the CPU inside
+    :func:`decisions_on_device` (tests compare the two)."""
     return on_gpu() or _decisions_on_device_on_cpu
 
 
@@ -388,12 +378,9 @@ def decisions_on_device(enabled: bool = True):
 @contextlib.contextmanager
 def light_compile():
     """Kernels that compile inside (their first call) skip Taichi's advanced IR optimisation, as every
-    kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile.
-    The bodies' rigid step is one thread over a few bodies and a few dozen contact candidates a
-    substep, and the whole-kernel simplification that took 1.4 s of the contacts' first call on 2
-    cores (it grows faster than the kernel) takes 0.4 s without it (docs/BENCHMARKS.md, "Start-up").
-    A kernel compiled so is compiled so on every start (and loaded so from the offline cache), and
-    rounds its own way, deterministically."""
+    kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile,
+    such as the bodies' rigid step (docs/BENCHMARKS.md, "Start-up: cold and warm"). Such a kernel is
+    compiled so on every start and rounds its own way, deterministically."""
     config = compile_config()
     before = config.advanced_optimization
     config.advanced_optimization = False
@@ -426,10 +413,8 @@ def _cuda_free_bytes() -> int | None:
 
 def device_memory_bytes() -> int:
     """Memory the running backend can still give a Simulation's fields, bytes: the CUDA device's free
-    memory (else its total), a hardware Vulkan device's largest device-local heap, and the host's free
-    memory on the CPU backend, on Metal (unified memory), on a software Vulkan driver and before any
-    backend has started. The memory check before allocation (``pbf.solver.model``) compares a scene's
-    need against it."""
+    memory (else its total), a hardware Vulkan device's largest device-local heap, else the host's
+    free memory (CPU, Metal's unified memory, a software Vulkan driver, no backend yet)."""
     if _started is None:
         return host_available_bytes()
     device = _started
@@ -452,9 +437,9 @@ def memory_place() -> str:
 def restart_backend() -> None:
     """Free every Taichi field and compiled kernel of this process and start the same backend again.
 
-    Taichi keeps each Simulation's kernels (and the memory they were compiled into) until the
-    runtime is reset, so a process that builds hundreds of Simulations, like the test suite, grows by
-    a few MB with each. Simulations made before the restart cannot be used after it.
+    Taichi keeps each Simulation's kernels until the runtime is reset, so a process that builds
+    hundreds of Simulations, like the test suite, grows with each. Simulations made before the
+    restart cannot be used after it.
     """
     if _started is None:
         raise BackendError("restart_backend(): no backend has been started in this process")

@@ -8,39 +8,30 @@ gradient rotated back; a sphere's is the half-space table at d = |p − c| − R
 collision (Algorithm 1, line 15) pushes a particle out of the body grown by the particle radius, less
 while the body moves (``collision_reach``).
 
-The reaction. The ghost moves particle i by h² λ̂_i ∇ψ_b(x_i) in each iteration and the divergence
-pass changes its velocity by h² Δt Λ_i ∇ψ_b; over a substep that is the force −V p_i ∇ψ_b(x_i) on
-the particle, with p_i = −ρ0 h² (L_i/Δt² + Λ_i) the pressure of ``Simulation.pressures`` (L_i the
-multiplier the iterations moved it by, combined with their weights). The body takes the opposite,
+The reaction. Over a substep the ghost's terms push particle i with the force −V p_i ∇ψ_b(x_i),
+p_i = −ρ0 h² (L_i/Δt² + Λ_i) the pressure of ``Simulation.pressures`` (L_i the iterations' weighted
+multiplier, Λ_i the divergence pass's). The body takes the opposite,
 
     F_b = Σ_i V p_i ∇ψ_b(x_i),   τ_b = Σ_i (x_i − c_b) × V p_i ∇ψ_b(x_i),
 
-so buoyancy and impact come out of the pressure, and momentum passes between water and body through
-the same term that moves the water. The collision moves water too: each projection records the
-bodies' share of its move, D_i, followed through the iterations' weighted recurrence as x* is
-(``record_start``), and the body that pushed takes −m D_i / Δt² (m the particle's mass), as v = (x* −
-x)/Δt gave the particle m D_i / Δt. The pair terms of the constraint are antisymmetric, so at rest
-the sum over the particles of every boundary's terms balances the water's weight: a floating body
-carries exactly what it pushes. The sum runs over fixed blocks of particles in index order, then
-over the blocks in order (no float atomics), so it is the same bit for bit on every run.
+so buoyancy and impact come out of the pressure that moves the water. The collision moves water too:
+each projection records the bodies' share of its move, D_i, through the iterations' recurrence
+(``record_start``), and the body that pushed takes −m D_i / Δt². The pair terms are antisymmetric,
+so at rest a floating body carries exactly what it pushes. The sum runs over fixed blocks of
+particles in order (no float atomics): the same bits on every run.
 
-The step. Each substep, before the water's prediction, each body is advanced with symplectic Euler
-under gravity and the reaction of the substep before (v += Δt (g + F/M), ω += Δt I⁻¹ (τ − ω × Iω) in
-the body frame, c += Δt v, q += Δt/2 (0, ω) q, normalised), then its contacts with the container,
-the obstacles and the other bodies are resolved (``_contacts``). The water is then solved around it
-where it stands at the end of the substep, moving at its new velocity, as the piston is. The
-reaction comes one substep late: an explicit (partitioned) coupling. Bodies lighter than water are
-where such couplings can go unstable (added mass); at the densities of the presets (300-900 kg/m³)
-and the CFL-limited substeps it is stable (docs/BODIES.md). A collision that hands the water a body's
-whole velocity at once is where it overshoots: hence COLLISION_FRACTION.
+The step. Each substep, before the water's prediction, each body takes a symplectic Euler step
+under gravity and the last substep's reaction, then its contacts are resolved (``_contacts``); the
+water is solved around it where it stands at the end of the substep, as around the piston. The
+coupling is explicit, one substep late; at the presets' densities and CFL-limited substeps it is
+stable (docs/BODIES.md).
 
 Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
-sphere point that lies inside a wall, an obstacle or another body, with the penetration removed by
-moving the bodies apart (in inverse proportion to their masses); one serial pass over the few bodies,
-so the order, and the bits, are fixed. Boxes meet boxes at the corners of one inside the other, and,
-where no corner is inside, edge across edge (``_edge_contacts``). A body moves at most time.max_cfl
-spacings a substep (its speed counts in the CFL limit, ``speed_limit_m_s``) and is at least two
-spacings thick, so it cannot pass through a wall or another body in one substep.
+sphere point inside a wall, an obstacle or another body, the penetration removed by moving the
+bodies apart in inverse proportion to their masses; one serial pass, so the order and the bits are
+fixed. Boxes meet boxes corner in box, else edge across edge (``_edge_candidate``). A body moves at
+most time.max_cfl spacings a substep and is at least two spacings thick, so it cannot pass through
+a wall or another body in one substep.
 """
 
 import math
@@ -68,28 +59,20 @@ FRICTION = 0.4
 """Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
 COLLISION_AT_REST = 1.0
 """The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
-at the walls: the first layer of water under a floating box then sits half a spacing from it, where
-the ghost's lattice stands, and the box floats at its draft (within 1.2%; 5-8% too deep with the
-collision at COLLISION_MOVING throughout; docs/VALIDATION.md, Floating bodies)."""
+at the walls: the water under a floating box then sits where the ghost's lattice stands, and the box
+floats at its draft (docs/VALIDATION.md)."""
 COLLISION_MOVING = 0.2
-"""The least fraction of r, for a body that moves: the ghost's pressure, which grows as water comes
-near, must meet a moving body rather than the collision, which hands the water in the way the body's
-whole velocity in one substep. A box of water's density running into water at 0.5 m/s keeps 0.34 m/s
-after the impact at 0.2 r (an added mass of 0.7 times the water it displaces gives 0.3 m/s), and
-stops dead at r (0.04 m/s)."""
+"""The least fraction of r, for a body that moves: the ghost's pressure must meet a moving body rather
+than the collision, which would hand the water in the way the body's whole velocity in one substep."""
 COLLISION_GIVE = 1.0
 """The collision distance is r (COLLISION_AT_REST) less this many times the distance the body's fastest
 point moves in a substep, and at least COLLISION_MOVING r. At 1 the grown body's surface at the end of
 a substep stands no further out than a resting body's stood at its start: a moving body does not sweep
-the water with its collision (its ghost's pressure moves it), and a floating box's bobbing (a few
-cm/s, 0.03 r a substep) leaves the distance near r. The box of the momentum test keeps 0.30 m/s after
-its impact, what an added mass of 0.7 times the water it displaces gives; at 2 and 4 it kept 0.32 and
-0.34 m/s, as at 0.2 r, the drafts the same (benchmarks/bodies.py collision), but the floating box,
-whose collision distance then followed its bobbing more, moved faster than the 0.06 m/s that
-tests/test_bodies.py's box at rest is held to (0.064 m/s at 2, against 0.052 at 1)."""
+the water with its collision, and a floating box's bobbing leaves the distance near r (the values
+tried: benchmarks/bodies.py collision)."""
 CONTACT_SWEEPS = 8
 """Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
-corner to stop undoing those at the others (after two, a box on the floor still moved at 0.1 m/s)."""
+corner to stop undoing those at the others."""
 
 
 CORNERS = 8
@@ -171,10 +154,8 @@ class Bodies:
     def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
         """``capacity``: the per-particle arrays' length (a bucket). The bodies' arrays have slots of a
         bucket too (``pbf.solver.model.allocation``) and every number the kernels read is data
-        (``self.constants``), so that every scene with bodies shares one compile of their code: a
-        field's shape and a Python number a kernel reads are both part of a kernel's cache key. What
-        stays a switch (``ti.static``) is whether a scene has spheres, boxes or both, whether it has
-        obstacles and whether walls have ghost density: each leaves a whole feature's code out."""
+        (``self.constants``), so that every scene with bodies shares one compile. The switches
+        (``ti.static``) are spheres, boxes, obstacles and wall density: each leaves a feature's code out."""
         bodies = params.bodies
         self.params = bodies
         self.tables = tables
@@ -185,10 +166,9 @@ class Bodies:
         self.kernel_radius = params.kernel_radius_m
         self.with_wall_density = params.wall_density
         slots = allocation(self.count, 8)
-        # The arrays whose shapes follow the particles' bucket first, closed into a SNode tree of their
-        # own by a launch (the fill), then the bodies' slots in another: Taichi's cache key of a field
-        # holds its tree's layout, so the rigid step's kernels, which touch only the slots, are shared
-        # by scenes of any particle bucket. The reaction's blocks follow the bucketed capacity.
+        # The arrays that follow the particles' bucket first, closed into a SNode tree of their own by a
+        # launch (the fill), then the bodies' slots in another: the rigid step's kernels, which touch
+        # only the slots, are then shared by scenes of any particle bucket.
         self.block = max(64, math.ceil(capacity / 1024))
         self.blocks = math.ceil(capacity / self.block)
         self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
@@ -248,10 +228,9 @@ class Bodies:
             volume=float(bodies.particle_volume_m3),
         )
         """The counts, the container, the radii and the particle volume as data. ``wall_margin``: how far
-        inside the container a way out of a body must lead: the walls' collision distance, a little less
-        so that rounding does not shut a way flush with it."""
-        # One kernel writes them all: a write per element from Python compiles a kernel per field, and
-        # a from_numpy one per field too (7 more compiles at the start).
+        inside the container a way out of a body must lead (a little less than the walls' collision
+        distance, so that rounding does not shut a way flush with it)."""
+        # One kernel writes them all: a from_numpy per field would compile a kernel per field.
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
         for b in range(self.count):
             extents = bodies.half_extents_m[b]
@@ -291,8 +270,7 @@ class Bodies:
             self._store(state)
         return state
 
-    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel of its
-    # own for its field (12 more compiles at the start, 0.5 s on 2 cores).
+    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel.
 
     @ti.kernel
     def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
@@ -323,15 +301,14 @@ class Bodies:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
 
     def speed_limit_m_s(self) -> float:
-        """The fastest any point of a body moves, |v| + |ω| r_bound (a read from the device): the CFL limit
-        counts it, so no body crosses more than time.max_cfl spacings. The frame's one read brings it with
-        the water's fastest speed (``Diagnostics.frame_speeds``)."""
+        """The fastest any point of a body moves, |v| + |ω| r_bound (a read from the device), for the CFL
+        limit; the frame's read brings it with the water's (``Diagnostics.frame_speeds``)."""
         return float(self.fastest[None]) if self.count else 0.0
 
     @ti.func
     def _set_fastest(self):
-        """``fastest`` for the bodies as they move now: by the one thread of a launch that has just changed
-        their velocities (the rigid step, a restore, the hand), so that the frame's read finds it."""
+        """``fastest`` for the bodies as they move now, by the one thread of a launch that has just changed
+        their velocities."""
         top = 0.0
         for b in range(self.constants[None].count):
             top = ti.max(top, self.fastest_point(b))
@@ -342,8 +319,8 @@ class Bodies:
         if self.held:  # still, so at rest: the collision at its full distance (collision_reach)
             self._rest_reach()
         else:
-            # The contacts are most of the step's compile: without Taichi's advanced IR optimisation it
-            # is a third (docs/BODIES.md, Compile time). Only the first call compiles.
+            # The contacts are most of the step's compile, far less without Taichi's advanced IR
+            # optimisation (docs/BODIES.md, "Compile time").
             with backend.light_compile():
                 self._launch_step(dt, *gravity)
 
@@ -368,8 +345,7 @@ class Bodies:
     def grab(self, push, speed_limit_m_s: float) -> None:
         """The hand in the water (``model.Push``) carries the bodies it touches as it does the water: each
         body's velocity blended toward the hand's by w = (1 − (d/R)²)³, d the hand's distance from its
-        surface, and its spin damped alike, so that a body follows the dragged hand and flies on at the
-        hand's velocity when let go. The hand's speed is capped at ``speed_limit_m_s``, as for the water."""
+        surface, and its spin damped alike. The hand's speed is capped at ``speed_limit_m_s``."""
         velocity = np.asarray(push.velocity_m_s, np.float64)
         speed = float(np.linalg.norm(velocity))
         if speed > speed_limit_m_s:
@@ -405,10 +381,9 @@ class Bodies:
 
     @ti.kernel
     def _step(self, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32):
-        # One thread takes the whole rigid step (a top-level loop of one iteration): the bodies' motion,
-        # their contacts in a fixed order and their collision distances. The work grows with the bodies
-        # (squared, for the contacts), a few dozen, not with the particles, and a launch of its own for
-        # each part would cost a GPU more than the part: one call a substep and one task.
+        # One thread takes the whole rigid step: the motion, the contacts in a fixed order and the
+        # collision distances. The work grows with the few bodies, not the particles, and a launch per
+        # part would cost more than the part.
         for _ in range(1):
             count = self.constants[None].count
             for b in range(count):
@@ -432,7 +407,7 @@ class Bodies:
 
     @ti.kernel
     def _rest_reach(self):
-        # Not ``reach.fill(number)``: Taichi's fill takes its value as a template, compiled into the kernel.
+        # Not ``reach.fill(number)``: Taichi's fill compiles its value into the kernel.
         for b in range(self.constants[None].count):
             self.reach[b] = COLLISION_AT_REST * self.constants[None].particle_radius
 
@@ -451,17 +426,14 @@ class Bodies:
 
     @ti.func
     def _contacts(self):
-        """Every contact, CONTACT_SWEEPS times over, in a fixed order: each body against the container
-        (its corners, or a sphere's six extreme points, below then above each wall) and the obstacles,
-        then each pair of bodies (a box's corners inside the other box, then, where none is, its edges
-        across the other's). Each candidate is tested where the contacts before it left the bodies,
-        and resolved at once (sequential impulses).
+        """Every contact, CONTACT_SWEEPS times over, in a fixed order: each body against the container and
+        the obstacles, then each pair of bodies (corners inside the other box, then, where none is,
+        edges across). Each candidate is tested where the contacts before it left the bodies and
+        resolved at once (sequential impulses).
 
-        The candidates are numbered and walked by runtime loops (``slot``: a body against what stands
-        still, then a pair of bodies; ``m``: the candidate), and the resolution (:meth:`_resolve`) is
-        written once in the loop's body: Taichi inlines every ``ti.func`` call, and with a call per
-        wall, axis and kind of pair (unrolled by ``ti.static``) the impulse code was inlined 16 times
-        and the rigid step took 100 s to compile on 2 cores (docs/BODIES.md, Compile time)."""
+        The candidates are numbered and walked by runtime loops (``slot``: a body or a pair; ``m``: the
+        candidate), so that :meth:`_resolve` is inlined once: Taichi inlines every ``ti.func`` call, and
+        a call per wall, axis and kind of pair made the compile far longer (docs/BODIES.md, "Compile time")."""
         (count, pairs, static_candidates) = (
             self.constants[None].count,
             self.constants[None].pairs,
@@ -510,10 +482,9 @@ class Bodies:
     @ti.func
     def _static_candidate(self, b, m):
         """Candidate m of body b against what does not move: whether it touches, the point, the outward
-        normal of the wall and the depth. m < CONTAINER_CANDIDATES: the container, at a box's corner
-        m // 6 (a sphere: m < 6 only, its extreme point), along axis m // 2 % 3, below its lower wall
-        (m even) or above its upper (m odd); then CORNERS per obstacle (a sphere: the first only, its
-        closest point). A scene of boxes alone compiles no sphere code, and the other way round."""
+        normal and the depth. m < CONTAINER_CANDIDATES: the container, at a box's corner m // 6 (a
+        sphere: m < 6, its extreme point), along axis m // 2 % 3, below the lower wall (m even) or
+        above the upper (m odd); then CORNERS per obstacle (a sphere: the first, its closest point)."""
         found = False
         point = ti.Vector([0.0, 0.0, 0.0])
         normal = ti.Vector([0.0, 0.0, 0.0])
@@ -614,12 +585,10 @@ class Bodies:
 
     @ti.func
     def _resolve(self, a, b, point, normal, depth):
-        """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a. With b < 0, a's
-        ``point`` lies inside a fixed wall of outward ``normal``: a moves out by the depth. Else a's and
-        b's surfaces overlap there and each moves apart in inverse proportion to its mass. Then the
-        velocity into the contact is taken away (no bounce), and, within Coulomb's cone, the sliding:
-        two impulses along a direction (the normal, then the sliding's), one loop over them, each on
-        one or two bodies (the impulse code once in the kernel)."""
+        """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a (b < 0: a fixed wall).
+        The bodies move apart (a alone against a wall, else in inverse proportion to their masses),
+        then the velocity into the contact is taken away (no bounce) and, within Coulomb's cone, the
+        sliding: one loop over the two impulses, so that the impulse code is inlined once."""
         pair = b >= 0
         other = ti.max(b, 0)  # (a valid index where there is no other body; its terms are left out)
         ma = self.inverse_mass[a]
@@ -822,8 +791,7 @@ class Bodies:
 
     @ti.func
     def _ghost_of(self, p, b):
-        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m). A scene of boxes alone (or of
-        spheres alone) compiles one branch only (``has_spheres``, ``has_boxes``)."""
+        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
@@ -954,13 +922,10 @@ class Bodies:
         q, _pusher = self.push_out(p)
         return q
 
-    # The collision's push, recorded per particle so that the body feels it (:meth:`gather`). A
-    # substep's x* is the prediction's, then the Jacobi iterations' two-step recurrence
-    # x^{k+1} = x^{k−1} + w (x̂^{k+1} − x^{k−1}) (``pbf.solver.acceleration``), each collided, then
-    # perhaps a step back between the last two. That is linear in the pushes, so the part of x* the
-    # pushes account for follows the same recurrence: D^{k+1} = D^{k−1} + w (D^k − D^{k−1}) + c^{k+1}, c
-    # the push of iteration k + 1, as the multiplier L follows it (``DensityConstraint.lam_total``).
-    # With v = (x* − x)/Δt the bodies gave particle i the momentum m D_i / Δt over the substep.
+    # The collision's push, recorded per particle so that the body feels it (:meth:`gather`). x* follows
+    # the iterations' two-step recurrence (``pbf.solver.acceleration``), each step collided, which is
+    # linear in the pushes: their part D follows the same recurrence, D^{k+1} = D^{k−1} + w (D^k −
+    # D^{k−1}) + c^{k+1}, c the push of iteration k + 1.
 
     @ti.func
     def record_start(self, i, pushed, pusher):
@@ -1017,8 +982,7 @@ class Bodies:
         velocity_scale: ti.f32,
         push_scale: ti.f32,
     ):
-        # Both loops run over the arrays' slots, bounds the kernel knows, and skip the slots past the
-        # bodies: a bound read at run time would be a one-thread task of its own (a launch on a GPU).
+        # Both loops run over the arrays' slots, bounds the kernel knows (no one-thread task for a bound).
         for b, k in ti.ndrange(self.partial_force.shape[0], self.partial_force.shape[1]):
             if b < self.constants[None].count:
                 block, volume = self.constants[None].block, self.constants[None].volume

@@ -10,19 +10,15 @@ stands at the end of the coming substep) and ``speed_limit_m_s()`` (for the CFL 
 more boundary in its tuple.
 
 A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
-the solver pulls it into the wall, where clamping stacks it. We add the density of ghost fluid behind
-each wall (``pbf.solver.sph.wall_density_table``), and its gradient, to the density constraint; the table is
-computed once per scene and looked up by wall distance. Near an edge or a corner the ghost lattices
-of two or three walls overlap; inclusion–exclusion tables (``pbf.solver.sph.wall_overlap_tables``) remove
-what would be counted twice, so a block in a corner also starts exactly at ρ0.
+the solver pulls it into the wall. We add the density of ghost fluid behind each wall
+(``pbf.solver.sph.wall_density_table``), and its gradient, to the density constraint, looked up by
+wall distance; near an edge or a corner inclusion–exclusion tables
+(``pbf.solver.sph.wall_overlap_tables``) remove what two or three walls count twice.
 
-An obstacle is the intersection of three slabs, so its ghost lattice is too. Per axis, a particle
-is either outside the slab (one half-space at distance a stands for the slab) or inside it (the
-slab is everything minus the two half-spaces beyond its faces, at distances d_lo and d_hi). The
-product over the three axes expands into at most 27 signed terms, each the ghost density of one,
-two or three orthogonal half-spaces: the wall, edge and corner tables of the container. So the
-ghost of an obstacle is exact (to the tables) at its faces, its convex edges and its corners, and a
-block resting on an obstacle starts at ρ0 as it does on the floor.
+An obstacle is the intersection of three slabs. Per axis, a particle is outside the slab (one
+half-space stands for it) or inside it (everything minus the two half-spaces beyond its faces); the
+product over the axes expands into at most 27 signed terms, each the wall, edge or corner table. So
+the ghost of an obstacle is exact (to the tables) at its faces, convex edges and corners.
 """
 
 import math
@@ -113,12 +109,9 @@ class GhostTables:
     @ti.func
     def box(self, p, lower, upper):
         """Ghost density ρ/ρ0 of the axis-aligned box lower–upper at p, and its gradient (1/m): the
-        27-term expansion of the module docstring (obstacles; bodies in their own frame).
-
-        Written with selections instead of branches, and with one wall and one quadrant lookup at the
-        active axes (:meth:`half_spaces`) instead of three of each: this code is inlined in
-        each Jacobi iteration's kernel, once per obstacle and body shape, and Taichi's compile time of a
-        kernel grows faster than its length (docs/BODIES.md, "Compile time")."""
+        27-term expansion of the module docstring (obstacles; bodies in their own frame). Written with
+        selections and one lookup of each table (:meth:`half_spaces`): it is inlined in the iterations'
+        kernel, whose compile time grows faster than its length (docs/BODIES.md, "Compile time")."""
         h = self.constants[None].kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
@@ -153,9 +146,8 @@ class GhostTables:
 
     @ti.func
     def half_spaces(self, active, d):
-        """Ghost density of the half-spaces marked in ``active`` (one, two or three axes, at distances
-        d), and its derivative in each distance; no half-space at all is the full lattice, ρ/ρ0 = 1.
-        The wall or the quadrant is looked up once, at the active axes chosen at run time."""
+        """Ghost density of the half-spaces marked in ``active`` (at distances d), and its derivative in
+        each distance; none at all is the full lattice, ρ/ρ0 = 1."""
         value = 0.0
         slope = ti.Vector([0.0, 0.0, 0.0])
         count = active.sum()
@@ -191,8 +183,7 @@ class Container:
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
         )
         """The particle radius r, the walls, h and h − r as data (``pbf.solver.constants``): a wall's
-        mirror images of the fluid come within h of a particle only if the particle is closer than
-        h − r to the wall, as no particle comes closer to it than r (the collision)."""
+        mirror images come within h of a particle only if it is closer than h − r to the wall."""
         self.with_wall_density = params.wall_density
         self.mirrored = params.wall_mirror
         """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``,
@@ -210,8 +201,7 @@ class Container:
         self.piston_x[None] = params.lower_m[0]
         self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
         self._piston_x_host = float(np.float32(params.lower_m[0]))
-        """piston_x as the device holds it (float32), kept on the host so that moving the piston reads
-        nothing back from the device."""
+        """piston_x as the device holds it, kept on the host so that moving the piston reads nothing back."""
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
@@ -223,32 +213,21 @@ class Container:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move(self, piston_time_s: float, dt: float = 0.0, launch: bool = True) -> tuple[float, float]:
+    def move(self, piston_time_s: float, dt: float = 0.0) -> tuple[float, float]:
         """Place moving walls where they stand at the end of the coming substep of ``dt``, where x* is
-        projected, so a particle the piston pushes leaves with the piston's velocity (v = (x* − x)/Δt);
-        the piston's velocity over that substep is what the divergence pre-correction sees (0 when
-        ``dt`` is 0: placed, not moved). Returns the piston's place and velocity; with ``launch`` False
-        they are not set on the device here but left to the substep's first launch
-        (:meth:`set_piston`, ``pbf.solver.substep``), a kernel call fewer a substep."""
+        projected, so a particle the piston pushes leaves with its velocity (v = (x* − x)/Δt), which the
+        divergence pre-correction sees (0 when ``dt`` is 0). Returns the piston's place and velocity."""
         if not self.wave_maker:
             return self._piston_x_host, 0.0
         position = self.piston_position_m(piston_time_s)
         velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
-        if launch:
-            self._launch_place(position, velocity)
+        self._launch_place(position, velocity)
         self._piston_x_host = float(np.float32(position))
         return position, velocity
 
     @ti.kernel
     def _place(self, position: ti.f32, velocity: ti.f32):
-        """Both of :meth:`move`'s values in one launch: set from Python, each would be a kernel call of
-        Taichi's own (a field's writer)."""
-        self.set_piston(position, velocity)
-
-    @ti.func
-    def set_piston(self, position, velocity):
-        """The piston's place (m) and its velocity over the coming substep (m/s), for the top level of a
-        kernel, before any loop that reads them (a one-thread task)."""
+        """Both of :meth:`move`'s values in one launch, not a field write (a launch) each."""
         self.piston_x[None] = position
         self.piston_v[None] = velocity
 
@@ -344,8 +323,7 @@ class Obstacles:
 
     def allocate(self) -> None:
         """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``),
-        none without obstacles: allocated after every array all scenes have, so that theirs keep
-        their place in Taichi's cache keys whether a scene has obstacles or not."""
+        none without obstacles; allocated after every array all scenes have (their cache keys)."""
         if not self.present:
             return
         params = self.params
@@ -433,8 +411,7 @@ class Boundaries:
 
     def __init__(self, params: BoundaryParams, capacity: int = 1, solids: bool = True):
         """The ghost tables and the container; with ``solids`` also the obstacles' and bodies' arrays
-        (else :meth:`allocate_solids` later: ``Simulation`` allocates them after every array all
-        scenes have, so that those keep their places in Taichi's cache keys)."""
+        (else :meth:`allocate_solids` later, after every array all scenes have)."""
         self.params = params
         self.tables = GhostTables(params.spacing_m, params.kernel_radius_m, params.wall_density)
         self.container = Container(params, self.tables)
@@ -454,14 +431,12 @@ class Boundaries:
             self.bodies = Bodies(self.params, self.tables, self.obstacles, capacity)
             self.parts += (self.bodies,)
 
-    def move(self, clock_s: float, dt: float = 0.0, launch: bool = True) -> tuple[float, float]:
+    def move(self, clock_s: float, dt: float = 0.0) -> tuple[float, float]:
         """Place moving boundaries where they stand at the end of the coming substep of ``dt``
-        (``clock_s``: the wave maker's clock, which stops while it is switched off). Returns the piston's
-        place and velocity, which with ``launch`` False the substep's first launch sets
-        (``Container.move``)."""
+        (``clock_s``: the wave maker's clock). Returns the piston's place and velocity."""
         for part in self.parts[1:]:
             part.move(clock_s, dt)
-        return self.container.move(clock_s, dt, launch)
+        return self.container.move(clock_s, dt)
 
     def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
         """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as
@@ -483,9 +458,8 @@ class Boundaries:
 
     @ti.func
     def _project_pushed(self, p):
-        """:meth:`project` with bodies, and the bodies' part of the move with the body that made it: what
-        is left of their push once the container has taken back what they pushed through a wall (a
-        particle caught between a body and a wall does not move, so it lifts no body off the floor)."""
+        """:meth:`project` with bodies, and the bodies' part of the move with the body that made it, less
+        what the container took back (a particle caught between a body and a wall lifts no body)."""
         q = p
         for k in ti.static(range(len(self.parts) - 1)):
             q = self.parts[k].project(q)

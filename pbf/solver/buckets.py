@@ -1,22 +1,16 @@
 """The capacity buckets a cache folder holds compiled: a start may take one a size up instead of its own.
 
 The solver sizes its arrays by capacity buckets, powers of two (``pbf.solver.model.allocation``),
-because Taichi's offline cache names a compiled kernel by the shapes of the fields it touches. A
-scene whose particle or cell count falls into a bucket no run before used compiles every kernel
-again: ``floating_boxes`` at 1.1 times its spacing (12,960 particles, the bucket of 16,384 instead
-of 32,768) compiled 28 kernels, 3.5 s of its start on 2 cores.
+because Taichi's offline cache names a compiled kernel by the shapes of the fields it touches: a
+scene whose counts fall into a bucket no run before used compiles every kernel again.
 
-An array's length changes nothing of the results: every loop runs to the live count (on a GPU's
-path to the bucket, where the threads past the count do nothing), so the same scene steps bit for
-bit the same in any bucket (``tests/test_start_cache.py``). A start therefore takes, where its own
-buckets were never compiled, the smallest pair of buckets a run before compiled that holds it and is
-at most one size up on each (:func:`pbf.solver.model.reused_allocation`): at most twice the arrays'
-memory, and only while that is at most REUSE_LIMIT_BYTES more, where a compile costs more than the
-memory and, on a GPU, the idle threads of the larger loops.
+An array's length changes nothing of the results (``tests/test_start_cache.py``). A start therefore
+takes, where its own buckets were never compiled, the smallest pair of buckets a run before compiled
+that holds it and is at most one size up on each (:func:`pbf.solver.model.reused_allocation`), while
+that adds at most REUSE_LIMIT_BYTES of memory.
 
 Each start records its pair in ``pbf_buckets.txt`` in Taichi's offline cache folder, a line of
-"particles cells" each; only while the offline cache is on (an empty folder is a cold start in every
-respect). A pair whose kernels have since gone from the cache compiles again and costs nothing more.
+"particles cells" each, only while the offline cache is on.
 """
 
 from __future__ import annotations
@@ -28,7 +22,7 @@ from pbf.solver.launch import compile_config
 FILE = "pbf_buckets.txt"
 """The record, in Taichi's offline cache folder."""
 REUSE_LIMIT_BYTES = 64 << 20
-"""The most memory a larger bucket may add: 64 MiB, the arrays of about 100,000 particles."""
+"""The most memory a larger bucket may add."""
 
 
 def _path() -> Path | None:

@@ -1,14 +1,11 @@
 """A stage's scene constants as data: one () struct field its kernels read, instead of Python numbers.
 
-Taichi bakes a Python number that a kernel reads (``self.h`` of a ``data_oriented`` stage) into the
-kernel's code, and its offline cache names a compiled kernel by a hash of that code: every scene of
-another spacing, rest density or container compiled every kernel again. Read from a field, a constant
-is data, and one compile serves every scene (the fields' shapes are buckets, ``pbf.solver.model.allocation``).
+Taichi bakes a Python number that a kernel reads into the kernel's code, by which its offline cache
+names the compiled kernel: every scene of another spacing or container would compile again. Read
+from a field, a constant is data, and one compile serves every scene.
 
-A kernel reads the constants it needs into locals once per particle (``c = self.constants[None]``,
-then ``c.h``): the compiler keeps them in registers through the neighbour loops and hoists what is
-derived from them (a kernel's normalisation from h) out of those loops, so the arithmetic per pair is
-what it was with the numbers baked in.
+A kernel reads the constants it needs into locals once per particle (``c = self.constants[None]``),
+so that the compiler hoists what is derived from them out of the neighbour loops.
 """
 
 import numbers

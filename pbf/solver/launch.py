@@ -6,35 +6,26 @@ Every read of Taichi's private names (``taichi.lang``, ``taichi._lib``, a kernel
 that a Taichi other than the one this was written for changes one file's behaviour, not the solver's.
 
 The gate. :func:`knows_taichi`: the running Taichi is the version this module was written for
-(``WRITTEN_FOR``, from Taichi's public ``ti.__version__``) and its internals imported. Only then does a
-:class:`Launcher` launch past Taichi's call, and only where the environment does not say
-``PBF_PUBLIC_LAUNCH=1`` (:func:`fast_launch`); on any other Taichi, or with the switch, every launch
-is Taichi's public call, ``bound(*args, **kwargs)``. Another build of Taichi with the same public API
-may lay out its internals otherwise (one did: its ``launch_kernel`` took other arguments), so the
-names existing is no test.
+(``WRITTEN_FOR``) and its internals imported. Only then, and unless ``PBF_PUBLIC_LAUNCH=1``
+(:func:`fast_launch`), does a :class:`Launcher` launch past Taichi's call; otherwise every launch is
+Taichi's public call. Another build with the same public API may lay out its internals otherwise,
+so the names existing is no test.
 
-The launch. A call of a Taichi kernel first works out, in Python, which compiled variant its arguments
-select (``Kernel.ensure_compiled``: every argument's features, the template arguments by value or by
-identity, each through a chain of type tests), then sets the arguments and launches; on a GPU, a small
-scene's substep waits on the first part as long as on the device (docs/BENCHMARKS.md, "Host time per
-substep"). :class:`Launcher` calls a bound kernel the ordinary way the first time a variant is asked
-for (so the compile, Taichi's offline cache and the observers see it), keeps the compiled kernel under
-the variant's template arguments (plain values by value, fields and objects by identity, kept alive so
-that no other object takes their identity), and from then on launches it directly. A kernel that
-returns nothing and takes only scalars and ndarrays besides its templates is launched from a launch
-context whose arguments the Launcher sets itself, as ``Kernel.launch_kernel`` sets them but without
-the closures and the type dispatch that function builds a call, and with Taichi's lookup of the
-compiled code done once; any other goes through ``Kernel.launch_kernel``. A call with an argument
-Taichi would refuse, or with another count of arguments, is an ordinary call, so that Taichi refuses
-it in its own words. The same kernel, the same arguments: the same launch, bit for bit
+The launch. A call of a Taichi kernel first works out, in Python, which compiled variant its
+arguments select, then sets the arguments and launches; on a GPU the first part can take as long as
+the device (docs/BENCHMARKS.md, "Host time per substep"). :class:`Launcher` calls a bound kernel the
+ordinary way the first time a variant is asked for (so the compile, the offline cache and the
+observers see it), keeps the compiled kernel under the variant's template arguments (plain values by
+value, objects by identity, kept alive), and from then on launches it directly, setting scalar and
+ndarray arguments itself. A call Taichi would refuse is an ordinary call, so that Taichi refuses it
+in its own words. The same kernel, the same arguments: the same launch, bit for bit
 (``tests/test_launch.py``).
 
 What the studies see (:class:`Observer`, :func:`watching`): every kernel launch, whether the host
-waits on it, every element of a field or ndarray read or written from Python, and every call that
-compiled a new variant with its time. Taichi 1.7.4 has no public hook for these (its profiler records
-the device's tasks, not the host's calls or reads), so while an observer watches, this module wraps
-Taichi's kernel class and its fields' element access, and its Launchers report their own launches;
-the studies patch nothing. Taichi's profiler's records, task by task, are :func:`profiled_tasks`.
+waits on it, every element of a field or ndarray accessed from Python, and every call that compiled
+a new variant with its time. Taichi has no public hook for these, so while an observer watches,
+this module wraps Taichi's kernel class and its fields' element access; the studies patch nothing.
+Taichi's profiler's records, task by task, are :func:`profiled_tasks`.
 
 The configuration. Taichi's public ``ti.cfg`` is the running program's configuration (None before
 ``ti.init``): :func:`current_arch`, :func:`compile_config`. :func:`start_taichi` is ``ti.init``

@@ -5,13 +5,10 @@ parameter object per stage of the step (:class:`GridParams`, :class:`BoundaryPar
 :class:`DensityParams`, :class:`VelocityParams`). What may change between substeps travels apart, in
 :class:`Control`, and reaches the kernels as arguments.
 
-A parameter's path from a TOML file to a kernel: ``scene.load_scene`` validates the key into a frozen
-``Scene``; ``Model.from_scene`` derives the stage's parameter object from it; the stage's constructor
-writes its numbers into a field of scene constants (``pbf.solver.constants``) that its kernels read
-as data. Only the switches that remove code (a feature a scene does not use) and the sizes of the
-arrays enter the compiled kernels, and the sizes only as capacity buckets (:func:`allocation`): so
-Taichi's offline cache, which names a kernel by its code and the shapes of the fields it touches,
-serves every scene of the same features and buckets with the kernels one of them compiled.
+The stages write these numbers into fields of scene constants (``pbf.solver.constants``) that their
+kernels read as data: only the switches that remove code and the arrays' capacity buckets
+(:func:`allocation`) enter the compiled kernels, so Taichi's offline cache serves every scene of the
+same features and buckets with the kernels one of them compiled (docs/ARCHITECTURE.md).
 """
 
 from __future__ import annotations
@@ -44,8 +41,8 @@ Vec3 = tuple[float, float, float]
 
 NEIGHBOUR_REACH = 2
 """Grid cells per h. Cells h/2 wide put every neighbour within 2 cells, so a particle checks the 5×5×5
-cells around it, (5/2)³ = 15.6 h³ of space, against 27 h³ for cells h wide and 3×3×3: 42% fewer
-distance tests, the same lists, and a faster sort and neighbour search (docs/METHOD.md, "Grid and neighbour lists")."""
+cells around it, (5/2)³ h³ of space against 27 h³ for cells h wide: fewer distance tests, the same
+lists."""
 MAX_CORRECTION = 0.1
 """Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
 SCORR_N = 8
@@ -56,25 +53,22 @@ SCORR_DQ = 0.2
 STABLE_GAIN = 1.8
 """Largest per-iteration gain ω·μ allowed for any error mode: below 2, so every mode decays."""
 BYTES_PER_PARTICLE = 600
-"""Memory one particle needs: about 30 float32/int32 fields (~130 B) plus its 64 neighbour slots at
-4 B (256 B, pbf.solver.grid.SLOTS); rounded up for the compact list that replaces them after an overflow."""
+"""Memory one particle needs: its float32/int32 fields plus its neighbour slots (pbf.solver.grid.SLOTS),
+rounded up for the compact list that replaces them after an overflow."""
 BYTES_PER_CELL = 12
 """Grid memory per cell: count, start and a scan scratch, int32 each."""
 PARTICLE_BUCKET_FLOOR = 2**14
-"""The smallest particle allocation (:func:`allocation`): every preset below it shares one compile, for
-at most 16,384 × 600 B ≈ 10 MB of memory."""
+"""The smallest particle allocation (:func:`allocation`): every preset below it shares one compile."""
 CELL_BUCKET_FLOOR = 2**16
-"""The smallest grid allocation in cells (:func:`allocation`), 0.8 MB."""
+"""The smallest grid allocation in cells (:func:`allocation`)."""
 
 
 def allocation(count: int, floor: int) -> int:
     """The number of entries allocated for ``count``: the next power of two, at least ``floor``.
 
-    A field's shape is part of the key Taichi's offline cache files a compiled kernel under, so
-    fields sized to the scene made every scene compile every kernel again. Sized by buckets, a scene
-    whose counts fall in the buckets of one run before starts from the cache, at the price of at most
-    twice the memory of the per-particle and per-cell arrays (the neighbour list, the largest, is sized
-    to the scene: it is an ndarray, whose shape is no part of the key)."""
+    A field's shape is part of the key Taichi's offline cache files a compiled kernel under: sized by
+    buckets, a scene whose counts fall in the buckets of a run before starts from the cache, at the
+    price of at most twice the memory of those arrays."""
     return max(int(floor), 1 << max(int(count) - 1, 0).bit_length())
 
 
@@ -353,12 +347,10 @@ class Control:
 
 @dataclass(frozen=True)
 class Features:
-    """What a substep's kernels compile in, as one frozen, hashable value (a compile-time argument of
-    the substep's kernels: each distinct value is one compile). The terms the control may switch
-    (an error target, confinement, XSPH, the divergence pre-correction's iterations) come from the
-    control; the wave maker, the bodies and mirrored walls are fixed when the solver is built (they
-    shape ``Boundaries`` and ``DensityConstraint``) and are named here so that the description is whole.
-    Build it with :meth:`of`, which hands out one object per value."""
+    """What a substep's kernels compile in, as one frozen, hashable value (a compile-time argument: each
+    distinct value is one compile). The terms the control may switch come from the control; the wave
+    maker, the bodies and mirrored walls are fixed when the solver is built and named here so that the
+    description is whole. Build it with :meth:`of`, which hands out one object per value."""
 
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
@@ -653,11 +645,9 @@ def _culprit(scene: Scene) -> tuple[str, str]:
 
 
 def _check_memory(scene: Scene, particles: int, cells: int, allocated: int, allocated_cells: int) -> None:
-    """Refuse, before Taichi allocates anything, a scene whose particles and grid would not fit in
-    memory, would outgrow the kernels' int32 indices, or whose s_corr would overflow float32. The
-    figures are exact integers (and float64), so no count can wrap before it is compared. The message
-    names the key that makes the difference (``_culprit``). The arrays are counted at their allocated
-    lengths (:func:`allocation`)."""
+    """Refuse, before Taichi allocates anything, a scene whose arrays (at their allocated lengths) would
+    not fit in memory or outgrow the kernels' int32 indices, naming the key that makes the difference
+    (``_culprit``). The figures are exact Python integers, so no count wraps before it is compared."""
     need = allocated * BYTES_PER_PARTICLE + allocated_cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:

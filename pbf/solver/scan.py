@@ -1,30 +1,17 @@
 """Prefix sums and reductions over Taichi fields: parallel, in float32, bit-identical on any thread count.
 
-Both walk a tree of blocks. Level 0 cuts the values into blocks of consecutive entries; every level
-above cuts the block results of the one below into blocks, up to a level that is one block. A block
-is one thread's loop in index order, a level one parallel loop at the top level of the calling
-kernel: no serialised pass, no atomic, no host round trip, and the order of every addition depends
-on the indices alone, so the results are the same bits on any thread count, run after run.
-Everything is a ``ti.func`` for the top level of the caller's kernel, so a scan or a sum adds loops
-to a launch, never a launch of its own.
+Both walk a tree of blocks: level 0 cuts the values into blocks of consecutive entries, each level
+above cuts the block results of the one below, up to a level of one block. A block is one thread's
+loop in index order and a level one parallel loop at the top level of the calling kernel, so the
+order of every addition depends on the indices alone: no atomic, no host round trip, and a scan or a
+sum adds loops to the caller's launch, never a launch of its own. A prefix sum goes up the tree a
+pass a level and down it in one pass. On CUDA float sums add up in shared memory instead
+(:meth:`TreeSum._reduce_in_blocks`), in a fixed order all the same.
 
-The block sizes are the one choice per backend (:func:`block_sizes`). On the CPU level 0 has about
-1,024 blocks of n/1024 entries (64 at least; a prefix sum 256 of n/256): a thread walks a long stretch
-of memory in order, and one thread adds up the block results, two levels in all. On a GPU every block
-has 32 entries: tens of thousands of threads at level 0, a few levels more (four million values: 131,072,
-4,096, 128, 4), and a prefix sum's top level holds up to GPU_SCAN_TOP (four million cells: 131,072,
-4,096, 128). A prefix sum goes up the tree a pass a level, and down it in one pass: each level-0
-block adds up its own start from the sums above it, at most a block's a level. Float sums on CUDA
-take a shorter way (:meth:`TreeSum._reduce_in_blocks`): each block of 256 threads adds up its entries
-and then halves its partial sums in shared memory, so that a sum is one launch up to 16,384 entries
-and two above, in a fixed order all the same.
-
-Sums of floats are compensated: each block keeps its sum as a float32 pair (high, low), Knuth's
-TwoSum carrying the rounding error of every addition into the low part, so a sum comes out as exact
-as a float64 one (the float32 pair holds about 48 bits) without float64, which Metal and many
-integrated GPUs lack. Taichi compiles with fast math, under which LLVM may rewrite (a + b) − a as b
-and erase the error term; every step of TwoSum therefore passes through an integer xor with a zero
-the compiler cannot see (``_opaque``), which costs two bit casts and keeps the arithmetic as written.
+Float sums are compensated: each block keeps a float32 pair (high, low), Knuth's TwoSum carrying the
+rounding error of every addition into the low part, as exact as float64 without it (Metal and many
+integrated GPUs lack it). Under Taichi's fast math LLVM may rewrite (a + b) − a as b; every TwoSum
+step therefore passes through an integer xor with a zero the compiler cannot see (``_opaque``).
 """
 
 import math
@@ -36,55 +23,44 @@ from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level but the top."""
 GPU_SCAN_TOP = 512
-"""The most entries the top level of a prefix sum's tree holds on a GPU backend, as one block: the tree
-stops at the first level above 0 that holds no more, so a level of a few hundred block sums is not
-summed up once more (a pass up, a launch) but read by :meth:`ExclusiveScan.start_of`, up to 511 adds
-for each thread that works out a start (sums in the L1 cache, a few microseconds at most, about
-what a launch costs). The cells' scan of the seed scene (65,536 cells: 2,048 and 64 block sums)
-and the neighbour counts' (16,384 particles: 512) then take a pass up fewer each."""
+"""The most entries the top level of a prefix sum's tree holds on a GPU backend, as one block: a level
+of a few hundred block sums is read whole by :meth:`ExclusiveScan.start_of` rather than summed up by
+one more pass (a launch)."""
 GPU_SUM_THREADS = 256
 """Threads of a GPU block that adds up a float sum in shared memory (a work-group size every GPU backend
-takes): each adds up its entries, then the block halves its partial sums 8 times."""
+takes)."""
 GPU_SUM_ONE_BLOCK = 16_384
-"""Up to this many entries one block adds up a sum, at most 64 entries a thread: one launch (the seed
-scene's bucket). On an H200 a substep of 8,000 particles launched 26 tasks instead of 34."""
+"""Up to this many entries one block adds up a sum: one launch."""
 GPU_SUM_PER_THREAD = 16
-"""Entries a thread adds up first when a sum takes more than one block; then one block adds up the
-blocks' results, two launches. 16 rather than 64: more blocks in flight hide the reads' latency (an
-H200 at 1,000,000 particles: 2.786 and 2.780 ms a substep against 2.844 and 2.840 for 64)."""
+"""Entries a thread adds up first when a sum takes more than one block (two launches): more blocks in
+flight hide the reads' latency."""
 GPU_SUM_MOST_BLOCKS = 1024
-"""At most this many blocks at level 0 (more entries a thread past 4,194,304): each thread of the loop then
-runs one pass of it on any GPU, so that every thread of a block meets each of its syncs."""
+"""At most this many level-0 blocks: each thread of the loop runs one pass of it on any GPU, so that
+every thread of a block meets each of its syncs."""
 CPU_BLOCKS = 1024
 """On the CPU: about this many level-0 blocks (of 64 entries at least), and up to this many entries in a
 block above level 0, so that the tree has two levels."""
 CPU_SCAN_BLOCKS = 256
-"""The prefix sum's CPU_BLOCKS: few enough that each level-0 block of the pass down adds up the block sums
-before its own (at most 255 integers, a fraction of a microsecond) instead of a pass over the top of its
-own, a task saved (20-100 µs on two busy cores); still 128 blocks a core on two."""
+"""The prefix sum's CPU_BLOCKS: few enough that each level-0 block of the pass down adds up the block
+sums before its own, instead of a pass (a task) over the top level."""
 
 
 def block_sizes(length: int, blocks: int = CPU_BLOCKS) -> tuple[int, int]:
-    """Entries per block at level 0 and above it, for ``length`` values on the running backend.
-
-    On the CPU a level costs a task: a dispatch to the thread pool, 20-100 µs when two cores are busy,
-    measured as a 5% longer substep at 8,000 particles with levels of 32; one thread walks 1,024 block
-    sums in about a microsecond. On a GPU a level costs a few microseconds and a long block idles
-    thousands of threads."""
+    """Entries per block at level 0 and above it, for ``length`` values on the running backend: on the
+    CPU few long blocks (a level is a task, a dispatch to the thread pool), on a GPU blocks of 32 (a
+    long block idles thousands of threads)."""
     if gpu_blocks():
         return GPU_BLOCK, GPU_BLOCK
     return max(64, math.ceil(length / blocks)), blocks
 
 
 class Tree:
-    """The static shape of a block tree over ``length`` entries: block sizes, the length of each level
-    and where each level above 0 lies in one flat scratch field. A level's live length depends on the
-    live count at run time (``live``), its partition never does: block k of level j always covers the
-    same entries, so a result depends only on the values."""
+    """The static shape of a block tree over ``length`` entries: block sizes, each level's length and
+    offset in one flat scratch field. The partition never depends on the live count, so a result
+    depends only on the values."""
 
     def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS, top: int = 0):
-        """``top``: the most entries the top level may hold as one block, if more than a block's above level
-        0 (fewer levels, so fewer passes up; :data:`GPU_SCAN_TOP`)."""
+        """``top``: the most entries the top level may hold as one block (:data:`GPU_SCAN_TOP`)."""
         self.length = max(int(length), 1)
         first, above = block_sizes(self.length, cpu_blocks) if block is None else (block, block)
         self.blocks = [first]
@@ -96,7 +72,6 @@ class Tree:
         self.top = len(self.lengths) - 1
         self.block_counts = self.lengths[1:] + [1]
         """Blocks of each level, the top's one."""
-        """The top level: one block (0: the values themselves are the top)."""
         self.offsets = [0, 0]
         for level_length in self.lengths[1:]:
             self.offsets.append(self.offsets[-1] + level_length)
@@ -112,7 +87,7 @@ def _live(count, block):
 
 @ti.func
 def read_count(count: ti.template(), gate: ti.template()):
-    """A count given as a 0-D field, a Python int or a value, read where it is used (inside a loop), times
+    """A count given as a 0-D field, a Python int or a value, read inside the loop that uses it, times
     the 0-D field ``gate`` (0 or 1) if one is given."""
     value = 0
     if ti.static(isinstance(count, ti.ScalarField)):
@@ -160,23 +135,21 @@ class ExclusiveScan:
 
     @ti.func
     def add_to_block(self, k, amount):
-        """Add ``amount`` to the sum of the level-0 block that holds entry k, for a caller that counts its
-        values itself (an atomic into one address a block, so many addresses): the scan's first pass up
-        is then done (``scan(..., counted=True)``). Nothing when the tree is one block."""
+        """Add ``amount`` to the sum of entry k's level-0 block, for a caller that counts its values itself:
+        the scan's first pass up is then done (``scan(..., counted=True)``)."""
         if ti.static(self.tree.top > 0):
             ti.atomic_add(self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]], amount)
 
     @ti.func
     def clear_block(self, k):
-        """Zero the sum :meth:`add_to_block` gathers for entry k's block, once the scan has read it (for
-        the next count; every caller in the block may store the same 0)."""
+        """Zero the sum :meth:`add_to_block` gathers for entry k's block, once the scan has read it."""
         if ti.static(self.tree.top > 0):
             self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]] = 0
 
     @ti.func
     def up(self, values: ti.template(), count: ti.template(), gate: ti.template() = 1, counted: ti.template() = False):
-        """The passes up the tree of :meth:`scan` (after :meth:`add_to_block` when ``counted``: from level 1),
-        each block's sum into the level above: enough for :meth:`start_of`. Called at a kernel's top level."""
+        """The passes up the tree of :meth:`scan` (from level 1 when ``counted``): enough for
+        :meth:`start_of`. Called at a kernel's top level."""
         for level in ti.static(range(1 if counted else 0, self.tree.top)):
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):
@@ -192,10 +165,8 @@ class ExclusiveScan:
     @ti.func
     def start_of(self, values: ti.template(), k, lowest: ti.template() = 0):
         """Σ_{l<k} values[l] worked out by the calling thread alone, after :meth:`up`: the entries before k
-        in its level-0 block, then before its block in the level above, and so on to the top (at most
-        one block's entries a level). For a caller that needs a few starts, or each thread its own,
-        without the passes down (a task each). ``lowest``: k is an entry of that level (1: the start of
-        level-0 block k)."""
+        in its block, then before its block a level up, to the top; no pass down. ``lowest``: k is an
+        entry of that level (1: the start of level-0 block k)."""
         total = 0
         index = k
         for level in ti.static(range(lowest, self.tree.top + 1)):
@@ -208,19 +179,14 @@ class ExclusiveScan:
 
     @ti.func
     def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), counted: ti.template() = False):
-        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (so starts[count] is the total), ``count`` a
-        0-D field, a Python int or a value. Called at a kernel's top level. Up the tree each block sums
-        its entries; then one pass down: each level-0 block adds up its own start from the block sums
-        above it (:meth:`start_of` from level 1: the sums before it in its block of the level above, and
-        so on to the top, at most a block's a level: 255 on the CPU, whose tree has two levels, 31 a
-        level on a GPU and up to 511 at its top) and writes the running sums of its entries from there.
-        A pass down per level would cost a task each, a launch on a GPU (a million cells: four levels).
+        """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (starts[count] is the total), ``count`` a
+        0-D field, a Python int or a value. Called at a kernel's top level. After the passes up, one
+        pass down: each level-0 block works out its own start (:meth:`start_of` from level 1), since a
+        pass down per level would be a task each.
 
         Every level loops over all of its blocks, a count the kernel knows, and skips those past the
-        live entries, each thread reading the count itself: a loop bound or a count read at run time
-        outside the loops would be a one-thread task of its own. ``counted``: the level-0 blocks' sums
-        were gathered by :meth:`add_to_block` (over all ``length`` entries), and the first pass up is
-        skipped."""
+        live entries: a count read outside the loops would be a one-thread task of its own.
+        ``counted``: :meth:`add_to_block` gathered the level-0 sums, and the first pass up is skipped."""
         self.up(values, count, 1, counted)
         if ti.static(self.tree.top > 0):
             block = ti.static(self.tree.blocks[0])
@@ -236,7 +202,7 @@ class ExclusiveScan:
                         starts[total_count] = running
                 if b == 0 and total_count == 0:  # no block is live: the total is 0
                     starts[0] = 0
-        if ti.static(self.tree.top == 0):  # a single block: one thread walks it
+        else:  # a single block: one thread walks it
             for _ in range(1):
                 live = read_count(count, 1)
                 running = 0
@@ -244,12 +210,6 @@ class ExclusiveScan:
                     starts[k] = running
                     running += values[k]
                 starts[live] = running
-
-    @ti.kernel
-    def run(self, values: ti.template(), starts: ti.template()) -> ti.i32:
-        """:meth:`scan` of all ``length`` values as a kernel of its own; returns the total."""
-        self.scan(values, starts, self.length)
-        return starts[self.length]
 
 
 @ti.data_oriented
@@ -261,10 +221,8 @@ class TreeSum:
         self.length = length
         self.tree = Tree(length, block)
         self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
-        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`): one launch up to
-        GPU_SUM_ONE_BLOCK entries and two above, where the tree of blocks of 32 takes three to five. On CUDA unless
-        ``shared`` says otherwise (a GPU backend only; one such sum a kernel on Vulkan and Metal,
-        :func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`), fewer launches than the
+        tree: on CUDA unless ``shared`` says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
         threads = GPU_SUM_THREADS
         if length <= GPU_SUM_ONE_BLOCK:
             self.per_thread = math.ceil(max(length, 1) / threads)
@@ -283,15 +241,9 @@ class TreeSum:
         """Always 0; read in the kernels, so that the compiler cannot fold the TwoSum steps."""
 
     @ti.func
-    def total(self, slot):
-        """Sum ``slot`` rounded to one float32."""
-        return self.high[slot] + self.low[slot]
-
-    @ti.func
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] + low[slot] = Σ_{k < count} values[k], ``count`` ≤ length a Python int or a 0-D field
-        (read inside the loops: a count read outside them would be a one-thread task of its own). Called at a kernel's
-        top level."""
+        (read inside the loops). Called at a kernel's top level."""
         self._reduce(values, slot, count, False, False, 0.0)
 
     @ti.func
@@ -304,9 +256,8 @@ class TreeSum:
         context: ti.template(),
     ):
         """:meth:`sum`, then ``then.received(total, count, context)`` by the one thread that holds the
-        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task. ``context``
-        (anything: a tuple of the kernel's arguments) reaches ``then`` as it is, not copied outside the
-        loops, which would be a one-thread task."""
+        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task.
+        ``context`` (a tuple of the kernel's arguments) reaches ``then`` as it is."""
         self._reduce(values, slot, count, False, then, context)
 
     @ti.func
@@ -341,9 +292,8 @@ class TreeSum:
     ):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
         # entries), then the block halves its partial sums in shared memory. The partition depends on
-        # the length alone and every block runs (a block past the live entries adds up nothing), so the
-        # order of every addition is fixed: the same bits run after run. One loop a level; the loop's
-        # range is a multiple of the block, each thread runs one pass, so every thread meets each sync.
+        # the length alone, so the order of every addition is fixed. One loop a level, each thread one
+        # pass, so every thread meets each sync.
         threads = ti.static(GPU_SUM_THREADS)
         for level in ti.static(range(2 if self.blocks > 1 else 1)):
             top = ti.static(level == 1 or self.blocks == 1)
@@ -404,9 +354,8 @@ class TreeSum:
         then: ti.template(),
         context: ti.template(),
     ):
-        # Every level loops over all of its blocks, a count the kernel knows, and skips those past the
-        # live entries: a loop bound read at run time costs a one-thread task before the loop. The top
-        # block always runs, so that it writes 0 when there is nothing to add.
+        # Every level loops over all of its blocks and skips those past the live entries (as in
+        # ExclusiveScan.scan); the top block always runs, so that it writes 0 when there is nothing to add.
         for level in ti.static(range(self.tree.top + 1)):
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):

@@ -1,23 +1,18 @@
 """Settled starts kept on disk, beside Taichi's compiled kernels: a warm start skips settling.
 
-A scene with ``time.settle_s`` steps its blocks for that long before t = 0 (``Simulation._settle``):
-2 s of substeps for ``hydrostatic``, most of its start once the kernels come from Taichi's offline
-cache. Settling is deterministic (the same scene, code and backend give the same bits on every run),
-so its result is a function of what determines it, and a start that finds it on disk restores it
-instead of settling again. ``restore(snapshot())`` is exact and the settled state is itself a
-restored snapshot, so a start from the file steps bit for bit as one that settled.
+A scene with ``time.settle_s`` steps its blocks for that long before t = 0 (``Simulation._settle``).
+Settling is deterministic, so a start that finds its result on disk restores it instead; since
+``restore(snapshot())`` is exact, a start from the file steps bit for bit as one that settled.
 
 The file is named by a hash of everything the settled state depends on (:func:`settled_key`): the
 scene's physics (every table but the view's: name, description, camera, render, surface), the
 package's solver and scene code (every ``.py`` file of ``pbf/solver`` and ``pbf/scene``), Taichi's and
 NumPy's versions, the backend's ``ti.init`` options and device (the compile mode rounds differently)
-and whether the substep's decisions stay on the device (another path, other rounding). A
-change to any of them names another file; stale files are never read, only left behind (a few
-hundred kB each, in ``pbf_settled/`` of the offline cache folder, removed with it).
+and whether the GPU backends' choices are taken (other rounding). A change to any of them names
+another file; stale files are never read, only left behind.
 
-The files live in Taichi's offline cache folder (``TI_OFFLINE_CACHE_FILE_PATH``, default
-``~/.cache/taichi/ticache``) and only while Taichi's offline cache is on: an empty folder is a cold
-start in every respect, and a run without the offline cache neither reads nor writes them.
+The files live in ``pbf_settled/`` of Taichi's offline cache folder (``TI_OFFLINE_CACHE_FILE_PATH``),
+only while the offline cache is on: an empty folder is a cold start in every respect.
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
 """The SPH smoothing kernel: the cubic B-spline (Monaghan 1992), as Taichi functions and NumPy twins.
 
-The paper pairs poly6 for density with the spiky gradient. That gradient is not the gradient of the
-density it constrains, so each projection moves particles off the constraint's true gradient and
-feeds energy into a resting fluid: a column at rest jittered at 0.1-0.8 m/s, and more iterations made
-it worse. The cubic spline gives density and gradient from one function, so the projection is a true
-Gauss-Newton step; the same column's kinetic energy fell 8× (54× without the wall term) and now falls with iterations.
-h is the support radius (W = 0 for r ≥ h).
+The paper pairs poly6 for density with the spiky gradient, which is not the gradient of the density
+it constrains: each projection then feeds energy into a resting fluid, the more so with more
+iterations. The cubic spline gives density and gradient from one function, so the projection is a
+true Gauss-Newton step (docs/METHOD.md). h is the support radius (W = 0 for r ≥ h).
 
 The NumPy twins compute derived constants once (particle mass, wall density table) and give tests an
 independent implementation to check the Taichi versions against.
@@ -21,10 +19,9 @@ SIGMA_3D = 8.0 / math.pi
 
 @ti.func
 def kernel_scale(h):
-    """(1/h, σ, σ/h²) of the kernel at support radius h, σ = 8/(π h³): what :func:`scaled_kernel` and
-    :func:`scaled_kernel_and_gradient` need. h is data (``pbf.solver.constants``), so a caller works
-    this out once per particle and passes it to its neighbour loop, where the three divisions a baked h
-    folded away would otherwise be paid per pair."""
+    """(1/h, σ, σ/h²) of the kernel at support radius h, σ = 8/(π h³), for :func:`scaled_kernel` and
+    :func:`scaled_kernel_and_gradient`: h is data, so a caller works this out once per particle rather
+    than per pair."""
     inverse_h = 1.0 / h
     sigma = SIGMA_3D * inverse_h * inverse_h * inverse_h
     return ti.Vector([inverse_h, sigma, sigma * inverse_h * inverse_h])
@@ -43,8 +40,7 @@ def scaled_kernel_and_gradient(r: ti.template(), k):
     """(W, ∇W) at offset r, k = kernel_scale(h), sharing one square root: the solver's inner loops need both.
 
     ∇W = W'(|r|) r/|r| with W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½ (no division, and zero force at r = 0)
-    and −σ/h⁵ · 6(1 − q)²/q beyond. Both pieces are computed and one selected: a branch on q would
-    mispredict on the pairs where it changes, in every pass over every pair.
+    and −σ/h⁵ · 6(1 − q)²/q beyond. Both pieces are computed and one selected (no branch on q).
     """
     q = r.norm() * k[0]
     t = ti.max(1.0 - q, 0.0)
@@ -217,9 +213,9 @@ def jacobi_gain(kernel_ratio, relaxation, samples=24):
 
     Linearised about a lattice of spacing s, one projection maps the constraint error C to
     (1 − μ(k)) C for each Fourier mode k, with μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂)
-    (ĝ_j the dimensionless gradient of pbf.solver.density). A mode with μ > 2 grows every iteration: for
-    the cubic spline at h = 2.2 s, μ reaches 3.1 at wavelengths near 4 s, and a 64,000-particle dam
-    break exploded at the first impact. Depends only on h/s and ε̂, so it is computed in units of s.
+    (ĝ_j the dimensionless gradient of pbf.solver.density). A mode with μ > 2 grows every iteration,
+    which the cubic spline at h = 2.2 s reaches near wavelengths of 4 s. Depends only on h/s and ε̂,
+    so it is computed in units of s.
     """
     h = float(kernel_ratio)
     offsets = lattice_offsets(1.0, h)

@@ -88,15 +88,10 @@ class Snapshot:
 
 @ti.data_oriented
 class State:
-    """The particles of a simulation. Arrays are allocated once for the scene's capacity (its blocks
-    and everything its emitters will add); the first ``active[None]`` slots hold live particles, in
-    the current sorted order: the grid re-sorts them by cell every substep, so slot i holds particle
-    ``index[i]``. Emitters append particles after the live ones; the rest of the slots are never read.
-
-    Each entry of :data:`PARTICLE_FIELDS` is a (capacity,) field of its type here (``x``, ``v``,
-    ``index``, ``multiplier``, ``pressure_sum``); ``active`` is a () i32 field, the number of live
-    particles.
-    """
+    """The particles of a simulation: a (capacity,) field per entry of :data:`PARTICLE_FIELDS`, the
+    capacity holding the blocks and everything the emitters will add. The first ``active[None]``
+    slots hold the live particles in the grid's sorted order (slot i holds particle ``index[i]``);
+    emitters append after them."""
 
     def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
         self.capacity = capacity
@@ -104,10 +99,9 @@ class State:
         self.active = ti.field(ti.i32, shape=())
         self.loop_bound = capacity if keeps_decisions_on_device() else self.active
         """What loops over the live particles run to (:meth:`live_bound`, each skipping the slots past the
-        live count): on the GPU backends' path the capacity, a count the kernel knows (a bound read at
-        run time is a one-thread task, a launch on a GPU); on the CPU's the live count (loops over the
-        capacity made the seed's first second 1.24 s against 1.06, 8,000 particles in a bucket of
-        16,384, and a one-thread task costs nothing there)."""
+        live count): on a GPU the capacity, a count the kernel knows (a bound read at run time is a
+        one-thread task, a launch); on the CPU the live count, where that task costs little and idle
+        slots do (docs/BENCHMARKS.md, "Backends: the CPU's path and the GPU's")."""
         self._carried = []
         """(field, scratch) of every per-particle array the sort carries, the state's own first."""
         for spec in self.fields:
