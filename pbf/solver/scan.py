@@ -223,6 +223,8 @@ class TreeSum:
         self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
         """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`), fewer launches than the
         tree: on CUDA unless ``shared`` says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        self._reduce = self._reduce_in_blocks if self.in_shared_memory else self._reduce_in_tree
+        """How a sum is made, chosen here: in shared memory or as a tree of blocks."""
         threads = GPU_SUM_THREADS
         if length <= GPU_SUM_ONE_BLOCK:
             self.per_thread = math.ceil(max(length, 1) / threads)
@@ -264,21 +266,6 @@ class TreeSum:
     def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
         self._reduce(values, slot, count, True, False, 0.0)
-
-    @ti.func
-    def _reduce(
-        self,
-        values: ti.template(),
-        slot: ti.template(),
-        count: ti.template(),
-        is_max: ti.template(),
-        then: ti.template(),
-        context: ti.template(),
-    ):
-        if ti.static(self.in_shared_memory):
-            self._reduce_in_blocks(values, slot, count, is_max, then, context)
-        else:
-            self._reduce_in_tree(values, slot, count, is_max, then, context)
 
     @ti.func
     def _reduce_in_blocks(
