@@ -61,6 +61,10 @@ def _named_type(names: tuple[str, ...]):
 
 @ti.data_oriented
 class NeighbourGrid:
+    """The uniform grid and exact neighbour lists of the module docstring. ``active``: the 0-D field of
+    live particles; ``slot_major`` (the lists' layout) and ``loop_bound`` (what loops over the particles
+    run to, ``State.loop_bound``) are the backend's, chosen by the Simulation."""
+
     def __init__(self, params: GridParams, active, slot_major: bool, loop_bound):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         allocated = params.allocated_particles or particle_count

@@ -172,7 +172,7 @@ class Simulation:
         self.state = State(model.allocated)
         self.boundaries = Boundaries(model.boundary, solids=False)
         """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
-        self.grid = NeighbourGrid(model.grid, self.state.active, on_gpu(), self.state.loop_bound)
+        self.grid = NeighbourGrid(model.grid, self.state.active, slot_major=on_gpu(), loop_bound=self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
@@ -180,9 +180,9 @@ class Simulation:
         self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
         self.iterations = JacobiIterations(
             self.density,
-            model.iteration_weights,
-            self.state.active,
-            self.state.loop_bound,
+            weights=model.iteration_weights,
+            active=self.state.active,
+            loop_bound=self.state.loop_bound,
             per_call=2 if on_device else 1,
             reads_decisions=not on_device,
         )
@@ -194,7 +194,13 @@ class Simulation:
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
         self.kernels = SubstepKernels(
-            self.state, self.integrator, self.grid, self.density, self.divergence, self.iterations, self.postprocess
+            state=self.state,
+            integrator=self.integrator,
+            grid=self.grid,
+            density=self.density,
+            divergence=self.divergence,
+            iterations=self.iterations,
+            postprocess=self.postprocess,
         )
         """The stages composed into three kernels (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
@@ -516,7 +522,15 @@ class Simulation:
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
             pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
             first = self.pressure_substeps == 0
-            kernels.iterate_and_finish(last, dt, features, control, pressure, first, self.scene.time.max_speed_m_s)
+            kernels.iterate_and_finish(
+                last,
+                dt,
+                features,
+                control,
+                pressure_per_impulse=pressure,
+                first_of_frame=first,
+                max_speed=self.scene.time.max_speed_m_s,
+            )
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1

@@ -66,10 +66,19 @@ class SubstepKernels:
         at ε = control.vorticity, XSPH at c = control.xsph, v capped at ``max_speed`` (0: not), x = x*,
         and the pressure at ``pressure_per_impulse`` Pa per unit of the multipliers (``State.pressure_sum``
         starts again at the ``first_of_frame`` substep)."""
-        self._call(features, control, start, True, dt, pressure_per_impulse, first_of_frame, max_speed)
+        self._call(
+            features,
+            control,
+            start,
+            finish=True,
+            dt=dt,
+            pressure_per_impulse=pressure_per_impulse,
+            first_of_frame=first_of_frame,
+            max_speed=max_speed,
+        )
 
     def _call(
-        self, features, control, start, finish, dt=0.0, pressure_per_impulse=0.0, first_of_frame=False, max_speed=0.0
+        self, features, control, start, *, finish, dt=0.0, pressure_per_impulse=0.0, first_of_frame=False, max_speed=0.0
     ):
         self._iterations(
             entries=self.grid.neighbours,
