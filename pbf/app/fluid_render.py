@@ -716,6 +716,14 @@ class FluidRenderer:
             c = ti.cast(self.image[row, col], ti.u32)
             out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
 
+    def surface(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The last draw's surface at the coarse passes' resolution (``coarse_height`` × ``coarse_width``,
+        row 0 at the top): world-space unit normals (h, w, 3), the water mask (h, w) and the smoothed view
+        depth (h, w, m; FAR where no water), for measures of how the surface reads
+        (``python -m pbf.study.frames look``)."""
+        depth = self.smooth_depth.to_numpy()
+        return self.normal.to_numpy(), depth < FAR, depth
+
     def draw_packed(self, view, positions, count: int, light_direction) -> np.ndarray:
         """Like :meth:`render`, as a (W, H) array of packed RGBA words, y up, the layout GGUI's canvas
         shows without a conversion pass (the window's surface mode)."""
