@@ -31,9 +31,10 @@ Both figures come from the renderer's normal buffer and water mask (``FluidRende
 coarse passes' pixels). *Top face*: the water pixels whose normal is within 45° of vertical and whose
 surface point lies more than two spacings inside the container's side walls (the rim, where the water
 meets a wall, is left out); reported are the share of them within 5° of vertical and their median
-angle. *Speckle*: the share of water pixels whose normal is more than 30° from the mean of the normals
-of the water among its eight neighbours (a pixel with no water beside it counts as speckle), over the
-splash frames.
+angle, and beside them the same for the particles' own top (a cubic fitted to the highest particle of
+each column: the waves a renderer should keep). *Speckle*: the share of water pixels whose normal is
+more than 30° from the mean of the normals of its eight neighbours on the same surface (water within
+two spacings of its depth; a pixel with none counts as speckle), over the splash frames.
 
 This study's subject is the application's renderer and writer, so it imports ``pbf.app`` (the other
 studies measure the solver only).
@@ -158,6 +159,9 @@ FLAT_DEG = 5.0
 """The top face's pixels within this of vertical are flat."""
 SPECKLE_DEG = 30.0
 """A water pixel whose normal turns more than this from its neighbours' mean is speckle."""
+SAME_SURFACE_SPACINGS = 2.0
+"""Neighbouring pixels of water whose depths differ by less than this are on one surface (twice the
+renderer's narrow range: a surface seen at a slant changes depth from pixel to pixel)."""
 POOLS = (("hydrostatic", 60), ("dam_break", 180))
 """The settled pools measured: preset and frame (t = 1 s; t = 3 s)."""
 SPLASH = ("dam_break", range(27, 41))
@@ -200,14 +204,41 @@ def top_face(normals, water, depth, view, scene) -> dict:
     }
 
 
-def speckle(normals, water) -> float:
-    """The share of water pixels whose normal is more than 30° from the mean normal of the water among
-    its eight neighbours (or that has no water beside it)."""
+def particles_top(positions: np.ndarray, scene) -> dict:
+    """The tilt the particles themselves give a pool's top: the highest particle in each column two
+    spacings square, a cubic in x and z fitted to those heights by least squares (the waves, without the
+    particles' own bumps), and its slope at the columns: the share within 5° of level and the median,
+    degrees. What a renderer that smooths only the particles' bumps can reach."""
+    column = 2.0 * scene.fluid.spacing_m
+    cells = np.floor(positions[:, [0, 2]] / column).astype(np.int64)
+    keys, inverse = np.unique(cells, axis=0, return_inverse=True)
+    heights = np.full(len(keys), -np.inf)
+    np.maximum.at(heights, inverse.ravel(), positions[:, 1])
+    x, z = ((keys + 0.5) * column).T
+    terms = np.stack([np.ones_like(x), x, z, x * x, x * z, z * z, x**3, x * x * z, x * z * z, z**3], axis=1)
+    c = np.linalg.lstsq(terms, heights, rcond=None)[0]
+    slope_x = c[1] + 2 * c[3] * x + c[4] * z + 3 * c[6] * x * x + 2 * c[7] * x * z + c[8] * z * z
+    slope_z = c[2] + c[4] * x + 2 * c[5] * z + c[7] * x * x + 2 * c[8] * x * z + 3 * c[9] * z * z
+    angles = np.degrees(np.arctan(np.hypot(slope_x, slope_z)))
+    return {"flat": float(np.mean(angles < FLAT_DEG)), "median_deg": float(np.median(angles))}
+
+
+def speckle(normals, water, depth, surface_m: float) -> float:
+    """The share of water pixels whose normal is more than 30° from the mean normal of their neighbours
+    on the same surface: the water among the eight around it whose depth is within ``surface_m`` of its
+    own (a drop in front of the pool is another surface, and its outline no speckle). A pixel with no
+    such neighbour counts as speckle."""
     height, width = water.shape
-    padded = np.pad(normals * water[..., None], ((1, 1), (1, 1), (0, 0)))
-    around = sum(
-        padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc
-    )
+    far = 1e30  # the renderer's FAR: no water
+    depth = np.where(water, depth, far)
+    padded_depth = np.pad(depth, 1, constant_values=far)
+    padded = np.pad(normals, ((1, 1), (1, 1), (0, 0)))
+    around = np.zeros_like(normals)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                same = np.abs(padded_depth[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] - depth) <= surface_m
+                around += padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] * same[..., None]
     length = np.linalg.norm(around, axis=-1)
     cosine = np.sum(normals * around, axis=-1) / np.maximum(length, 1e-12)
     rough = (length < 1e-6) | (cosine < np.cos(np.radians(SPECKLE_DEG)))
@@ -238,6 +269,7 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
         draw = renderer(sim)
         save(f"{preset}_{frame}", draw.frame())
         figures["pools"][(preset, frame)] = top_face(*draw.fluid.surface(), draw.view, sim.scene)
+        figures["pools"][(preset, frame)]["particles"] = particles_top(sim.positions(), sim.scene)
     preset, frames = splash
     sim = Simulation(preset, quiet=True)
     draw = renderer(sim)
@@ -246,8 +278,8 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
         image = draw.frame()
         if frame == frames[0]:
             save(f"{preset}_{frame}", image)
-        normals, water, _ = draw.fluid.surface()
-        figures["splash"][frame] = speckle(normals, water)
+        normals, water, depth = draw.fluid.surface()
+        figures["splash"][frame] = speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m)
     if pour is not None and images is not None:
         sim = Simulation(pour[0], quiet=True)
         sim.step(pour[1])
@@ -271,12 +303,17 @@ def look(argv=None) -> int:
     shown = "the scenes' size" if args.size is None else f"{args.size[0]}×{args.size[1]}"
     print(f"The surface style, {backend}, {shown}")
     print()
-    print(f"| settled pool | top-face pixels | within {FLAT_DEG:g}° of vertical | median | 95th percentile |")
-    print("|---|---:|---:|---:|---:|")
+    print(
+        f"| settled pool | top-face pixels | within {FLAT_DEG:g}° of vertical | median | 95th percentile "
+        f"| the particles' top: within {FLAT_DEG:g}° | median |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|")
     for (preset, frame), pool in figures["pools"].items():
+        top = pool["particles"]
         print(
             f"| {preset}, frame {frame} | {pool['pixels']:,} | {100 * pool['flat']:.1f}% | "
-            f"{pool['median_deg']:.2f}° | {pool['p95_deg']:.1f}° |"
+            f"{pool['median_deg']:.2f}° | {pool['p95_deg']:.1f}° | "
+            f"{100 * top['flat']:.1f}% | {top['median_deg']:.2f}° |"
         )
     shares = list(figures["splash"].values())
     preset, frames = SPLASH
