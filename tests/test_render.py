@@ -158,7 +158,7 @@ def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch
     assert lines[:4] == [
         "[pbf] no window: DISPLAY is not set; rendering headless instead",
         lines[1],
-        "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
+        "[pbf] pour: 0 particles now, up to 9,772 from its emitters; Δt = 8.33 ms, 10 iterations",
         f"[pbf] rendering 2 frames (the start and 1 step) into {tmp_path}/",
     ], output
     assert lines[4].startswith("[pbf] kernels ready and the first frame drawn in "), output
