@@ -61,7 +61,6 @@ def test_splats_are_flat_at_the_surface_round_in_the_bulk_and_drops_alone():
     assert lengths == pytest.approx(np.full(3, DROP_RADIUS_SPACINGS * s), rel=1e-4)
 
 
-@pytest.mark.slow
 def test_a_settled_column_reads_as_one_flat_surface():
     sim = Simulation(column_scene(), quiet=True)
     sim.step(60)
@@ -74,7 +73,6 @@ def test_a_settled_column_reads_as_one_flat_surface():
     assert particles_top(sim.positions(), sim.scene)["median_deg"] > 1.0
 
 
-@pytest.mark.slow
 def test_a_splash_is_not_speckled():
     sim = Simulation(small_dam_break(), quiet=True)
     renderer = SceneRenderer(sim, *SIZE, style="surface")
@@ -83,6 +81,6 @@ def test_a_splash_is_not_speckled():
         sim.step(frame - sim.frame)
         renderer.frame()
         normals, water, depth = renderer.fluid.surface()
-        assert water.sum() > 5000
+        assert water.sum() > 2000  # a tenth of the frame
         shares.append(speckle(normals, water, depth, 2 * sim.scene.fluid.spacing_m))
     assert np.mean(shares) <= 0.04

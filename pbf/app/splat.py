@@ -165,7 +165,11 @@ class Ellipsoids:
                 second = ti.Matrix(
                     [[acc[4], acc[5], acc[6]], [acc[5], acc[7], acc[8]], [acc[6], acc[8], acc[9]]]
                 ) / total - mean.outer_product(mean)
-                sigma, axes = ti.sym_eig(second)
+                # C is symmetric and positive semi-definite, so its SVD is its eigen decomposition. Taichi's
+                # iterative ti.sym_eig never returned on a lattice's covariance (equal eigenvalues); its
+                # 3 × 3 SVD runs a fixed count of Jacobi sweeps.
+                axes, singular, _ = ti.svd(second)
+                sigma = ti.Vector([singular[0, 0], singular[1, 1], singular[2, 2]])
                 largest = ti.max(sigma[0], sigma[1], sigma[2])
                 if largest > 0.0:
                     floor = largest / AXIS_RATIO
