@@ -356,17 +356,20 @@ class FluidRenderer:
         return row, col, extent
 
     @ti.func
-    def _splat_pixel(self, splats: ti.template(), i, r, c, eye, right, up, forward, focal):
-        """Splat i at coarse pixel (r, c): the nearest depth, and the chord its ray cuts, scaled by
-        (particle volume / sphere volume) × the splat's share of the sphere's volume, as fixed-point
-        steps."""
+    def _splat_pixel(self, splats: ti.template(), seen: ti.template(), scale, r, c, focal):
+        """A splat (``seen``: its ``Ellipsoids.frame``) at coarse pixel (r, c): the nearest depth, and the
+        chord its ray cuts times ``scale`` (particle volume / sphere volume × the splat's share of the
+        sphere's volume / the thickness step) as fixed-point steps."""
         u = (c + 0.5 - 0.5 * self.coarse_width) / focal
         w = (0.5 * self.coarse_height - r - 0.5) / focal
-        t, chord = splats.hit(i, eye, right, up, forward, u, w)
+        t, chord = splats.hit(seen[0], seen[1], seen[2], seen[3], u, w)
         if t > 0.0:
             ti.atomic_min(self.depth[r, c], t)
-            steps = chord * splats.chord[i] * self.constants[None].chord_scale * self.constants[None].inverse_quantum
-            ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
+            ti.atomic_add(self.thickness_steps[r, c], ti.cast(chord * scale + 0.5, ti.i32))
+
+    @ti.func
+    def _chord_scale(self, splats: ti.template(), i):
+        return splats.chord[i] * self.constants[None].chord_scale * self.constants[None].inverse_quantum
 
     @ti.kernel
     def _splat(
@@ -376,6 +379,8 @@ class FluidRenderer:
         for i in range(count):
             row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
             if extent > 0.0:
+                seen = splats.frame(i, eye, right, up, forward)
+                scale = self._chord_scale(splats, i)
                 # Each row visits the span of the bounding disc.
                 r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
                 for r in range(r0, r1):
@@ -383,7 +388,7 @@ class FluidRenderer:
                     half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
                     c0, c1 = ti.max(0, ti.cast(col - half, ti.i32)), ti.min(width, ti.cast(col + half, ti.i32) + 1)
                     for c in range(c0, c1):
-                        self._splat_pixel(splats, i, r, c, eye, right, up, forward, focal)
+                        self._splat_pixel(splats, seen, scale, r, c, focal)
 
     @ti.kernel
     def _splat_items(
@@ -407,7 +412,8 @@ class FluidRenderer:
             offset = r + 0.5 - row
             half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
             if ti.max(0, ti.cast(col - half, ti.i32)) <= c < ti.min(width, ti.cast(col + half, ti.i32) + 1):
-                self._splat_pixel(splats, i, r, c, eye, right, up, forward, focal)
+                seen = splats.frame(i, eye, right, up, forward)
+                self._splat_pixel(splats, seen, self._chord_scale(splats, i), r, c, focal)
 
     @ti.kernel
     def _filter(

@@ -198,14 +198,20 @@ class Ellipsoids:
             )
 
     @ti.func
-    def hit(self, i, eye, right, up, forward, u, w):
-        """Where the ray eye + t (u right + w up + forward) first meets splat i: (t, the view depth, or
-        -1 where it misses; the chord it cuts, m). In the splat's frame x' = G (x − c) the ray is
-        G (eye − c) + t G ray and the splat the unit sphere: t² |G ray|² − 2 t (G ray)·(G (c − eye)) +
-        |G (c − eye)|² − 1 = 0."""
+    def frame(self, i, eye, right, up, forward):
+        """Splat i's view in its own frame x' = G (x − c): G (c − eye) and the images G right, G up and
+        G forward of the camera's axes, from which :meth:`hit` tests a pixel with a few products
+        (computed once per splat, not per pixel)."""
         inverse = self.inverse[i]
-        offset = inverse @ (self.centre[i] - eye)
-        along = inverse @ (right * u + up * w + forward)
+        return inverse @ (self.centre[i] - eye), inverse @ right, inverse @ up, inverse @ forward
+
+    @ti.func
+    def hit(self, offset, along_right, along_up, along_forward, u, w):
+        """Where the ray eye + t (u right + w up + forward) first meets a splat seen as :meth:`frame`
+        gives it: (t, the view depth, or -1 where it misses; the chord it cuts, m). In the splat's frame
+        the ray is G (eye − c) + t G ray and the splat the unit sphere: t² |G ray|² − 2 t (G ray)·(G (c −
+        eye)) + |G (c − eye)|² − 1 = 0."""
+        along = along_right * u + along_up * w + along_forward
         a, b = along.norm_sqr(), along.dot(offset)
         disc = b * b - a * (offset.norm_sqr() - 1.0)
         t, chord = -1.0, 0.0
