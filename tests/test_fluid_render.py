@@ -355,7 +355,7 @@ def test_a_splash_has_no_axis_aligned_blocks():
     sim.step(60)
     renderer = fluid_renderer(sim, 1280, 720)
     particles = sim.readout()
-    renderer.draw(View.of_scene(sim.scene), particles.positions, particles.count, LIGHT_DIRECTION)
+    renderer.draw(View.of_scene(sim.scene), particles.positions, particles.count, LIGHT_DIRECTION, sim.neighbourhood())
     water = renderer.smooth_depth.to_numpy() < FAR
     assert water.sum() > 20000  # the splash fills a good part of the frame
     assert axis_aligned_steps(renderer.colour.to_numpy(), water) < 0.0015

@@ -165,7 +165,7 @@ def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path
         "[pbf] no window: no Vulkan driver for the window (on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers "
         "libvulkan1' gives a software one); rendering headless instead",
         lines[2],
-        "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
+        "[pbf] pour: 0 particles now, up to 9,772 from its emitters; Δt = 8.33 ms, 10 iterations",
         f"[pbf] rendering 3 frames (the start and 2 steps) into {out}/",
     ], result.stdout
     assert re.fullmatch(r"\[pbf\] kernels ready and the first frame drawn in \d+\.\d s", lines[5]), result.stdout

@@ -65,7 +65,13 @@ def test_nearer_sphere_wins():
 
 def test_headless_frame_shows_water_where_the_particles_are():
     scene = small_dam_break()
-    scene["render"] = {"width_px": W, "height_px": H, "background_rgb": list(WHITE), "container_rgb": [1, 1, 1]}
+    scene["render"] = {
+        "width_px": W,
+        "height_px": H,
+        "background_rgb": list(WHITE),
+        "container_rgb": [1, 1, 1],
+        "legend": False,  # only the particles differ from the background
+    }
     sim = Simulation(scene)
     renderer = SceneRenderer(sim)
     water = covered(renderer.frame())
@@ -163,7 +169,7 @@ def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch
     assert lines[:4] == [
         "[pbf] no window: DISPLAY is not set; rendering headless instead",
         lines[1],
-        "[pbf] pour: 0 particles now, up to 12,564 from its emitters; Δt = 8.33 ms, 10 iterations",
+        "[pbf] pour: 0 particles now, up to 9,772 from its emitters; Δt = 8.33 ms, 10 iterations",
         f"[pbf] rendering 2 frames (the start and 1 step) into {tmp_path}/",
     ], output
     assert lines[4].startswith("[pbf] kernels ready and the first frame drawn in "), output
@@ -271,11 +277,17 @@ def test_the_legend_is_blended_into_its_corner_alone():
     assert corner.sum(axis=1).min() < 3 * 60  # the labels' ink (20, 20, 20), antialiased at its edges
 
 
-def test_colour_by_on_the_command_line_brings_the_legend():
+def test_particle_frames_carry_the_legend_unless_told_not_to():
+    # Colour means speed or density on every particle frame, so the default frames explain it; the
+    # surface style's colours are the water's own and its frames draw none (a scene may keep the key on).
     def legend(*argv):
         return cli.load(cli.parse_args(["dam_break", *argv])).render.legend
 
-    assert legend("--colour-by", "density") and legend("--colour-by", "speed")
-    assert not legend()  # the scene's own setting
+    assert legend() and legend("--colour-by", "density") and legend("--colour-by", "speed")
     assert not legend("--colour-by", "density", "--set", "render.legend=false")  # --set wins
-    assert not legend("--colour-by", "density", "--style", "surface")  # the window: no colours to explain
+    assert legend("--style", "surface")  # accepted: the surface frames draw no legend
+    scene = small_dam_break()
+    scene["render"] = {"width_px": 320, "height_px": 180}
+    sim = Simulation(scene)
+    plain = SceneRenderer(Simulation(dict(scene, render={**scene["render"], "legend": False}))).frame()
+    assert (SceneRenderer(sim).frame() != plain).any()

@@ -269,7 +269,7 @@ def test_key_v_switches_the_window_between_surface_and_particles(settled):
     shown = unpack_rgb(packed)
     particles = sim.readout()
     expected = fluid_renderer(sim, 160, 90).render(
-        viewer.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION
+        viewer.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION, sim.neighbourhood()
     )
     assert np.array_equal(shown, expected)
 

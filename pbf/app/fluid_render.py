@@ -45,7 +45,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.constants import colour
-from pbf.app.splat import Footprints, per_item
+from pbf.app.splat import Ellipsoids, Footprints, per_item
 from pbf.solver import allocation as bucket
 from pbf.solver import scene_constants
 
@@ -192,6 +192,9 @@ class FluidRenderer:
         self.per_item = per_item()
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
+        self.splats = None
+        """The particles' splats (``pbf.app.splat.Ellipsoids``), allocated on first use for the positions'
+        capacity."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_points = points.reshape(-1, 2, 3).astype(np.float64)
         """The line segments' end points, m (a few: the container's edges)."""
@@ -333,88 +336,84 @@ class FluidRenderer:
             self.depth[row, col] = FAR
             self.thickness_steps[row, col] = 0
 
+    @ti.func
+    def _bound(self, splats: ti.template(), i, eye, right, up, forward, focal):
+        """Splat i's screen disc on the coarse image: (row, column of its centre's image, its radius in
+        pixels), radius 0 where the splat is not wholly in front of the eye. The bounding sphere of
+        radius ``reach`` images to an ellipse of semi-major axis f r √(|c|² − r²) / (d² − r²), within
+        f r |c| / ((d − r) d) of the centre's image; the 10% covers the ellipse's centre lying a little
+        off the centre's image (by about (r/d)² of its distance from the middle), and the bounds'
+        rounding takes in every pixel whose centre is inside. (A pixel more of margin, as the sphere
+        renderer keeps, gave the same frames here and a third more pixels to test.)"""
+        reach = splats.reach[i]
+        centre = splats.centre[i] - eye
+        depth = centre.dot(forward)
+        row, col, extent = 0.0, 0.0, 0.0
+        if depth > reach * 1.01:
+            col = 0.5 * self.coarse_width + focal * centre.dot(right) / depth
+            row = 0.5 * self.coarse_height - focal * centre.dot(up) / depth
+            extent = 1.1 * focal * reach * centre.norm() / ((depth - reach) * depth)
+        return row, col, extent
+
+    @ti.func
+    def _splat_pixel(self, splats: ti.template(), seen: ti.template(), scale, r, c, focal):
+        """A splat (``seen``: its ``Ellipsoids.frame``) at coarse pixel (r, c): the nearest depth, and the
+        chord its ray cuts times ``scale`` (particle volume / sphere volume × the splat's share of the
+        sphere's volume / the thickness step) as fixed-point steps."""
+        u = (c + 0.5 - 0.5 * self.coarse_width) / focal
+        w = (0.5 * self.coarse_height - r - 0.5) / focal
+        t, chord = splats.hit(seen[0], seen[1], seen[2], seen[3], u, w)
+        if t > 0.0:
+            ti.atomic_min(self.depth[r, c], t)
+            ti.atomic_add(self.thickness_steps[r, c], ti.cast(chord * scale + 0.5, ti.i32))
+
+    @ti.func
+    def _chord_scale(self, splats: ti.template(), i):
+        return splats.chord[i] * self.constants[None].chord_scale * self.constants[None].inverse_quantum
+
     @ti.kernel
-    def _splat(self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
+    def _splat(
+        self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
+    ):
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
-            (radius, chord_scale, inverse_quantum) = (
-                self.constants[None].radius,
-                self.constants[None].chord_scale,
-                self.constants[None].inverse_quantum,
-            )
-            centre = x[i] - eye
-            depth = centre.dot(forward)
-            if depth > radius * 1.01:
-                col = 0.5 * width + focal * centre.dot(right) / depth
-                row = 0.5 * height - focal * centre.dot(up) / depth
-                # The sphere's image, an ellipse of semi-major axis f r √(|c|² − r²) / (d² − r²), lies within
-                # f r |c| / ((d − r) d) of its centre's; the 10% covers the ellipse's centre lying a little
-                # off the centre's image (by about (r/d)² of its distance from the middle), and the bounds'
-                # rounding takes in every pixel whose centre is inside. Each row visits the span of that
-                # disc. (A pixel more of margin, as the sphere renderer keeps, gave the same frames here
-                # and a third more pixels to test.)
-                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth)
+            row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
+            if extent > 0.0:
+                seen = splats.frame(i, eye, right, up, forward)
+                scale = self._chord_scale(splats, i)
+                # Each row visits the span of the bounding disc.
                 r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
                 for r in range(r0, r1):
                     offset = r + 0.5 - row
                     half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
                     c0, c1 = ti.max(0, ti.cast(col - half, ti.i32)), ti.min(width, ti.cast(col + half, ti.i32) + 1)
                     for c in range(c0, c1):
-                        # The ray eye + t·ray (t the view depth) meets the sphere where
-                        # t² |ray|² − 2 t ray·c + |c|² − r² = 0.
-                        ray = self._ray(r, c, right, up, forward, focal, width, height)
-                        a, b = ray.norm_sqr(), ray.dot(centre)
-                        disc = b * b - a * (centre.norm_sqr() - radius * radius)
-                        if disc > 0.0:
-                            root = ti.sqrt(disc)
-                            ti.atomic_min(self.depth[r, c], (b - root) / a)
-                            steps = 2.0 * root / ti.sqrt(a) * chord_scale * inverse_quantum
-                            ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
+                        self._splat_pixel(splats, seen, scale, r, c, focal)
 
     @ti.kernel
     def _splat_items(
-        self, x: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
+        self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
     ):
         """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
         (``pbf.app.splat``): the same tests and integer sums, so the same image."""
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
-            radius = self.constants[None].radius
-            centre = x[i] - eye
-            depth = centre.dot(forward)
+            row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
             c0, c1, r0, r1 = 0, 0, 0, 0
-            if depth > radius * 1.01:
-                col = 0.5 * width + focal * centre.dot(right) / depth
-                row = 0.5 * height - focal * centre.dot(up) / depth
-                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth)
+            if extent > 0.0:
                 r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
                 c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(width, ti.cast(col + extent, ti.i32) + 1)
             self.footprints.set(i, c0, c1, r0, r1)
         self.footprints.scan(count)
         for w in range(self.footprints.total(count)):
             i, c, r = self.footprints.item(w, count)
-            (radius, chord_scale, inverse_quantum) = (
-                self.constants[None].radius,
-                self.constants[None].chord_scale,
-                self.constants[None].inverse_quantum,
-            )
-            centre = x[i] - eye
             # The per-particle loops visit only the disc of the bounding square; so does this.
-            depth = centre.dot(forward)
-            col = 0.5 * width + focal * centre.dot(right) / depth
-            row = 0.5 * height - focal * centre.dot(up) / depth
-            extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth)
+            row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
             offset = r + 0.5 - row
             half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-            in_disc = ti.max(0, ti.cast(col - half, ti.i32)) <= c < ti.min(width, ti.cast(col + half, ti.i32) + 1)
-            ray = self._ray(r, c, right, up, forward, focal, width, height)
-            a, b = ray.norm_sqr(), ray.dot(centre)
-            disc = b * b - a * (centre.norm_sqr() - radius * radius)
-            if in_disc and disc > 0.0:
-                root = ti.sqrt(disc)
-                ti.atomic_min(self.depth[r, c], (b - root) / a)
-                steps = 2.0 * root / ti.sqrt(a) * chord_scale * inverse_quantum
-                ti.atomic_add(self.thickness_steps[r, c], ti.cast(steps + 0.5, ti.i32))
+            if ti.max(0, ti.cast(col - half, ti.i32)) <= c < ti.min(width, ti.cast(col + half, ti.i32) + 1):
+                seen = splats.frame(i, eye, right, up, forward)
+                self._splat_pixel(splats, seen, self._chord_scale(splats, i), r, c, focal)
 
     @ti.kernel
     def _filter(
@@ -506,19 +505,31 @@ class FluidRenderer:
 
     @ti.func
     def _difference(self, row, col, step_row, step_col, eye, right, up, forward, focal):
-        """The change of surface position to the next pixel along (step_row, step_col): forward or
-        backward, whichever changes depth less and lies on water (van der Laan et al. 2009, §4)."""
+        """The change of surface position to the next pixel along (step_row, step_col): the central
+        difference where both neighbours lie on this surface (within the filter's range μ), else the
+        one-sided difference that changes depth less and lies on water (van der Laan et al. 2009, §4).
+        Picking the smaller one-sided difference everywhere flipped between the two sides from pixel to
+        pixel wherever the smoothed surface curved a little, and the normals had the grain of single
+        pixels (speckle, ``python -m pbf.study.frames look``)."""
         here = self._position(row, col, eye, right, up, forward, focal)
         z = self.smooth_depth[row, col]
+        mu = THRESHOLD_SPACINGS * self.constants[None].spacing
         best = ti.Vector([0.0, 0.0, 0.0])
         best_change = FAR
+        both = 0
         for sign in ti.static((1, -1)):
             r, c = row + sign * step_row, col + sign * step_col
             if 0 <= r < self.coarse_height and 0 <= c < self.coarse_width:
                 neighbour = self.smooth_depth[r, c]
+                if neighbour < FAR and ti.abs(neighbour - z) <= mu:
+                    both += 1
                 if neighbour < FAR and ti.abs(neighbour - z) < best_change:
                     best_change = ti.abs(neighbour - z)
                     best = sign * (self._position(r, c, eye, right, up, forward, focal) - here)
+        if both == 2:
+            after = self._position(row + step_row, col + step_col, eye, right, up, forward, focal)
+            before = self._position(row - step_row, col - step_col, eye, right, up, forward, focal)
+            best = 0.5 * (after - before)
         return best
 
     @ti.kernel
@@ -716,22 +727,32 @@ class FluidRenderer:
             c = ti.cast(self.image[row, col], ti.u32)
             out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
 
-    def draw_packed(self, view, positions, count: int, light_direction) -> np.ndarray:
+    def surface(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The last draw's surface at the coarse passes' resolution (``coarse_height`` × ``coarse_width``,
+        row 0 at the top): world-space unit normals (h, w, 3), the water mask (h, w) and the smoothed view
+        depth (h, w, m; FAR where no water), for measures of how the surface reads
+        (``python -m pbf.study.frames look``)."""
+        depth = self.smooth_depth.to_numpy()
+        return self.normal.to_numpy(), depth < FAR, depth
+
+    def draw_packed(self, view, positions, count: int, light_direction, neighbourhood=None) -> np.ndarray:
         """Like :meth:`render`, as a (W, H) array of packed RGBA words, y up, the layout GGUI's canvas
         shows without a conversion pass (the window's surface mode)."""
-        self.draw(view, positions, count, light_direction)
+        self.draw(view, positions, count, light_direction, neighbourhood)
         if self.packed is None:
             self.packed = np.zeros((self.width, self.height), np.uint32)
         self._pack(self.packed)
         return self.packed
 
-    def render(self, view, positions, count: int, light_direction) -> np.ndarray:
+    def render(self, view, positions, count: int, light_direction, neighbourhood=None) -> np.ndarray:
         """(H, W, 3) uint8 image of the ``count`` particles at ``positions`` (a Taichi vector field, m)
-        seen through ``view`` (a ``pbf.app.render.View``), lit from unit ``light_direction``."""
-        self.draw(view, positions, count, light_direction)
+        seen through ``view`` (a ``pbf.app.render.View``), lit from unit ``light_direction``: each particle
+        an ellipsoid from ``neighbourhood`` (``Simulation.neighbourhood()`` of these positions), or a sphere
+        without it."""
+        self.draw(view, positions, count, light_direction, neighbourhood)
         return self.image.to_numpy()
 
-    def draw(self, view, positions, count: int, light_direction) -> None:
+    def draw(self, view, positions, count: int, light_direction, neighbourhood=None) -> None:
         """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
@@ -746,12 +767,16 @@ class FluidRenderer:
             solids = self.solids
             self._take_solids(solids.sphere, solids.half, solids.position, solids.rotation)
         self._clear()
+        if count:
+            if self.splats is None or self.splats.capacity < positions.shape[0]:
+                self.splats = Ellipsoids(positions.shape[0], self.radius, self.spacing)
+            self.splats.update(positions, count, neighbourhood)
         if count and self.per_item:
             if self.footprints is None or self.footprints.capacity < positions.shape[0]:
                 self.footprints = Footprints(positions.shape[0])
-            self._splat_items(positions, count, eye, right, up, forward, coarse_focal)
+            self._splat_items(self.splats, count, eye, right, up, forward, coarse_focal)
         elif count:
-            self._splat(positions, count, eye, right, up, forward, coarse_focal)
+            self._splat(self.splats, count, eye, right, up, forward, coarse_focal)
         # The thickness is smoothed in the first round only: it needs no edges kept, and one round of
         # σ/√rounds is smooth enough for a tint. Every pass but the first follows the surface's slope: the
         # splat's raw depth has the bumps of single spheres, a row-smoothed one no longer along rows.

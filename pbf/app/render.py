@@ -627,7 +627,9 @@ class SceneRenderer:
         once)."""
         particles = self.sim.readout()
         if self.fluid is not None:
-            return self.fluid.render(self.view, particles.positions, particles.count, LIGHT_DIRECTION)
+            return self.fluid.render(
+                self.view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
+            )
         colours = self.colours.update()
         positions, count = particles.positions, particles.count
         if self.bodies is not None:

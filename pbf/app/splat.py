@@ -16,6 +16,8 @@ import math
 
 import taichi as ti
 
+from pbf.solver import NeighbourList, scene_constants
+
 
 def per_item() -> bool:
     """Whether the running backend splats per item (every backend but the CPU)."""
@@ -76,3 +78,145 @@ class Footprints:
         width = self.width[low]
         corner = self.corner[low]
         return low, corner[0] + local % width, corner[1] + local // width
+
+
+SMOOTHING = 0.9
+"""λ of Yu & Turk's centre smoothing: a splat's centre is (1 − λ) x_i + λ x̄_i, x̄_i the weighted mean of
+the particle and its neighbours; the bumps of single particles on a surface go, a sheet keeps its place."""
+AXIS_RATIO = 4.0
+"""k_r: no axis of a splat is shorter than 1/k_r of its longest (the covariance's eigenvalues clamped)."""
+FEW_NEIGHBOURS = 6
+"""N_ε: a particle with fewer neighbours within h is a drop, drawn as a sphere of its own volume. Yu &
+Turk's 25 count the neighbours within twice their kernel's support; the solver's lists hold those within h
+(2 spacings: about 33 in the bulk, 17 at a flat surface, 12 in a sheet one particle thick, 2-4 along a
+filament), and a sheet should stay a sheet."""
+DROP_RADIUS_SPACINGS = (3.0 / (4.0 * math.pi)) ** (1.0 / 3.0)
+"""A drop's sphere, in spacings: the volume of a spacing cubed (0.62)."""
+
+
+@ti.data_oriented
+class Ellipsoids:
+    """A splat per particle: an ellipsoid with the axes of the weighted covariance of its neighbours and
+    its centre smoothed toward theirs (Yu & Turk 2013, "Reconstructing surfaces of particle-based fluids
+    using anisotropic kernels", ACM TOG 32(1), §3-4), computed on the device from the solver's neighbour
+    lists (``Simulation.neighbourhood``) once per drawn frame; or, without lists, spheres.
+
+    With weights w_ij = 1 − (|x_j − x_i| / h)³ (j = i included, w = 1), x̄_i = Σ w x_j / Σ w and
+    C_i = Σ w (x_j − x̄_i)(x_j − x̄_i)ᵀ / Σ w = R diag(σ) Rᵀ. The semi-axes are R's columns with lengths
+    proportional to max(σ_k, σ_1 / k_r), scaled so that the ellipsoid has the volume of the sphere of
+    ``radius_m``: in the bulk, where C is isotropic, the splat is that sphere; at a surface it is a disc
+    in the surface's plane, in a sheet a disc in the sheet's, along a filament a rod. Each particle
+    keeps ``inverse``, G = diag(1/a) Rᵀ, which maps the ellipsoid to the unit sphere
+    (x' = G (x − c)), ``reach``, its longest semi-axis (its screen bound), and ``chord``, its volume's
+    share of the sphere's (which scales the thickness its chord adds)."""
+
+    def __init__(self, capacity: int, radius_m: float, spacing_m: float):
+        self.capacity = max(int(capacity), 1)
+        self.point = ti.Vector.field(3, ti.f32, shape=self.capacity)
+        """The particles' positions, copied: the neighbour walk reads them from here."""
+        self.centre = ti.Vector.field(3, ti.f32, shape=self.capacity)
+        self.inverse = ti.Matrix.field(3, 3, ti.f32, shape=self.capacity)
+        self.reach = ti.field(ti.f32, shape=self.capacity)
+        self.chord = ti.field(ti.f32, shape=self.capacity)
+        self.constants = scene_constants(radius=float(radius_m), drop=DROP_RADIUS_SPACINGS * float(spacing_m))
+        """The sphere's radius and a drop's, m (data: another spacing compiles nothing)."""
+
+    @ti.kernel
+    def spheres(self, x: ti.template(), count: ti.i32):
+        """Every splat the sphere of ``radius`` at its particle."""
+        radius = self.constants[None].radius
+        for i in range(count):
+            self.centre[i] = x[i]
+            self.inverse[i] = ti.Matrix.identity(ti.f32, 3) / radius
+            self.reach[i] = radius
+            self.chord[i] = 1.0
+
+    @ti.func
+    def pair(self, i, j, acc: ti.template()):
+        """Neighbour j's weight, weighted offset and weighted outer product (its upper triangle) into
+        ``acc``, and a count of the neighbours within h (the lists were built a little earlier)."""
+        d = self.point[j] - self.point[i]
+        q = d.norm() * acc[10]  # acc[10]: 1/h, set by the caller
+        if q < 1.0:
+            w = 1.0 - q * q * q
+            wd = w * d
+            acc += ti.Vector(
+                [w, wd.x, wd.y, wd.z, wd.x * d.x, wd.x * d.y, wd.x * d.z, wd.y * d.y, wd.y * d.z, wd.z * d.z, 0.0, 1.0]
+            )
+
+    @ti.kernel
+    def anisotropic(self, grid: ti.template(), x: ti.template(), entries: NeighbourList, count: ti.i32, h: ti.f32):
+        """Every splat from the neighbour lists ``entries`` of ``grid`` (``pbf.solver.Neighbourhood``),
+        positions ``x``."""
+        for i in range(count):
+            self.point[i] = x[i]
+        radius, drop = self.constants[None].radius, self.constants[None].drop
+        for i in range(count):
+            # The particle itself (w = 1, offset 0), then its neighbours; offsets from x_i keep float32's
+            # digits for the covariance (positions are metres, offsets a few centimetres).
+            acc = ti.Vector([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0 / h, 0.0])
+            grid.for_each_neighbour(i, entries, self.pair, acc)
+            total = acc[0]
+            mean = ti.Vector([acc[1], acc[2], acc[3]]) / total
+            centre = self.point[i] + SMOOTHING * mean
+            inverse = ti.Matrix.identity(ti.f32, 3) / drop
+            reach, chord = drop, (radius / drop) ** 3
+            if acc[11] >= FEW_NEIGHBOURS:
+                second = ti.Matrix(
+                    [[acc[4], acc[5], acc[6]], [acc[5], acc[7], acc[8]], [acc[6], acc[8], acc[9]]]
+                ) / total - mean.outer_product(mean)
+                # C is symmetric and positive semi-definite, so its SVD is its eigen decomposition. Taichi's
+                # iterative ti.sym_eig never returned on a lattice's covariance (equal eigenvalues); its
+                # 3 × 3 SVD runs a fixed count of Jacobi sweeps.
+                axes, singular, _ = ti.svd(second)
+                sigma = ti.Vector([singular[0, 0], singular[1, 1], singular[2, 2]])
+                largest = ti.max(sigma[0], sigma[1], sigma[2])
+                if largest > 0.0:
+                    floor = largest / AXIS_RATIO
+                    s = ti.Vector([ti.max(sigma[0], floor), ti.max(sigma[1], floor), ti.max(sigma[2], floor)])
+                    # Semi-axes ∝ σ with the sphere's volume: a_k = r σ_k / (σ_1 σ_2 σ_3)^(1/3).
+                    scale = radius / ti.pow(s[0] * s[1] * s[2], 1.0 / 3.0)
+                    a = s * scale
+                    inverse = ti.Matrix([[1.0 / a[0], 0.0, 0.0], [0.0, 1.0 / a[1], 0.0], [0.0, 0.0, 1.0 / a[2]]])
+                    inverse = inverse @ axes.transpose()
+                    reach, chord = ti.max(a[0], a[1], a[2]), 1.0
+            self.centre[i] = centre
+            self.inverse[i] = inverse
+            self.reach[i] = reach
+            self.chord[i] = chord
+
+    def update(self, positions, count: int, neighbourhood=None) -> None:
+        """The splats of the ``count`` particles at ``positions``: anisotropic from ``neighbourhood``
+        (a ``pbf.solver.Neighbourhood`` of these positions), spheres without."""
+        if not count:
+            return
+        if neighbourhood is None:
+            self.spheres(positions, count)
+        else:
+            self.anisotropic(
+                neighbourhood.grid, positions, neighbourhood.entries, count, float(neighbourhood.support_m)
+            )
+
+    @ti.func
+    def frame(self, i, eye, right, up, forward):
+        """Splat i's view in its own frame x' = G (x − c): G (c − eye) and the images G right, G up and
+        G forward of the camera's axes, from which :meth:`hit` tests a pixel with a few products
+        (computed once per splat, not per pixel)."""
+        inverse = self.inverse[i]
+        return inverse @ (self.centre[i] - eye), inverse @ right, inverse @ up, inverse @ forward
+
+    @ti.func
+    def hit(self, offset, along_right, along_up, along_forward, u, w):
+        """Where the ray eye + t (u right + w up + forward) first meets a splat seen as :meth:`frame`
+        gives it: (t, the view depth, or -1 where it misses; the chord it cuts, m). In the splat's frame
+        the ray is G (eye − c) + t G ray and the splat the unit sphere: t² |G ray|² − 2 t (G ray)·(G (c −
+        eye)) + |G (c − eye)|² − 1 = 0."""
+        along = along_right * u + along_up * w + along_forward
+        a, b = along.norm_sqr(), along.dot(offset)
+        disc = b * b - a * (offset.norm_sqr() - 1.0)
+        t, chord = -1.0, 0.0
+        if disc > 0.0:
+            root = ti.sqrt(disc)
+            t = (b - root) / a
+            chord = 2.0 * root / a * ti.sqrt(u * u + w * w + 1.0)
+        return t, chord

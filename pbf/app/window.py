@@ -436,7 +436,9 @@ class WindowViewer:
             renderer = self.surface_renderer
             if renderer is None or (renderer.width, renderer.height) != (width, height):  # first use, or resized
                 self.surface_renderer = renderer = fluid_renderer(self.sim, width, height)
-            packed = renderer.draw_packed(view, particles.positions, particles.count, LIGHT_DIRECTION)
+            packed = renderer.draw_packed(
+                view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
+            )
         else:
             renderer = self.sphere_renderer
             if renderer is None or (renderer.width, renderer.height) != (width, height):

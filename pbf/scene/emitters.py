@@ -7,11 +7,18 @@ from dataclasses import dataclass
 
 from pbf.scene.schema import SceneError, Vec3, _between, _length, _num, key
 
+HEX_PITCH = math.sqrt(2.0 / math.sqrt(3.0))
+"""Distance between neighbouring sites of a nozzle's hexagonal lattice, in spacings (1.075): a site's
+hexagon, (√3/2) pitch², is a spacing squared."""
+
 
 @dataclass(frozen=True)
 class Emitter:
-    """A nozzle that shoots water in: a disc of lattice sites at the spacing, perpendicular to the
-    direction, emitting a new layer each time the stream has moved one spacing, from start_s to end_s."""
+    """A nozzle that shoots water in: a disc of sites in hexagonal packing, perpendicular to the
+    direction, emitting a new layer each time the stream has moved one spacing, from start_s to end_s.
+    The disc's lattice is hexagonal so that the stream is round (a square lattice in a small nozzle is a
+    square rod: 3 × 3 sites in pour's), its pitch such that each site has a spacing squared of the disc
+    (``HEX_PITCH``): with the layers a spacing apart the water arrives at the rest density."""
 
     position_m: Vec3 = key(doc="centre of the nozzle, m")
     direction: Vec3 = key(doc="direction of the stream (any length; normalised)")
@@ -29,13 +36,30 @@ class Emitter:
         scaled = [c / largest for c in self.direction]
         return tuple(c / _length(scaled) for c in scaled)
 
+    def disc_rows(self, spacing: float) -> list[tuple[float, float, int]]:
+        """The nozzle's sites, row by row: a hexagonal lattice of pitch ``HEX_PITCH`` spacings, the sites
+        within the radius. Each row is (its offset across the rows, m; its first site's offset along it, m;
+        its sites, one pitch apart). Counted per row (a nozzle of a thousand spacings in a millisecond)."""
+        pitch = HEX_PITCH * spacing
+        row_gap = pitch * math.sqrt(3.0) / 2.0
+        radius = self.radius_m * (1 + 1e-9)
+        rows = []
+        for j in range(-int(math.floor(radius / row_gap)), int(math.floor(radius / row_gap)) + 1):
+            across = j * row_gap
+            half = math.sqrt(max(radius * radius - across * across, 0.0)) / pitch  # in pitches
+            if j % 2:  # odd rows sit half a pitch over: sites at (i + ½) pitch
+                count = 2 * int(math.floor(half + 0.5))
+                first = -(count / 2 - 0.5) * pitch
+            else:
+                count = 2 * int(math.floor(half)) + 1
+                first = -(count // 2) * pitch
+            if count:
+                rows.append((across, first, count))
+        return rows
+
     def sites_per_layer(self, spacing: float) -> int:
-        """Lattice sites (i s, j s) of the nozzle's plane within its radius: per row i, the j with
-        j² ≤ limit − i², counted exactly with isqrt (one row at a time, not one site: a nozzle of
-        a thousand spacings counts in a millisecond)."""
-        reach = int(math.floor(self.radius_m / spacing + 1e-9))
-        limit = (self.radius_m / spacing) ** 2 + 1e-9
-        return sum(2 * math.isqrt(math.floor(limit - i * i)) + 1 for i in range(-reach, reach + 1))
+        """Sites of one layer (:meth:`disc_rows`)."""
+        return sum(count for _, _, count in self.disc_rows(spacing))
 
     def layers(self, spacing: float) -> int:
         """Layers emitted over the whole interval: one at start_s, one per spacing the stream moves."""

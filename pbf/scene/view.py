@@ -48,7 +48,9 @@ class Render:
     width_px: int = key(1280, _even_pixels, "image width, pixels")
     height_px: int = key(720, _even_pixels, "image height, pixels")
     legend: bool = key(
-        False, doc="draw the colour legend (bar, range and unit) on headless frames; the window's panel always shows it"
+        True,
+        doc="draw the colour legend (bar, range and unit) on headless frames of particles (the surface style's "
+        "colours are the water's own: no legend); the window's panel always shows it",
     )
     style: str = key(
         "particles",
@@ -135,8 +137,5 @@ def _check_camera(scene, source: str) -> None:
 
 
 def _check_render(scene, source: str) -> None:
-    if scene.render.legend and scene.render.style == "surface":
-        raise SceneError(
-            f"{source}: key 'render.legend': the surface style has no colour map to explain; "
-            f'set render.legend = false or render.style = "particles"'
-        )
+    """Nothing to check: ``render.legend`` applies to particle frames only, and a surface frame, whose
+    colours need no legend, draws none."""

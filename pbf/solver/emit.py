@@ -1,10 +1,10 @@
 """Emitters: water added while the scene runs, before each substep's prediction.
 
-A nozzle is a disc of lattice sites at the spacing s, perpendicular to its direction. The stream is a
-pile of such layers one spacing apart: layer j leaves the nozzle at t_j = start + j s / u and, at
-time t, has travelled u (t − t_j), so the new water arrives at the rest spacing (no explosion where
-it appears). The layers emitted so far are part of a snapshot, so a restored one replays exactly.
-Slots for every particle the emitters will add are allocated at the start
+A nozzle is a disc of sites in hexagonal packing (a site to each s² of it), perpendicular to its
+direction. The stream is a pile of such layers one spacing apart: layer j leaves the nozzle at
+t_j = start + j s / u and, at time t, has travelled u (t − t_j), so the new water arrives at the rest
+density (no explosion where it appears). The layers emitted so far are part of a snapshot, so a
+restored one replays exactly. Slots for every particle the emitters will add are allocated at the start
 (``Scene.particle_capacity``); new particles take the slots after the live ones.
 
 A drowned nozzle pauses: a layer whose sites the water already occupies (a live particle within
@@ -19,21 +19,26 @@ import numpy as np
 import taichi as ti
 
 from pbf.scene import Emitter
+from pbf.scene.emitters import HEX_PITCH
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import allocation
 
 
 def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
-    """(k, 3) offsets (m) of the nozzle's lattice sites from its centre, in its plane."""
+    """(k, 3) offsets (m) of the nozzle's sites from its centre, in its plane: the hexagonal rows of
+    ``Emitter.disc_rows``, so that their count is ``Emitter.sites_per_layer``'s."""
     direction = np.array(emitter.unit_direction())
     helper = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least along the stream
     u = np.cross(direction, helper)
     u /= np.linalg.norm(u)
     w = np.cross(direction, u)
-    reach = int(math.floor(emitter.radius_m / spacing + 1e-9))
-    limit = (emitter.radius_m / spacing) ** 2 + 1e-9
-    grid = [(i, j) for i in range(-reach, reach + 1) for j in range(-reach, reach + 1) if i * i + j * j <= limit]
-    return np.array([spacing * (i * u + j * w) for i, j in grid]).reshape(-1, 3)
+    pitch = HEX_PITCH * spacing
+    sites = [
+        (first + i * pitch) * u + across * w
+        for across, first, count in emitter.disc_rows(spacing)
+        for i in range(count)
+    ]
+    return np.array(sites).reshape(-1, 3)
 
 
 LAYERS_PER_LAUNCH = 16

@@ -20,6 +20,22 @@ writer), the ways alternating round by round (``--rounds``), medians:
 
     python -m pbf.study.frames --whole 15 --rounds 5
 
+``look`` measures how the surface style reads rather than what it costs: a settled pool (``hydrostatic``
+at t = 1 s, the seed scene at t = 3 s) should be one flat surface, and a splash (the seed scene's
+frames 27-40) sheets and drops rather than sparkles:
+
+    python -m pbf.study.frames look                 # the scenes' own size, 1280×720
+    python -m pbf.study.frames look --size 640x360 --images out/look
+
+Both figures come from the renderer's normal buffer and water mask (``FluidRenderer.surface``, the
+coarse passes' pixels). *Top face*: the water pixels whose normal is within 45° of vertical and whose
+surface point lies more than two spacings inside the container's side walls (the rim, where the water
+meets a wall, is left out); reported are the share of them within 5° of vertical and their median
+angle, and beside them the same for the particles' own top (a cubic fitted to the highest particle of
+each column: the waves a renderer should keep). *Speckle*: the share of water pixels whose normal is
+more than 30° from the mean of the normals of its eight neighbours on the same surface (water within
+two spacings of its depth; a pixel with none counts as speckle), over the splash frames.
+
 This study's subject is the application's renderer and writer, so it imports ``pbf.app`` (the other
 studies measure the solver only).
 """
@@ -31,6 +47,8 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 from pbf.study.common import run_command
 
@@ -135,6 +153,182 @@ def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
     return f"| {label} | {rate:,.1f} | {wall_s * 1e3:.1f} | {cpu_s * 1e3:.1f} | {extra} |"
 
 
+FACES_UP_DEG = 45.0
+"""A water pixel belongs to a pool's top face when its normal is within this of vertical."""
+WALL_INSET_SPACINGS = 2.0
+"""...and its surface point this far inside the container's side walls (the rim is left out)."""
+FLAT_DEG = 5.0
+"""The top face's pixels within this of vertical are flat."""
+SPECKLE_DEG = 30.0
+"""A water pixel whose normal turns more than this from its neighbours' mean is speckle."""
+SAME_SURFACE_SPACINGS = 2.0
+"""Neighbouring pixels of water whose depths differ by less than this are on one surface (twice the
+renderer's narrow range: a surface seen at a slant changes depth from pixel to pixel)."""
+POOLS = (("hydrostatic", 60), ("dam_break", 180))
+"""The settled pools measured: preset and frame (t = 1 s; t = 3 s)."""
+SPLASH = ("dam_break", range(27, 41))
+"""The splash measured: the seed scene's frames 27-40."""
+POUR = ("pour", 150)
+"""The pour frame ``--images`` adds (not measured)."""
+
+
+def surface_points(view, depth: np.ndarray) -> np.ndarray:
+    """World positions (h, w, 3) of the surface at each coarse pixel of view depth ``depth``."""
+    height, width = depth.shape
+    right, up, forward = view.basis()
+    focal = view.focal_px(height)
+    rows, cols = np.mgrid[0:height, 0:width]
+    u = (cols + 0.5 - 0.5 * width) / focal
+    w = (0.5 * height - rows - 0.5) / focal
+    rays = u[..., None] * right + w[..., None] * up + forward  # forward part 1: depth times ray
+    return view.eye + np.where(depth < 1e29, depth, 0.0)[..., None] * rays
+
+
+def top_face(normals, water, depth, view, scene) -> dict:
+    """The tilt of a pool's top face (see the module's ``look``): its pixels, the share within 5° of
+    vertical, and the median and 95th percentile angle, degrees."""
+    points = surface_points(view, depth)
+    inset = WALL_INSET_SPACINGS * scene.fluid.spacing_m
+    lower, upper = np.asarray(scene.container.min_m), np.asarray(scene.container.max_m)
+    inside = np.ones(water.shape, bool)
+    for axis in (0, 2):
+        inside &= (points[..., axis] > lower[axis] + inset) & (points[..., axis] < upper[axis] - inset)
+    tilt = np.degrees(np.arccos(np.clip(normals[..., 1], -1.0, 1.0)))
+    face = water & inside & (tilt < FACES_UP_DEG)
+    angles = tilt[face]
+    if not angles.size:
+        return {"pixels": 0, "flat": float("nan"), "median_deg": float("nan"), "p95_deg": float("nan")}
+    return {
+        "pixels": int(face.sum()),
+        "flat": float(np.mean(angles < FLAT_DEG)),
+        "median_deg": float(np.median(angles)),
+        "p95_deg": float(np.percentile(angles, 95)),
+    }
+
+
+def particles_top(positions: np.ndarray, scene) -> dict:
+    """The tilt the particles themselves give a pool's top: the highest particle in each column two
+    spacings square, a cubic in x and z fitted to those heights by least squares (the waves, without the
+    particles' own bumps), and its slope at the columns: the share within 5° of level and the median,
+    degrees. What a renderer that smooths only the particles' bumps can reach."""
+    column = 2.0 * scene.fluid.spacing_m
+    cells = np.floor(positions[:, [0, 2]] / column).astype(np.int64)
+    keys, inverse = np.unique(cells, axis=0, return_inverse=True)
+    heights = np.full(len(keys), -np.inf)
+    np.maximum.at(heights, inverse.ravel(), positions[:, 1])
+    x, z = ((keys + 0.5) * column).T
+    terms = np.stack([np.ones_like(x), x, z, x * x, x * z, z * z, x**3, x * x * z, x * z * z, z**3], axis=1)
+    c = np.linalg.lstsq(terms, heights, rcond=None)[0]
+    slope_x = c[1] + 2 * c[3] * x + c[4] * z + 3 * c[6] * x * x + 2 * c[7] * x * z + c[8] * z * z
+    slope_z = c[2] + c[4] * x + 2 * c[5] * z + c[7] * x * x + 2 * c[8] * x * z + 3 * c[9] * z * z
+    angles = np.degrees(np.arctan(np.hypot(slope_x, slope_z)))
+    return {"flat": float(np.mean(angles < FLAT_DEG)), "median_deg": float(np.median(angles))}
+
+
+def speckle(normals, water, depth, surface_m: float) -> float:
+    """The share of water pixels whose normal is more than 30° from the mean normal of their neighbours
+    on the same surface: the water among the eight around it whose depth is within ``surface_m`` of its
+    own (a drop in front of the pool is another surface, and its outline no speckle). A pixel with no
+    such neighbour counts as speckle."""
+    height, width = water.shape
+    far = 1e30  # the renderer's FAR: no water
+    depth = np.where(water, depth, far)
+    padded_depth = np.pad(depth, 1, constant_values=far)
+    padded = np.pad(normals, ((1, 1), (1, 1), (0, 0)))
+    around = np.zeros_like(normals)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                same = np.abs(padded_depth[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] - depth) <= surface_m
+                around += padded[1 + dr : 1 + dr + height, 1 + dc : 1 + dc + width] * same[..., None]
+    length = np.linalg.norm(around, axis=-1)
+    cosine = np.sum(normals * around, axis=-1) / np.maximum(length, 1e-12)
+    rough = (length < 1e-6) | (cosine < np.cos(np.radians(SPECKLE_DEG)))
+    return float(np.sum(rough & water) / max(int(water.sum()), 1))
+
+
+def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLASH, pour=None) -> dict:
+    """The pools' top faces and the splash's speckle (see ``look``), drawn at ``size`` (width, height;
+    default: each scene's); with ``images`` each measured frame is written there as a PNG (the pools,
+    the splash's first frame and, when ``pour`` is given, that frame of ``pour``)."""
+    from pbf.app.render import SceneRenderer
+    from pbf.app.writer import write_png
+    from pbf.solver import Simulation
+
+    def renderer(sim):
+        width, height = size or (sim.scene.render.width_px, sim.scene.render.height_px)
+        return SceneRenderer(sim, width, height, style="surface")
+
+    def save(name, image):
+        if images is not None:
+            images.mkdir(parents=True, exist_ok=True)
+            write_png(images / f"{name}.png", image)
+
+    figures = {"pools": {}, "splash": {}}
+    for preset, frame in pools:
+        sim = Simulation(preset, quiet=True)
+        sim.step(frame)
+        draw = renderer(sim)
+        save(f"{preset}_{frame}", draw.frame())
+        figures["pools"][(preset, frame)] = top_face(*draw.fluid.surface(), draw.view, sim.scene)
+        figures["pools"][(preset, frame)]["particles"] = particles_top(sim.positions(), sim.scene)
+    preset, frames = splash
+    sim = Simulation(preset, quiet=True)
+    draw = renderer(sim)
+    for frame in frames:
+        sim.step(frame - sim.frame)
+        image = draw.frame()
+        if frame == frames[0]:
+            save(f"{preset}_{frame}", image)
+        normals, water, depth = draw.fluid.surface()
+        figures["splash"][frame] = speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m)
+    if pour is not None and images is not None:
+        sim = Simulation(pour[0], quiet=True)
+        sim.step(pour[1])
+        save(f"{pour[0]}_{pour[1]}", renderer(sim).frame())
+    return figures
+
+
+def look(argv=None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m pbf.study.frames look", description="how the surface style reads: settled pools, a splash"
+    )
+    parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scenes')")
+    parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
+    parser.add_argument("--images", type=Path, default=None, help="write the measured frames (and pour's) here")
+    args = parser.parse_args(argv)
+
+    from pbf.solver import start_backend
+
+    backend = start_backend(args.arch)
+    figures = look_figures(args.size, args.images, pour=POUR if args.images else None)
+    shown = "the scenes' size" if args.size is None else f"{args.size[0]}×{args.size[1]}"
+    print(f"The surface style, {backend}, {shown}")
+    print()
+    print(
+        f"| settled pool | top-face pixels | within {FLAT_DEG:g}° of vertical | median | 95th percentile "
+        f"| the particles' top: within {FLAT_DEG:g}° | median |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for (preset, frame), pool in figures["pools"].items():
+        top = pool["particles"]
+        print(
+            f"| {preset}, frame {frame} | {pool['pixels']:,} | {100 * pool['flat']:.1f}% | "
+            f"{pool['median_deg']:.2f}° | {pool['p95_deg']:.1f}° | "
+            f"{100 * top['flat']:.1f}% | {top['median_deg']:.2f}° |"
+        )
+    shares = list(figures["splash"].values())
+    preset, frames = SPLASH
+    print()
+    print(f"| splash | speckle (normal > {SPECKLE_DEG:g}° from its neighbours'), mean | least | most |")
+    print("|---|---:|---:|---:|")
+    print(
+        f"| {preset}, frames {frames[0]}-{frames[-1]} | {100 * np.mean(shares):.1f}% | "
+        f"{100 * min(shares):.1f}% | {100 * max(shares):.1f}% |"
+    )
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     parser.add_argument("--scene", default="dam_break", help="preset or TOML file (default: dam_break)")
@@ -147,6 +341,12 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--rounds", type=int, default=5, help="rounds of --whole, the ways alternating (default: 5)")
     parser.add_argument("--style", choices=STYLES, default="particles", help="the style --whole draws")
+    if argv is None:
+        import sys
+
+        argv = sys.argv[1:]
+    if argv[:1] == ["look"]:
+        return look(argv[1:])
     args = parser.parse_args(argv)
 
     from pbf.app.render import SceneRenderer
