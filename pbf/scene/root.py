@@ -13,7 +13,7 @@ from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_contai
 from pbf.scene.schema import SceneError, Vec3, _at_most_tables, _line, _show, _table_values, key
 from pbf.scene.solver import Solver, Viscosity, Vorticity, _check_solver
 from pbf.scene.timestep import Time, _check_settle, _check_time, travel_spacings
-from pbf.scene.view import Camera, Render, Surface, _check_camera, _check_render
+from pbf.scene.view import Camera, Render, Surface, _check_camera
 from pbf.scene.wave_maker import WaveMaker, _check_wave_maker
 
 MAX_OBSTACLES = 100
@@ -115,4 +115,3 @@ def _check_scene(scene: Scene) -> None:
     _check_solver(scene, source)
     _check_settle(scene, source)
     _check_camera(scene, source)
-    _check_render(scene, source)

@@ -134,8 +134,3 @@ def _check_camera(scene, source: str) -> None:
             f"{source}: key 'camera.position_m': the eye {_vec(eye)} m is at {given} {_vec(target)} m, "
             f"so it looks nowhere; move camera.position_m or set camera.look_at_m elsewhere"
         )
-
-
-def _check_render(scene, source: str) -> None:
-    """Nothing to check: ``render.legend`` applies to particle frames only, and a surface frame, whose
-    colours need no legend, draws none."""
