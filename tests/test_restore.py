@@ -65,7 +65,7 @@ def changed(snapshot, **changes):
         (
             lambda s: changed(s, emitted_layers=(0,)),
             ValueError,
-            ("the emitters have still to add (emitted_layers = (0,)) exceed the 189 this scene allocates"),
+            ("the emitters have still to add (emitted_layers = (0,)) exceed the 147 this scene allocates"),
         ),
         (lambda s: changed(s, emitted_layers=(-5,)), ValueError, "emitted_layers[0] = -5; allowed: 0 to the 21 layers"),
         (lambda s: changed(s, emitted_layers=(22,)), ValueError, "emitted_layers[0] = 22"),
@@ -137,7 +137,7 @@ def test_a_snapshot_of_another_scene_is_refused(poured):
         },
         quiet=True,
     )
-    with pytest.raises(ValueError, match="more than the 189 this scene allocates"):
+    with pytest.raises(ValueError, match="more than the 147 this scene allocates"):
         sim.restore(other.snapshot())
     few = other.snapshot()
     few = changed(
@@ -156,7 +156,7 @@ def test_the_emitters_append_cannot_pass_the_budget(poured):
     sim.restore(snapshot)
     sim.emitters.emitted = [0]  # every layer counted as not yet emitted
     sim.step(40)
-    assert sim.particle_count == sim.model.capacity == 189
+    assert sim.particle_count == sim.model.capacity == 147
     assert inside(sim)
 
 
@@ -215,7 +215,7 @@ def test_a_drowned_nozzle_pauses_instead_of_pushing():
     sim = Simulation(scene, quiet=True)
     sim.step(90)
     stats = sim.stats()
-    emitted = sim.emitters.emitted[0] * 9
+    emitted = sim.emitters.emitted[0] * len(sim.emitters.sites[0])
     assert sim.particle_count < 0.8 * emitted  # layers were skipped while the nozzle was under water
     top = sim.positions()[:, 1].max()
     assert top > 0.07 - SPACING  # because the water had reached the nozzle
