@@ -171,7 +171,8 @@ def test_a_run_without_vulkan_says_why_once_and_counts_its_frames_alike(tmp_path
     assert re.fullmatch(r"\[pbf\] kernels ready and the first frame drawn in \d+\.\d s", lines[5]), result.stdout
     size = cli._size(sum(path.stat().st_size for path in out.glob("frame_*.png")))
     assert lines[6:] == [
-        f"[pbf] wrote 3 frames in {out}/: {size} (PNG frames at 64×48); a video as well: --video {out}.mp4; "
+        f"[pbf] wrote 3 frames in {out}/: {size} (PNG frames at 64×48); a video instead: "
+        f"--headless --video {out}.mp4 --no-png; "
         f"fewer or smaller frames: --frames N, --size WxH"
     ], result.stdout
     assert len(list(out.glob("frame_*.png"))) == 3

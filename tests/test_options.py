@@ -24,6 +24,17 @@ def here(tmp_path, monkeypatch):
         (["--stats-only", "--video", "v.mp4"], ["--video: --stats-only renders and writes nothing"]),
         (["--stats-only", "--export", "npz"], ["--export: --stats-only renders and writes nothing"]),
         (["--stats-only", "--out", "frames"], ["--out: --stats-only renders and writes nothing"]),
+        (
+            ["--headless", "--no-png"],
+            ["--no-png writes a video instead of the PNG frames: add --video FILE.mp4, or drop --no-png"],
+        ),
+        (["--no-png"], ["--no-png writes a video instead of the PNG frames: add --video"]),
+        (["--no-png", "--video", "v.mp4"], ["--video writes files, which the window does not; add --headless"]),
+        (["--stats-only", "--no-png"], ["--no-png: --stats-only renders and writes nothing"]),
+        (
+            ["--headless", "--video", "v.mp4", "--no-png", "--out", "frames"],
+            ["--out: with --no-png only --export files go there; drop --out, or add --export"],
+        ),
         (["--stats-only", "--size", "64x48"], ["--size: --stats-only renders and writes nothing"]),
         (["--stats-only", "--colour-map", "viridis"], ["--colour-map: --stats-only"]),
         (["--headless", "--size", ""], ["--size '': expected WIDTHxHEIGHT in pixels"]),

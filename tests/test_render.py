@@ -131,7 +131,35 @@ def test_headless_run_writes_frames_video_and_particles(tmp_path, capsys):
     assert np.isfinite(ply["vertex"]["vy"]).all() and ply["vertex"]["vy"].min() < -0.1  # falling
 
 
-def test_npz_export(tmp_path):
+def test_no_png_writes_the_video_alone(tmp_path, monkeypatch, capsys):
+    # In the default place: no out/ folder appears, only the video, and the last line gives its size.
+    monkeypatch.chdir(tmp_path)
+    argv = ["dam_break", "--headless", "--frames", "3", "--video", "v.mp4", "--no-png", "--size", "160x90"]
+    assert cli.main([*argv, "--set", "fluid.spacing_m=0.05"]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["v.mp4"]
+    frames = list(iio.imiter(tmp_path / "v.mp4"))
+    assert len(frames) == 4 and frames[0].shape == (90, 160, 3)
+    lines = capsys.readouterr().out.splitlines()
+    assert "[pbf] rendering 4 frames (the start and 3 steps) into v.mp4" in lines
+    size = cli._size((tmp_path / "v.mp4").stat().st_size)
+    assert lines[-1] == f"[pbf] wrote 4 frames as a video, v.mp4: {size} (H.264 at 160×90)"
+
+
+def test_no_png_keeps_the_exports(tmp_path, capsys):
+    out = tmp_path / "frames"
+    argv = ["dam_break", "--headless", "--frames", "2", "--out", str(out), "--video", str(tmp_path / "v.mp4")]
+    argv += ["--no-png", "--export", "npz", "--size", "64x48", "--set", "fluid.spacing_m=0.05"]
+    assert cli.main(argv) == 0
+    assert sorted(p.name for p in out.iterdir()) == [f"particles_{k:05d}.npz" for k in range(3)]
+    assert len(list(iio.imiter(tmp_path / "v.mp4"))) == 3
+    video = cli._size((tmp_path / "v.mp4").stat().st_size)
+    npz = cli._size(sum(p.stat().st_size for p in out.iterdir()))
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"[pbf] wrote 3 frames as a video, {tmp_path / 'v.mp4'}: {video} (H.264 at 64×48); npz files in {out}/: {npz}"
+    )
+
+
+def test_npz_export(tmp_path, capsys):
     assert (
         cli.main(
             [
@@ -152,6 +180,11 @@ def test_npz_export(tmp_path):
         == 0
     )
     data = np.load(tmp_path / "particles_00001.npz")
+    # A --headless run's last line says how to write the video instead of the PNG frames, as it is typed.
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.endswith(
+        f"a video instead: --video {tmp_path}.mp4 --no-png; fewer or smaller frames: --frames N, --size WxH"
+    )
     assert data["positions_m"].shape == data["velocities_m_s"].shape == (1000, 3)
     assert data["time_s"] == pytest.approx(1 / 60)
 
@@ -175,8 +208,8 @@ def test_without_display_the_window_falls_back_to_headless(tmp_path, monkeypatch
     assert lines[4].startswith("[pbf] kernels ready and the first frame drawn in "), output
     size = cli._size(sum(path.stat().st_size for path in tmp_path.glob("frame_*.png")))
     assert lines[5:] == [
-        f"[pbf] wrote 2 frames in {tmp_path}/: {size} (PNG frames at 64×48); a video as well: "
-        f"--video {tmp_path}.mp4; fewer or smaller frames: --frames N, --size WxH"
+        f"[pbf] wrote 2 frames in {tmp_path}/: {size} (PNG frames at 64×48); a video instead: "
+        f"--headless --video {tmp_path}.mp4 --no-png; fewer or smaller frames: --frames N, --size WxH"
     ], output
     assert len(list(tmp_path.glob("frame_*.png"))) == 2
     assert "((" not in output

@@ -1,7 +1,7 @@
 """Command line: open a scene in a window, render it headless to PNG/video/particle files, or list presets.
 
     python run.py [SCENE] [--set KEY=VALUE]...               # the window (headless when none can open)
-    python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4] [--export ply|npz|mesh]...
+    python run.py SCENE --headless --frames N --out DIR [--video FILE.mp4 [--no-png]] [--export ply|npz|mesh]...
     python run.py --list
     python run.py --keys                                      # every scene key (docs/KEYS.md)
 
@@ -37,7 +37,7 @@ EPILOG = "\n".join(
     [
         "examples:",
         "  %(prog)s                   the seed dam break in a window (headless without one)",
-        "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4",
+        "  %(prog)s dam_break --headless --frames 120 --video out/dam_break.mp4 --no-png",
         "  %(prog)s drop_into_pool --headless --frames 60 --export ply --export mesh",
         "  %(prog)s dam_break --set solver.iterations=8 --set fluid.spacing_m=0.02",
         "  %(prog)s my_scene.toml --stats-only    your own scene file (copy one from scenes/)",
@@ -119,8 +119,8 @@ def build_parser() -> Parser:
     output.add_argument(
         "--out",
         default=None,
-        help="folder for PNG frames (default out/ + the scene file's name, or the next free out/NAME-2 … "
-        "when it holds an earlier run; also where the window writes when none can open); a folder "
+        help="folder for PNG frames and --export files (default out/ + the scene file's name, or the next "
+        "free out/NAME-2 … when it holds an earlier run; also where the window writes when none can open); a folder "
         "given here that holds an earlier run's files is refused unless --overwrite",
     )
     output.add_argument(
@@ -129,7 +129,16 @@ def build_parser() -> Parser:
         help="replace an earlier run's files in --out, or in the default folder out/NAME (only "
         "frame_*.png, particles_*.ply/.npz and surface_*.ply/.obj are removed), and an existing --video file",
     )
-    output.add_argument("--video", default=None, help="also encode the frames as a video (.mp4); needs --headless")
+    output.add_argument(
+        "--video",
+        default=None,
+        help="also encode the frames as a video (.mp4, H.264); needs --headless; with --no-png instead of PNG frames",
+    )
+    output.add_argument(
+        "--no-png",
+        action="store_true",
+        help="write the --video alone, without the PNG frames (--export files still go to --out)",
+    )
     output.add_argument(
         "--export",
         choices=export.EXPORTS,
@@ -191,7 +200,7 @@ def checked_args(argv=None):
         dest
         for dest in ("scene", "arch", "frames", "out", *FILE_OPTIONS, *VIEW_OPTIONS)
         if getattr(args, dest) is not None
-    ] + [d for d in ("set", "headless", "stats_only") if getattr(args, d)]
+    ] + [d for d in ("set", "headless", "stats_only", "no_png") if getattr(args, d)]
     if args.list and args.keys:
         raise UsageError("--list and --keys each print a reference; give one of the two")
     for flag, does in (("list", "lists the presets"), ("keys", "prints the key reference")):
@@ -203,6 +212,13 @@ def checked_args(argv=None):
             raise UsageError(f"{_option(dest)}: --stats-only renders and writes nothing; drop one of the two")
     if args.stats_only and args.overwrite:
         raise UsageError("--overwrite: --stats-only writes nothing to replace; drop one of the two")
+    if args.stats_only and args.no_png:
+        raise UsageError("--no-png: --stats-only renders and writes nothing; drop one of the two")
+    if args.no_png and args.video is None:
+        raise UsageError("--no-png writes a video instead of the PNG frames: add --video FILE.mp4, or drop --no-png")
+    if args.no_png and args.out is not None and not args.export:
+        # Without PNG frames or --export files nothing goes into the folder: --out would do nothing.
+        raise UsageError("--out: with --no-png only --export files go there; drop --out, or add --export")
     if args.headless and args.style == "surface":
         for dest in ("colour_by", "colour_map"):
             if getattr(args, dest) is not None:
@@ -326,10 +342,13 @@ def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
     writes there when no window can open, which is known only once Taichi has started. An earlier
     run's files in a folder named by --out are refused unless --overwrite; without --out the run takes
     the next free default folder (out/dam_break, out/dam_break-2 …), and --overwrite replaces the
-    first's."""
+    first's. The folder is None when the run writes nothing there (--no-png without --export)."""
     check_view(scene, args)
     if args.stats_only:
         return None, None
+    video = outputs.check_video(args.video, "--video", args.overwrite) if args.video is not None else None
+    if args.no_png and not args.export:
+        return None, video
     if args.out is not None:
         out = outputs.check_folder(args.out, "--out", args.overwrite)
     else:
@@ -338,7 +357,6 @@ def plan_outputs(scene, args) -> tuple[Path | None, Path | None]:
         out = outputs.check_folder(str(free), DEFAULT_OUT_LABEL, args.overwrite)
         if free != default:
             args.taken_default = default
-    video = outputs.check_video(args.video, "--video", args.overwrite) if args.video is not None else None
     return out, video
 
 
@@ -347,6 +365,8 @@ def frame_writer(sim, args, frames, out, video):
     otherwise such a folder is refused)."""
     from pbf.app.headless import FrameWriter
 
+    if out is None:  # --no-png without --export: the video alone, no folder
+        return FrameWriter(sim, frames, None, video=video, png=False)
     label = "--out" if args.out is not None else DEFAULT_OUT_LABEL
     outputs.check_folder(str(out), label, args.overwrite)  # again: files may have appeared since the start
     removed = outputs.clear_earlier(out)
@@ -355,7 +375,7 @@ def frame_writer(sim, args, frames, out, video):
     taken = getattr(args, "taken_default", None)
     if taken is not None:
         print(f"[pbf] {taken}/ holds an earlier run, kept: writing to {out}/ instead (--out names the folder)")
-    return FrameWriter(sim, frames, out, video=video, export=args.export)
+    return FrameWriter(sim, frames, out, video=video, export=args.export, png=not args.no_png)
 
 
 def try_window(scene, args, waiting: str):
@@ -389,7 +409,7 @@ def choose_viewer(sim, args, gui_window, out, video):
         return window.WindowViewer(sim, gui_window), args.frames
     viewer = frame_writer(sim, args, frames, out, video)
     steps = f"{frames} step{'s' if frames > 1 else ''}"
-    print(f"[pbf] rendering {frames + 1} frames (the start and {steps}) into {out}/")
+    print(f"[pbf] rendering {frames + 1} frames (the start and {steps}) into {video if args.no_png else f'{out}/'}")
     return viewer, frames
 
 
@@ -449,6 +469,10 @@ def report_written(sim, args, viewer) -> None:
     from pbf.app import loop
 
     print(loop.stats_line(sim))
+    render = sim.scene.render
+    if args.no_png:
+        print(f"[pbf] wrote {video_written(args, viewer, render)}")
+        return
     written = f"{len(viewer.paths)} frames in {viewer.out_dir}/"
     if args.video:
         written += f", video {args.video}"
@@ -458,11 +482,28 @@ def report_written(sim, args, viewer) -> None:
     # holds now are what this run wrote: a bare run's 181 frames take some 50 MB, every time.
     files = outputs.earlier_files(viewer.out_dir) + ([Path(args.video)] if args.video else [])
     size = sum(path.stat().st_size for path in files if path.is_file())
-    render = sim.scene.render
     written += f": {_size(size)} (PNG frames at {render.width_px}×{render.height_px})"
     if not args.video:
-        written += f"; a video as well: --video {viewer.out_dir}.mp4; fewer or smaller frames: --frames N, --size WxH"
+        # A run that fell back from the window needs --headless for --video (checked_args refuses it otherwise).
+        headless = "" if args.headless else "--headless "
+        written += (
+            f"; a video instead: {headless}--video {viewer.out_dir}.mp4 --no-png; "
+            f"fewer or smaller frames: --frames N, --size WxH"
+        )
     print(f"[pbf] wrote {written}")
+
+
+def video_written(args, viewer, render) -> str:
+    """What a --no-png run wrote: the video and its size, then the --export files and theirs."""
+    written = (
+        f"{viewer.shown} frames as a video, {args.video}: {_size(Path(args.video).stat().st_size)} "
+        f"(H.264 at {render.width_px}×{render.height_px})"
+    )
+    if args.export:
+        # As for PNG frames: the folder held none of a run's own files before this one.
+        size = sum(path.stat().st_size for path in outputs.earlier_files(viewer.out_dir) if path.is_file())
+        written += f"; {' and '.join(args.export)} files in {viewer.out_dir}/: {_size(size)}"
+    return written
 
 
 def _size(size: int) -> str:

@@ -1,7 +1,7 @@
-"""The headless viewer: numbered PNG frames, an optional video and per-frame particle and surface
-mesh files, with a progress bar. Each frame is drawn on the device and copied to the host once; its
-PNG and video encoding run in worker threads (``pbf.app.writer``) while the next frames are simulated
-and drawn."""
+"""The headless viewer: numbered PNG frames, an optional video (or the video alone) and per-frame
+particle and surface mesh files, with a progress bar. Each frame is drawn on the device and copied to
+the host once; its PNG and video encoding run in worker threads (``pbf.app.writer``) while the next
+frames are simulated and drawn."""
 
 from __future__ import annotations
 
@@ -23,18 +23,30 @@ class ExportError(RuntimeError):
 
 
 class FrameWriter:
-    """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame,
-    and, when asked, appends each to a video and writes the particles (``particles_00000.ply`` or
-    ``.npz``) and the surface mesh (``surface_00000.ply`` or ``.obj``, and the bodies' ``bodies_00000``) beside it.
-    The paths
-    are checked before the run (``pbf.app.outputs``); this only creates the folders."""
+    """Writes ``out_dir/frame_00000.png`` (the state it is shown first) and one PNG per later frame
+    (unless ``png`` is false: a video alone), and, when asked, appends each to a video and writes the
+    particles (``particles_00000.ply`` or ``.npz``) and the surface mesh (``surface_00000.ply`` or
+    ``.obj``, and the bodies' ``bodies_00000``) beside it. The paths are checked before the run
+    (``pbf.app.outputs``); this only creates the folders. ``out_dir`` may be None when nothing goes
+    there (no PNG, no exports)."""
 
-    def __init__(self, sim, frames: int, out_dir: Path, video: Path | None = None, export=(), progress: bool = True):
+    def __init__(
+        self,
+        sim,
+        frames: int,
+        out_dir: Path | None,
+        video: Path | None = None,
+        export=(),
+        progress: bool = True,
+        png: bool = True,
+    ):
         self.sim = sim
         self.out_dir = out_dir
         self.exports = tuple(dict.fromkeys(export or ()))
         """Names from ``pbf.app.export.EXPORTS``, each once."""
-        out_dir.mkdir(parents=True, exist_ok=True)
+        self.png = png
+        if png or self.exports:
+            out_dir.mkdir(parents=True, exist_ok=True)
         self.renderer = SceneRenderer(sim)
         self.writer = None
         if video is not None:
@@ -44,6 +56,9 @@ class FrameWriter:
         self.files = FrameFiles(video=self.writer)
         """The PNG and video encoders, in worker threads."""
         self.paths: list[Path] = []
+        """The PNG frames written."""
+        self.shown = 0
+        """Frames shown (drawn and handed to the encoders), with or without a PNG."""
         self.total = frames + 1
         """The start and ``frames`` steps."""
         self.show_progress = progress
@@ -57,7 +72,7 @@ class FrameWriter:
         return True
 
     def show(self) -> None:
-        number = len(self.paths)
+        number = self.shown
         # The surface first: when splashsurf fails, nothing of this frame is written and the folder
         # holds whole frames only (each with its PNG, particles and meshes).
         meshes = {}
@@ -83,9 +98,11 @@ class FrameWriter:
                     [b.shape for b in bodies], [b.half_extents() for b in bodies], self.sim.body_states()
                 )
         image = self.renderer.frame()  # a fresh host array, handed over to the encoders
-        path = self.out_dir / frame_name(number)
+        path = self.out_dir / frame_name(number) if self.png else None
         self.files.submit(path, image)
-        self.paths.append(path)
+        if path is not None:
+            self.paths.append(path)
+        self.shown += 1
         for name in self.exports:
             if name == "mesh":
                 for file_name, mesh in meshes.items():

@@ -79,9 +79,9 @@ def write_png(path: Path, image: np.ndarray, level: int = PNG_LEVEL) -> None:
 class FrameFiles:
     """PNG frames (and optionally a video's frames) encoded in worker threads and written in order.
 
-    ``submit(path, image)`` queues one frame; the image must not change afterwards (the renderer
-    hands over a fresh array each frame). Errors in a worker (a full disk) are raised by a later
-    ``submit`` or by ``close``."""
+    ``submit(path, image)`` queues one frame (``path`` None: the video's frame alone, no PNG); the
+    image must not change afterwards (the renderer hands over a fresh array each frame). Errors in a
+    worker (a full disk) are raised by a later ``submit`` or by ``close``."""
 
     def __init__(self, video=None, workers: int | None = None, depth: int | None = None, level: int = PNG_LEVEL):
         """``video``: an imageio writer whose ``append_data`` takes the frames in order, or None."""
@@ -99,8 +99,9 @@ class FrameFiles:
         self.written = 0
         """Frames renamed into place."""
 
-    def submit(self, path: Path, image: np.ndarray) -> None:
-        self.pending.append((path, self.pool.submit(write_png, temporary_path(path), image, self.level)))
+    def submit(self, path: Path | None, image: np.ndarray) -> None:
+        if path is not None:
+            self.pending.append((path, self.pool.submit(write_png, temporary_path(path), image, self.level)))
         if self.video_pool is not None:
             self.video_pending.append(self.video_pool.submit(self.video.append_data, image))
         # Frames already encoded go into place now; beyond the bound, wait for the oldest.
