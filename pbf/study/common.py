@@ -44,7 +44,8 @@ def dam_break(particles: int, iterations: int, overrides=()) -> Scene:
 
 
 def run_command(main) -> None:
-    """Run a study's ``main()`` as its command and exit with its status; a reader that stops early
+    """Run a study's ``main()`` as its command and exit with its status (an int; anything else, such as
+    the rows a study returns to its Python callers, is success); a reader that stops early
     (``python -m pbf.study.bench --help | head -1``) ends it quietly, with 0. The same recipe as
     ``pbf.app.cli``'s, kept here because a study imports the application only where it studies it."""
     try:
@@ -54,7 +55,7 @@ def run_command(main) -> None:
         # Python flushes stdout again at exit, which would fail the same way: what is left goes to devnull.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         status = 0
-    raise SystemExit(status)
+    raise SystemExit(status if isinstance(status, int) else 0)
 
 
 def timed(function, *args):
