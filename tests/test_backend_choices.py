@@ -27,7 +27,7 @@ def frames(sim, count):
     return used, reads / substeps, launches / substeps
 
 
-@pytest.mark.parametrize("step_back", [True, False])
+@pytest.mark.parametrize("step_back", [True, pytest.param(False, marks=pytest.mark.slow)])
 def test_the_gpus_choices_give_the_cpus_bits(step_back):
     scene = small_dam_break(iterations=10)
     scene["solver"].update(target_density_error=0.002, expert={"step_back": step_back})
@@ -48,6 +48,7 @@ def test_the_gpus_choices_give_the_cpus_bits(step_back):
     assert cpu_launches - cpu_reads <= gpu_launches + 1, (cpu_launches, cpu_reads, gpu_launches)
 
 
+@pytest.mark.slow  # several Simulations compiled twice: the default run's time
 def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
     scene = small_dam_break(iterations=3)
     scene["solver"].update(target_density_error=0.0, min_iterations=1)
@@ -79,6 +80,7 @@ def test_a_pouring_nozzle_adds_no_read_to_the_substep():
     assert max(counts) <= 1.0 and sim.particle_count > 0
 
 
+@pytest.mark.slow  # several Simulations compiled twice: the default run's time
 def test_the_gpus_list_layout_holds_the_cpus_lists(monkeypatch):
     # The GPU's neighbour lists (slot-major, built with a branch) hold the same neighbours in the same
     # order as the CPU's rows, so every sum over them adds the same terms in the same order; the
@@ -97,6 +99,7 @@ def test_the_gpus_list_layout_holds_the_cpus_lists(monkeypatch):
     assert slot_major.stats()["mean_neighbours"] == pytest.approx(rows.stats()["mean_neighbours"], rel=1e-3)
 
 
+@pytest.mark.slow  # several Simulations compiled twice: the default run's time
 @pytest.mark.parametrize("divergence", [0, 1])
 def test_lists_past_their_slots_stay_exact(divergence):
     # At h = 3.6 spacings a particle inside the block has about 190 neighbours, far more than the SLOTS

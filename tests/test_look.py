@@ -61,6 +61,7 @@ def test_splats_are_flat_at_the_surface_round_in_the_bulk_and_drops_alone():
     assert lengths == pytest.approx(np.full(3, DROP_RADIUS_SPACINGS * s), rel=1e-4)
 
 
+@pytest.mark.slow  # a column settled, then drawn: among the default run's longest
 def test_a_settled_column_reads_as_one_flat_surface():
     sim = Simulation(column_scene(), quiet=True)
     sim.step(60)
