@@ -1,8 +1,7 @@
 """How the surface style reads (``python -m pbf.study.frames look``): each particle's splat is an
 ellipsoid from its neighbours (flat at a surface, a sphere in the bulk, a drop alone), a settled pool is
 one flat surface and a splash is not speckled. The figures are the study's own measures, on small
-scenes; the renderer of spheres before the anisotropic splats failed both (a settled column: 77% of its
-top within 5° of vertical, median 2.8°; the small splash: 5.5% speckle)."""
+scenes; the renderer of spheres before the anisotropic splats failed both (docs/RENDERING.md)."""
 
 import numpy as np
 import pytest
