@@ -154,8 +154,8 @@ class Bodies:
     def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
         """``capacity``: the per-particle arrays' length (a bucket). The bodies' arrays have slots of a
         bucket too (``pbf.solver.model.allocation``) and every number the kernels read is data
-        (``self.constants``), so that every scene with bodies shares one compile. The switches
-        (``ti.static``) are spheres, boxes, obstacles and wall density: each leaves a feature's code out."""
+        (``self.constants``), shapes and obstacles included, so that every scene with bodies shares one
+        compile."""
         bodies = params.bodies
         self.params = bodies
         self.tables = tables
@@ -164,7 +164,6 @@ class Bodies:
         """The number of bodies, for the host side; kernels read ``constants[None].count``."""
         self.particle_radius = params.particle_radius_m
         self.kernel_radius = params.kernel_radius_m
-        self.with_wall_density = params.wall_density
         slots = allocation(self.count, 8)
         # The arrays that follow the particles' bucket first, closed into a SNode tree of their own by a
         # launch (the fill), then the bodies' slots in another: the rigid step's kernels, which touch
@@ -204,8 +203,6 @@ class Bodies:
         self.fastest = ti.field(ti.f32, shape=())
         """The fastest any point of a body moves now (m/s, :meth:`speed_limit_m_s`), kept by the launches
         that change the bodies' velocities."""
-        self.has_spheres = "sphere" in bodies.shapes
-        self.has_boxes = "box" in bodies.shapes or not bodies.shapes
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
         self.pairs = len(pairs)
         pair_slots = allocation(self.pairs, 8)
@@ -226,6 +223,7 @@ class Bodies:
             wall_margin=0.99 * float(self.particle_radius),
             kernel_radius=float(self.kernel_radius),
             volume=float(bodies.particle_volume_m3),
+            wall_density=int(params.wall_density),
         )
         """The counts, the container, the radii and the particle volume as data. ``wall_margin``: how far
         inside the container a way out of a body must lead (a little less than the walls' collision
@@ -489,12 +487,7 @@ class Bodies:
         point = ti.Vector([0.0, 0.0, 0.0])
         normal = ti.Vector([0.0, 0.0, 0.0])
         depth = 0.0
-        if ti.static(self.has_spheres and self.has_boxes):
-            if self.sphere[b]:
-                found, point, normal, depth = self._sphere_static_candidate(b, m)
-            else:
-                found, point, normal, depth = self._box_static_candidate(b, m)
-        elif ti.static(self.has_spheres):
+        if self.sphere[b]:
             found, point, normal, depth = self._sphere_static_candidate(b, m)
         else:
             found, point, normal, depth = self._box_static_candidate(b, m)
@@ -515,16 +508,15 @@ class Bodies:
             else:
                 depth, normal = component(self.constants[None].lower, axis) - component(point, axis), unit
             found = depth > 0.0
-        if ti.static(self.obstacles.present):
-            if m >= CONTAINER_CANDIDATES:
-                o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
-                lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
-                centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-                point = self._corner(b, k)
-                local = point - centre
-                if (ti.abs(local) < half).all():
-                    normal, depth = self._box_exit(local, half)
-                    found = True
+        if m >= CONTAINER_CANDIDATES:
+            o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
+            lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
+            centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+            point = self._corner(b, k)
+            local = point - centre
+            if (ti.abs(local) < half).all():
+                normal, depth = self._box_exit(local, half)
+                found = True
         return found, point, normal, depth
 
     @ti.func
@@ -545,24 +537,23 @@ class Bodies:
                 depth = component(self.constants[None].lower, axis) - (centre - radius)
                 point, normal = self.position[b] - radius * unit, unit
             found = depth > 0.0
-        if ti.static(self.obstacles.present):
-            if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
-                o = (m - CONTAINER_CANDIDATES) // CORNERS
-                lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
-                centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-                c = self.position[b]
-                closest = ti.max(lower, ti.min(c, upper))
-                gap = c - closest
-                distance = gap.norm()
-                if distance < radius:
-                    normal = ti.Vector([0.0, 1.0, 0.0])
-                    depth = radius - distance
-                    if distance > 1e-9:
-                        normal = gap / distance
-                    else:
-                        n, inside = self._box_exit(c - centre, half)
-                        normal, depth = n, radius + inside
-                    point, found = c - radius * normal, True
+        if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
+            o = (m - CONTAINER_CANDIDATES) // CORNERS
+            lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
+            centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+            c = self.position[b]
+            closest = ti.max(lower, ti.min(c, upper))
+            gap = c - closest
+            distance = gap.norm()
+            if distance < radius:
+                normal = ti.Vector([0.0, 1.0, 0.0])
+                depth = radius - distance
+                if distance > 1e-9:
+                    normal = gap / distance
+                else:
+                    n, inside = self._box_exit(c - centre, half)
+                    normal, depth = n, radius + inside
+                point, found = c - radius * normal, True
         return found, point, normal, depth
 
     @ti.func
@@ -652,12 +643,7 @@ class Bodies:
         point = ti.Vector([0.0, 0.0, 0.0])
         normal = ti.Vector([0.0, 0.0, 0.0])
         depth = 0.0
-        if ti.static(self.has_spheres and self.has_boxes):
-            if self.sphere[a] or self.sphere[b]:
-                found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
-            else:
-                found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
-        elif ti.static(self.has_spheres):
+        if self.sphere[a] or self.sphere[b]:
             found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
         else:
             found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
@@ -795,12 +781,7 @@ class Bodies:
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
-        if ti.static(self.has_spheres and self.has_boxes):
-            if self.sphere[b]:
-                density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
-            else:
-                density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
-        elif ti.static(self.has_spheres):
+        if self.sphere[b]:
             density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
         else:
             density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
@@ -832,7 +813,7 @@ class Bodies:
         """The bodies' ghost density ρ/ρ0 at p and its gradient (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_wall_density):
+        if self.constants[None].wall_density:
             for b in range(self.constants[None].count):
                 d, g = self._ghost_of(p, b)
                 density += d
@@ -847,12 +828,7 @@ class Bodies:
         pusher = -1
         for b in range(self.constants[None].count):
             moved = False
-            if ti.static(self.has_spheres and self.has_boxes):
-                if self.sphere[b]:
-                    q, moved = self._push_out_of_sphere(q, b)
-                else:
-                    q, moved = self._push_out_of_box(q, b)
-            elif ti.static(self.has_spheres):
+            if self.sphere[b]:
                 q, moved = self._push_out_of_sphere(q, b)
             else:
                 q, moved = self._push_out_of_box(q, b)

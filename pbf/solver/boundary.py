@@ -181,16 +181,18 @@ class Container:
             upper=tuple(params.upper_m),
             kernel_radius=params.kernel_radius_m,
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
+            wall_density=int(params.wall_density),
+            wave_maker=int(params.piston_stroke_m > 0.0),
         )
         """The particle radius r, the walls, h and h − r as data (``pbf.solver.constants``): a wall's
-        mirror images come within h of a particle only if it is closer than h − r to the wall."""
-        self.with_wall_density = params.wall_density
+        mirror images come within h of a particle only if it is closer than h − r to the wall. Whether
+        the walls have a ghost density and whether the lower-x wall is a piston are data too."""
         self.mirrored = params.wall_mirror
         """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``,
         ``pbf.solver.density``) rather than the tables: then the density constraint leaves out
         :meth:`ghost` and mirrors the fluid in the walls :meth:`mirror_walls` names."""
         self.wave_maker = params.piston_stroke_m > 0.0
-        """Whether the container's lower-x wall is a piston wave maker (compiled out when not)."""
+        """Whether the container's lower-x wall is a piston wave maker."""
         self.piston_stroke_m = params.piston_stroke_m
         self.piston_period_s = params.piston_period_s
         self.piston_x = ti.field(ti.f32, shape=())
@@ -233,17 +235,16 @@ class Container:
 
     @ti.func
     def _lower(self):
-        """The container's lower corner now (the piston moves its x)."""
+        """The container's lower corner now (the piston moves its x; without one it stays at lower_m)."""
         lower = self.constants[None].lower
-        if ti.static(self.wave_maker):
-            lower[0] = self.piston_x[None]
+        lower[0] = self.piston_x[None]
         return lower
 
     @ti.func
     def velocity(self, p):
         """Velocity of the wall ghost that p sees (m/s): the piston's within h of it, else zero."""
         velocity = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.wave_maker):
+        if self.constants[None].wave_maker:
             below = p[0] - self.piston_x[None]
             kernel_radius, upper = self.constants[None].kernel_radius, self.constants[None].upper
             if below < kernel_radius and below <= upper[0] - p[0]:
@@ -280,7 +281,7 @@ class Container:
         with respect to p (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_wall_density):
+        if self.constants[None].wall_density:
             lower = self._lower()
             upper, kernel_radius = self.constants[None].upper, self.constants[None].kernel_radius
             distance = ti.Vector([0.0, 0.0, 0.0])
@@ -316,21 +317,16 @@ class Obstacles:
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
         self.params = params
-        self.with_wall_density = params.wall_density
         self.count = len(params.obstacles)
-        self.present = self.count > 0
-        """Whether the scene has obstacles: a switch that compiles their code in (their count is data)."""
 
     def allocate(self) -> None:
-        """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``),
-        none without obstacles; allocated after every array all scenes have (their cache keys)."""
-        if not self.present:
-            return
+        """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``), as
+        many for none as for a few: their count is data, and every scene shares the same code."""
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
-        self.constants = scene_constants(radius=radius, count=count)
-        """The particle radius and the obstacle count as data."""
+        self.constants = scene_constants(radius=radius, count=count, wall_density=int(params.wall_density))
+        """The particle radius, the obstacle count and whether they have a ghost density, as data."""
         lower, upper = np.zeros((slots, 3), np.float32), np.zeros((slots, 3), np.float32)
         # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
         exit_lower, exit_upper = np.zeros((slots, 3), np.int32), np.zeros((slots, 3), np.int32)
@@ -361,9 +357,8 @@ class Obstacles:
     def project(self, p):
         """p moved out of every obstacle grown by the particle radius."""
         q = p
-        if ti.static(self.present):
-            for o in range(self.constants[None].count):
-                q = self._push_out(q, o)
+        for o in range(self.constants[None].count):
+            q = self._push_out(q, o)
         return q
 
     @ti.func
@@ -391,7 +386,7 @@ class Obstacles:
         """The obstacles' ghost density ρ/ρ0 and its gradient (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_wall_density and self.present):
+        if self.constants[None].wall_density:
             for o in range(self.constants[None].count):
                 d, g = self._ghost_of(p, o)
                 density += d

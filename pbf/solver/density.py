@@ -80,18 +80,13 @@ SURFACE_SKIP = 0.002
 
 @ti.func
 def position(x: ti.template(), j):
-    """x_j of ``x``: a field, or the triple (first, second, from_second) of the iterations' two buffers,
-    read from the one ``from_second`` picks. The choice is made per neighbour, inside the walk, so that a
-    kernel holds one copy of each walk, not one per buffer: a branch every thread takes the same way,
-    where the copies doubled the compile of the density iteration."""
-    xj = ti.Vector([0.0, 0.0, 0.0])
-    if ti.static(isinstance(x, tuple)):
-        if x[2]:
-            xj = ti.static(x[1])[j]
-        else:
-            xj = ti.static(x[0])[j]
-    else:
-        xj = x[j]
+    """x_j of the triple (first, second, from_second): the iterations' two buffers, read from the one
+    ``from_second`` picks (a field alone is ``(x, x, 0)``). The choice is made per neighbour, inside the
+    walk, so that a kernel holds one copy of each walk, not one per buffer: a branch every thread takes
+    the same way."""
+    xj = ti.static(x[0])[j]
+    if x[2]:
+        xj = ti.static(x[1])[j]
     return xj
 
 
@@ -109,8 +104,6 @@ class DensityConstraint:
         self.wall_mirror = params.wall_mirror
         """Whether the container's walls mirror the fluid: fixed when the solver is built, it compiles the
         images' code in."""
-        self.with_scorr = params.scorr_k > 0.0
-        """Whether s_corr is added: a switch that compiles its term in (its strength k is data)."""
         g_below, g_top, psi_top = params.surface_calibration
         self.constants = scene_constants(
             h=params.kernel_radius_m,
@@ -179,10 +172,8 @@ class DensityConstraint:
         for mask in ti.static(range(1, 8)):
             m = ti.static([float(mask >> a & 1) for a in range(3)])  # 1 on the axes reflected
             flip = ti.Vector([1.0 - 2.0 * m[0], 1.0 - 2.0 * m[1], 1.0 - 2.0 * m[2]])  # −1 there
-            use = 1
-            for a in ti.static(range(3)):
-                if ti.static(m[a] > 0.0):
-                    use *= near[a]
+            reflected = ti.Vector([mask >> a & 1 for a in ti.static(range(3))])
+            use = (near * reflected + 1 - reflected).min()  # near every wall the image reflects in
             if use != 0:
                 r = xi - (flip * xj + 2.0 * ti.Vector(m) * plane)  # x' = x_j reflected: 2 P_a − x_j,a
                 if r.norm_sqr() < h * h:  # most images are out of reach: no square root for them
@@ -238,19 +229,19 @@ class DensityConstraint:
         (ρ_i/ρ0, Σ_j ĝ_ij, Σ_j |∂C_i/∂x_j|², ĝ_self)."""
         h, volume, scale = self.particle_constants()
         near, plane = ti.Vector([0, 0, 0]), ti.Vector([0.0, 0.0, 0.0])
-        w_self, g_self = 0.0, ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.wall_mirror):
-            near, plane = self.boundaries.container.mirror_walls(xi)
-            if near.sum() > 0:
-                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, gradients)
-        sums = ti.Vector([volume * (scaled_kernel(0.0, scale) + w_self), 0.0, 0.0, 0.0, 0.0])
+        g_self = ti.Vector([0.0, 0.0, 0.0])
+        sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])
         p = ti.static(
             named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, gradients=gradients, sums=sums)
         )
         if ti.static(self.wall_mirror):
-            # A walk of its own for the particles at a wall: with the images' code in the common walk,
-            # every particle's pairs took 2.5 times as long, the few at a wall or not.
+            near, plane = self.boundaries.container.mirror_walls(xi)
             if near.sum() > 0:
+                # A walk of its own for the particles at a wall: the images' code in the common walk
+                # would slow every particle's pairs, the few at a wall or not.
+                w_self, g, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, gradients)
+                g_self = g
+                sums[0] = volume * (scaled_kernel(0.0, scale) + w_self)
                 self.grid.for_each_neighbour(i, neighbours, self.mirrored_density_pair, p)
             else:
                 self.grid.for_each_neighbour(i, neighbours, self.density_pair, p)
@@ -262,7 +253,7 @@ class DensityConstraint:
     def density_ratio(self, x: ti.template(), i, neighbours: ti.template()):
         """ρ_i/ρ0 of particle i: the fluid and the ghost fluid behind the walls."""
         xi = x[i]
-        ratio, gradient_i, sum_sq, own_images = self.pair_sums(x, xi, i, neighbours, False)
+        ratio, gradient_i, sum_sq, own_images = self.pair_sums((x, x, 0), xi, i, neighbours, False)
         wall, wall_gradient = self.boundaries.ghost(xi, True)
         return ratio + wall
 
@@ -274,7 +265,7 @@ class DensityConstraint:
         xi = x[i]
         h, relaxation = self.constants[None].h, self.constants[None].relaxation
         wall = self.walls(i, xi)
-        ratio, gradient_i, sum_sq, own_images = self.pair_sums(x, xi, i, neighbours, True)
+        ratio, gradient_i, sum_sq, own_images = self.pair_sums((x, x, 0), xi, i, neighbours, True)
         # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
         colour = gradient_i + own_images + h * self.wall_gradient[i]
         self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
@@ -359,9 +350,7 @@ class DensityConstraint:
     def correction_term(self, j, p: ti.template()):
         """(λ̂_i + λ̂_j + s_corr) ĝ_ij (Eqs. 11-12) of pair (i, j)."""
         w, grad_w = scaled_kernel_and_gradient(p.xi - position(p.x, j), p.scale)
-        s_corr = 0.0
-        if ti.static(self.with_scorr):
-            s_corr = -p.scorr[0] * (w * p.scorr[1]) ** ti.static(SCORR_N)
+        s_corr = -p.scorr[0] * (w * p.scorr[1]) ** ti.static(SCORR_N)  # 0 with k = 0
         return (p.lam_i + self.lam[j] + s_corr) * p.volume * p.h * grad_w
 
     @ti.func
@@ -384,16 +373,14 @@ class DensityConstraint:
         scorr = ti.Vector([self.constants[None].scorr_k, self.constants[None].inverse_w_dq])
         near, plane = ti.Vector([0, 0, 0]), ti.Vector([0.0, 0.0, 0.0])
         dx = ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.wall_mirror):
-            near, plane = self.boundaries.container.mirror_walls(xi)
-            if near.sum() > 0:
-                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
-                dx += 2.0 * lam_i * volume * h * g_self
         p = ti.static(
             named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, lam_i=lam_i, scorr=scorr, dx=dx)
         )
         if ti.static(self.wall_mirror):
+            near, plane = self.boundaries.container.mirror_walls(xi)
             if near.sum() > 0:  # a walk of its own, as in pair_sums
+                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
+                dx += 2.0 * lam_i * volume * h * g_self
                 self.grid.for_each_neighbour(i, neighbours, self.mirrored_correction_pair, p)
             else:
                 self.grid.for_each_neighbour(i, neighbours, self.correction_pair, p)

@@ -231,9 +231,18 @@ class NeighbourGrid:
         (:attr:`slot_major`, a stride of the list's length over SLOTS) after a one-visit build; entries
         in a row after an overflow's compact build and on the CPU."""
         first = self.neighbour_start[i]
-        slot_stride = neighbours.shape[0] // SLOTS if ti.static(self.slot_major) else 1
+        _start, slot_stride = self.slots_of(i, neighbours.shape[0])
         stride = ti.select(self.overflow[None] > 0, 1, slot_stride)
         return first, first + self.neighbour_listed[i], stride
+
+    @ti.func
+    def slots_of(self, i, capacity):
+        """(first entry, stride) of particle i's SLOTS entries in a one-visit list of ``capacity`` entries:
+        entry i + k·(capacity / SLOTS) slot-major, i·SLOTS + k in a row (:attr:`slot_major`)."""
+        start, stride = i * SLOTS, 1
+        if ti.static(self.slot_major):
+            start, stride = i, capacity // SLOTS
+        return start, stride
 
     @ti.func
     def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
@@ -274,9 +283,7 @@ class NeighbourGrid:
         h2 = kernel_radius * kernel_radius
         xi = x[i]
         c = self.cell_of(xi)
-        # Slot-major on a GPU: entry i + k·(capacity / SLOTS); a row of SLOTS on the CPU: i·SLOTS + k.
-        start = i if ti.static(self.slot_major) else i * SLOTS
-        stride = capacity // SLOTS if ti.static(self.slot_major) else 1
+        start, stride = self.slots_of(i, capacity)
         room = SLOTS
         if ti.static(compact):
             start = ti.min(self.neighbour_start[i], capacity)

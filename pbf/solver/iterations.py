@@ -116,7 +116,7 @@ class JacobiIterations:
             if ti.static(run.measure):
                 # The run's values as they are (a tuple of the kernel's arguments), read where they are used.
                 context = ti.static((run.start + u, run.iterations, run.target, run.min_iterations, run.step_back))
-                density.error_sum.sum_then(density.error, 0, self.active, self, context)
+                density.error_sum.sum_then(density.error, 0, self.active, self.received, context)
 
     @ti.func
     def received(self, total, count, context: ti.template()):

@@ -358,8 +358,6 @@ class Features:
     """Iterations of the divergence pre-correction; 0 leaves the pass out."""
     vorticity: bool
     """Vorticity confinement (Eqs. 13-14)."""
-    xsph: bool
-    """XSPH viscosity (Eq. 15)."""
     wave_maker: bool
     bodies: bool
     wall_mirror: bool
@@ -372,7 +370,6 @@ class Features:
             control.target_density_error > 0.0,
             0 if in_place else control.divergence_iterations,
             control.vorticity > 0.0,
-            control.xsph > 0.0,
             model.boundary.piston_stroke_m > 0.0,
             bool(model.scene.bodies),
             model.density.wall_mirror,

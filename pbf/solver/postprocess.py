@@ -12,9 +12,8 @@ Both terms are made dimensionless like the density constraint (V = m/ρ0 is the 
 The h in Eq. 14 makes confinement fade as resolution rises, as the vorticity it restores is the part
 lost to coarse particles. Every pass reads v_j as (x*_j − x_j)/Δt instead of a stored velocity, so
 the velocity update needs no pass of its own and the smoothed velocity can be written straight into
-v (nothing in that pass reads v): two particle loops fewer than update, smooth into a copy, copy back.
-With confinement on, the ω pass keeps each v_i (``velocity_now``) and the last pass reads v_j from
-there, not from x_j, so it also moves x to x*: no loop of its own for line 23 (a launch on a GPU).
+v (nothing in that pass reads v). The first pass keeps each v_i (``velocity_now``) and the last pass
+reads v_j from there, not from x_j, so it also moves x to x*: no loop of its own for line 23.
 """
 
 import taichi as ti
@@ -40,7 +39,7 @@ class VelocityPostprocess:
         self.omega_norm = ti.field(ti.f32, shape=params.particle_count)
         """|ω_i|, read once per pair by the location vector η: computed once per particle."""
         self.velocity_now = ti.Vector.field(3, ti.f32, shape=params.particle_count)
-        """v_i = (x*_i − x_i)/Δt as the ω pass read it, for the pass after it (the module docstring)."""
+        """v_i = (x*_i − x_i)/Δt from the first pass, for the pass after it (the module docstring)."""
 
     @ti.func
     def velocity(self, x_pred: ti.template(), i, inverse_dt):
@@ -64,33 +63,28 @@ class VelocityPostprocess:
 
     @ti.func
     def smoothing_pair(self, i, j, p: ti.template()):
-        """Pair (i, j)'s XSPH term V (v_j − v_i) W_ij (Eq. 15) and its term of the location vector η
-        (Eq. 14)."""
+        """Pair (i, j)'s XSPH term V (v_j − v_i) W_ij (Eq. 15) and, with confinement, its term of the
+        location vector η (Eq. 14)."""
         w, grad_w = scaled_kernel_and_gradient(p.xi - p.x[j], p.scale)
-        if ti.static(p.with_xsph):
-            vj = ti.Vector([0.0, 0.0, 0.0])
-            if ti.static(p.kept):
-                vj = self.velocity_now[j]
-            else:
-                vj = self.velocity(p.x, j, p.inverse_dt)
-            p.smoothing += p.volume * (vj - p.vi) * w
+        p.smoothing += p.volume * (self.velocity_now[j] - p.vi) * w
         if ti.static(p.with_vorticity):
             p.eta += p.volume * (self.omega_norm[j] - p.omega_i_norm) * grad_w
 
     @ti.func
     def finish(self, x_pred: ti.template(), neighbours: ti.template(), impulse: ti.template(), run: ti.template()):
         """Lines 20-23 for the top level of a kernel: v = (x* − x)/Δt, confinement (``run.vorticity``, at
-        ε = ``run.epsilon``) and XSPH (``run.xsph``, c = ``run.xsph_c``) on v, v capped at
-        ``run.max_speed`` (m/s, ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of
-        the multipliers ``impulse`` (L, per particle) and Λ, at ``run.pressure_per_impulse`` Pa per unit
-        of L, added to ``State.pressure_sum`` (which starts again at the ``run.first_of_frame``
-        substep). Every loop runs over the particles' bucket and reads what it needs itself: a loop bound
-        or a value worked out outside the loops would be a one-thread task, a launch on a GPU."""
+        ε = ``run.epsilon``) and XSPH (c = ``run.xsph_c``) on v, v capped at ``run.max_speed`` (m/s,
+        ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of the multipliers
+        ``impulse`` (L, per particle) and Λ, at ``run.pressure_per_impulse`` Pa per unit of L, added to
+        ``State.pressure_sum`` (which starts again at the ``run.first_of_frame`` substep). Every loop runs
+        over the particles' bucket and reads what it needs itself: a loop bound or a value worked out
+        outside the loops would be a one-thread task, a launch on a GPU."""
         bound = ti.static(self.state.loop_bound)
-        if ti.static(run.vorticity):
-            for i in range(read_count(bound, 1)):
-                if i < self.state.active[None]:
-                    h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
+        for i in range(read_count(bound, 1)):  # line 21, v_i kept for the pass below; Eq. 13
+            if i < self.state.active[None]:
+                h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
+                self.velocity_now[i] = vi
+                if ti.static(run.vorticity):
                     omega = ti.Vector([0.0, 0.0, 0.0])
                     p = ti.static(
                         named(x=x_pred, xi=xi, vi=vi, volume=volume, scale=scale, inverse_dt=inverse_dt, omega=omega)
@@ -98,18 +92,13 @@ class VelocityPostprocess:
                     self.grid.for_each_neighbour(i, neighbours, self.curl_pair, p)
                     self.omega[i] = omega
                     self.omega_norm[i] = omega.norm()
-                    self.velocity_now[i] = vi
-        # x = x* in the pass below when it reads no x_j: with confinement (v_j kept by the ω pass) or
-        # without neighbour sums at all.
-        moves_x = ti.static(run.vorticity or not run.xsph)
+        # Eqs. 14-15 and line 23: the pairs read v_j as kept above, never x_j, so x moves in the same pass.
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
                 h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
                 dv = ti.Vector([0.0, 0.0, 0.0])
-                if ti.static(run.vorticity or run.xsph):
-                    omega_i, omega_i_norm = ti.Vector([0.0, 0.0, 0.0]), 0.0
-                    if ti.static(run.vorticity):
-                        omega_i, omega_i_norm = self.omega[i], self.omega_norm[i]
+                if run.xsph_c > 0.0 or run.epsilon > 0.0:
+                    omega_i_norm = self.omega_norm[i]
                     eta, smoothing = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
                     p = ti.static(
                         named(
@@ -118,13 +107,10 @@ class VelocityPostprocess:
                             vi=vi,
                             volume=volume,
                             scale=scale,
-                            inverse_dt=inverse_dt,
                             omega_i_norm=omega_i_norm,
                             eta=eta,
                             smoothing=smoothing,
-                            with_xsph=run.xsph,
                             with_vorticity=run.vorticity,
-                            kept=moves_x,
                         )
                     )
                     self.grid.for_each_neighbour(i, neighbours, self.smoothing_pair, p)
@@ -132,19 +118,14 @@ class VelocityPostprocess:
                     if ti.static(run.vorticity):
                         eta_norm = eta.norm()
                         if eta_norm > 0.0:
-                            dv += run.dt * run.epsilon * h * omega_i_norm * (eta / eta_norm).cross(omega_i)
+                            dv += run.dt * run.epsilon * h * omega_i_norm * (eta / eta_norm).cross(self.omega[i])
                 v = vi + dv
                 if run.max_speed > 0.0:  # time.max_speed_m_s: the same bits as before when there is no cap
                     speed = v.norm()
                     if speed > run.max_speed:
                         v *= run.max_speed / speed
                 self.state.v[i] = v
-                if ti.static(moves_x):
-                    self.move(x_pred, i, impulse, run)
-        if ti.static(not moves_x):
-            for i in range(read_count(bound, 1)):
-                if i < self.state.active[None]:
-                    self.move(x_pred, i, impulse, run)
+                self.move(x_pred, i, impulse, run)
 
     @ti.func
     def move(self, x_pred: ti.template(), i, impulse: ti.template(), run: ti.template()):

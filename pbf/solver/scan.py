@@ -88,15 +88,18 @@ def _live(count, block):
 @ti.func
 def read_count(count: ti.template(), gate: ti.template()):
     """A count given as a 0-D field, a Python int or a value, read inside the loop that uses it, times
-    the 0-D field ``gate`` (0 or 1) if one is given."""
-    value = 0
-    if ti.static(isinstance(count, ti.ScalarField)):
-        value = count[None]
+    ``gate`` (1, or a 0-D field of 0 or 1)."""
+    return _read(count) * _read(gate)
+
+
+@ti.func
+def _read(value: ti.template()):
+    result = 0
+    if ti.static(isinstance(value, ti.ScalarField)):
+        result = value[None]
     else:
-        value = count
-    if ti.static(isinstance(gate, ti.ScalarField)):
-        value *= gate[None]
-    return value
+        result = value
+    return result
 
 
 @ti.func
@@ -112,6 +115,23 @@ def _two_sum(a, b, zero):
     b_virtual = _opaque(s - a, zero)
     a_virtual = _opaque(s - b_virtual, zero)
     return s, _opaque(a - a_virtual, zero) + _opaque(b - b_virtual, zero)
+
+
+@ti.func
+def _accumulate(high, low, value_high, value_low, is_max: ti.template(), zero):
+    """(high, low) with one more value (value_high, value_low) added in, compensated, or its maximum taken."""
+    if ti.static(is_max):
+        high = ti.max(high, value_high)
+    else:
+        high, error = _two_sum(high, value_high, zero)
+        low += error + value_low
+    return high, low
+
+
+@ti.func
+def _nothing(total, count, context: ti.template()):
+    """A sum's ``then`` when nothing waits on it."""
+    pass
 
 
 @ti.data_oriented
@@ -136,15 +156,14 @@ class ExclusiveScan:
     @ti.func
     def add_to_block(self, k, amount):
         """Add ``amount`` to the sum of entry k's level-0 block, for a caller that counts its values itself:
-        the scan's first pass up is then done (``scan(..., counted=True)``)."""
-        if ti.static(self.tree.top > 0):
-            ti.atomic_add(self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]], amount)
+        the scan's first pass up is then done (``scan(..., counted=True)``). With a single block (no level
+        above) the sum lands in scratch that nothing reads."""
+        ti.atomic_add(self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]], amount)
 
     @ti.func
     def clear_block(self, k):
         """Zero the sum :meth:`add_to_block` gathers for entry k's block, once the scan has read it."""
-        if ti.static(self.tree.top > 0):
-            self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]] = 0
+        self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]] = 0
 
     @ti.func
     def up(self, values: ti.template(), count: ti.template(), gate: ti.template() = 1, counted: ti.template() = False):
@@ -188,28 +207,19 @@ class ExclusiveScan:
         live entries: a count read outside the loops would be a one-thread task of its own.
         ``counted``: :meth:`add_to_block` gathered the level-0 sums, and the first pass up is skipped."""
         self.up(values, count, 1, counted)
-        if ti.static(self.tree.top > 0):
-            block = ti.static(self.tree.blocks[0])
-            for b in range(ti.static(self.tree.block_counts[0])):
-                total_count = read_count(count, 1)
-                if b < _live(total_count, block):
-                    running = self.start_of(values, b, 1)
-                    end = ti.min((b + 1) * block, total_count)
-                    for k in range(b * block, end):
-                        starts[k] = running
-                        running += values[k]
-                    if end == total_count:
-                        starts[total_count] = running
-                if b == 0 and total_count == 0:  # no block is live: the total is 0
-                    starts[0] = 0
-        else:  # a single block: one thread walks it
-            for _ in range(1):
-                live = read_count(count, 1)
-                running = 0
-                for k in range(live):
+        block = ti.static(self.tree.blocks[0])
+        for b in range(ti.static(self.tree.block_counts[0])):
+            total_count = read_count(count, 1)
+            if b < _live(total_count, block):
+                running = self.start_of(values, b, 1)
+                end = ti.min((b + 1) * block, total_count)
+                for k in range(b * block, end):
                     starts[k] = running
                     running += values[k]
-                starts[live] = running
+                if end == total_count:
+                    starts[total_count] = running
+            if b == 0 and total_count == 0:  # no block is live: the total is 0
+                starts[0] = 0
 
 
 @ti.data_oriented
@@ -246,7 +256,7 @@ class TreeSum:
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] + low[slot] = Σ_{k < count} values[k], ``count`` ≤ length a Python int or a 0-D field
         (read inside the loops). Called at a kernel's top level."""
-        self._reduce(values, slot, count, False, False, 0.0)
+        self._reduce(values, slot, count, False, _nothing, 0.0)
 
     @ti.func
     def sum_then(
@@ -257,7 +267,7 @@ class TreeSum:
         then: ti.template(),
         context: ti.template(),
     ):
-        """:meth:`sum`, then ``then.received(total, count, context)`` by the one thread that holds the
+        """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``) by the one thread that holds the
         total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task.
         ``context`` (a tuple of the kernel's arguments) reaches ``then`` as it is."""
         self._reduce(values, slot, count, False, then, context)
@@ -265,7 +275,7 @@ class TreeSum:
     @ti.func
     def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
-        self._reduce(values, slot, count, True, False, 0.0)
+        self._reduce(values, slot, count, True, _nothing, 0.0)
 
     @ti.func
     def _reduce_in_blocks(
@@ -303,11 +313,7 @@ class TreeSum:
                             value_high = values[k]
                         else:
                             value_high, value_low = self.scratch_high[k], self.scratch_low[k]
-                        if ti.static(is_max):
-                            high = ti.max(high, value_high)
-                        else:
-                            high, error = _two_sum(high, value_high, zero)
-                            low += error + value_low
+                        high, low = _accumulate(high, low, value_high, value_low, is_max, zero)
                 shared_high[t] = high
                 shared_low[t] = low
                 ti.simt.block.sync()
@@ -325,8 +331,7 @@ class TreeSum:
                     if ti.static(top):
                         self.high[slot] = shared_high[0]
                         self.low[slot] = shared_low[0]
-                        if ti.static(not isinstance(then, bool)):  # False: nothing to tell
-                            then.received(shared_high[0] + shared_low[0], read_count(count, 1), context)
+                        then(shared_high[0] + shared_low[0], read_count(count, 1), context)
                     else:
                         self.scratch_high[g] = shared_high[0]
                         self.scratch_low[g] = shared_low[0]
@@ -359,16 +364,11 @@ class TreeSum:
                         else:
                             value_high = self.scratch_high[self.tree.offsets[level] + k]
                             value_low = self.scratch_low[self.tree.offsets[level] + k]
-                        if ti.static(is_max):
-                            high = ti.max(high, value_high)
-                        else:
-                            high, error = _two_sum(high, value_high, zero)
-                            low += error + value_low
+                        high, low = _accumulate(high, low, value_high, value_low, is_max, zero)
                     if ti.static(level == self.tree.top):
                         self.high[slot] = high
                         self.low[slot] = low
-                        if ti.static(not isinstance(then, bool)):  # False: nothing to tell
-                            then.received(high + low, read_count(count, 1), context)
+                        then(high + low, read_count(count, 1), context)
                     else:
                         self.scratch_high[self.tree.offsets[level + 1] + b] = high
                         self.scratch_low[self.tree.offsets[level + 1] + b] = low

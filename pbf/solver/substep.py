@@ -144,7 +144,6 @@ class SubstepKernels:
             named(
                 measure=features.measure,
                 vorticity=features.vorticity,
-                xsph=features.xsph,
                 start=start,
                 iterations=iterations,
                 target=target,
