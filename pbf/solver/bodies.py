@@ -1,37 +1,16 @@
 """Rigid bodies two-way coupled with the water: boxes and spheres as moving boundaries with ghost density.
 
-Method. A body is one more boundary of ``pbf.solver.boundary`` (``Boundaries.parts``): the fluid sees
-the ghost fluid inside it, ρ/ρ0 and its gradient ∇ψ_b, exactly as it sees the container's walls and
-the obstacles, and the divergence pre-correction sees its velocity v + ω × (p − c). A box's ghost is
-the obstacles' 27-term ghost of an axis-aligned box (``GhostTables.box``) in the body's frame, its
-gradient rotated back; a sphere's is the half-space table at d = |p − c| − R along the radius. The
-collision (Algorithm 1, line 15) pushes a particle out of the body grown by the particle radius, less
-while the body moves (``collision_reach``).
+A body is one more part of ``pbf.solver.boundary.Boundaries``: the fluid sees the ghost fluid inside
+it (a box's is the obstacles' 27-term ghost in the body's frame, a sphere's the half-space table along
+its radius), and the divergence pre-correction sees its velocity v + ω × (p − c). The body takes the
+reaction of the water's pressure and of the collision's push,
 
-The reaction. Over a substep the ghost's terms push particle i with the force −V p_i ∇ψ_b(x_i),
-p_i = −ρ0 h² (L_i/Δt² + Λ_i) the pressure of ``Simulation.pressures`` (L_i the iterations' weighted
-multiplier, Λ_i the divergence pass's). The body takes the opposite,
+    F_b = Σ_i V p_i ∇ψ_b(x_i) − Σ_{i pushed by b} m D_i / Δt²,   τ_b = Σ_i (x_i − c_b) × f_i,
 
-    F_b = Σ_i V p_i ∇ψ_b(x_i),   τ_b = Σ_i (x_i − c_b) × V p_i ∇ψ_b(x_i),
-
-so buoyancy and impact come out of the pressure that moves the water. The collision moves water too:
-each projection records the bodies' share of its move, D_i, through the iterations' recurrence
-(``record_start``), and the body that pushed takes −m D_i / Δt². The pair terms are antisymmetric,
-so at rest a floating body carries exactly what it pushes. The sum runs over fixed blocks of
-particles in order (no float atomics): the same bits on every run.
-
-The step. Each substep, before the water's prediction, each body takes a symplectic Euler step
-under gravity and the last substep's reaction, then its contacts are resolved (``_contacts``); the
-water is solved around it where it stands at the end of the substep, as around the piston. The
-coupling is explicit, one substep late; at the presets' densities and CFL-limited substeps it is
-stable (docs/BODIES.md).
-
-Contacts. Sequential impulses (no restitution, Coulomb friction FRICTION) at each box corner or
-sphere point inside a wall, an obstacle or another body, the penetration removed by moving the
-bodies apart in inverse proportion to their masses; one serial pass, so the order and the bits are
-fixed. Boxes meet boxes corner in box, else edge across edge (``_edge_candidate``). A body moves at
-most time.max_cfl spacings a substep and is at least two spacings thick, so it cannot pass through
-a wall or another body in one substep.
+summed over fixed blocks of particles in order (no float atomics). Each substep, before the water's
+prediction, each body takes a symplectic Euler step under gravity and the last substep's reaction,
+then its contacts are resolved by sequential impulses in a fixed order. The method and why:
+docs/BODIES.md.
 """
 
 import math
@@ -142,6 +121,12 @@ def _closest_on_segments(p0, d1, q0, d2):
     elif t > 1.0:
         t, s = 1.0, ti.min(ti.max((b - c) / a, 0.0), 1.0)
     return p0 + s * d1, q0 + t * d2
+
+
+@ti.func
+def _no_contact():
+    """(found, point, normal, depth) of a candidate that touches nothing."""
+    return False, ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0]), 0.0
 
 
 @ti.data_oriented
@@ -446,11 +431,8 @@ class Bodies:
                     candidates = self._pair_candidates(a, b)
                 corners = 0
                 for m in range(candidates):
-                    found = False
+                    found, point, normal, depth = _no_contact()
                     first, second = a, b
-                    point = ti.Vector([0.0, 0.0, 0.0])
-                    normal = ti.Vector([0.0, 0.0, 0.0])
-                    depth = 0.0
                     if b < 0:
                         found, point, normal, depth = self._static_candidate(a, m)
                     elif m < 2 * CORNERS or corners == 0:  # edges only where no corner is inside
@@ -483,10 +465,7 @@ class Bodies:
         normal and the depth. m < CONTAINER_CANDIDATES: the container, at a box's corner m // 6 (a
         sphere: m < 6, its extreme point), along axis m // 2 % 3, below the lower wall (m even) or
         above the upper (m odd); then CORNERS per obstacle (a sphere: the first, its closest point)."""
-        found = False
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
+        found, point, normal, depth = _no_contact()
         if self.sphere[b]:
             found, point, normal, depth = self._sphere_static_candidate(b, m)
         else:
@@ -495,10 +474,7 @@ class Bodies:
 
     @ti.func
     def _box_static_candidate(self, b, m):
-        found = False
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
+        found, point, normal, depth = _no_contact()
         if m < CONTAINER_CANDIDATES:
             axis, above = m // 2 % 3, m % 2
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
@@ -521,10 +497,7 @@ class Bodies:
 
     @ti.func
     def _sphere_static_candidate(self, b, m):
-        found = False
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
+        found, point, normal, depth = _no_contact()
         radius = self.half[b][0]
         if m < 6:
             axis, above = m // 2 % 3, m % 2
@@ -541,20 +514,26 @@ class Bodies:
             o = (m - CONTAINER_CANDIDATES) // CORNERS
             lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
             centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-            c = self.position[b]
-            closest = ti.max(lower, ti.min(c, upper))
-            gap = c - closest
-            distance = gap.norm()
-            if distance < radius:
-                normal = ti.Vector([0.0, 1.0, 0.0])
-                depth = radius - distance
-                if distance > 1e-9:
-                    normal = gap / distance
-                else:
-                    n, inside = self._box_exit(c - centre, half)
-                    normal, depth = n, radius + inside
-                point, found = c - radius * normal, True
+            found, closest, normal, depth = self._sphere_at_box(self.position[b] - centre, radius, half)
+            point = self.position[b] - radius * normal
         return found, point, normal, depth
+
+    @ti.func
+    def _sphere_at_box(self, c, radius, half):
+        """A sphere of ``radius`` centred at c in a box's frame (centre 0, half extents ``half``): whether
+        they overlap, the box's point closest to c, the normal from the box toward the sphere and the
+        depth."""
+        closest = ti.max(-half, ti.min(c, half))
+        gap = c - closest
+        distance = gap.norm()
+        normal = ti.Vector([0.0, 1.0, 0.0])
+        depth = radius - distance
+        if distance > 1e-9:
+            normal = gap / distance
+        else:  # the centre inside the box
+            n, inside = self._box_exit(c, half)
+            normal, depth = n, radius + inside
+        return distance < radius, closest, normal, depth
 
     @ti.func
     def _box_exit(self, local, half):
@@ -638,11 +617,8 @@ class Bodies:
         the other, the point, the normal and the depth. Two spheres or a sphere and a box: one
         candidate. Two boxes: m < 16 the corners of a inside b, then those of b inside a; then edge
         (m − 16) // 12 of a across edge (m − 16) % 12 of b (:meth:`_edge_candidate`)."""
-        found = False
+        found, point, normal, depth = _no_contact()
         first, second = a, b
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
         if self.sphere[a] or self.sphere[b]:
             found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
         else:
@@ -652,11 +628,8 @@ class Bodies:
     @ti.func
     def _sphere_pair_candidate(self, a, b):
         """Two spheres, or a sphere and a box: their one candidate."""
-        found = False
+        found, point, normal, depth = _no_contact()
         first, second = a, b
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
         if self.sphere[a] and self.sphere[b]:
             gap = self.position[a] - self.position[b]
             distance = gap.norm()
@@ -672,31 +645,16 @@ class Bodies:
                 s, box = b, a
             r = self.rotation[box]
             local = r.transpose() @ (self.position[s] - self.position[box])
-            half = self.half[box]
-            closest = ti.max(-half, ti.min(local, half))
-            gap = local - closest
-            distance = gap.norm()
-            radius = self.half[s][0]
-            if distance < radius:
-                normal_local = ti.Vector([0.0, 1.0, 0.0])
-                depth = radius - distance
-                if distance > 1e-9:
-                    normal_local = gap / distance
-                else:
-                    n, inside = self._box_exit(local, half)
-                    normal_local, depth = n, radius + inside
-                point, normal = self.position[box] + r @ closest, r @ normal_local
-                first, second, found = s, box, True
+            found, closest, normal_local, depth = self._sphere_at_box(local, self.half[s][0], self.half[box])
+            point, normal = self.position[box] + r @ closest, r @ normal_local
+            first, second = s, box
         return found, first, second, point, normal, depth
 
     @ti.func
     def _box_pair_candidate(self, a, b, m):
         """Two boxes: a corner of one inside the other (m < 16), or an edge across an edge."""
-        found = False
+        found, point, normal, depth = _no_contact()
         first, second = a, b
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
         if m < 2 * CORNERS:
             inner, outer = a, b
             if m >= CORNERS:
@@ -735,10 +693,7 @@ class Bodies:
         inside b and q inside a the edges cross through each other's volume. The normal is their edges'
         cross product, turned from b to a, and the depth the boxes' overlap along it (separating axis
         test: the two boxes' projected half widths less the distance between their centres)."""
-        found = False
-        point = ti.Vector([0.0, 0.0, 0.0])
-        normal = ti.Vector([0.0, 0.0, 0.0])
-        depth = 0.0
+        found, point, normal, depth = _no_contact()
         p0, p1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
         q0, q1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
         for side in range(2):  # a's edge, then b's: the edge code once in the kernel
@@ -776,7 +731,7 @@ class Bodies:
     # ------------------------------------------------------------------ the boundary the fluid sees
 
     @ti.func
-    def _ghost_of(self, p, b):
+    def ghost_of(self, p, b):
         """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
@@ -811,14 +766,7 @@ class Bodies:
     @ti.func
     def ghost(self, p):
         """The bodies' ghost density ρ/ρ0 at p and its gradient (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        if self.constants[None].wall_density:
-            for b in range(self.constants[None].count):
-                d, g = self._ghost_of(p, b)
-                density += d
-                gradient += g
-        return density, gradient
+        return self.tables.summed(self, p)
 
     @ti.func
     def push_out(self, p):
@@ -967,7 +915,7 @@ class Bodies:
                 centre = self.position[b]
                 for i in range(k * block, ti.min((k + 1) * block, active[None])):
                     f = ti.Vector([0.0, 0.0, 0.0])
-                    _density, gradient = self._ghost_of(x[i], b)
+                    _density, gradient = self.ghost_of(x[i], b)
                     if gradient.norm_sqr() > 0.0:
                         pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
                         f = volume * pressure * gradient

@@ -1,24 +1,13 @@
 """The boundaries of the fluid, behind one interface: the container (an axis-aligned box whose
-lower-x wall may be a piston wave maker) and the static box obstacles inside it.
+lower-x wall may be a piston wave maker), the static box obstacles and the rigid bodies.
 
-Every boundary offers the solver the same three things, as Taichi functions of a position p:
-``project(p)`` (the collision of Algorithm 1, line 15: p moved out of the solid), ``ghost(p)`` (the
-density ρ/ρ0 of the ghost fluid behind it and its gradient) and ``velocity(p)`` (the velocity of that
-ghost, for the divergence pre-correction), and on the host ``move(clock_s, dt)`` (placed where it
-stands at the end of the coming substep) and ``speed_limit_m_s()`` (for the CFL limit).
-:class:`Boundaries` holds them in a fixed order and is what the stages call, so a moving body is one
-more boundary in its tuple.
-
-A particle next to a wall has fewer neighbours than one inside the fluid, so its density reads low and
-the solver pulls it into the wall. We add the density of ghost fluid behind each wall
-(``pbf.solver.sph.wall_density_table``), and its gradient, to the density constraint, looked up by
-wall distance; near an edge or a corner inclusion–exclusion tables
-(``pbf.solver.sph.wall_overlap_tables``) remove what two or three walls count twice.
-
-An obstacle is the intersection of three slabs. Per axis, a particle is outside the slab (one
-half-space stands for it) or inside it (everything minus the two half-spaces beyond its faces); the
-product over the axes expands into at most 27 signed terms, each the wall, edge or corner table. So
-the ghost of an obstacle is exact (to the tables) at its faces, convex edges and corners.
+Every boundary offers the solver the same Taichi functions of a position p: ``project(p)`` (the
+collision of Algorithm 1, line 15), ``ghost(p)`` (the density ρ/ρ0 of the ghost fluid behind it and
+its gradient) and ``velocity(p)`` (that ghost's velocity, for the divergence pre-correction); and on
+the host ``move(clock_s, dt)`` and ``speed_limit_m_s()``. :class:`Boundaries` holds them in a fixed
+order. The ghost behind a wall is looked up in tables by wall distance, with inclusion–exclusion
+tables at edges and corners; an obstacle, the intersection of three slabs, expands into at most 27
+signed terms of the same tables (:meth:`GhostTables.box`; docs/METHOD.md, "Walls and obstacles").
 """
 
 import math
@@ -142,6 +131,19 @@ class GhostTables:
                     value, slope = self.half_spaces(active, d)
                     density += sign * value
                     gradient += sign * d_sign * slope
+        return density, gradient
+
+    @ti.func
+    def summed(self, solids: ti.template(), p):
+        """The ghost density ρ/ρ0 of a set of solids (the obstacles, the bodies) at p and its gradient
+        (1/m): ``solids.ghost_of(p, k)`` summed over their ``constants.count``, none without wall density."""
+        density = 0.0
+        gradient = ti.Vector([0.0, 0.0, 0.0])
+        if solids.constants[None].wall_density:
+            for k in range(solids.constants[None].count):
+                d, g = solids.ghost_of(p, k)
+                density += d
+                gradient += g
         return density, gradient
 
     @ti.func
@@ -384,17 +386,10 @@ class Obstacles:
     @ti.func
     def ghost(self, p):
         """The obstacles' ghost density ρ/ρ0 and its gradient (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        if self.constants[None].wall_density:
-            for o in range(self.constants[None].count):
-                d, g = self._ghost_of(p, o)
-                density += d
-                gradient += g
-        return density, gradient
+        return self.tables.summed(self, p)
 
     @ti.func
-    def _ghost_of(self, p, o):
+    def ghost_of(self, p, o):
         """Ghost density of obstacle o and its gradient: the 27-term expansion of the module docstring."""
         return self.tables.box(p, self.lower[o], self.upper[o])
 

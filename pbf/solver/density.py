@@ -1,65 +1,22 @@
 """The density constraint of PBF (Macklin & Müller 2013, Sec. 3-4), in a dimensionless form.
 
-The paper's λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Eq. 10) carries units of length², so ε and the s_corr
-term added to λ (Eqs. 11-12) only work at the scale they were tuned for. We measure lengths in h:
-with volume V = m/ρ0 and the dimensionless gradient ĝ_ij = V h ∇W(x_i − x_j),
+The paper's λ_i = −C_i / (Σ_k |∇_k C_i|² + ε) (Eq. 10) carries units of length², so ε and s_corr
+(Eqs. 11-12) only work at the scale they were tuned for. Lengths are measured in h: with volume
+V = m/ρ0 and the dimensionless gradient ĝ_ij = V h ∇W(x_i − x_j),
 
-    C_i  = ρ_i/ρ0 − 1,  ρ_i/ρ0 = V Σ_j W_ij + ρ_wall/ρ0            (clamped to C_i ≥ 0 by default)
-    λ̂_i  = −ω C_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂)      (λ = h² λ̂, ε = ε̂ / h²)
+    C_i  = ρ_i/ρ0 + ψ_i − 1,  ρ_i/ρ0 = V Σ_j W_ij + ρ_wall/ρ0          (clamped to C_i ≥ 0)
+    λ̂_i  = −ω C_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂)          (λ = h² λ̂, ε = ε̂ / h²)
     Δx_i = h [Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij + λ̂_i ĝ_wall],  s_corr = −k (W_ij / W(Δq))ⁿ
 
-Every constant (ε̂, k, n, Δq/h) is dimensionless, so one set behaves the same at any particle spacing.
-
-s_corr is a repulsion added in every iteration, not a constraint that converges. The paper's n = 4
-still pushes at the lattice spacing (0.45 h), so water at rest kept jostling: single particles of a
-resting 0.4 m column flickered at up to 0.32 m/s. With n = 8 and k = 0.03 it is negligible beyond
-about 0.3 h, it still parts pairs that come closer (its job in spray), and the fastest particle of
-the same column stays under 0.11 m/s.
-
-Iterations are Jacobi: all λ from the same positions, then all Δx, then all positions move at once
-(into a second buffer: the iterations alternate between two, ``PredictedPositions``),
-accelerated by the weights of ``pbf.solver.acceleration``.
-The denominator of λ̂_i is computed once a substep, at x* before the first iteration, and kept: it only
-scales each particle's step (a diagonal preconditioner: the iterations still stop where C_i = 0,
-and Δx still follows the current gradients), and the positions move by a few per cent of h within
-a substep, so it changes by little. The λ passes then sum the density alone, without the gradients
-(docs/METHOD.md, "Speed on a CPU"). The
-price: a deep tank at 1-2 substeps with a fixed iteration count, already at the edge of stability,
-sloshes (every preset holds still as before).
-
-The free surface (``solver.surface_density``). A particle in the top layer of a pool has half a
-neighbourhood, reads about 0.82 ρ0 and is left free by the clamp; gravity then settles the layer into
-the hollows of the one below, 0.73 s above it instead of a spacing, and the settled seed pool stood
-1.5% below its fill height (docs/VALIDATION.md). As the wall term supplies the ghost fluid behind a
-wall, ψ_i supplies the ghost fluid beyond the free surface, C_i = ρ_i/ρ0 + ψ_i − 1, so that the top
-layer pushes back at a lattice layer's height. Where the surface lies is read from the colour
-gradient: a particle's own |ĝ_i| is 0.1-0.2 of noise in a disordered interior against 0.7-1.1 in the
-top layer, and ψ read from it made the surface jitter at 0.2 m/s, so it is smoothed over the
-neighbourhood first, which needs every ĝ_j: the pass that finds the denominators (:meth:`prepare`)
-stores ĝ_i, and the first iteration's λ pass smooths it into ψ_i before it forms λ̂_i. ψ is a
-constant of the substep (like the denominator): with its own gradient the top layer stopped pushing
-itself up and the tank boiled.
-
-The walls (``solver.wall_mirror``). By default the ghost fluid behind the container's walls is a fixed
-lattice, its density and gradient looked up in tables (``Container.ghost``). A particle at a wall
-then has half a neighbourhood that moves: to hold its density it takes twice its neighbours'
-multiplier, and that doubled pressure held the layer at the back wall of the Martin & Moyce
-collapse 0.57 s above its neighbours (docs/VALIDATION.md). With ``solver.wall_mirror`` the ghost is the
-mirror image of the fluid in every wall within reach, one image across each wall, edge and corner
-(R_S reflects in the walls S), and it moves with the water:
-
-    ρ_i/ρ0 = V Σ_{j ∈ N_i ∪ {i}} Σ_S W(x_i − R_S x_j)                   (S = ∅: the fluid itself)
-    Δx_i   = h [Σ_j (λ̂_i + λ̂_j) Σ_S ĝ(x_i − R_S x_j) + 2 λ̂_i Σ_{S≠∅} ĝ(x_i − R_S x_i)]
-
-A pair's images act like the pair; a particle's own image moves with it, so it counts twice in
-∂C_i/∂x_i, and ∂C_i/∂x_j = −Σ_S R_S ĝ(x_i − R_S x_j). On a lattice the images are the tables' ghost
-lattice; at a free surface they end where the water does. Obstacles keep their tables, and so does
-the divergence pre-correction (``pbf.solver.divergence``).
-
-Plain Jacobi (ω = 1) overshoots: some short-wavelength modes of the error grow every iteration
-(``pbf.solver.sph.jacobi_gain``), which blew up a 64,000-particle dam break at its first impact. We
-under-relax by ω = STABLE_GAIN / gain (``pbf.solver.model``), so that no mode is amplified; long
-waves, which carry most of the density error, still converge.
+Every constant (ε̂, k, n, Δq/h) is dimensionless. ω = STABLE_GAIN / gain under-relaxes the Jacobi
+iterations so that no error mode grows (``pbf.solver.sph.jacobi_gain``). The denominator is computed
+once a substep at x* and kept, a diagonal preconditioner (:meth:`DensityConstraint.prepare`); so is
+ψ_i, the ghost fluid beyond the free surface (``solver.surface_density``), read from the smoothed
+colour gradient. With ``solver.wall_mirror`` the ghost behind the container's walls is the fluid's
+mirror image (:meth:`DensityConstraint.image_sums`) instead of the tables. Iterations are Jacobi,
+alternating between two buffers (``PredictedPositions``) and accelerated by ``pbf.solver.acceleration``.
+Why each of these: docs/METHOD.md ("A Jacobi step that no mode outgrows", "Artificial pressure",
+"Walls and obstacles", "The free surface").
 """
 
 import taichi as ti
@@ -72,8 +29,7 @@ from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradie
 
 SURFACE_RAMP = (0.25, 0.75)
 """Where between the smoothed colour gradient of a lattice's second layer (0) and of its top layer (1)
-the surface ghost's smoothstep starts and ends: a disordered surface spreads both by about ±0.1 of
-their gap, and ψ_top is reached (and held) before the top layer's value."""
+the surface ghost's smoothstep starts and ends."""
 SURFACE_SKIP = 0.002
 """ψ is left at 0, without its neighbour loop, where twice the deficit 1 − ρ/ρ0 is below this."""
 
@@ -98,12 +54,11 @@ class DensityConstraint:
     def __init__(self, params: DensityParams, boundaries, grid):
         particle_count = params.particle_count
         self.h = params.kernel_radius_m
-        """h on the host (``pressure_scale``); the kernels read it from :attr:`constants`."""
+        """h on the host (``pressure_scale``)."""
         self.boundaries = boundaries
         self.grid = grid
         self.wall_mirror = params.wall_mirror
-        """Whether the container's walls mirror the fluid: fixed when the solver is built, it compiles the
-        images' code in."""
+        """Whether the container's walls mirror the fluid (compiles the images' walk in)."""
         g_below, g_top, psi_top = params.surface_calibration
         self.constants = scene_constants(
             h=params.kernel_radius_m,
@@ -118,9 +73,7 @@ class DensityConstraint:
             surface_slope=1.0 / ((SURFACE_RAMP[1] - SURFACE_RAMP[0]) * (g_top - g_below)),
             surface_top=psi_top,
         )
-        """The scene's constants as data (``pbf.solver.constants``): h (m), V (m³), ε̂, ω, k, 1/W(Δq),
-        the largest correction (in h), whether the surface ghost is on (a flag, not a switch, so that a
-        scene with it and one without share the kernels) and its smoothstep's offset, slope and ψ_top."""
+        """The scene's constants as data (``pbf.solver.constants``), the surface ghost's switch included."""
         self.surface = ti.field(ti.f32, shape=particle_count)
         """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
         iteration (0 with the ghost off)."""
@@ -139,11 +92,9 @@ class DensityConstraint:
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
-        impulse (see pressure_scale). Δx^k is linear in λ̂^k, and the positions combine as
-        x^{k+1} = x^{k−1} + w (x^k + Δx^k − x^{k−1}) (``pbf.solver.acceleration``), so the multiplier
-        they have moved by combines alike: L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for
-        plain Jacobi (w = 1). The plain sum under accelerated weights read the `hydrostatic` tank's
-        gradient low; this one reads it once averaged over a frame's substeps (docs/VALIDATION.md)."""
+        impulse (see pressure_scale). Δx^k is linear in λ̂^k and the positions combine with the
+        iterations' weights (``pbf.solver.acceleration``), so L does too: L^{k+1} = L^{k−1} +
+        w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for plain Jacobi (w = 1)."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
@@ -152,9 +103,8 @@ class DensityConstraint:
 
     @ti.func
     def walls(self, i, xi):
-        """The ghost density ρ/ρ0 behind the walls held still at xi, and its gradient, which is kept for
-        the Δx pass that reads the same positions: the ghost tables of the container and the
-        obstacles, or with ``solver.wall_mirror`` the obstacles' only."""
+        """The ghost density ρ/ρ0 of the boundaries held still at xi (with ``solver.wall_mirror`` all but
+        the container's); its gradient is kept for the Δx pass that reads the same positions."""
         wall, gradient = self.boundaries.ghost(xi, True)
         self.wall_gradient[i] = gradient
         return wall
@@ -162,10 +112,8 @@ class DensityConstraint:
     @ti.func
     def image_sums(self, xi, xj, near, plane, h, scale, gradients: ti.template()):
         """Σ W(x_i − x') over the mirror images x' of x_j in the container walls ``near`` x_i: one across
-        each, one across each edge, one across the corner (with the fluid they fill the space around a
-        lattice in a corner). With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the image's
-        reflection (∂/∂x_j of W(x_i − x') is −R∇W). ``h`` and its ``scale = kernel_scale(h)`` come from the
-        caller, read once per particle."""
+        each, each edge and the corner. With ``gradients`` also Σ ∇W(x_i − x') and Σ R∇W(x_i − x'), R the
+        image's reflection (∂/∂x_j of W(x_i − x') is −R∇W)."""
         w_sum = 0.0
         g_sum = ti.Vector([0.0, 0.0, 0.0])
         reflected_sum = ti.Vector([0.0, 0.0, 0.0])
@@ -188,8 +136,8 @@ class DensityConstraint:
 
     @ti.func
     def particle_constants(self):
-        """h, V and the kernel's scale for a walk of a particle's neighbours, read once per particle: read
-        once per neighbour, h cost the `hydrostatic` tank a seventh of its time."""
+        """h, V and the kernel's scale for a walk of a particle's neighbours, read once per particle, not
+        per neighbour."""
         h, volume = self.constants[None].h, self.constants[None].volume
         return h, volume, kernel_scale(h)
 
@@ -222,11 +170,10 @@ class DensityConstraint:
 
     @ti.func
     def pair_sums(self, x: ti.template(), xi, i, neighbours: ti.template(), gradients: ti.template()):
-        """The fluid's part of ρ_i/ρ0 for particle i at xi (its own term included, and with
-        ``solver.wall_mirror`` the mirror images in the container's walls); with ``gradients`` also
-        Σ_j ĝ_ij (the pairs' part of ∂C_i/∂x_i), Σ_j |∂C_i/∂x_j|² and ĝ_self, the gradient of the
-        particle's own images held still (they move with it, so ∂C_i/∂x_i counts them twice). Returns
-        (ρ_i/ρ0, Σ_j ĝ_ij, Σ_j |∂C_i/∂x_j|², ĝ_self)."""
+        """(ρ_i/ρ0, Σ_j ĝ_ij, Σ_j |∂C_i/∂x_j|², ĝ_self): the fluid's part of ρ_i/ρ0 at xi, its own term
+        and the mirror images included; with ``gradients`` the pairs' part of ∂C_i/∂x_i, the
+        denominator's sum and the gradient of the particle's own images (they move with it, so
+        ∂C_i/∂x_i counts them twice)."""
         h, volume, scale = self.particle_constants()
         near, plane = ti.Vector([0, 0, 0]), ti.Vector([0.0, 0.0, 0.0])
         g_self = ti.Vector([0.0, 0.0, 0.0])
@@ -279,14 +226,11 @@ class DensityConstraint:
 
     @ti.func
     def surface_ghost(self, x: ti.template(), i, neighbours: ti.template()):
-        """ψ_i/ρ0, the density of the ghost fluid beyond the free surface (module docstring), from the
-        colour gradients smoothed over the neighbourhood, g = |Σ_j V W_ij ĝ_j| (self included): ψ_top
-        where g reads as in the top layer of a lattice under a flat surface, 0 where it reads as in the
-        layer below, a smoothstep between (SURFACE_RAMP; ``pbf.solver.sph.surface_ghost_calibration``).
-        ψ fills at most twice the particle's deficit 1 − ρ_i/ρ0: a layer squeezed against a wall at an
-        impact, whose colour gradient the wall term turns outward, lacks nothing; a particle above
-        0.999 ρ0 (most of a pool) is left at 0 without the neighbour loop (SURFACE_SKIP). 0 with the
-        ghost off (``solver.surface_density``)."""
+        """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the smoothed colour
+        gradient g = |Σ_j V W_ij ĝ_j|: ψ_top where g reads as in the top layer of a lattice, 0 as in
+        the layer below, a smoothstep between (SURFACE_RAMP, ``pbf.solver.sph.surface_ghost_calibration``).
+        ψ fills at most twice the particle's deficit 1 − ρ_i/ρ0 (a layer squeezed against a wall lacks
+        nothing), and is 0 without a neighbour loop where the deficit is below SURFACE_SKIP."""
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
         if self.constants[None].surface_density and cap > SURFACE_SKIP:
@@ -416,12 +360,8 @@ class DensityConstraint:
     @ti.func
     def between(self, first: ti.template(), second: ti.template(), newer_in_second, fraction, i):
         """x*_i = newer + fraction (older − newer), collided, into the first buffer, and L_i alike: the
-        step back (``pbf.solver.iterations``). With an error target the count of iterations jumps by a
-        whole one as the error crosses the target, and in a pool at rest, whose error hovers at the
-        target, the count flips from substep to substep, a relay that kept a small tank moving
-        (docs/VALIDATION.md). Stepping back by the fraction of the last step the target did not need,
-        (target − e_k) / (e_{k−1} − e_k), makes the result continuous in the error. The collision again,
-        as a point between two outside an obstacle may lie in it."""
+        step back by the share of the last iteration the error target did not need, which makes the
+        result continuous in the error (``pbf.solver.iterations``; docs/METHOD.md, "Accelerated iterations")."""
         newer, older = first[i], second[i]
         if newer_in_second:
             newer, older = second[i], first[i]

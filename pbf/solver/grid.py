@@ -1,25 +1,15 @@
-"""Uniform grid and exact neighbour lists, rebuilt every substep by counting sorts.
+"""Uniform grid and exact neighbour lists, rebuilt every substep by counting sorts (Algorithm 1, lines 5-7).
 
-Build (Algorithm 1, lines 5-7 "find neighbouring particles"):
-1. count the particles in each cell (cell size ≥ h / reach) and give each a rank inside its cell, and
-   in each block of cells of the prefix sum (its first pass up);
-2. exclusive prefix sum of the counts → first slot of every cell;
-3. slot = start[cell] + rank, then each particle's place inside its cell by the order of a key (the
-   creation index): the permutation that sorts particles by cell, which the caller applies to its
-   arrays so that neighbours sit together in memory (gathered in the same loop, and taken back from
-   scratch in the visit's);
-4. visit the cells within ``reach`` of each particle's own (3×3×3 for reach 1, 5×5×5 for reach 2)
-   once, writing its neighbours within h into its SLOTS entries (slot-major on a GPU, a row on the
-   CPU: :attr:`NeighbourGrid.slot_major`) and counting them all. If some
-   particle has more than SLOTS neighbours, the counts are prefix-summed into a compact list (grown
-   as needed) and filled by a second visit. No capacity can overflow: 8,000 particles in one cell
-   still give exact neighbours, only a little slower.
+1. count the particles in each cell (cells ≥ h / reach wide), each with a rank inside its cell;
+2. exclusive prefix sum of the counts → the first slot of every cell;
+3. the permutation that sorts particles by cell, ties inside a cell broken by a key (the creation
+   index), which the caller applies to its arrays (gathered in the same loop);
+4. visit the cells within ``reach`` of each particle's own, writing its neighbours within h into its
+   SLOTS entries and counting them all. If some particle has more, the counts are prefix-summed into a
+   compact list, filled by a second visit in the same launch. Nothing is dropped: the host learns once
+   a frame how full the compact list got (``settle_frame``) and grows it ahead of need.
 
-Both visits run in one launch on every backend, the second over no particles unless the first
-overflowed: the device decides, the host reads nothing. The host learns once a frame how full the
-compact list got (``settle_frame``) and grows it ahead of need. No step uses an atomic into one
-address: the overflow is a flag that only overflowing particles set, the counts per cell are
-atomics into many addresses.
+docs/METHOD.md, "Grid and neighbour lists", says why.
 """
 
 import collections
@@ -35,7 +25,7 @@ from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan, read_count
 
 SLOTS = 64
-"""Neighbours stored per particle on the one-visit path; about twice the typical 30-40 at h = 2.2 s."""
+"""Neighbours stored per particle by the first visit: about twice the typical count at h = 2.2 s."""
 MOST_ENTRIES, TRUNCATED = range(2)
 """Entries of ``NeighbourGrid.status``."""
 GROW_ABOVE = 0.75
@@ -47,10 +37,8 @@ an overflow recompiles nothing)."""
 
 def named(**values):
     """Taichi values by name, for a walk's task (:meth:`NeighbourGrid.for_each_neighbour`) or a kernel's
-    arguments handed to its stages. Made inside ``ti.static`` in Taichi code, ``p = ti.static(named(xi=xi,
-    sums=sums))``, so that the variables given stay themselves (not copies): a task's ``p.sums += …``
-    adds to the caller's ``sums``, and a kernel argument is read where it is used (a copy at a
-    kernel's top level would be a one-thread task)."""
+    arguments handed to its stages. Made inside ``ti.static`` (``p = ti.static(named(xi=xi, sums=sums))``)
+    the variables stay themselves, not copies: a task's ``p.sums += …`` adds to the caller's ``sums``."""
     return _named_type(tuple(values))(**values)
 
 
@@ -134,10 +122,9 @@ class NeighbourGrid:
 
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
-        """Counting sort by cell of positions ``x`` (steps 1-3 above, one launch), particles of one
-        cell in ascending ``key``; fills :attr:`sorted_from`, and the caller reorders. The substep sorts
-        inside its first kernel (``pbf.solver.substep``); this is the sort alone, for a caller with
-        arrays of its own (the grid's tests check it against brute force)."""
+        """Counting sort by cell of positions ``x`` (steps 1-3, one launch), particles of one cell in
+        ascending ``key``; fills :attr:`sorted_from`, and the caller reorders (the grid's tests; the
+        substep sorts inside its first kernel)."""
         for i in range(read_count(self.loop_bound, 1)):
             self.clear_for_visit(i)
             if i < self.active[None]:
@@ -155,11 +142,8 @@ class NeighbourGrid:
 
     @ti.func
     def clear_for_visit(self, i):
-        """Thread i of a loop over the particles' bucket before a visit (the sort's counting loop) clears
-        what the visit gathers: the lists' overflow flag (thread 0) and the sum of i's block of the
-        overflow's prefix sum (:meth:`find_neighbours`). Stores outside the loops would be a one-thread
-        task; the sums stay until here because the second visit reads them in a loop that cannot also
-        clear them."""
+        """Thread i of the loop before a visit clears what the visit gathers: the overflow flag (thread
+        0) and the sum of i's block of the overflow's prefix sum (no loop or one-thread task of its own)."""
         if i == 0:
             self.overflow[None] = 0
         self.neighbour_scan.clear_block(i)
@@ -175,17 +159,11 @@ class NeighbourGrid:
     @ti.func
     def order_loops(self, key: ti.template(), mover: ti.template()):
         """Steps 2-3 once every particle is counted (:meth:`count_in_cell`), for the top level of a kernel:
-        :attr:`sorted_from`, and, unless ``mover`` is False, ``mover.gather(slot, i)`` of each particle into
-        its sorted slot (the ``State``: into scratch, which ``mover.take_gathered`` brings back).
+        :attr:`sorted_from`, and ``mover.gather(slot, i)`` of each particle into its sorted slot.
 
-        The ranks the atomic counter hands out depend on which thread gets there first, so within a
-        cell the order would change from run to run, and with it the order of every neighbour sum:
-        two runs of the seed scene ended 0.46 m apart after a second. Each particle's place inside its
-        cell is its rank by a key that belongs to it (its creation index; its slot before the sort
-        breaks a tie), so the permutation depends only on where the particles are, and runs, and a
-        restored snapshot, replay bit for bit. A cell holds a few particles, and each thread reads the
-        keys of its own cell's: the same work as one thread sorting the cell, spread over its particles.
-        """
+        The atomic counter's ranks change from run to run, so each particle's place inside its cell is
+        its rank by a key that belongs to it (its creation index; its slot before the sort breaks a
+        tie): the permutation depends only on where the particles are, and runs replay bit for bit."""
         # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
         # hold no particle and add nothing.
         self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length, True)
@@ -247,16 +225,13 @@ class NeighbourGrid:
     @ti.func
     def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
         """``task(i, j, acc)`` for every neighbour j of sorted particle i in the lists ``entries`` (the
-        ndarray :attr:`neighbours`, passed to the kernel as a ``NeighbourList``), in the list's order;
-        ``acc`` is the caller's accumulator (a Taichi vector, or :func:`named` values of the particle and
-        its sums), passed by reference. The one walk of the lists: every pass of the solver and the
-        renderers' neighbour sums go through it.
+        ndarray :attr:`neighbours`, a ``NeighbourList`` kernel argument), in the list's order; ``acc``
+        is the caller's accumulator (a vector, or :func:`named` values), passed by reference. The one
+        walk of the lists: every pass of the solver and the renderers' sums go through it.
 
-        On a GPU the walk asks for the entry after the k-th before the task gathers x_j of the k-th, so
-        that its load is in flight meanwhile: a neighbour is two dependent loads (the index, then what
-        it points at), and the passes wait on that latency more than on bandwidth at a million
-        particles. On the CPU, whose cores read ahead themselves, ``entries[k]`` itself: the loop the
-        compiler knows best. The order of every sum is the same."""
+        Slot-major (a GPU) the walk reads the next entry before the task gathers x_j, so that the
+        dependent load is in flight meanwhile; in a row (the CPU) it reads ``entries[k]`` as it goes,
+        which the cores read ahead themselves. The order of every sum is the same."""
         first, last, stride = self.listed(i, entries)
         if ti.static(self.slot_major):
             upcoming = 0
@@ -273,11 +248,9 @@ class NeighbourGrid:
 
     @ti.func
     def _visit_particle(self, x: ti.template(), neighbours: ti.template(), compact: ti.template(), i):
-        """Find the neighbours of particle i: into its SLOTS entries (first visit: slot-major on a GPU, a
-        row of its own on the CPU; :attr:`slot_major`) or, when ``compact``, into the prefix-summed row
-        neighbour_start[i] (second visit, only after an overflow), never past the list's end. A particle
-        with more than SLOTS sets ``overflow``: a plain store of the same 1 by every such thread, no
-        atomic into one address."""
+        """Find the neighbours of particle i: into its SLOTS entries (first visit) or, when ``compact``,
+        into the prefix-summed row neighbour_start[i] (second visit, only after an overflow), never past
+        the list's end. A particle with more than SLOTS sets ``overflow`` (a plain store of 1)."""
         capacity = neighbours.shape[0]
         kernel_radius, resolution = self.constants[None].kernel_radius, self.constants[None].resolution
         h2 = kernel_radius * kernel_radius
@@ -324,15 +297,12 @@ class NeighbourGrid:
         self, gathered: ti.template(), x: ti.template(), neighbours: ti.template(), mover: ti.template()
     ):
         """Step 4 over the live particles, both visits, for the top level of a kernel whose loop before
-        cleared what they gather (:meth:`clear_for_visit`). After a sort whose ``mover`` gathered into
-        scratch (:meth:`order_loops`), ``gathered`` is the sorted positions' scratch, and each thread of the
-        first visit first takes its particle's arrays back (``mover.take_gathered``): no loop of its own
-        for the copy; without a mover (False) ``gathered`` is ``x``. The second visit runs over no
-        particles unless the first overflowed; its starts come from a prefix sum of the counts whose
-        first pass up the first visit did (``ExclusiveScan.add_to_block``), whose levels above are summed
-        only after an overflow, and whose pass down each thread does for itself
-        (``ExclusiveScan.start_of``): no pass runs every substep for a rare event. A compact list longer
-        than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
+        cleared what they gather (:meth:`clear_for_visit`). ``gathered`` is the sorted positions' scratch
+        of a ``mover`` (:meth:`order_loops`), taken back by each thread of the first visit, or ``x``
+        itself without one. The second visit runs over no particles unless the first overflowed; its
+        starts come from a prefix sum whose first pass up the first visit did and whose pass down each
+        thread does for itself (``ExclusiveScan.start_of``). A compact list longer than the array is
+        cut at its end and ``status`` says so, for :meth:`settle_frame`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 mover.take_gathered(i)
@@ -383,10 +353,9 @@ class NeighbourGrid:
         return status
 
     def settle_frame(self, most_entries: int, truncated: bool) -> None:
-        """Act on the record of the frame's builds (:meth:`take_status`, read by the host once a frame):
-        a compact list over GROW_ABOVE of the array is grown by half, so that the mean neighbour count
-        may rise by a third within a frame before a list is cut; one cut short is grown the same way,
-        with a warning (that substep's sums missed pairs)."""
+        """Act on the record of the frame's builds (:meth:`take_status`, read once a frame): a compact
+        list over GROW_ABOVE of the array is grown by half; one cut short is grown the same way, with a
+        warning (that substep missed pairs)."""
         most_entries = int(most_entries)
         if truncated or most_entries > GROW_ABOVE * self.neighbours.shape[0]:
             self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(max(most_entries, 1) * 1.5)))

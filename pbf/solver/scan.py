@@ -20,6 +20,8 @@ import taichi as ti
 
 from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 
+Template = ti.template()
+"""A compile-time argument's annotation, short for signatures of many."""
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level but the top."""
 GPU_SCAN_TOP = 512
@@ -259,14 +261,7 @@ class TreeSum:
         self._reduce(values, slot, count, False, _nothing, 0.0)
 
     @ti.func
-    def sum_then(
-        self,
-        values: ti.template(),
-        slot: ti.template(),
-        count: ti.template(),
-        then: ti.template(),
-        context: ti.template(),
-    ):
+    def sum_then(self, values: Template, slot: Template, count: Template, then: Template, context: Template):
         """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``) by the one thread that holds the
         total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task.
         ``context`` (a tuple of the kernel's arguments) reaches ``then`` as it is."""
@@ -279,13 +274,7 @@ class TreeSum:
 
     @ti.func
     def _reduce_in_blocks(
-        self,
-        values: ti.template(),
-        slot: ti.template(),
-        count: ti.template(),
-        is_max: ti.template(),
-        then: ti.template(),
-        context: ti.template(),
+        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
     ):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
         # entries), then the block halves its partial sums in shared memory. The partition depends on
@@ -338,13 +327,7 @@ class TreeSum:
 
     @ti.func
     def _reduce_in_tree(
-        self,
-        values: ti.template(),
-        slot: ti.template(),
-        count: ti.template(),
-        is_max: ti.template(),
-        then: ti.template(),
-        context: ti.template(),
+        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
     ):
         # Every level loops over all of its blocks and skips those past the live entries (as in
         # ExclusiveScan.scan); the top block always runs, so that it writes 0 when there is nothing to add.
