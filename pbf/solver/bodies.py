@@ -310,13 +310,7 @@ class Bodies:
     @ti.kernel
     def _grab(self, point: ti.types.vector(3, ti.f32), hand: ti.types.vector(3, ti.f32), radius: ti.f32):
         for b in range(self.constants[None].count):
-            centre = self.position[b]
-            gap = 0.0
-            if self.sphere[b]:
-                gap = ti.max((point - centre).norm() - self.half[b][0], 0.0)
-            else:
-                local = self.rotation[b].transpose() @ (point - centre)
-                gap = ti.max(ti.abs(local) - self.half[b], 0.0).norm()
+            gap = ti.max(self.outside_distance(b, point), 0.0)
             q2 = gap * gap / (radius * radius)
             if q2 < 1.0:
                 w = (1.0 - q2) ** 3
@@ -880,18 +874,19 @@ class Bodies:
     def velocity(self, p):
         """The velocity v + ω × (p − c) of the body whose ghost p sees (within h of its surface)."""
         v = ti.Vector([0.0, 0.0, 0.0])
-        h = self.constants[None].kernel_radius
         for b in range(self.constants[None].count):
-            centre = self.position[b]
-            near = False
-            if self.sphere[b]:
-                near = (p - centre).norm() - self.half[b][0] < h
-            else:
-                local = self.rotation[b].transpose() @ (p - centre)
-                near = ti.max(ti.abs(local) - self.half[b], 0.0).norm() < h
-            if near:
-                v += self.linear_velocity[b] + self.angular_velocity[b].cross(p - centre)
+            if self.outside_distance(b, p) < self.constants[None].kernel_radius:
+                v += self.linear_velocity[b] + self.angular_velocity[b].cross(p - self.position[b])
         return v
+
+    @ti.func
+    def outside_distance(self, b, p):
+        """How far p lies outside body b (0 inside a box, negative inside a sphere), m."""
+        offset = p - self.position[b]
+        distance = offset.norm() - self.half[b][0]
+        if not self.sphere[b]:
+            distance = ti.max(ti.abs(self.rotation[b].transpose() @ offset) - self.half[b], 0.0).norm()
+        return distance
 
     # ------------------------------------------------------------------ the reaction
 
