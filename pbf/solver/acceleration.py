@@ -1,29 +1,15 @@
 """The weights that accelerate the Jacobi iterations of the density constraint (``solver.expert.acceleration``).
 
-Every scheme here is the two-step (semi-iterative) recurrence of Wang 2015, Eq. 12,
+Every scheme is the two-step recurrence of Wang 2015, Eq. 12,
 
     x^{k+1} = x^{k−1} + w_{k+1} (x̂^{k+1} − x^{k−1}),    x̂^{k+1} the plain Jacobi update of x^k,
 
-and differs only in its weights w_1 = 1, w_2, w_3, …. Linearised about rest, one plain iteration maps
-each error mode to λ times itself, λ = 1 − ω μ in [1 − ω μ_max, 1] (``pbf.solver.sph.jacobi_gain``:
-[−0.8, 1] for STABLE_GAIN 1.8), and k weighted iterations map it to P_k(λ), with
-
-    P_0 = 1,  P_1 = λ,  P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1}.
-
-Why the Chebyshev weights are not the default. They make P_k the Chebyshev polynomial that is least on
-[−ρ, ρ], which is how they speed up the slow long waves (λ near 1). But that polynomial swings
-negative: at ρ = 0.9, P_2 reaches −0.68 (at λ = 0) and P_3 −0.46. A PBF substep turns the residual
-into velocity, v = (x* − x)/Δt, so a mode whose compression c the iterations leave at P·(what the
-prediction brought) follows c_{n+1} = P (2 c_n − c_{n−1}) from substep to substep: its roots
-z = P ± √(P² − P) leave the unit circle when P < −1/3. A substep that stops after 2 or 3 Chebyshev
-iterations therefore pumps those modes, as a tank at rest shows (docs/VALIDATION.md).
-
-The stable weights (the default). w_1 = 1, and each later weight is the largest for which P_k stays
-at or above −REVERSAL (1/4, inside the −1/3 bound) and within ±1 over the whole spectrum: the boldest
-extrapolation along the slow modes that reverses no mode enough to pump it. The weights rise toward
-WEIGHT_CAP (past Chebyshev's limit), so after several iterations the slow modes converge faster than
-under Chebyshev weights, and the same tank holds still (docs/BENCHMARKS.md). One plain iteration
-(P_1 = λ) still reverses the shortest waves, which is why ``solver.min_iterations`` is 2 by default.
+with weights w_1 = 1, w_2, …. Linearised, a plain iteration maps each error mode to λ times itself,
+λ in [1 − ω μ_max, 1] (``pbf.solver.sph.jacobi_gain``), and k weighted iterations map it to P_k(λ):
+P_0 = 1, P_1 = λ, P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1}. A substep turns the residual into
+velocity, so a mode that P_k reverses past −1/3 grows from substep to substep; the default (stable)
+weights keep every P_k within [−REVERSAL, 1], Chebyshev's do not (docs/METHOD.md, "Accelerated
+iterations that do not pump the water").
 """
 
 from __future__ import annotations

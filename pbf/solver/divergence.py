@@ -1,33 +1,19 @@
-"""The divergence pre-correction: a velocity-level pass inside the prediction (Algorithm 1, between
-the neighbour search and the iterations) that removes the part of v that would compress the fluid,
-with pressure warm-started from the previous substep; x* is then predicted again from the new v.
+"""The divergence pre-correction: a velocity-level pass inside the prediction (after the neighbour
+search, before the iterations) that removes the part of v that would compress the fluid, warm-started
+from the last substep's pressure; x* is then predicted again from the new v (docs/METHOD.md, "Rest").
 
-Why. PBF's iterations start every substep from zero pressure. A pool at rest needs the hydrostatic
-pressure, built anew each substep from the compression gravity causes, and a few Jacobi iterations
-rebuild the long waves of that pressure (the column's height) only partly: the seed pool stayed 1.25%
-compressed. Carrying the multipliers of the position iterations over instead acts as an integral
-controller on positions and left a pool at rest jittering at 0.1-0.4 m/s (docs/METHOD.md, "Tried and not kept").
-Carried over at the velocity level, as in DFSPH's divergence solver (Bender & Koschier 2015) and in
-the warm-started velocity solvers of rigid-body contact, the pressure impulse is damped by the very
-velocities it acts on, and the position iterations are left with what the velocity pass missed.
-
-What. The change of the density constraint of ``pbf.solver.density`` that v would cause over Δt,
+The change of the density constraint that v would cause over Δt,
 
     ΔC_i = (Δt/h) [Σ_j ĝ_ij · (v_i − v_j) + ĝ_wall · (v_i − v_wall)],
 
-is driven to c_i = ΔC_i + min(C_i, 0) ≤ 0 (a particle below ρ0 may fill up to it, one at or above ρ0
-may not compress further; its existing error is the position iterations' job, as carrying that over
-is what made the integral controller) by Jacobi iterations in the form of Eq. 10:
+is driven to c_i = ΔC_i + min(C_i, 0) ≤ 0 by Jacobi iterations in the form of Eq. 10:
 
     δλ̂_i = −ω c_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂),   Λ_i ← min(Λ_i + δλ̂_i, 0)
     Δv_i  = (h/Δt) [Σ_j (δλ̂_i + δλ̂_j) ĝ_ij + δλ̂_i ĝ_wall]
 
-Λ_i, the multiplier accumulated over the substep, is clamped at zero (pressure, never suction: a
-separating surface stays free, a lone particle falls freely), and the next substep starts by
-applying Λ again (warm start, scaled by (Δt_new/Δt_old)² when the CFL limit changes the step: Λ/Δt²
-is a pressure), so its iterations only correct the change. Positions stay at x during the pass; the
-neighbour lists are those just built at x* (pairs that only come within h at x are separating, and
-the kernel gives pairs beyond h nothing).
+Λ_i is clamped at zero (pressure, never suction) and applied again at the start of the next substep
+(scaled by (Δt_new/Δt_old)²), so the iterations only correct the change. Positions stay at x; the
+neighbour lists are those just built at x*.
 """
 
 import taichi as ti

@@ -8,14 +8,10 @@ import taichi as ti
 @ti.data_oriented
 class PredictedPositions:
     """x*, the predicted positions (m): two (n,) vector(3, f32) buffers, :attr:`first` and
-    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other,
-    which saves a copy per iteration, and the iterations' last call settles x* back into the first
-    (``JacobiIterations.settle``), so that every other pass only ever sees the first buffer.
-
-    Why not pass "the current buffer" around: a Taichi kernel compiles once per field it is given, so
-    each kernel that took the current buffer compiled twice, the second time when an iteration count
-    of the other parity first came, seconds into a run. The iterations take both buffers in a fixed
-    order and read which holds x* as data."""
+    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other
+    (no copy), and the iterations' last call settles x* back into the first
+    (``JacobiIterations.settle``). The iterations take both buffers in a fixed order and read which
+    holds x* as data: a kernel given "the current buffer" would compile once per buffer."""
 
     def __init__(self, particle_count: int):
         self.first = ti.Vector.field(3, ti.f32, shape=particle_count)

@@ -4,14 +4,11 @@ rises, and the step back that takes back the part of the last iteration the targ
 (``DensityConstraint.between``).
 
 The rules run on the device, written once (:meth:`JacobiIterations.received`), in the one thread that
-finishes each iteration's error sum (``TreeSum.sum_then``): it writes the state of the loop (the buffer
-that holds x*, the weight's index, the last error, whether the target was met) to a few device
-entries that the next iteration's threads read, and once the target is met the remaining iterations
-loop over no particles. Without a target the state is a function of the iteration's index and
-nothing is written. What differs by backend is chosen when the solver is built: how many iterations
-one kernel call runs (:attr:`JacobiIterations.per_call`) and whether the host reads the decision after
-each call (``reads_decisions``: on the CPU, where a call costs little and an iteration much, so none
-is launched past the target; on a GPU never, where a read would make the host wait for the device).
+finishes each iteration's error sum (``TreeSum.sum_then``); the next iteration's threads read what it
+decided, and once the target is met the remaining iterations loop over no particles. What differs by
+backend is chosen when the solver is built: how many iterations one call runs (``per_call``) and
+whether the host reads the decision after each call (``reads_decisions``: on the CPU, so that no
+call runs past the target; never on a GPU, where a read would make the host wait for the device).
 """
 
 import numpy as np

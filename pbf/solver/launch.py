@@ -1,35 +1,22 @@
 """Taichi's internals in one module: the substep's kernel calls with less of Taichi's Python in them,
-what the studies see of Taichi's launches, and the running backend's configuration.
+what the studies see of Taichi's launches, and the running backend's configuration. No other module
+reads Taichi's private names (``tests/test_private_taichi.py``).
 
-Every read of Taichi's private names (``taichi.lang``, ``taichi._lib``, a kernel's ``_primal``, its
-``compiled_kernels`` …) is here and nowhere else in the project (``tests/test_private_taichi.py``), so
-that a Taichi other than the one this was written for changes one file's behaviour, not the solver's.
+The gate: :func:`knows_taichi` (the running Taichi is ``WRITTEN_FOR`` and its internals imported) and
+``PBF_PUBLIC_LAUNCH`` (:func:`fast_launch`); otherwise every launch is Taichi's public call.
 
-The gate. :func:`knows_taichi`: the running Taichi is the version this module was written for
-(``WRITTEN_FOR``) and its internals imported. Only then, and unless ``PBF_PUBLIC_LAUNCH=1``
-(:func:`fast_launch`), does a :class:`Launcher` launch past Taichi's call; otherwise every launch is
-Taichi's public call. Another build with the same public API may lay out its internals otherwise,
-so the names existing is no test.
+:class:`Launcher` calls a bound kernel the ordinary way the first time a variant is asked for (so the
+compile, the offline cache and the observers see it), keeps the compiled kernel under the variant's
+template arguments, and from then on launches it directly, setting scalar and ndarray arguments
+itself: the same launch, bit for bit (``tests/test_launch.py``), without Taichi's per-call Python
+(docs/BENCHMARKS.md, "Host time per substep"). A call Taichi would refuse is an ordinary call, so that
+Taichi refuses it in its own words.
 
-The launch. A call of a Taichi kernel first works out, in Python, which compiled variant its
-arguments select, then sets the arguments and launches; on a GPU the first part can take as long as
-the device (docs/BENCHMARKS.md, "Host time per substep"). :class:`Launcher` calls a bound kernel the
-ordinary way the first time a variant is asked for (so the compile, the offline cache and the
-observers see it), keeps the compiled kernel under the variant's template arguments (plain values by
-value, objects by identity, kept alive), and from then on launches it directly, setting scalar and
-ndarray arguments itself. A call Taichi would refuse is an ordinary call, so that Taichi refuses it
-in its own words. The same kernel, the same arguments: the same launch, bit for bit
-(``tests/test_launch.py``).
-
-What the studies see (:class:`Observer`, :func:`watching`): every kernel launch, whether the host
-waits on it, every element of a field or ndarray accessed from Python, and every call that compiled
-a new variant with its time. Taichi has no public hook for these, so while an observer watches,
-this module wraps Taichi's kernel class and its fields' element access; the studies patch nothing.
-Taichi's profiler's records, task by task, are :func:`profiled_tasks`.
-
-The configuration. Taichi's public ``ti.cfg`` is the running program's configuration (None before
-``ti.init``): :func:`current_arch`, :func:`compile_config`. :func:`start_taichi` is ``ti.init``
-without the line it prints.
+:class:`Observer` and :func:`watching` tell the studies of every launch, element access and compile
+(Taichi has no public hook: while one watches, its kernel class and field access are wrapped);
+:func:`profiled_tasks` reads the kernel profiler's records. :func:`current_arch` and
+:func:`compile_config` read Taichi's public ``ti.cfg``; :func:`start_taichi` is ``ti.init`` without
+the line it prints.
 """
 
 from __future__ import annotations

@@ -193,15 +193,7 @@ class Simulation:
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.kernels = SubstepKernels(
-            state=self.state,
-            integrator=self.integrator,
-            grid=self.grid,
-            density=self.density,
-            divergence=self.divergence,
-            iterations=self.iterations,
-            postprocess=self.postprocess,
-        )
+        self.kernels = SubstepKernels(self)
         """The stages composed into three kernels (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
@@ -597,13 +589,8 @@ class Simulation:
 
     def neighbourhood(self) -> Neighbourhood:
         """The last neighbour search's lists, for renderers on the device (no copy to the host)."""
-        return Neighbourhood(
-            self.particle_count,
-            self.model.grid.kernel_radius_m,
-            self.state.x,
-            self.grid,
-            self.grid.neighbours,
-        )
+        h, x, grid = self.model.grid.kernel_radius_m, self.state.x, self.grid
+        return Neighbourhood(count=self.particle_count, support_m=h, positions=x, grid=grid, entries=grid.neighbours)
 
     def density_ratios(self):
         """ρ/ρ0 of every particle as a device field in the order of :meth:`readout`."""

@@ -1,18 +1,16 @@
-"""The substep's three kernels: the stages of Algorithm 1, each a set of loops (``@ti.func``) in a module
-of its own, composed into few calls, the same on every backend.
+"""The substep's kernels: the stages of Algorithm 1, each a set of loops (``@ti.func``) in a module of its
+own, composed into few calls, the same on every backend.
 
 * :meth:`SubstepKernels.find_neighbours`, lines 1-7: v += Δt g and x* = x + Δt v
   (``pbf.solver.integrate``), the counting sort by the cell of x* with the state reordered alike, the
-  exact neighbour lists (``pbf.solver.grid``), our divergence pre-correction and x* predicted again
-  (``pbf.solver.divergence``), and the constraint's constants of the substep at x* (the denominators
-  of λ, Eq. 10: ``DensityConstraint.prepare``);
+  neighbour lists (``pbf.solver.grid``), the divergence pre-correction and x* again
+  (``pbf.solver.divergence``), and the denominators of λ (Eq. 10) at x* (``DensityConstraint.prepare``);
 * :meth:`SubstepKernels.iterate`, lines 8-19: ``per_call`` Jacobi iterations a call
-  (``pbf.solver.iterations``, ``pbf.solver.density``), as many calls as the iterations need but the last;
+  (``pbf.solver.iterations``, ``pbf.solver.density``), every call but the last;
 * :meth:`SubstepKernels.iterate_and_finish`: the same kernel with the end compiled in, the last call's
   iterations, x* settled into the first buffer, then lines 20-23 (``pbf.solver.postprocess``).
 
-On a GPU every kernel call costs the host time, and small scenes wait on it: with two iterations a
-call a substep of 4 iterations is 3 calls (docs/BENCHMARKS.md, "Launches per substep").
+On a GPU every call costs the host time: a substep of 4 iterations is 3 calls.
 """
 
 import taichi as ti
@@ -26,14 +24,11 @@ class SubstepKernels:
     """The kernels that run a substep's stages (the module docstring); the stages themselves are the
     objects given, each from its module."""
 
-    def __init__(self, state, integrator, grid, density, divergence, iterations, postprocess):
-        self.state = state
-        self.integrator = integrator
-        self.grid = grid
-        self.density = density
-        self.divergence = divergence
-        self.iterations = iterations
-        self.postprocess = postprocess
+    def __init__(self, stages):
+        """``stages``: the Simulation, whose stages these kernels compose."""
+        self.state, self.integrator, self.grid = stages.state, stages.integrator, stages.grid
+        self.density, self.divergence = stages.density, stages.divergence
+        self.iterations, self.postprocess = stages.iterations, stages.postprocess
         # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
