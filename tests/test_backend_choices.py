@@ -60,6 +60,7 @@ def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
         assert reads == pytest.approx(1.0 / sim.frame_substeps)  # the frame's one read: the CFL limit's speed
 
 
+@pytest.mark.slow
 def test_a_pouring_nozzle_adds_no_read_to_the_substep():
     # A stream into an empty box: every substep appends a layer or more (the drowned check, the slots
     # and the live count on the device), yet the substep still reads the device once at most.

@@ -70,6 +70,7 @@ def test_predicted_positions_end_every_substep_in_the_first_buffer(iterations):
     assert np.array_equal(x_star.first.to_numpy()[:n], sim.state.x.to_numpy()[:n])
 
 
+@pytest.mark.slow
 def test_the_start_warm_up_leaves_the_run_as_it_would_have_been():
     # What a user's start runs before the first picture (a substep, then back to the start): the
     # frames after it are those of a run that never had it, settled start and divergence pass included.

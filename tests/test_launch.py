@@ -134,7 +134,9 @@ def launchers(sim) -> list[Launcher]:
     return [value for owner in owners for value in vars(owner).values() if isinstance(value, Launcher)]
 
 
-@pytest.mark.parametrize("on_device", [False, True], ids=["cpu path", "device path"])
+@pytest.mark.parametrize(
+    "on_device", [pytest.param(False, id="cpu path"), pytest.param(True, id="device path", marks=pytest.mark.slow)]
+)
 def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_device):
     # One Simulation run twice from its start (reset() restores it exactly): launched directly, then
     # with every Launcher calling its kernel the ordinary way. One set of kernels, not two.

@@ -73,6 +73,7 @@ def test_a_settled_column_reads_as_one_flat_surface():
     assert particles_top(sim.positions(), sim.scene)["median_deg"] > 1.0
 
 
+@pytest.mark.slow
 def test_a_splash_is_not_speckled():
     sim = Simulation(small_dam_break(), quiet=True)
     renderer = SceneRenderer(sim, *SIZE, style="surface")

@@ -159,6 +159,7 @@ def test_no_png_keeps_the_exports(tmp_path, capsys):
     )
 
 
+@pytest.mark.slow
 def test_npz_export(tmp_path, capsys):
     assert (
         cli.main(

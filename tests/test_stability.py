@@ -180,6 +180,7 @@ def test_one_iteration_a_substep_holds_the_64000_particle_dam_break():
     assert fastest < 15.0, fastest
 
 
+@pytest.mark.slow
 def test_a_speed_cap_holds_every_particle_and_bounds_the_substeps():
     # time.max_speed_m_s caps |v| at the end of every substep (as FleX caps it), so the CFL limit sees
     # at most the cap: the falling block at 1 m/s takes the preset's 2 substeps where, uncapped, its

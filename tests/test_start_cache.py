@@ -62,6 +62,7 @@ def start(scene: dict, folder) -> tuple[dict, set, set]:
     return report, compiled, loaded
 
 
+@pytest.mark.slow
 def test_a_scene_of_another_size_and_other_constants_compiles_nothing(tmp_path):
     first, compiled, _ = start(small_dam_break(), tmp_path)
     assert len(compiled) > 10  # the first start compiled the solver's kernels into the empty folder
@@ -95,7 +96,9 @@ def test_a_smaller_scene_takes_the_larger_bucket_a_start_before_compiled(tmp_pat
     assert again & compiled == set(), f"the smaller scene compiled {sorted(again & compiled)} again"
 
 
-@pytest.mark.parametrize("on_device", [False, True], ids=["cpu path", "device path"])
+@pytest.mark.parametrize(
+    "on_device", [pytest.param(False, id="cpu path"), pytest.param(True, id="device path", marks=pytest.mark.slow)]
+)
 def test_a_scene_steps_bit_for_bit_the_same_in_a_larger_bucket(monkeypatch, on_device):
     monkeypatch.setattr(buckets, "record", lambda particles, cells: None)  # the user's cache folder untouched
     with decisions_on_device(on_device):
