@@ -185,6 +185,7 @@ def test_the_seed_preset_reaches_its_error_target():
     assert len(iterations) > 1  # the target decides, not a fixed count
 
 
+@pytest.mark.slow
 def test_divergence_pressure_carries_the_hydrostatic_load():
     # A settled column: pressure grows as ρ0 g depth in the interior, and the part the divergence pass
     # carries from substep to substep (Λ) is a large share of it (0.35-0.40 of the slope, which reads

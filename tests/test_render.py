@@ -145,6 +145,7 @@ def test_no_png_writes_the_video_alone(tmp_path, monkeypatch, capsys):
     assert lines[-1] == f"[pbf] wrote 4 frames as a video, v.mp4: {size} (H.264 at 160×90)"
 
 
+@pytest.mark.slow
 def test_no_png_keeps_the_exports(tmp_path, capsys):
     out = tmp_path / "frames"
     argv = ["dam_break", "--headless", "--frames", "2", "--out", str(out), "--video", str(tmp_path / "v.mp4")]
@@ -311,6 +312,7 @@ def test_the_legend_is_blended_into_its_corner_alone():
     assert corner.sum(axis=1).min() < 3 * 60  # the labels' ink (20, 20, 20), antialiased at its edges
 
 
+@pytest.mark.slow
 def test_particle_frames_carry_the_legend_unless_told_not_to():
     # Colour means speed or density on every particle frame, so the default frames explain it; the
     # surface style's colours are the water's own and its frames draw none (a scene may keep the key on).

@@ -158,6 +158,7 @@ def peak_of_one_iteration_run(particles: int, frames: int) -> tuple[float, float
     return worst_error, fastest
 
 
+@pytest.mark.slow
 def test_one_iteration_a_substep_holds_the_dam_breaks_impact():
     # Against compression piling up faster than one iteration removes it: at two spacings a substep
     # (the preset's time.max_cfl) the seed scene's impact read 146-328% mean density error and its

@@ -341,6 +341,7 @@ def test_a_colour_value_on_the_iso_level_is_meshed_with_the_level_nudged(monkeyp
     assert mesh.enclosed_volume_m3() == pytest.approx(above.enclosed_volume_m3(), rel=1e-3)
 
 
+@pytest.mark.slow
 def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_before_it_whole(
     tmp_path, monkeypatch, capsys
 ):

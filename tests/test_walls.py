@@ -36,6 +36,7 @@ def test_mirror_images_complete_a_lattice_as_the_ghost_tables_do():
     assert mirrored.stats()["max_density_error"] < 1e-3
 
 
+@pytest.mark.slow
 def test_mirror_images_end_at_the_free_surface_as_the_water_does():
     # The top layer against a wall: the tables supply a ghost lattice above the water too (a whole
     # half-space behind the wall), so that particle read 3.1% of ρ0 denser than the top layer inside; the
