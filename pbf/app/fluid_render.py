@@ -364,7 +364,8 @@ class FluidRenderer:
         w = (0.5 * self.coarse_height - r - 0.5) / focal
         t, chord = splats.hit(seen[0], seen[1], seen[2], seen[3], u, w)
         if t > 0.0:
-            ti.atomic_min(self.depth[r, c], t)
+            if t < self.depth[r, c]:  # a plain read first: most splats lie behind a nearer one
+                ti.atomic_min(self.depth[r, c], t)
             ti.atomic_add(self.thickness_steps[r, c], ti.cast(chord * scale + 0.5, ti.i32))
 
     @ti.func
