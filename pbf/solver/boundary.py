@@ -139,11 +139,14 @@ class GhostTables:
         (1/m): ``solids.ghost_of(p, k)`` summed over their ``constants.count``, none without wall density."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
-        if solids.constants[None].wall_density:
-            for k in range(solids.constants[None].count):
-                d, g = solids.ghost_of(p, k)
-                density += d
-                gradient += g
+        # A switch, not only a count: the box's 27 terms in a λ pass hold registers on a GPU even where no
+        # obstacle is (docs/BENCHMARKS.md, "Registers and occupancy").
+        if ti.static(solids.count > 0):
+            if solids.constants[None].wall_density:
+                for k in range(solids.constants[None].count):
+                    d, g = solids.ghost_of(p, k)
+                    density += d
+                    gradient += g
         return density, gradient
 
     @ti.func
@@ -359,8 +362,9 @@ class Obstacles:
     def project(self, p):
         """p moved out of every obstacle grown by the particle radius."""
         q = p
-        for o in range(self.constants[None].count):
-            q = self._push_out(q, o)
+        if ti.static(self.count > 0):  # as in GhostTables.summed
+            for o in range(self.constants[None].count):
+                q = self._push_out(q, o)
         return q
 
     @ti.func

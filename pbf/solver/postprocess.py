@@ -83,7 +83,6 @@ class VelocityPostprocess:
         for i in range(read_count(bound, 1)):  # line 21, v_i kept for the pass below; Eq. 13
             if i < self.state.active[None]:
                 h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
-                self.velocity_now[i] = vi
                 if ti.static(run.vorticity):
                     omega = ti.Vector([0.0, 0.0, 0.0])
                     p = ti.static(
@@ -92,6 +91,7 @@ class VelocityPostprocess:
                     self.grid.for_each_neighbour(i, neighbours, self.curl_pair, p)
                     self.omega[i] = omega
                     self.omega_norm[i] = omega.norm()
+                self.velocity_now[i] = vi
         # Eqs. 14-15 and line 23: the pairs read v_j as kept above, never x_j, so x moves in the same pass.
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
