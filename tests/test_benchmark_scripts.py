@@ -500,3 +500,11 @@ def test_kernel_gaps_reads_a_report_through_nsys_stats(tmp_path, monkeypatch, ca
     report.write_bytes(b"")
     assert script("kernel_gaps").main([str(report)]) == 0
     assert "6 operations in a window of 3.5 µs" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_pool_at_rest_prints_its_table(capsys):
+    script("pool_at_rest").main(["--times", "0", "0.05", "--columns", "4"])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("dam_break: the tops of 4 × 4 columns")
+    assert len([line for line in lines if line.startswith("| 0.0")]) == 2
