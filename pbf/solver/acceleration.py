@@ -1,9 +1,6 @@
-"""The weights of the Jacobi iterations' two-step acceleration (``solver.expert.acceleration``; Wang 2015,
-Eq. 12): x^{k+1} = x^{k−1} + w_{k+1} (x̂^{k+1} − x^{k−1}), x̂^{k+1} the plain update of x^k, w_1 = 1.
-
-A plain iteration maps an error mode to λ times itself, λ in [1 − ω μ_max, 1]; k weighted ones to
-P_k(λ), P_0 = 1, P_1 = λ, P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1}. The stable weights keep every
-P_k within [−REVERSAL, 1] (docs/METHOD.md, "Accelerated iterations that do not pump the water").
+"""The weights w of the iterations' two-step acceleration (Wang 2015, Eq. 12), x^{k+1} = x^{k−1} +
+w_{k+1} (x̂^{k+1} − x^{k−1}). A mode that a plain iteration scales by λ, k iterations scale by P_k(λ):
+P_0 = 1, P_1 = λ, P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1} (docs/METHOD.md, "Accelerated iterations").
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
-"""Choosing and starting Taichi's backend, once per process, and what the host knows of its device.
-
-``arch`` (or ``PBF_ARCH``) is one of ARCHES: ``auto`` (CUDA, else a hardware Vulkan device or Metal,
-else the CPU: a software Vulkan driver runs the same kernels slower than the CPU backend); ``gpu`` (the
-best GPU backend that starts, software Vulkan included); or a backend by name. One that cannot start
-is a BackendError, Taichi's own fallback to the CPU included. The choice is printed in one line.
+"""Choosing and starting Taichi's backend once per process, and what the host knows of its device.
+``auto`` never takes a software Vulkan driver (the CPU backend is faster); ``gpu`` takes the best GPU
+backend that starts; one asked for by name that cannot start is a BackendError (docs/BENCHMARKS.md,
+"Backends: the CPU's path and the GPU's").
 """
 
 import contextlib
@@ -29,8 +27,6 @@ class BackendError(RuntimeError):
 
 @dataclass(frozen=True)
 class Device:
-    """What runs the kernels."""
-
     arch: str
     """One of "cpu", "cuda", "vulkan", "metal"."""
     name: str
@@ -111,8 +107,7 @@ VK_PHYSICAL_DEVICE_TYPE = {1: "integrated", 2: "discrete", 3: "virtual", 4: "cpu
 
 
 def vulkan_devices() -> list[dict]:
-    """Every Vulkan device the loader lists: name, type, API minor version and largest device-local heap
-    (bytes); empty without a loader or driver. Read from libvulkan without starting Taichi."""
+    """Every Vulkan device (name, type, API minor version, largest local heap in bytes), read from libvulkan."""
     try:
         vulkan = ctypes.CDLL(ctypes.util.find_library("vulkan") or "libvulkan.so.1")
     except OSError:
@@ -161,9 +156,7 @@ def _is_software(device: dict) -> bool:
 
 
 def _taichi_vulkan_choice(devices: list[dict]) -> dict | None:
-    """The device Taichi 1.7's Vulkan backend picks (``VulkanDeviceCreator::pick_physical_device``):
-    TI_VISIBLE_DEVICE's, else the highest score, discrete (1000) over integrated (500) over the rest,
-    plus 100 per API minor version."""
+    """The device Taichi 1.7's Vulkan backend picks (``VulkanDeviceCreator::pick_physical_device``)."""
     if not devices:
         return None
     visible = os.environ.get("TI_VISIBLE_DEVICE", "")
@@ -238,10 +231,9 @@ def start_backend(
     fast_compile: bool = False,
     kernel_profiler: bool = False,
 ) -> str:
-    """Start Taichi on ``arch`` (else $PBF_ARCH, else "auto") and return the backend's name. ``cpu_threads``
-    caps the CPU backend's threads; ``fast_compile`` skips Taichi's advanced IR optimisation (a shorter
-    compile, a slower step, other rounding); ``kernel_profiler`` starts Taichi's kernel profiler.
-    One backend per process: a later call asking for another raises BackendError."""
+    """Start Taichi on ``arch`` (else $PBF_ARCH, else "auto") and return the backend's name; ``fast_compile``
+    skips the advanced IR optimisation (shorter compile, slower step, other rounding). One backend a
+    process: asking for another later raises BackendError."""
     global _started
     requested = (arch or os.environ.get(ENV_VAR) or "auto").lower()
     if requested not in ARCHES:
@@ -268,7 +260,7 @@ def start_backend(
     except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
         raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
     if device.arch != "cpu" and running != getattr(ti, device.arch):
-        # Taichi falls back to the CPU by itself when a GPU backend fails to start.
+        # Taichi's own fallback to the CPU.
         ti.reset()
         raise BackendError(
             f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
@@ -292,7 +284,6 @@ def describe(device: Device, arch_name: str | None = None) -> str:
 
 
 def running_device() -> Device:
-    """The device of the running backend."""
     if _started is None:
         raise BackendError("no backend has been started in this process")
     return _started
@@ -310,8 +301,7 @@ def gpu_blocks() -> bool:
 
 @contextlib.contextmanager
 def in_gpu_blocks(enabled: bool = True):
-    """Sums built inside take a GPU's blocks on any backend: the same results, and a GPU's launches for
-    the profiler to count on the CPU (``python -m pbf.study.bench counts --gpu-blocks``)."""
+    """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
     global _gpu_blocks_on_cpu
     before, _gpu_blocks_on_cpu = _gpu_blocks_on_cpu, enabled
     try:
@@ -321,14 +311,12 @@ def in_gpu_blocks(enabled: bool = True):
 
 
 def sums_in_shared_memory() -> bool:
-    """Whether float sums add up in each GPU block's shared memory: on CUDA only, as Taichi's SPIR-V code
-    generator fails on a kernel whose second loop holds a shared array."""
+    """Whether float sums add up in shared memory: CUDA only (SPIR-V fails on a second loop with a shared array)."""
     return _started is not None and _started.arch == "cuda"
 
 
 def keeps_decisions_on_device() -> bool:
-    """Whether a Simulation built now takes the GPU backends' choices (docs/METHOD.md, "One substep on every
-    backend"): on a GPU, or inside :func:`decisions_on_device`."""
+    """Whether a Simulation built now takes the GPU's choices: on a GPU, or inside :func:`decisions_on_device`."""
     return on_gpu() or _decisions_on_device_on_cpu
 
 
@@ -345,8 +333,7 @@ def decisions_on_device(enabled: bool = True):
 
 @contextlib.contextmanager
 def light_compile():
-    """Kernels that compile inside skip Taichi's advanced IR optimisation, as under ``fast_compile``: for
-    launches whose run time is nothing beside their compile (the bodies' rigid step)."""
+    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
     config = compile_config()
     before = config.advanced_optimization
     config.advanced_optimization = False
@@ -378,8 +365,7 @@ def _cuda_free_bytes() -> int | None:
 
 
 def device_memory_bytes() -> int:
-    """Memory the backend can still give the fields, bytes: the CUDA device's free (else total) memory, a
-    hardware Vulkan device's largest local heap, else the host's free memory."""
+    """Memory the backend can still give the fields, bytes: the GPU's where it can tell, else the host's."""
     if _started is None:
         return host_available_bytes()
     device = _started
@@ -400,8 +386,7 @@ def memory_place() -> str:
 
 
 def restart_backend() -> None:
-    """Free every Taichi field and compiled kernel (a process that builds hundreds of Simulations grows
-    with each) and start the same backend again; Simulations made before cannot be used after."""
+    """Free every Taichi field and kernel and start the same backend again; earlier Simulations cannot be used."""
     if _started is None:
         raise BackendError("restart_backend(): no backend has been started in this process")
     start_taichi(**_options)  # ti.init begins with ti.reset(), which frees the runtime

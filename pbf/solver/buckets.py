@@ -1,6 +1,5 @@
-"""The capacity buckets a cache folder holds compiled (``pbf.solver.model.allocation``), a line of
-"particles cells" per start in ``pbf_buckets.txt``: a start whose own were never compiled may take a pair
-one size up that was (:func:`pbf.solver.model.reused_allocation`); the results are the same.
+"""The capacity buckets a cache folder holds compiled, a "particles cells" line per start: a start whose
+own were never compiled may take a pair one size up that was (:func:`pbf.solver.model.reused_allocation`).
 """
 
 from __future__ import annotations
@@ -10,7 +9,6 @@ from pathlib import Path
 from pbf.solver.launch import compile_config
 
 FILE = "pbf_buckets.txt"
-"""The record, in Taichi's offline cache folder."""
 REUSE_LIMIT_BYTES = 64 << 20
 """The most memory a larger bucket may add."""
 

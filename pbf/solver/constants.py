@@ -1,7 +1,5 @@
-"""A stage's scene constants as data, one () struct field its kernels read: a Python number would be baked
-into the kernel's code, and every scene of another spacing would compile again. Read them into locals
-once per particle, so what derives from them is hoisted out of the neighbour loops.
-"""
+"""A stage's scene constants as data, one () struct field: a Python number would be baked into the kernels,
+and every scene of another spacing would compile again. Read them into locals once a particle."""
 
 import numbers
 

@@ -64,15 +64,13 @@ class Diagnostics:
         return self.sums.high[4], status[0], status[1], solids
 
     def frame_speeds(self, bodies=None) -> tuple[float, float]:
-        """The largest particle speed and the fastest point of ``bodies`` (or None), m/s, for the CFL limit,
-        with the grid's record of the frame's lists (``NeighbourGrid.settle_frame``): a frame's one read."""
+        """The fastest particle and body point (m/s) for the CFL limit, and the grid's record: a frame's one read."""
         speed, most_entries, truncated, solids = self._max_speed(bodies)
         self.grid.settle_frame(most_entries, bool(truncated))
         return float(speed), float(solids)
 
     def compute(self, neighbours) -> dict:
-        """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts, from
-        the last substep's lists at the current positions."""
+        """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""
         self._reduce(neighbours)
         high, low = self.sums.high.to_numpy(), self.sums.low.to_numpy()
         sums = [float(h) + float(lo) for h, lo in zip(high, low)]

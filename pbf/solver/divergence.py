@@ -17,8 +17,7 @@ from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradie
 
 @ti.data_oriented
 class DivergenceCorrection:
-    """The pass's loops (run in the substep's first kernel) and scratch. Λ persists as
-    ``State.multiplier`` = Λ/Δt² (1/s²), a pressure independent of the Δt it was found with."""
+    """The pass's loops and scratch; Λ persists as ``State.multiplier`` = Λ/Δt² (1/s²), free of Δt."""
 
     def __init__(self, params: DensityParams, state, boundaries, grid, density):
         self.state = state
@@ -33,8 +32,7 @@ class DivergenceCorrection:
         self.increment = ti.field(ti.f32, shape=params.particle_count)
         """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
         self.wall_gradient = density.wall_gradient
-        """ĝ_wall at x_i, looked up by the warm start (x stays put): the density constraint's field, free
-        until its iterations."""
+        """ĝ_wall at x_i, looked up by the warm start: the density constraint's field, free until its iterations."""
 
     @ti.func
     def change_pair(self, i, j, p: ti.template()):
@@ -51,8 +49,7 @@ class DivergenceCorrection:
 
     @ti.func
     def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), dt, start: ti.template()):
-        """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
-        min(C_i, 0) and the denominator of δλ̂_i."""
+        """Δv_i from the increments δλ̂ (Eq. 12's Δx over Δt); at the ``start`` also min(C_i, 0) and the denominator."""
         h, volume = self.constants[None].h, self.constants[None].volume
         scale = kernel_scale(h)  # once per particle, not per neighbour
         sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])
@@ -100,8 +97,7 @@ class DivergenceCorrection:
 
     @ti.func
     def correct(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
-        """For the top level of a kernel: v += Δv of the warm start (the last Λ; min(C_i, 0) and the
-        denominators at x), then ``iterations`` Jacobi iterations, each all δλ̂, then all Δv."""
+        """For the top level of a kernel: v += Δv of the warm start, then ``iterations`` of all δλ̂, then all Δv."""
         bound = ti.static(self.state.loop_bound)
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:

@@ -1,8 +1,5 @@
-"""Emitters: water added while the scene runs, before each substep's prediction.
-
-A nozzle is a disc of sites in hexagonal packing (a site to each s²); layer j leaves it at
-t_j = start + j s / u and has travelled u (t − t_j) by t, so the water arrives at rest density. A layer
-with water within half a spacing of a site (a drowned nozzle) is skipped, as while the emitters are off.
+"""Emitters: nozzles, discs of sites in hexagonal packing (a site to each s²). Layer j leaves at
+t_j = start + j s / u and has travelled u (t − t_j) by t: the water arrives at rest density.
 """
 
 import itertools
@@ -39,8 +36,7 @@ LAYERS_PER_LAUNCH = 16
 
 @ti.data_oriented
 class Emitters:
-    """Appends each emitter's due layers (the host knows them from the clock) on the device: whether one is
-    drowned and the live count stay there, so an emitting substep reads nothing back."""
+    """Appends the layers due on the device; a drowned one (water within s/2 of a site) is skipped."""
 
     def __init__(self, emitters, spacing_m: float, state, grid=None, capacity: int | None = None):
         self.emitters = emitters
@@ -104,8 +100,7 @@ class Emitters:
         travelled: ti.f32,
         velocity: ti.math.vec3,
     ):
-        """Append ``layers`` layers of one nozzle's ``sites`` sites, layer j centred at centre + (travelled −
-        j s) direction, a drowned one skipped; the live count is moved last."""
+        """Append ``layers`` layers of one nozzle, layer j at centre + (travelled − j s) direction."""
         for j, k in ti.ndrange(layers, sites):
             spacing = self.constants[None].spacing
             radius = 0.5 * spacing
@@ -141,8 +136,7 @@ class Emitters:
             self.state.active[None] = ti.min(first + kept * sites, capacity)
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
-        """Add the layers due by ``now_s`` not in yet, each where it has travelled; when not ``pouring`` they
-        are skipped (turned back on, a nozzle resumes rather than releasing what it held back)."""
+        """Add the layers due by ``now_s`` (skipped when not ``pouring``: a nozzle resumes, never bursts)."""
         for k, emitter in enumerate(self.emitters):
             due = self.layers_due(emitter, now_s)
             if not pouring:

@@ -7,9 +7,8 @@ import taichi as ti
 
 @ti.data_oriented
 class PredictedPositions:
-    """x*, the predicted positions (m), in two buffers: prediction writes the first, each iteration reads
-    one and writes the other, and the last call settles x* into the first. Which holds x* is data, so
-    the kernels compile once."""
+    """x* (m) in two buffers: each iteration reads one and writes the other; x* ends in the first.
+    Which holds x* is data, so the kernels compile once."""
 
     def __init__(self, particle_count: int):
         self.first = ti.Vector.field(3, ti.f32, shape=particle_count)

@@ -1,7 +1,5 @@
-"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) and their rules: the error target (after
-``min_iterations``), the weights restarted when the error rises, and the step back. The rules run on the
-device, in the thread that finishes each iteration's error sum; the host reads the decision only where
-``reads_decisions`` (docs/METHOD.md, "One substep on every backend").
+"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) and their rules, run on the device by the
+thread that finishes each error sum (docs/METHOD.md, "One substep on every backend").
 """
 
 import numpy as np
@@ -48,8 +46,7 @@ class JacobiIterations:
         self._count, self._measured = count, False
 
     def calls(self, iterations: int, measure: bool, launch) -> int:
-        """Launch every call of ``iterations`` but the last (``launch(start)``), fewer where a read decision
-        says the target is met; return the first iteration of the last call."""
+        """Launch every call but the last (fewer once a read says the target is met); return the last's start."""
         self._count, self._measured = iterations, measure
         last = (iterations - 1) // self.per_call * self.per_call
         for start in range(0, last, self.per_call):
@@ -60,8 +57,7 @@ class JacobiIterations:
 
     @ti.func
     def _loop_state(self, measure: ti.template(), k):
-        """(running, the buffer x* is in, the weight's index) before iteration ``k``: without a target a
-        function of k; with one, what the sum of iteration k − 1 decided (:meth:`received`)."""
+        """(running, the buffer x* is in, the weight's index) before iteration ``k``, as iteration k − 1 decided."""
         running, from_second, index = 1, k % 2, k
         if ti.static(measure):
             if k > 0:
@@ -102,10 +98,9 @@ class JacobiIterations:
 
     @ti.func
     def received(self, total, count, context: ti.template()):
-        """The rules after iteration k on the mean error ``total`` / ``count``, run by the thread that summed
-        it (``TreeSum.sum_then``), into the flags the next iteration reads. Target met (after the least
-        iterations): stop, stepping back the share of the last iteration it did not need; error risen: the
-        weights restart."""
+        """The rules after iteration k on the mean error, into the flags the next iteration reads: the target
+        met (after the least iterations): stop, stepping back the share of the last iteration it did not
+        need; the error risen: the weights restart."""
         k, iterations, target, min_iterations, step_back = context
         running, from_second, index = self._loop_state(True, k)
         if running and k < iterations:

@@ -1,11 +1,6 @@
-"""Taichi's internals in one module (no other reads its private names: ``tests/test_private_taichi.py``),
-used only on the Taichi ``WRITTEN_FOR`` and unless ``PBF_PUBLIC_LAUNCH`` is set (:func:`fast_launch`).
-
-:class:`Launcher` calls a kernel variant the ordinary way once (so the compile and the cache see it),
-then launches it directly, setting its scalar and ndarray arguments itself: the same launch without
-Taichi's per-call Python (``tests/test_launch.py``). A call Taichi would refuse goes through Taichi, which
-refuses it in its own words. :func:`watching` tells the studies of launches, element accesses and
-compiles (Taichi has no public hook, so its classes are wrapped while one watches).
+"""Taichi's internals in one module (``tests/test_private_taichi.py``), used only on the Taichi
+``WRITTEN_FOR`` unless ``PBF_PUBLIC_LAUNCH`` is set: :class:`Launcher` (the same launch without Taichi's
+per-call Python) and :func:`watching` (launches, element accesses and compiles, for the studies).
 """
 
 from __future__ import annotations
@@ -76,12 +71,10 @@ def start_taichi(**options) -> None:
 
 
 class Observer:
-    """What a study is told while it watches (:func:`watching`); only the methods a subclass overrides are
-    watched for."""
+    """What a study is told while it watches; only the methods a subclass overrides are watched for."""
 
     def launched(self, kernel: str, waits: bool) -> None:
-        """A kernel launch (its qualified name, Taichi's own ``to_numpy``, ``fill`` … included); ``waits``:
-        the host waits for a result (a returned value, a NumPy array argument)."""
+        """A kernel launch (Taichi's own included); ``waits``: the host waits for a result."""
 
     def accessed(self, read: bool) -> None:
         """An element of a field or ndarray read (``read``) or written from Python (``field[None]``)."""
@@ -184,8 +177,7 @@ def watching(observer: Observer):
 
 
 def profiled_tasks() -> list[tuple[str, float]]:
-    """(task, milliseconds) of every offloaded task the kernel profiler recorded since it was last cleared,
-    in the order they ran (Taichi's public profiler only prints or sums them)."""
+    """(task, milliseconds) of every task the kernel profiler recorded since last cleared, in order."""
     _require("reading the kernel profiler's records")
     profiler = get_default_kernel_profiler()
     profiler._update_records()
@@ -199,7 +191,6 @@ PLAIN = (bool, int, float, str, type(None))
 
 
 def _variant(value):
-    """A template argument's part of a variant's key."""
     if type(value) in PLAIN:
         return (type(value), value)
     if type(value) is tuple:
@@ -210,13 +201,11 @@ def _variant(value):
 REALS = (float, int, np.floating, np.integer)
 """What Taichi takes for a float argument (anything else goes to its own launch, which refuses it)."""
 INTEGERS = (int, np.integer)
-"""What Taichi takes for an integer argument."""
 
 
 def _argument_setters(primal) -> tuple | None:
-    """How each argument is set, as ``Kernel.launch_kernel`` does: None for a template, else (kind, index
-    among the non-template ones). None for the whole kernel when an argument is of another kind (matrix,
-    struct …) or the kernel returns values or prints: such a kernel launches through ``launch_kernel``."""
+    """How each argument is set, as ``Kernel.launch_kernel`` does: None for a template, else (kind, index).
+    None for a kernel with another kind of argument, or that returns values or prints."""
     if primal.return_type is not None or getattr(primal, "has_print", True):
         return None
     setters, place = [], 0
@@ -239,9 +228,8 @@ def _argument_setters(primal) -> tuple | None:
 
 
 class Launcher:
-    """``bound`` (``obj.kernel`` of a ``ti.data_oriented`` object) called with arguments by position or
-    name; its variants launched directly after their first call where :func:`fast_launch` allows.
-    Anything else is called as it is."""
+    """``bound`` (``obj.kernel`` of a ``ti.data_oriented`` object) called with arguments by position or name,
+    each variant the ordinary way once (so the compile and the cache see it), then directly."""
 
     def __init__(self, bound):
         self._bound = bound
@@ -274,8 +262,7 @@ class Launcher:
         self._count = len(primal.arguments) - 1 if direct else 0
         """The arguments the call site passes (the owner is not one)."""
         self._variants: dict = {}
-        """key → (compiled kernel, its template arguments kept alive, its data for the program's launch or
-        None where ``launch_kernel`` launches it)."""
+        """key → (compiled kernel, its template arguments kept alive, its launch data or None)."""
 
     def _in_order(self, args: tuple, kwargs: dict) -> tuple | None:
         """The arguments by position; None where they do not fill the parameters once each."""
@@ -323,8 +310,7 @@ class Launcher:
         return self._primal.launch_kernel(entry[0], self._owner, *args)
 
     def _context(self, compiled, args):
-        """The launch context with every argument set as ``Kernel.launch_kernel`` sets it; None where an
-        argument is not what Taichi takes for its type, or an ndarray carries a gradient."""
+        """The launch context with every argument set; None for one Taichi refuses or an ndarray with a gradient."""
         context = compiled.make_launch_context()
         for setter, value in zip(self._setters, args):
             if setter is None:

@@ -1,7 +1,5 @@
-"""The Model: everything the solver derives from a scene, once, before anything is allocated (frozen: the
-counts, mass, volume, grid and one parameter object per stage); and :class:`Control`, what may change
-between substeps, passed to the kernels as arguments (docs/ARCHITECTURE.md, "How a parameter travels").
-"""
+"""The Model, what the solver derives from a scene once (a parameter object per stage), and :class:`Control`,
+what may change between substeps (docs/ARCHITECTURE.md, "How a parameter travels")."""
 
 from __future__ import annotations
 
@@ -36,8 +34,7 @@ NEIGHBOUR_REACH = 2
 MAX_CORRECTION = 0.1
 """Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
 SCORR_N = 8
-"""The exponent n of s_corr (Eq. 11): 8 confines it to pairs closer than about 0.3 h (the paper's 4 pushes
-at the lattice spacing)."""
+"""n of s_corr (Eq. 11): 8 confines it to pairs closer than about 0.3 h (docs/METHOD.md, "Artificial pressure")."""
 SCORR_DQ = 0.2
 """Δq/h of s_corr (Eq. 11), the paper's."""
 STABLE_GAIN = 1.8
@@ -49,7 +46,6 @@ BYTES_PER_CELL = 12
 PARTICLE_BUCKET_FLOOR = 2**14
 """The smallest particle allocation (:func:`allocation`): every preset below it shares one compile."""
 CELL_BUCKET_FLOOR = 2**16
-"""The smallest grid allocation in cells (:func:`allocation`)."""
 
 
 def allocation(count: int, floor: int) -> int:
@@ -59,8 +55,8 @@ def allocation(count: int, floor: int) -> int:
 
 
 def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple[int, int]:
-    """The (particles, cells) buckets a scene allocates: ``own`` where it is ``compiled`` or none fits, else
-    the smallest ``compiled`` pair that holds it, at most one size up on each and ``limit_bytes`` more."""
+    """The (particles, cells) buckets a scene allocates: ``own``, or the smallest ``compiled`` pair at most one
+    size up on each that adds at most ``limit_bytes``."""
     particles, cells = own
     if own in compiled:
         return own
@@ -89,7 +85,6 @@ class GridParams:
     resolution: tuple[int, int, int]
     """Cells per axis, each at least h / reach wide."""
     reach: int
-    """Cells per h: every neighbour lies within ``reach`` cells of a particle's own."""
     allocated_particles: int = 0
     """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
     cell_bucket: int = 0
@@ -321,8 +316,7 @@ class Control:
 
 @dataclass(frozen=True)
 class Features:
-    """What a substep's kernels compile in: a compile-time argument, one compile per value. Build it with
-    :meth:`of`, which hands out one object per value."""
+    """What a substep's kernels compile in, one compile per value; build it with :meth:`of`."""
 
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
@@ -360,7 +354,6 @@ def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]
 
 
 def _given(value) -> str:
-    """What an assignment gave, for a message: the value as the schema echoes it, and its type."""
     return f"{_show(value)} ({type(value).__name__})"
 
 
@@ -476,8 +469,7 @@ CONTROL_CHECKS = {
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
-    """The weights of ``solver.expert.acceleration`` for the most iterations a substep may run; ``lowest``:
-    the smallest factor 1 − ω μ of a plain iteration."""
+    """The weights of ``solver.expert.acceleration``; ``lowest``: the smallest factor 1 − ω μ of an iteration."""
     if expert.acceleration == "stable":
         return acceleration.stable_weights(lowest, MAX_ITERATIONS)
     rho = expert.chebyshev_rho if expert.acceleration == "chebyshev" else 0.0
@@ -569,8 +561,7 @@ class Model:
         )
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lattice positions (m) and velocities (m/s) of every block, (n, 3) float32, at min + (i + ½) s: half
-        a spacing from a wall, where its ghost planes complete the neighbourhood."""
+        """Every block's lattice, (n, 3) float32 positions (m) at min + (i + ½) s and velocities (m/s)."""
         spacing = self.scene.fluid.spacing_m
         positions, velocities = [np.zeros((0, 3))], [np.zeros((0, 3))]
         for block in self.scene.fluid.blocks:

@@ -1,7 +1,5 @@
-"""Settled starts (``time.settle_s``) kept in Taichi's offline cache folder while the cache is on.
-Settling is deterministic, so a start that finds its file restores it instead, bit for bit. The file
-is named by a hash of all the settled state depends on (:func:`settled_key`); stale files are never read.
-"""
+"""Settled starts (``time.settle_s``) kept in Taichi's offline cache folder, named by a hash of all they
+depend on (:func:`settled_key`): settling is deterministic, so a start restores the file, bit for bit."""
 
 from __future__ import annotations
 
@@ -20,7 +18,6 @@ from pbf.solver.launch import compile_config
 from pbf.solver.state import Snapshot
 
 FOLDER = "pbf_settled"
-"""The settled starts' folder inside Taichi's offline cache folder."""
 VIEW_KEYS = ("source", "name", "description", "camera", "render", "surface")
 """Scene fields that do not move a particle, left out of the key."""
 CODE = ("solver", "scene")

@@ -38,8 +38,7 @@ STAGES = ("predict, sort by cell, neighbour lists", "solver iterations", "veloci
 SETTLE_DAMPING = 0.9
 """Velocities are multiplied by this after each substep of settling (``time.settle_s``)."""
 SETTLE_FINISH_S = 0.25
-"""With ``time.settle_substeps``, settling ends with this long at the run's own Δt, whose rest compression
-it starts from (docs/METHOD.md, "Rest")."""
+"""Settling's last seconds, at the run's own Δt under ``time.settle_substeps`` (docs/METHOD.md, "Rest")."""
 
 
 class StageHook(Protocol):
@@ -50,8 +49,6 @@ class StageHook(Protocol):
 
 
 class NoHook:
-    """The default hook: does nothing."""
-
     _null = contextlib.nullcontext()
 
     def stage(self, name: str) -> ContextManager:
@@ -60,8 +57,7 @@ class NoHook:
 
 @dataclass(frozen=True)
 class Readout:
-    """Per-particle fields for renderers on the device, in the current sorted order, valid until the next
-    step; read-only."""
+    """Per-particle fields for renderers on the device, in sorted order, read-only, valid until the next step."""
 
     count: int
     radius_m: float
@@ -74,18 +70,7 @@ class Readout:
 @dataclass(frozen=True)
 class Neighbourhood:
     """The last neighbour search's lists for renderers on the device, in the order of :class:`Readout`,
-    valid until the next step. A kernel walks them with the grid's neighbour loop::
-
-        @ti.kernel
-        def sums(self, grid: ti.template(), x: ti.template(), entries: pbf.solver.NeighbourList, n: ti.i32):
-            for i in range(n):
-                acc = ti.Vector([0.0, 0.0, 0.0])
-                grid.for_each_neighbour(i, entries, self.pair, acc)   # self.pair(i, j, acc): a ti.func
-
-        sums(hood.grid, hood.positions, hood.entries, hood.count)
-
-    Each list holds every other particle within ``support_m`` where the lists were built (x* of the
-    last substep), none dropped."""
+    valid until the next step (a kernel that walks them: docs/ARCHITECTURE.md, "The data each stage owns")."""
 
     count: int
     """Particles the lists cover (the first ``count`` of the readout's fields)."""
@@ -140,7 +125,7 @@ class Simulation:
         quiet: bool = False,
         hook: StageHook | None = None,
     ):
-        scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
+        scene = schema.load_scene(scene, overrides)
         self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
         self.model = Model.from_scene(scene, buckets.compiled(), buckets.REUSE_LIMIT_BYTES)
         buckets.record(self.model.allocated, self.model.grid.allocated_cells)
@@ -209,9 +194,8 @@ class Simulation:
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
-        """Step ``seconds`` with damped velocities (wave maker still), then start the clock at t = 0 from
-        there, near the solver's own rest state; with ``time.settle_substeps`` all but the last
-        SETTLE_FINISH_S at that coarser Δt."""
+        """Step ``seconds`` with damped velocities, the wave maker still (all but SETTLE_FINISH_S at the
+        coarser Δt of ``time.settle_substeps``), then start the clock at t = 0 there."""
         t = self.scene.time
         fine = t.frame_dt_s / self.control.substeps
         finish = min(seconds, SETTLE_FINISH_S) if t.settle_substeps else seconds
@@ -232,8 +216,7 @@ class Simulation:
         self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
-        """Positions, velocities, the divergence pressure (creation order), time and frame, the bodies:
-        what :meth:`restore` takes."""
+        """What :meth:`restore` takes: the particles' kept fields (creation order), clocks, emitters, bodies."""
         return Snapshot(
             self.positions(),
             self.velocities(),
@@ -317,7 +300,7 @@ class Simulation:
         return positions, velocities, fields, self._checked_layers(snapshot.emitted_layers, count)
 
     def _checked_bodies(self, snapshot) -> np.ndarray | None:
-        """The bodies' states of the snapshot (their start when it holds none), checked against this scene's."""
+        """The snapshot's bodies (their start when it holds none), checked."""
         if self.bodies is None:
             if snapshot.bodies is not None and len(snapshot.bodies):
                 raise ValueError(f"restore: the snapshot holds {len(snapshot.bodies)} bodies; this scene has none")
@@ -356,8 +339,7 @@ class Simulation:
             )
 
     def _checked_layers(self, layers, count: int) -> list[int]:
-        """Emitted layers: a whole number per emitter, 0 to its total, with the particles to come within budget
-        (fewer particles than the layers stand for: skipped layers)."""
+        """Emitted layers: a whole number per emitter, 0 to its total, the particles to come within budget."""
         emitters, spacing = self.scene.emitters, self.scene.fluid.spacing_m
         if not isinstance(layers, (tuple, list, np.ndarray)):
             raise TypeError(
@@ -395,13 +377,11 @@ class Simulation:
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
-        self.pressure_substeps = 0
-        """Substeps summed in ``State.pressure_sum`` since the frame began (pressures())."""
+        self.pressure_substeps = 0  # summed in State.pressure_sum since the frame began
         self._find_neighbours_in_place()
 
     def _find_neighbours_in_place(self) -> None:
-        """The sort and the neighbour lists where the particles stand (the first kernel with Δt = 0), a
-        list that did not fit grown and made again."""
+        """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
         features = Features.of(self.model, self.control, in_place=True)
         self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
         most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
@@ -448,14 +428,14 @@ class Simulation:
         return min(needed, t.max_substeps)
 
     def _outside_inputs(self, dt: float) -> None:
-        """What acts from outside Algorithm 1: the nozzles, the hand (capped for the CFL limit), the bodies'
-        rigid step, and moving walls placed where they stand at the end of the substep."""
+        """What acts from outside Algorithm 1: nozzles, the hand, the bodies' rigid step, moving walls placed
+        where they stand at the substep's end."""
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
             hand_limit_m_s = self.scene.travel_per_substep_m(control.iterations) / dt
             self.integrator.push(control.push, hand_limit_m_s)
-            if self.bodies is not None:  # and the bodies it touches
+            if self.bodies is not None:
                 self.bodies.grab(control.push, hand_limit_m_s)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
@@ -463,8 +443,7 @@ class Simulation:
         self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
-        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
-        most frame_dt_s."""
+        """One PBF step (Algorithm 1) of Δt ≤ frame_dt_s, by default frame_dt_s / control.substeps."""
         control, hook, kernels = self.control, self.hook, self.kernels
         dt = self._checked_dt(dt)
         features = Features.of(self.model, control)  # what the kernels compile in
@@ -498,7 +477,6 @@ class Simulation:
         self.last_dt_s = dt
 
     def _checked_dt(self, dt) -> float:
-        """A substep's Δt: ``dt`` checked, or frame_dt_s / control.substeps for None."""
         frame_dt = self.scene.time.frame_dt_s
         if dt is None:
             return frame_dt / self.control.substeps
@@ -531,10 +509,9 @@ class Simulation:
         return self.state.velocities()
 
     def pressures(self) -> np.ndarray:
-        """(n,) float32 pressure in Pa, in creation order: the mean over the last frame's substeps of
-        p = −ρ0 h² (L/Δt² + Λ), L the multiplier the iterations moved the particle by, Λ the divergence
-        pre-correction's (docs/METHOD.md, "The pressure read-out"). Zero before the first substep; noisy
-        per particle: average over frames for a field."""
+        """(n,) float32 pressure in Pa, in creation order: p = −ρ0 h² (L/Δt² + Λ) averaged over the last frame's
+        substeps (docs/METHOD.md, "The pressure read-out"); zero before the first substep. Noisy per
+        particle: average over frames for a field."""
         total = self.state.in_creation_order(self.state.pressure_sum)
         return total / np.float32(max(self.pressure_substeps, 1))
 

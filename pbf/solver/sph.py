@@ -1,8 +1,5 @@
-"""The SPH kernel, the cubic B-spline (Monaghan 1992), as Taichi functions and NumPy twins.
-
-Density and gradient come from one function, so the projection is a true Gauss-Newton step (the
-paper's poly6/spiky pair pumps energy in: docs/METHOD.md, "The kernel"). h is the support radius
-(W = 0 for r ≥ h). The NumPy twins compute derived constants once and check the Taichi versions.
+"""The cubic B-spline kernel (Monaghan 1992), as Taichi functions and NumPy twins (for constants and
+tests): density and gradient from one function (docs/METHOD.md, "The kernel"). W = 0 for r ≥ h.
 """
 
 import math
@@ -31,10 +28,8 @@ def scaled_kernel(r2, k):
 
 @ti.func
 def scaled_kernel_and_gradient(r: ti.template(), k):
-    """(W, ∇W) at offset r, k = kernel_scale(h), sharing one square root.
-
-    ∇W = W'(|r|) r/|r| with W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½ (zero force at r = 0) and
-    −σ/h⁵ · 6(1 − q)²/q beyond; both pieces computed, one selected (no branch)."""
+    """(W, ∇W) at offset r, k = kernel_scale(h): ∇W = W'(|r|) r/|r|, W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½
+    (zero at r = 0) and −σ/h⁵ · 6(1 − q)²/q beyond; both computed, one selected (no branch)."""
     q = r.norm() * k[0]
     t = ti.max(1.0 - q, 0.0)
     inner = q <= 0.5
@@ -123,10 +118,9 @@ def ghost_lattice_density(d, spacing, h):
 
 
 def surface_ghost_calibration(spacing, h):
-    """(g_below, g_top, ψ_top) of the free-surface ghost (``pbf.solver.density``), on a lattice filling
-    the half-space below a flat surface, in units of s. g = |Σ_j V W_ij ĝ_j| is the smoothed colour
-    gradient in the top layer and the one below; ψ_top/ρ0 the density of the planes above the top
-    layer. The ghost density, linear in g from 0 at g_below to ψ_top at g_top, puts the top layer at ρ0."""
+    """(g_below, g_top, ψ_top) of the free-surface ghost on a half-space lattice, in units of s: the smoothed
+    colour gradient g = |Σ_j V W_ij ĝ_j| of the layer below the top and of the top, and the density the top
+    misses; the ghost, linear in g from 0 to ψ_top, puts the top layer at ρ0."""
     s = 1.0
     h = h / spacing
     n = int(math.ceil(h)) + 1

@@ -1,6 +1,5 @@
-"""Particle state: what persists from one substep to the next. Each per-particle quantity is declared
-once, in :data:`PARTICLE_FIELDS`: allocated, carried by the sort, initialised for new particles and kept
-by snapshots from there; a stage's own array that must follow the sort is attached with :meth:`State.carry`.
+"""Particle state, what persists between substeps: each per-particle quantity declared once, in
+:data:`PARTICLE_FIELDS`; a stage's own array that must follow the sort is attached with :meth:`State.carry`.
 """
 
 from dataclasses import dataclass, field
@@ -19,7 +18,6 @@ class ParticleField:
     name: str
     """The attribute of State that holds it."""
     dtype: object
-    """ti.f32 or ti.i32."""
     components: int
     """1 (a scalar) or 3 (a vector)."""
     unit: str
@@ -57,7 +55,7 @@ PARTICLE_FIELDS = (
 )
 """The particles' quantities, in the order the sort carries them."""
 SNAPSHOT_NAMES = {"x": "positions_m", "v": "velocities_m_s"}
-"""Kept fields that a :class:`Snapshot` holds under a name of their own; the others are in its ``fields``."""
+"""Kept fields a :class:`Snapshot` holds under their own name; the others are in its ``fields``."""
 
 
 @dataclass(frozen=True)
@@ -82,16 +80,15 @@ class Snapshot:
 
 @ti.data_oriented
 class State:
-    """A (capacity,) field per entry of :data:`PARTICLE_FIELDS`; the first ``active[None]`` slots hold the
-    live particles in sorted order (slot i holds particle ``index[i]``), emitters append after them."""
+    """A (capacity,) field per :data:`PARTICLE_FIELDS` entry; slots below ``active[None]`` hold the live ones."""
 
     def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
         self.capacity = capacity
         self.fields = tuple(fields)
         self.active = ti.field(ti.i32, shape=())
         self.loop_bound = capacity if keeps_decisions_on_device() else self.active
-        """What loops over the live particles run to (:meth:`live_bound`): on a GPU the capacity, known
-        when compiling (a bound read at run time is a one-thread task); on the CPU the live count."""
+        """What loops over the live particles run to: on a GPU the capacity (a bound read at run time is a
+        one-thread task), on the CPU the live count."""
         self._carried = []
         """(field, scratch) of every per-particle array the sort carries, the state's own first."""
         for spec in self.fields:
@@ -115,8 +112,7 @@ class State:
         return int(self.active[None])
 
     def load(self, values: dict) -> None:
-        """Make ``values`` (field name → array in creation order; x required) the live particles; a field not
-        given starts at its initial value."""
+        """Make ``values`` (name → array in creation order; x required) the live particles, the rest initial."""
         n = len(values["x"])
         for spec in self.fields:
             shape = (self.capacity,) if spec.components == 1 else (self.capacity, spec.components)
@@ -136,8 +132,7 @@ class State:
 
     @ti.func
     def gather(self, slot, i):
-        """Particle i's carried arrays into ``slot`` of their scratch (the sort); :meth:`take_gathered`
-        brings them back in a later loop."""
+        """Particle i's carried arrays into ``slot`` of their scratch (the sort), until :meth:`take_gathered`."""
         for k in ti.static(range(len(self._carried))):
             self._carried[k][1][slot] = self._carried[k][0][i]
 

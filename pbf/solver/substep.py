@@ -1,7 +1,5 @@
-"""The substep's kernels, the same on every backend: the stages' loops (``@ti.func``) composed into
-lines 1-7 (:meth:`SubstepKernels.find_neighbours`), the iterations but the last call (``iterate``), and
-the last call with lines 20-23 (``iterate_and_finish``) (docs/METHOD.md, "One substep on every backend").
-"""
+"""The substep's three kernels, the same on every backend, composed of the stages' ``@ti.func`` loops
+(docs/METHOD.md, "One substep on every backend")."""
 
 import taichi as ti
 
@@ -11,14 +9,12 @@ from pbf.solver.launch import Launcher
 
 @ti.data_oriented
 class SubstepKernels:
-    """The kernels that run a substep's stages, the objects given."""
+    """The kernels that run the stages of ``stages``, the Simulation."""
 
     def __init__(self, stages):
-        """``stages``: the Simulation, whose stages these kernels compose."""
         self.state, self.integrator, self.grid = stages.state, stages.integrator, stages.grid
         self.density, self.divergence = stages.density, stages.divergence
         self.iterations, self.postprocess = stages.iterations, stages.postprocess
-        # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
 
@@ -45,9 +41,8 @@ class SubstepKernels:
         first_of_frame: bool,
         max_speed: float,
     ) -> None:
-        """The iterations from ``start``, x* settled, then lines 20-23: v, confinement, XSPH, v capped at
-        ``max_speed`` (0: not), x = x*, and the pressure at ``pressure_per_impulse`` Pa per unit multiplier
-        (its sum restarted at the ``first_of_frame`` substep)."""
+        """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
+        and the pressure (``pressure_per_impulse`` Pa a unit of multiplier, restarted ``first_of_frame``)."""
         self._call(
             features,
             control,
