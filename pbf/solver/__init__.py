@@ -1,8 +1,5 @@
-"""The solver wing: the physics of Position Based Fluids, a module per stage of Algorithm 1.
-
-Its public face (what the application and the studies use) is imported here. The modules inside
-import only the scene schema (``pbf.scene``), Taichi and NumPy: no plotting, command line or images.
-"""
+"""The solver wing: Position Based Fluids, a module per stage of Algorithm 1, importing only ``pbf.scene``,
+Taichi and NumPy. Its public face is imported here."""
 
 from pbf.solver.backend import ARCHES, ENV_VAR, BackendError, start_backend
 from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np

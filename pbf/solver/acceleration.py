@@ -1,15 +1,6 @@
-"""The weights that accelerate the Jacobi iterations of the density constraint (``solver.expert.acceleration``).
-
-Every scheme is the two-step recurrence of Wang 2015, Eq. 12,
-
-    x^{k+1} = x^{k−1} + w_{k+1} (x̂^{k+1} − x^{k−1}),    x̂^{k+1} the plain Jacobi update of x^k,
-
-with weights w_1 = 1, w_2, …. Linearised, a plain iteration maps each error mode to λ times itself,
-λ in [1 − ω μ_max, 1] (``pbf.solver.sph.jacobi_gain``), and k weighted iterations map it to P_k(λ):
-P_0 = 1, P_1 = λ, P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1}. A substep turns the residual into
-velocity, so a mode that P_k reverses past −1/3 grows from substep to substep; the default (stable)
-weights keep every P_k within [−REVERSAL, 1], Chebyshev's do not (docs/METHOD.md, "Accelerated
-iterations that do not pump the water").
+"""The weights w of the iterations' two-step acceleration (Wang 2015, Eq. 12), x^{k+1} = x^{k−1} +
+w_{k+1} (x̂^{k+1} − x^{k−1}). A mode that a plain iteration scales by λ, k iterations scale by P_k(λ):
+P_0 = 1, P_1 = λ, P_{k+1} = w_{k+1} λ P_k + (1 − w_{k+1}) P_{k−1} (docs/METHOD.md, "Accelerated iterations").
 """
 
 from __future__ import annotations
@@ -19,19 +10,16 @@ import math
 import numpy as np
 
 REVERSAL = 0.25
-"""The most a weighted sequence of iterations may reverse any error mode (P_k ≥ −REVERSAL): inside the
-1/3 past which a substep pumps the mode (module docstring)."""
+"""The most any error mode may be reversed (P_k ≥ −REVERSAL), inside the 1/3 past which substeps pump it."""
 WEIGHT_CAP = 1.9
-"""The largest stable weight: in the two-step recurrence a mode's error decays by at least √(w − 1) per
-iteration; toward 2 the recurrence stops damping, and the unbounded choice jumps about."""
+"""The largest stable weight: a mode keeps at least √(w − 1) of itself an iteration, so toward 2 none decays."""
 SPECTRUM_SAMPLES = 4001
 """Points of the spectrum the polynomials are checked on."""
 
 
 def stable_weights(lowest: float, count: int, reversal: float = REVERSAL) -> tuple[float, ...]:
-    """w_1 … w_count of the stable weights for a plain iteration whose modes' factors λ fill
-    [``lowest``, 1] (module docstring). Each is the largest w ≤ WEIGHT_CAP with −reversal ≤ P_k ≤ 1 on
-    the spectrum; P_{k+1} = a + w b is linear in w at every λ, so the bound is a minimum over λ."""
+    """w_1 … w_count for factors λ in [``lowest``, 1]: each the largest w ≤ WEIGHT_CAP keeping
+    −reversal ≤ P_k ≤ 1 (P_{k+1} = a + w b is linear in w, so the bound is a minimum over λ)."""
     lam = np.linspace(lowest, 1.0, SPECTRUM_SAMPLES)[:-1]  # at λ = 1 every P_k is 1, whatever w
     before, now = np.ones_like(lam), lam.copy()
     weights = [1.0]

@@ -1,18 +1,7 @@
-"""Choosing and starting Taichi's backend, once per process, and what the host knows of its device.
-
-``arch`` (or the ``PBF_ARCH`` environment variable) is one of ARCHES:
-
-- ``auto`` (the default): CUDA when an NVIDIA GPU answers, else a hardware Vulkan device (or Metal on
-  macOS), else Taichi's CPU backend. A software Vulkan driver (Mesa's lavapipe, device name
-  "llvmpipe") is never taken over the CPU backend, which runs the same kernels faster.
-- ``gpu``: the best GPU backend that starts, in the order CUDA, Metal, Vulkan (a software Vulkan
-  device included, named as such in the start line); an error when none does.
-- ``cpu``, ``cuda``, ``vulkan``, ``metal``: that backend, or an error saying why it cannot start.
-  Taichi itself falls back to the CPU when a GPU backend fails; that is caught and reported.
-
-The choice is printed once, in one line that names the device and Taichi's version. Taichi's own
-lines stay silent: its banner is switched off by ``pbf/__init__.py``, and the line ``ti.init``
-prints is caught by ``pbf.solver.launch.start_taichi``.
+"""Choosing and starting Taichi's backend once per process, and what the host knows of its device.
+``auto`` never takes a software Vulkan driver (the CPU backend is faster); ``gpu`` takes the best GPU
+backend that starts; one asked for by name that cannot start is a BackendError (docs/BENCHMARKS.md,
+"Backends: the CPU's path and the GPU's").
 """
 
 import contextlib
@@ -38,16 +27,13 @@ class BackendError(RuntimeError):
 
 @dataclass(frozen=True)
 class Device:
-    """What runs the kernels: the backend, the device's name and whether it is a software rasterizer."""
-
     arch: str
     """One of "cpu", "cuda", "vulkan", "metal"."""
     name: str
     software: bool = False
-    """A CPU posing as a GPU (Mesa's lavapipe/llvmpipe): correct, and slower than the CPU backend."""
+    """A CPU posing as a GPU (Mesa's lavapipe/llvmpipe)."""
     memory_bytes: int | None = None
-    """The device's own memory where the host can tell (CUDA, a hardware Vulkan device); None where the
-    kernels use the host's memory (CPU, Metal's unified memory, a software Vulkan driver)."""
+    """The device's own memory where the host can tell; None where the kernels use the host's."""
 
 
 _started: Device | None = None
@@ -66,12 +52,8 @@ def taichi_version() -> str:
     return ".".join(map(str, ti.__version__))
 
 
-# ---------------------------------------------------------------------------------------------- devices
-
-
 def _cuda_device() -> Device | None:
-    """The first CUDA device (the one Taichi uses), from NVIDIA's driver library; None without one.
-    Taichi is then started once to be sure it can use it."""
+    """The first CUDA device (Taichi's), from NVIDIA's driver library, once Taichi has started on it; or None."""
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
         return None
     name, memory = "CUDA GPU", None
@@ -125,9 +107,7 @@ VK_PHYSICAL_DEVICE_TYPE = {1: "integrated", 2: "discrete", 3: "virtual", 4: "cpu
 
 
 def vulkan_devices() -> list[dict]:
-    """Every Vulkan device the loader lists, in its order: name, type (VK_PHYSICAL_DEVICE_TYPE), API
-    minor version and largest device-local heap (bytes). Empty without a Vulkan loader or driver. Read
-    through ctypes from libvulkan, without starting Taichi (which keeps its device to itself)."""
+    """Every Vulkan device (name, type, API minor version, largest local heap in bytes), read from libvulkan."""
     try:
         vulkan = ctypes.CDLL(ctypes.util.find_library("vulkan") or "libvulkan.so.1")
     except OSError:
@@ -145,14 +125,12 @@ def vulkan_devices() -> list[dict]:
         handles = (ctypes.c_void_p * count.value)()
         vulkan.vkEnumeratePhysicalDevices(instance, ctypes.byref(count), handles)
         for handle in handles:
-            # VkPhysicalDeviceProperties: apiVersion, driverVersion, vendorID, deviceID, deviceType (uint32
-            # each), then deviceName[256]; the limits after them take under 1 kB. The buffers are larger.
+            # VkPhysicalDeviceProperties: five uint32 (apiVersion … deviceType), deviceName[256], < 1 kB of limits.
             properties = ctypes.create_string_buffer(4096)
             vulkan.vkGetPhysicalDeviceProperties(ctypes.c_void_p(handle), properties)
             api, _, _, _, kind = struct.unpack_from("<5I", properties.raw, 0)
             name = properties.raw[20:276].split(b"\0")[0].decode(errors="replace")
-            # VkPhysicalDeviceMemoryProperties: memoryTypeCount, 32 types of 8 bytes, memoryHeapCount at
-            # 260, then 16 heaps of (VkDeviceSize size, flags) from 264, 16 bytes each.
+            # VkPhysicalDeviceMemoryProperties: memoryHeapCount at 260, 16-byte heaps (size, flags) from 264.
             memory = ctypes.create_string_buffer(1024)
             vulkan.vkGetPhysicalDeviceMemoryProperties(ctypes.c_void_p(handle), memory)
             heaps = [
@@ -178,9 +156,7 @@ def _is_software(device: dict) -> bool:
 
 
 def _taichi_vulkan_choice(devices: list[dict]) -> dict | None:
-    """The device Taichi 1.7's Vulkan backend picks (``VulkanDeviceCreator::pick_physical_device``):
-    TI_VISIBLE_DEVICE's, else the highest score, discrete (1000) over integrated (500) over the rest,
-    plus 100 per API minor version."""
+    """The device Taichi 1.7's Vulkan backend picks (``VulkanDeviceCreator::pick_physical_device``)."""
     if not devices:
         return None
     visible = os.environ.get("TI_VISIBLE_DEVICE", "")
@@ -199,9 +175,6 @@ def _vulkan_device() -> Device | None:
 
 def _metal_device() -> Device | None:
     return Device("metal", "Apple GPU") if sys.platform == "darwin" else None
-
-
-# ---------------------------------------------------------------------------------------------- starting
 
 
 def _choose(requested: str) -> tuple[Device, str]:
@@ -258,17 +231,9 @@ def start_backend(
     fast_compile: bool = False,
     kernel_profiler: bool = False,
 ) -> str:
-    """Start Taichi on ``arch`` (argument, else $PBF_ARCH, else "auto"; see the module docstring) and
-    return the backend's name: "cpu", "cuda", "vulkan" or "metal". ``cpu_threads`` caps the CPU
-    backend's threads (default: one per core). ``fast_compile`` turns off Taichi's advanced IR
-    optimisation: a much shorter compile and a slightly slower step (the test suite uses it); the
-    arithmetic is the same up to rounding, not bit for bit, and each mode is deterministic by
-    itself. ``kernel_profiler`` starts Taichi's kernel profiler (``pbf.study.launches`` counts its tasks).
-
-    Taichi can only run one backend per process: a second call with a different explicit request
-    raises BackendError; a matching, "auto" or (on a GPU backend) "gpu" request returns the backend
-    already running.
-    """
+    """Start Taichi on ``arch`` (else $PBF_ARCH, else "auto") and return the backend's name; ``fast_compile``
+    skips the advanced IR optimisation (shorter compile, slower step, other rounding). One backend a
+    process: asking for another later raises BackendError."""
     global _started
     requested = (arch or os.environ.get(ENV_VAR) or "auto").lower()
     if requested not in ARCHES:
@@ -295,7 +260,7 @@ def start_backend(
     except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
         raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
     if device.arch != "cpu" and running != getattr(ti, device.arch):
-        # Taichi falls back to the CPU by itself when a GPU backend fails to start.
+        # Taichi's own fallback to the CPU.
         ti.reset()
         raise BackendError(
             f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
@@ -311,8 +276,7 @@ def start_backend(
 
 
 def describe(device: Device, arch_name: str | None = None) -> str:
-    """The start line's device: x64 or arm64 for the CPU backend (Taichi's name for its arch, once
-    started), else the device's name."""
+    """The start line's device: the CPU backend's arch (x64, arm64), else the device's name."""
     if device.arch == "cpu":
         return arch_name or current_arch().name
     memory = f", {device.memory_bytes / 2**30:.1f} GiB" if device.memory_bytes else ""
@@ -320,7 +284,6 @@ def describe(device: Device, arch_name: str | None = None) -> str:
 
 
 def running_device() -> Device:
-    """The device of the running backend."""
     if _started is None:
         raise BackendError("no backend has been started in this process")
     return _started
@@ -332,16 +295,13 @@ def on_gpu() -> bool:
 
 
 def gpu_blocks() -> bool:
-    """Whether prefix sums and tree sums built now take a GPU's blocks of 32 entries (``pbf.solver.scan``):
-    on a GPU backend, and on the CPU inside :func:`in_gpu_blocks`."""
+    """Whether sums built now take a GPU's blocks (``pbf.solver.scan``): on a GPU, or inside :func:`in_gpu_blocks`."""
     return on_gpu() or _gpu_blocks_on_cpu
 
 
 @contextlib.contextmanager
 def in_gpu_blocks(enabled: bool = True):
-    """Sums built inside take a GPU backend's blocks on any backend: the same results (integer sums
-    exactly, float sums compensated), and the launches a GPU makes, which Taichi's profiler counts on
-    the CPU (``python -m pbf.study.bench counts --gpu-blocks``)."""
+    """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
     global _gpu_blocks_on_cpu
     before, _gpu_blocks_on_cpu = _gpu_blocks_on_cpu, enabled
     try:
@@ -351,16 +311,12 @@ def in_gpu_blocks(enabled: bool = True):
 
 
 def sums_in_shared_memory() -> bool:
-    """Whether float sums add up in each GPU block's shared memory (``pbf.solver.scan.TreeSum``): on
-    CUDA only, as Taichi's SPIR-V code generator (Vulkan, Metal) fails on a kernel whose second loop
-    holds a shared array, and the substep's kernels hold several sums."""
+    """Whether float sums add up in shared memory: CUDA only (SPIR-V fails on a second loop with a shared array)."""
     return _started is not None and _started.arch == "cuda"
 
 
 def keeps_decisions_on_device() -> bool:
-    """Whether a Simulation built now takes the GPU backends' choices (loops over the bucket, two
-    iterations a call, the stopping test read on the device): on a GPU backend, and on the CPU inside
-    :func:`decisions_on_device` (tests compare the two)."""
+    """Whether a Simulation built now takes the GPU's choices: on a GPU, or inside :func:`decisions_on_device`."""
     return on_gpu() or _decisions_on_device_on_cpu
 
 
@@ -377,10 +333,7 @@ def decisions_on_device(enabled: bool = True):
 
 @contextlib.contextmanager
 def light_compile():
-    """Kernels that compile inside (their first call) skip Taichi's advanced IR optimisation, as every
-    kernel does under ``fast_compile``: for launches whose run time is nothing beside their compile,
-    such as the bodies' rigid step (docs/BENCHMARKS.md, "Start-up: cold and warm"). Such a kernel is
-    compiled so on every start and rounds its own way, deterministically."""
+    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
     config = compile_config()
     before = config.advanced_optimization
     config.advanced_optimization = False
@@ -412,9 +365,7 @@ def _cuda_free_bytes() -> int | None:
 
 
 def device_memory_bytes() -> int:
-    """Memory the running backend can still give a Simulation's fields, bytes: the CUDA device's free
-    memory (else its total), a hardware Vulkan device's largest device-local heap, else the host's
-    free memory (CPU, Metal's unified memory, a software Vulkan driver, no backend yet)."""
+    """Memory the backend can still give the fields, bytes: the GPU's where it can tell, else the host's."""
     if _started is None:
         return host_available_bytes()
     device = _started
@@ -435,12 +386,7 @@ def memory_place() -> str:
 
 
 def restart_backend() -> None:
-    """Free every Taichi field and compiled kernel of this process and start the same backend again.
-
-    Taichi keeps each Simulation's kernels until the runtime is reset, so a process that builds
-    hundreds of Simulations, like the test suite, grows with each. Simulations made before the
-    restart cannot be used after it.
-    """
+    """Free every Taichi field and kernel and start the same backend again; earlier Simulations cannot be used."""
     if _started is None:
         raise BackendError("restart_backend(): no backend has been started in this process")
     start_taichi(**_options)  # ti.init begins with ti.reset(), which frees the runtime

@@ -1,16 +1,5 @@
-"""The capacity buckets a cache folder holds compiled: a start may take one a size up instead of its own.
-
-The solver sizes its arrays by capacity buckets, powers of two (``pbf.solver.model.allocation``),
-because Taichi's offline cache names a compiled kernel by the shapes of the fields it touches: a
-scene whose counts fall into a bucket no run before used compiles every kernel again.
-
-An array's length changes nothing of the results (``tests/test_start_cache.py``). A start therefore
-takes, where its own buckets were never compiled, the smallest pair of buckets a run before compiled
-that holds it and is at most one size up on each (:func:`pbf.solver.model.reused_allocation`), while
-that adds at most REUSE_LIMIT_BYTES of memory.
-
-Each start records its pair in ``pbf_buckets.txt`` in Taichi's offline cache folder, a line of
-"particles cells" each, only while the offline cache is on.
+"""The capacity buckets a cache folder holds compiled, a "particles cells" line per start: a start whose
+own were never compiled may take a pair one size up that was (:func:`pbf.solver.model.reused_allocation`).
 """
 
 from __future__ import annotations
@@ -20,7 +9,6 @@ from pathlib import Path
 from pbf.solver.launch import compile_config
 
 FILE = "pbf_buckets.txt"
-"""The record, in Taichi's offline cache folder."""
 REUSE_LIMIT_BYTES = 64 << 20
 """The most memory a larger bucket may add."""
 
@@ -34,9 +22,7 @@ def _path() -> Path | None:
 
 
 def compiled() -> frozenset[tuple[int, int]]:
-    """The (particles, cells) bucket pairs the starts before recorded in this cache folder (none when
-    the offline cache is off, the record is missing or unreadable; a line that is not two positive
-    integers is skipped)."""
+    """The (particles, cells) pairs recorded in this cache folder (lines that are not two positive integers skipped)."""
     path = _path()
     if path is None:
         return frozenset()
@@ -61,7 +47,7 @@ def record(particles: int, cells: int) -> None:
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("a", encoding="ascii") as file:  # one short line: starts beside this one append whole lines
+        with path.open("a", encoding="ascii") as file:  # one short line: concurrent appends stay whole
             file.write(f"{particles} {cells}\n")
     except OSError:
         return

@@ -1,12 +1,5 @@
-"""A stage's scene constants as data: one () struct field its kernels read, instead of Python numbers.
-
-Taichi bakes a Python number that a kernel reads into the kernel's code, by which its offline cache
-names the compiled kernel: every scene of another spacing or container would compile again. Read
-from a field, a constant is data, and one compile serves every scene.
-
-A kernel reads the constants it needs into locals once per particle (``c = self.constants[None]``),
-so that the compiler hoists what is derived from them out of the neighbour loops.
-"""
+"""A stage's scene constants as data, one () struct field: a Python number would be baked into the kernels,
+and every scene of another spacing would compile again. Read them into locals once a particle."""
 
 import numbers
 
@@ -27,10 +20,8 @@ def _member_type(name: str, value):
 
 
 def scene_constants(**values):
-    """A () struct field holding ``values`` (name → number, bool or a 2-4 vector): ints and bools as
-    int32, reals as float32. Read a member in a kernel as ``self.constants[None].name``.
-
-    Written in one launch: a write per member from Python would compile a kernel per member."""
+    """A () struct field holding ``values`` (name → number, bool or 2-4 vector; int32 or float32), written in
+    one launch. Read a member in a kernel as ``self.constants[None].name``."""
     types = {name: _member_type(name, value) for name, value in values.items()}
     struct = ti.types.struct(**types)
     field = struct.field(shape=())

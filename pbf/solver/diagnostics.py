@@ -1,5 +1,4 @@
-"""Statistics of the current state, reduced inside a kernel (no Python loop over particles, no atomic
-into one address: tree reductions of ``pbf.solver.scan``, the same bits on any thread count)."""
+"""Statistics of the current state, by tree reductions (``pbf.solver.scan``): the same bits on any thread count."""
 
 import taichi as ti
 
@@ -21,8 +20,7 @@ class Diagnostics:
         self.speed = ti.field(ti.f32, shape=state.capacity)
         """|v| of each particle, for the maximum."""
         self.sums = TreeSum(state.capacity, 6)
-        """Σ max(ρ/ρ0 − 1, 0), Σ |v|², Σ neighbours (slots 0-2), then the maxima of max(ρ/ρ0 − 1, 0), |v|
-        and the neighbour count (slots 3-5)."""
+        """Sums of the three terms (slots 0-2), then maxima of the error, |v| and the neighbours (3-5)."""
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
@@ -49,8 +47,7 @@ class Diagnostics:
                 self.density_ratio[i] = self.density.density_ratio(self.state.x, i, neighbours)
 
     def density_ratios(self, neighbours):
-        """ρ/ρ0 of every particle at the current positions, with the last substep's neighbour lists;
-        returns the field."""
+        """The field of ρ/ρ0 at the current positions, with the last substep's neighbour lists."""
         self._density_ratios(neighbours)
         return self.density_ratio
 
@@ -67,20 +64,13 @@ class Diagnostics:
         return self.sums.high[4], status[0], status[1], solids
 
     def frame_speeds(self, bodies=None) -> tuple[float, float]:
-        """The largest particle speed and the fastest point of any of ``bodies`` (``pbf.solver.bodies``,
-        or None), m/s, read once a frame for the CFL limit: one reduction, no neighbour pass. The same
-        transfer brings the grid's record of the frame's neighbour lists (``NeighbourGrid.settle_frame``),
-        so that a frame reads the device once."""
+        """The fastest particle and body point (m/s) for the CFL limit, and the grid's record: a frame's one read."""
         speed, most_entries, truncated, solids = self._max_speed(bodies)
         self.grid.settle_frame(most_entries, bool(truncated))
         return float(speed), float(solids)
 
     def compute(self, neighbours) -> dict:
-        """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts.
-
-        Densities use the neighbour lists of the last substep with the current positions, as the
-        solver's final iteration did.
-        """
+        """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""
         self._reduce(neighbours)
         high, low = self.sums.high.to_numpy(), self.sums.low.to_numpy()
         sums = [float(h) + float(lo) for h, lo in zip(high, low)]

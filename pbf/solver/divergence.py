@@ -1,19 +1,10 @@
-"""The divergence pre-correction: a velocity-level pass inside the prediction (after the neighbour
-search, before the iterations) that removes the part of v that would compress the fluid, warm-started
-from the last substep's pressure; x* is then predicted again from the new v (docs/METHOD.md, "Rest").
+"""The divergence pre-correction: after the neighbour search, v loses the part that would compress the
+fluid, warm-started from the last substep's pressure; x* is then predicted again (docs/METHOD.md, "Rest").
+With ΔC_i = (Δt/h) [Σ_j ĝ_ij · (v_i − v_j) + ĝ_wall · (v_i − v_wall)], Jacobi iterations in the form of
+Eq. 10 drive c_i = ΔC_i + min(C_i, 0) to ≤ 0 at fixed x:
 
-The change of the density constraint that v would cause over Δt,
-
-    ΔC_i = (Δt/h) [Σ_j ĝ_ij · (v_i − v_j) + ĝ_wall · (v_i − v_wall)],
-
-is driven to c_i = ΔC_i + min(C_i, 0) ≤ 0 by Jacobi iterations in the form of Eq. 10:
-
-    δλ̂_i = −ω c_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂),   Λ_i ← min(Λ_i + δλ̂_i, 0)
+    δλ̂_i = −ω c_i / (|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂),   Λ_i ← min(Λ_i + δλ̂_i, 0)  (no suction)
     Δv_i  = (h/Δt) [Σ_j (δλ̂_i + δλ̂_j) ĝ_ij + δλ̂_i ĝ_wall]
-
-Λ_i is clamped at zero (pressure, never suction) and applied again at the start of the next substep
-(scaled by (Δt_new/Δt_old)²), so the iterations only correct the change. Positions stay at x; the
-neighbour lists are those just built at x*.
 """
 
 import taichi as ti
@@ -26,16 +17,14 @@ from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradie
 
 @ti.data_oriented
 class DivergenceCorrection:
-    """The pass's loops (``@ti.func``, run in the substep's first kernel) and scratch. Λ persists between
-    substeps as ``State.multiplier`` = Λ/Δt² (1/s²), a pressure, which needs no record of the Δt it was
-    found with."""
+    """The pass's loops and scratch; Λ persists as ``State.multiplier`` = Λ/Δt² (1/s²), free of Δt."""
 
     def __init__(self, params: DensityParams, state, boundaries, grid, density):
         self.state = state
         self.boundaries = boundaries
         self.grid = grid
         self.constants = density.constants
-        """h, V, ω and ε̂ as data: the density constraint's (``DensityConstraint.constants``)."""
+        """h, V, ω and ε̂: the density constraint's."""
         self.denominator = ti.field(ti.f32, shape=params.particle_count)
         """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ at the fixed positions."""
         self.deficit = ti.field(ti.f32, shape=params.particle_count)
@@ -43,9 +32,7 @@ class DivergenceCorrection:
         self.increment = ti.field(ti.f32, shape=params.particle_count)
         """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
         self.wall_gradient = density.wall_gradient
-        """ĝ_wall at x_i, looked up by the warm start and read by every iteration (x stays put while v is
-        corrected): the density constraint's field, free outside its iterations, which come after this
-        pass."""
+        """ĝ_wall at x_i, looked up by the warm start: the density constraint's field, free until its iterations."""
 
     @ti.func
     def change_pair(self, i, j, p: ti.template()):
@@ -62,8 +49,7 @@ class DivergenceCorrection:
 
     @ti.func
     def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), dt, start: ti.template()):
-        """Δv_i from the increments δλ̂ (the Δx of Eq. 12 over Δt); at the ``start``, in the same pass,
-        min(C_i, 0) and the denominator of δλ̂_i."""
+        """Δv_i from the increments δλ̂ (Eq. 12's Δx over Δt); at the ``start`` also min(C_i, 0) and the denominator."""
         h, volume = self.constants[None].h, self.constants[None].volume
         scale = kernel_scale(h)  # once per particle, not per neighbour
         sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])
@@ -111,10 +97,7 @@ class DivergenceCorrection:
 
     @ti.func
     def correct(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
-        """The pass's loops for the top level of a kernel: v += Δv of the warm start (the last substep's
-        Λ, with min(C_i, 0) and the denominators at x), then ``iterations`` Jacobi iterations, each all
-        δλ̂ from the current v, then all Δv. Every loop runs over the particles' bucket (no one-thread
-        task for a bound)."""
+        """For the top level of a kernel: v += Δv of the warm start, then ``iterations`` of all δλ̂, then all Δv."""
         bound = ti.static(self.state.loop_bound)
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:

@@ -1,15 +1,5 @@
-"""Emitters: water added while the scene runs, before each substep's prediction.
-
-A nozzle is a disc of sites in hexagonal packing (a site to each s² of it), perpendicular to its
-direction. The stream is a pile of such layers one spacing apart: layer j leaves the nozzle at
-t_j = start + j s / u and, at time t, has travelled u (t − t_j), so the new water arrives at the rest
-density (no explosion where it appears). The layers emitted so far are part of a snapshot, so a
-restored one replays exactly. Slots for every particle the emitters will add are allocated at the start
-(``Scene.particle_capacity``); new particles take the slots after the live ones.
-
-A drowned nozzle pauses: a layer whose sites the water already occupies (a live particle within
-half a spacing of a site, where the density constraint would push the pair apart at once) is
-skipped, as while the emitters are switched off, and the stream resumes once the water has gone.
+"""Emitters: nozzles, discs of sites in hexagonal packing (a site to each s²). Layer j leaves at
+t_j = start + j s / u and has travelled u (t − t_j) by t: the water arrives at rest density.
 """
 
 import itertools
@@ -25,8 +15,7 @@ from pbf.solver.model import allocation
 
 
 def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
-    """(k, 3) offsets (m) of the nozzle's sites from its centre, in its plane: the hexagonal rows of
-    ``Emitter.disc_rows``, so that their count is ``Emitter.sites_per_layer``'s."""
+    """(k, 3) offsets (m) of the nozzle's sites from its centre, in its plane (``Emitter.disc_rows``)."""
     direction = np.array(emitter.unit_direction())
     helper = np.eye(3)[int(np.argmin(np.abs(direction)))]  # the axis least along the stream
     u = np.cross(direction, helper)
@@ -42,16 +31,12 @@ def nozzle_sites(emitter: Emitter, spacing: float) -> np.ndarray:
 
 
 LAYERS_PER_LAUNCH = 16
-"""Layers one launch appends at most; more due at once (after a restore, or a fast stream) take more
-launches, none of them a read."""
+"""Layers one launch appends at most; more due at once take more launches."""
 
 
 @ti.data_oriented
 class Emitters:
-    """Appends each emitter's due layers to the state, on the device: the host knows from the clock
-    which layers are due; whether one is drowned, where it goes and how many particles are live stay on
-    the device, so an emitting substep reads nothing back (``Simulation.particle_count`` reads the
-    count when asked)."""
+    """Appends the layers due on the device; a drowned one (water within s/2 of a site) is skipped."""
 
     def __init__(self, emitters, spacing_m: float, state, grid=None, capacity: int | None = None):
         self.emitters = emitters
@@ -60,7 +45,7 @@ class Emitters:
         self.capacity = state.capacity if capacity is None else min(int(capacity), state.capacity)
         """The scene's particle budget: no append writes past it."""
         self.grid = grid
-        """The neighbour grid (``pbf.solver.grid``) of the last sort, to find water at a nozzle; None: no check."""
+        """The neighbour grid of the last sort, to find water at a nozzle; None: no check."""
         self.checks_water = grid is not None
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
         self.emitted = [0] * len(emitters)
@@ -68,8 +53,7 @@ class Emitters:
         self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]
         """Where each emitter's sites start in ``site_offsets``."""
         if self.offsets[-1]:
-            # Sized by buckets and with the spacing and budget as data, so that the kernel compiles
-            # once for every scene with emitters (pbf.solver.model.allocation).
+            # Sized by buckets, constants as data: one compile for every scene with emitters.
             self.constants = scene_constants(spacing=spacing_m, capacity=self.capacity)
             padded = np.zeros((allocation(self.offsets[-1], 64), 3), np.float32)
             padded[: self.offsets[-1]] = np.concatenate(self.sites)
@@ -90,9 +74,7 @@ class Emitters:
 
     @ti.func
     def _water_within(self, p, radius):
-        """1 where a live particle lies within ``radius`` of p. The cells within the grid's reach (h) of
-        p's hold every particle that was within h at the last sort, and none has moved a spacing since
-        (time.max_cfl), so none within radius < h − max_cfl s is missed."""
+        """1 where a live particle lies within ``radius`` (< h − max_cfl s) of p, from the last sort's cells."""
         grid = self.grid
         c = grid.cell_of(p)
         found = 0
@@ -118,10 +100,7 @@ class Emitters:
         travelled: ti.f32,
         velocity: ti.math.vec3,
     ):
-        """Append ``layers`` layers of one nozzle's ``sites`` sites: layer j centred at centre +
-        (travelled − j s) direction, each skipped where water already lies at one of its sites (a
-        drowned nozzle). Every loop is parallel: over (layer, site), then over layers (each thread
-        reading its layer's sites), then over (layer, site) again; the live count is moved last."""
+        """Append ``layers`` layers of one nozzle, layer j at centre + (travelled − j s) direction."""
         for j, k in ti.ndrange(layers, sites):
             spacing = self.constants[None].spacing
             radius = 0.5 * spacing
@@ -135,8 +114,7 @@ class Emitters:
             for k in range(sites):
                 found |= self.taken[j * sites + k]
             self.layer_taken[j] = found
-        # Bounds-safe by construction: the slots written are clamped to the allocation, whatever the
-        # scene (restore() also refuses emitted layers that could overflow the budget).
+        # The slots written are clamped to the allocation, whatever the scene.
         for j, k in ti.ndrange(layers, sites):
             spacing, capacity = self.constants[None].spacing, self.constants[None].capacity
             if self.layer_taken[j] == 0:
@@ -158,10 +136,7 @@ class Emitters:
             self.state.active[None] = ti.min(first + kept * sites, capacity)
 
     def emit(self, now_s: float, pouring: bool = True) -> None:
-        """Add the layers due by ``now_s`` (the start of a substep) that are not in yet, each where its
-        time since leaving the nozzle has carried it; the substep moves them on with everything else.
-        When not ``pouring``, the layers due are skipped instead: turned back on, a nozzle resumes its
-        stream rather than releasing everything it held back at once."""
+        """Add the layers due by ``now_s`` (skipped when not ``pouring``: a nozzle resumes, never bursts)."""
         for k, emitter in enumerate(self.emitters):
             due = self.layers_due(emitter, now_s)
             if not pouring:

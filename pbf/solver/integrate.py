@@ -7,11 +7,8 @@ import taichi as ti
 
 @ti.data_oriented
 class PredictedPositions:
-    """x*, the predicted positions (m): two (n,) vector(3, f32) buffers, :attr:`first` and
-    :attr:`second`. Prediction writes the first; each Jacobi iteration reads one and writes the other
-    (no copy), and the iterations' last call settles x* back into the first
-    (``JacobiIterations.settle``). The iterations take both buffers in a fixed order and read which
-    holds x* as data: a kernel given "the current buffer" would compile once per buffer."""
+    """x* (m) in two buffers: each iteration reads one and writes the other; x* ends in the first.
+    Which holds x* is data, so the kernels compile once."""
 
     def __init__(self, particle_count: int):
         self.first = ti.Vector.field(3, ti.f32, shape=particle_count)
@@ -59,8 +56,7 @@ class Integrator:
                 self.state.v[i] += w * (velocity - self.state.v[i])
 
     def push(self, push, speed_limit_m_s: float) -> None:
-        """Blend the velocities near the hand toward its velocity (see ``model.Push``), the hand's speed
-        capped at ``speed_limit_m_s`` so that the CFL limit still holds for what it pushes."""
+        """Blend the velocities near the hand toward its velocity (``model.Push``), capped at ``speed_limit_m_s``."""
         velocity = np.asarray(push.velocity_m_s, np.float64)
         speed = float(np.linalg.norm(velocity))
         if speed > speed_limit_m_s:

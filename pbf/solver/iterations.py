@@ -1,14 +1,5 @@
-"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) and the rules that steer them: the error
-target that stops them (after ``min_iterations``), the accelerated weights that restart when the error
-rises, and the step back that takes back the part of the last iteration the target did not need
-(``DensityConstraint.between``).
-
-The rules run on the device, written once (:meth:`JacobiIterations.received`), in the one thread that
-finishes each iteration's error sum (``TreeSum.sum_then``); the next iteration's threads read what it
-decided, and once the target is met the remaining iterations loop over no particles. What differs by
-backend is chosen when the solver is built: how many iterations one call runs (``per_call``) and
-whether the host reads the decision after each call (``reads_decisions``: on the CPU, so that no
-call runs past the target; never on a GPU, where a read would make the host wait for the device).
+"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) and their rules, run on the device by the
+thread that finishes each error sum (docs/METHOD.md, "One substep on every backend").
 """
 
 import numpy as np
@@ -24,24 +15,21 @@ LAST_ERROR, FRACTION = range(2)
 
 @ti.data_oriented
 class JacobiIterations:
-    """A substep's iterations as loops for the substep's kernels (``pbf.solver.substep``), steered on the
-    device."""
+    """A substep's iterations as loops for ``pbf.solver.substep``'s kernels, steered on the device."""
 
     def __init__(self, density, weights: tuple[float, ...], active, loop_bound, per_call: int, reads_decisions: bool):
         self.density = density
         self.active = active
         self.loop_bound = loop_bound
-        """What loops over the live particles run to (``State.loop_bound``)."""
         self.per_call = per_call
-        """Iterations a kernel call runs: more save the host's time per substep on a GPU and cost compile
-        time (each is a copy of an iteration's code)."""
+        """Iterations a kernel call runs (each a copy of an iteration's code)."""
         self.reads_decisions = reads_decisions
-        """Whether the host reads after each call if the target was met (and launches no more)."""
+        """Whether the host reads after each call whether the target was met (and launches no more)."""
         # The first iteration weighs its λ by 1 (DensityConstraint.multiplier_pass starts L afresh there).
         assert weights[0] == 1.0, f"the first iteration's weight is 1 in every table, not {weights[0]}"
         self.table = ti.field(ti.f32, shape=len(weights))
         self.table.from_numpy(np.asarray(weights, np.float32))
-        """The iterations' weights (``pbf.solver.acceleration``), restarted at each substep."""
+        """The iterations' weights (``pbf.solver.acceleration``)."""
         self.flags = ti.field(ti.i32, shape=5)
         self.values = ti.field(ti.f32, shape=2)
         self._count = 0
@@ -58,9 +46,7 @@ class JacobiIterations:
         self._count, self._measured = count, False
 
     def calls(self, iterations: int, measure: bool, launch) -> int:
-        """Launch every call of ``iterations`` but the last, ``launch(start)`` each, and return the first
-        iteration of the last call, which ends the substep (``pbf.solver.substep``). On a backend that
-        reads the decisions, once the target is met no call follows (the last runs over no particles)."""
+        """Launch every call but the last (fewer once a read says the target is met); return the last's start."""
         self._count, self._measured = iterations, measure
         last = (iterations - 1) // self.per_call * self.per_call
         for start in range(0, last, self.per_call):
@@ -71,8 +57,7 @@ class JacobiIterations:
 
     @ti.func
     def _loop_state(self, measure: ti.template(), k):
-        """(running, the buffer x* is in, the weight's index) before iteration ``k``: without a target a
-        function of k; with one, what the sum of iteration k − 1 decided (:meth:`received`)."""
+        """(running, the buffer x* is in, the weight's index) before iteration ``k``, as iteration k − 1 decided."""
         running, from_second, index = 1, k % 2, k
         if ti.static(measure):
             if k > 0:
@@ -87,17 +72,14 @@ class JacobiIterations:
 
     @ti.func
     def iterate(self, first: ti.template(), second: ti.template(), neighbours: ti.template(), run: ti.template()):
-        """Iterations ``run.start`` … ``run.start + per_call − 1`` of the substep's ``run.iterations``, each
-        over no particles once the target was met, for the top level of a kernel (lines 8-19):
+        """Iterations ``run.start`` … ``run.start + per_call − 1`` (each over no particles once the target
+        was met), for the top level of a kernel:
 
             for all particles: λ̂_i from C_i (Eqs. 1, 10)                           lines 9-11
             for all particles: Δx_i (Eqs. 11-12), collided, x*_i ← x*_i + Δx_i   lines 12-17
             with a target: Σ max(C_i, 0), then the rules (:meth:`received`)
 
-        ``run``: the kernel's arguments (start, iterations, target, min_iterations, step_back) and
-        ``measure`` (a target is set: a switch), read where they are used. Every loop runs over the
-        particles' :attr:`loop_bound`, and each thread reads the loop's state and the live count itself:
-        read once outside the loops they would be one-thread tasks, a launch each on a GPU."""
+        Each thread reads the loop's state itself: read outside the loops it would be a one-thread task."""
         density = self.density
         for u in ti.static(range(self.per_call)):
             for i in range(read_count(self.loop_bound, 1)):
@@ -111,18 +93,14 @@ class JacobiIterations:
                 if k < run.iterations and i < self.active[None] * running:
                     density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
             if ti.static(run.measure):
-                # The run's values as they are (a tuple of the kernel's arguments), read where they are used.
                 context = ti.static((run.start + u, run.iterations, run.target, run.min_iterations, run.step_back))
                 density.error_sum.sum_then(density.error, 0, self.active, self.received, context)
 
     @ti.func
     def received(self, total, count, context: ti.template()):
-        """The rules after iteration k of ``context`` (k, the substep's iterations, the target, the least
-        iterations, whether to step back: the kernel's arguments) on the mean error ``total`` /
-        ``count``: run by the one thread that summed it (``TreeSum.sum_then``), into the flags the next
-        iteration reads. The target met (after the least iterations): stop, and step back the share of the
-        last iteration the target did not need where the target fell between the last two errors; the
-        error risen (the acceleration overshot): the weights start again, plain."""
+        """The rules after iteration k on the mean error, into the flags the next iteration reads: the target
+        met (after the least iterations): stop, stepping back the share of the last iteration it did not
+        need; the error risen: the weights restart."""
         k, iterations, target, min_iterations, step_back = context
         running, from_second, index = self._loop_state(True, k)
         if running and k < iterations:
@@ -147,8 +125,7 @@ class JacobiIterations:
 
     @ti.func
     def settle(self, first: ti.template(), second: ti.template(), run: ti.template()):
-        """x* into the first buffer after the substep's iterations: stepped back between the buffers, or
-        copied when it is in the second. For the top level of a kernel."""
+        """x* into the first buffer after the iterations (stepped back, or copied from the second)."""
         for i in range(read_count(self.loop_bound, 1)):
             in_second, stepping_back, fraction = run.iterations % 2, 0, 0.0
             if ti.static(run.measure):

@@ -1,22 +1,6 @@
-"""Taichi's internals in one module: the substep's kernel calls with less of Taichi's Python in them,
-what the studies see of Taichi's launches, and the running backend's configuration. No other module
-reads Taichi's private names (``tests/test_private_taichi.py``).
-
-The gate: :func:`knows_taichi` (the running Taichi is ``WRITTEN_FOR`` and its internals imported) and
-``PBF_PUBLIC_LAUNCH`` (:func:`fast_launch`); otherwise every launch is Taichi's public call.
-
-:class:`Launcher` calls a bound kernel the ordinary way the first time a variant is asked for (so the
-compile, the offline cache and the observers see it), keeps the compiled kernel under the variant's
-template arguments, and from then on launches it directly, setting scalar and ndarray arguments
-itself: the same launch, bit for bit (``tests/test_launch.py``), without Taichi's per-call Python
-(docs/BENCHMARKS.md, "Host time per substep"). A call Taichi would refuse is an ordinary call, so that
-Taichi refuses it in its own words.
-
-:class:`Observer` and :func:`watching` tell the studies of every launch, element access and compile
-(Taichi has no public hook: while one watches, its kernel class and field access are wrapped);
-:func:`profiled_tasks` reads the kernel profiler's records. :func:`current_arch` and
-:func:`compile_config` read Taichi's public ``ti.cfg``; :func:`start_taichi` is ``ti.init`` without
-the line it prints.
+"""Taichi's internals in one module (``tests/test_private_taichi.py``), used only on the Taichi
+``WRITTEN_FOR`` unless ``PBF_PUBLIC_LAUNCH`` is set: :class:`Launcher` (the same launch without Taichi's
+per-call Python) and :func:`watching` (launches, element accesses and compiles, for the studies).
 """
 
 from __future__ import annotations
@@ -31,7 +15,7 @@ import time
 import numpy as np
 import taichi as ti
 
-try:  # the internals this module reads, in the Taichi it was written for (knows_taichi)
+try:  # the internals this module reads, in the Taichi it was written for
     from taichi._lib.core.taichi_python import is_signed
     from taichi.lang import impl
     from taichi.lang.exception import handle_exception_from_cpp
@@ -47,8 +31,7 @@ except ImportError:  # pragma: no cover - another Taichi: its public call only
 WRITTEN_FOR = (1, 7, 4)
 """The Taichi version whose internals this module reads (``ti.__version__``)."""
 PUBLIC_LAUNCH_VAR = "PBF_PUBLIC_LAUNCH"
-"""An environment variable: set to anything but "" or "0", every Launcher made afterwards takes Taichi's
-public call (the tests run so in CI, to see that the two launches agree)."""
+"""Set to anything but "" or "0": every Launcher made afterwards takes Taichi's public call."""
 
 
 def knows_taichi() -> bool:
@@ -57,17 +40,12 @@ def knows_taichi() -> bool:
 
 
 def fast_launch() -> bool:
-    """Whether a Launcher made now launches past Taichi's call: on the Taichi this was written for,
-    unless ``PBF_PUBLIC_LAUNCH`` says otherwise."""
+    """Whether a Launcher made now launches past Taichi's call."""
     return knows_taichi() and os.environ.get(PUBLIC_LAUNCH_VAR, "") in ("", "0")
 
 
-# ------------------------------------------------------------------------------------- configuration
-
-
 def compile_config():
-    """The running program's configuration (Taichi's public ``ti.cfg``: arch, offline cache, the
-    compiler's switches), None before Taichi starts. Its fields may be set, as ``ti.init`` sets them."""
+    """Taichi's public ``ti.cfg`` (arch, offline cache, compiler switches; settable), None before Taichi starts."""
     return ti.cfg
 
 
@@ -78,7 +56,7 @@ def current_arch():
 
 
 TAICHI_START_LINE = "[Taichi] Starting on arch="
-"""The line ``ti.init`` prints on every start, a plain ``print`` no option silences."""
+"""The line ``ti.init`` prints on every start, which no option silences."""
 
 
 def start_taichi(**options) -> None:
@@ -92,33 +70,24 @@ def start_taichi(**options) -> None:
         sys.stdout.write("".join(rest))
 
 
-# ------------------------------------------------------------------------------------------ observers
-
-
 class Observer:
-    """What a study is told while it watches (:func:`watching`). Each method does nothing here; only
-    those a subclass overrides are watched for (watching compiles wraps every kernel call)."""
+    """What a study is told while it watches; only the methods a subclass overrides are watched for."""
 
     def launched(self, kernel: str, waits: bool) -> None:
-        """A kernel launch (``kernel``: the kernel's qualified name, Taichi's own kernels included:
-        ``to_numpy``, ``fill`` …). ``waits``: the host waits on the device for a result, as after a
-        kernel that returns a value or one given a NumPy array (copied to the device and, on a GPU
-        backend, back)."""
+        """A kernel launch (Taichi's own included); ``waits``: the host waits for a result."""
 
     def accessed(self, read: bool) -> None:
-        """An element of a field or ndarray read (``read``) or written from Python (``field[None]``):
-        a read waits on the device; a write is a small launch of its own."""
+        """An element of a field or ndarray read (``read``) or written from Python (``field[None]``)."""
 
     def compiled(self, kernel: str, seconds: float) -> None:
-        """A kernel call that compiled a new variant: its wall time, Taichi's front end, the compile and
-        one run, the device synchronised."""
+        """A kernel call that compiled a new variant: its wall time (front end, compile, one synchronised run)."""
 
 
 _observers: list[Observer] = []
 _wrapped: list[tuple[type, str, object]] = []
 """(class, attribute, Taichi's own) for each wrapper in place while observers watch."""
 _depth = 0
-"""Element accesses under way: what one does inside (a writer kernel's launch) is part of it."""
+"""Element accesses under way (what one launches inside is part of it)."""
 
 
 def _overrides(observer: Observer, name: str) -> bool:
@@ -196,8 +165,7 @@ def _require(what: str) -> None:
 
 @contextlib.contextmanager
 def watching(observer: Observer):
-    """``observer`` told of what Taichi does while inside (:class:`Observer`); observers nest. On
-    another Taichi than the one this module was written for, a RuntimeError that says so."""
+    """``observer`` told of what Taichi does while inside; observers nest. RuntimeError on another Taichi."""
     _require("watching Taichi's launches")
     _observers.append(observer)
     _rewrap()
@@ -209,27 +177,20 @@ def watching(observer: Observer):
 
 
 def profiled_tasks() -> list[tuple[str, float]]:
-    """(task, milliseconds) of every offloaded task Taichi's kernel profiler recorded since it was last
-    cleared (``ti.profiler.clear_kernel_profiler_info()``), in the order they ran. Taichi's public
-    profiler prints these or sums them by name; the list itself is its own."""
+    """(task, milliseconds) of every task the kernel profiler recorded since last cleared, in order."""
     _require("reading the kernel profiler's records")
     profiler = get_default_kernel_profiler()
     profiler._update_records()
     return [(record.name, record.kernel_time) for record in profiler._traced_records]
 
 
-# ------------------------------------------------------------------------------------------- launches
-
 MOST_VARIANTS = 64
-"""Variants a Launcher keeps; past them it calls the ordinary way (a template argument that never
-compares equal to itself, a NaN, would otherwise add one a call)."""
+"""Variants a Launcher keeps; past them it calls the ordinary way (a NaN template argument adds one a call)."""
 PLAIN = (bool, int, float, str, type(None))
-"""Template arguments told apart by value (by type too: Taichi compiles True and 1 alike, but a
-variant should not be found by either for the other)."""
+"""Template arguments told apart by value and type (Taichi compiles True and 1 alike)."""
 
 
 def _variant(value):
-    """A template argument's part of a variant's key."""
     if type(value) in PLAIN:
         return (type(value), value)
     if type(value) is tuple:
@@ -240,15 +201,11 @@ def _variant(value):
 REALS = (float, int, np.floating, np.integer)
 """What Taichi takes for a float argument (anything else goes to its own launch, which refuses it)."""
 INTEGERS = (int, np.integer)
-"""What Taichi takes for an integer argument."""
 
 
 def _argument_setters(primal) -> tuple | None:
-    """How each argument the call site passes is set, in Taichi 1.7.4's own way (``Kernel.launch_kernel``:
-    a template argument not at all, the others at their place among the non-template ones): None for a
-    template, else (kind, index). None for the whole kernel when an argument is of a kind this does not
-    set (a matrix, a struct, a texture...), or when the kernel returns values or prints (Taichi waits
-    for the device after those): such a kernel launches through ``launch_kernel``."""
+    """How each argument is set, as ``Kernel.launch_kernel`` does: None for a template, else (kind, index).
+    None for a kernel with another kind of argument, or that returns values or prints."""
     if primal.return_type is not None or getattr(primal, "has_print", True):
         return None
     setters, place = [], 0
@@ -271,10 +228,8 @@ def _argument_setters(primal) -> tuple | None:
 
 
 class Launcher:
-    """``bound`` (a kernel of a ``ti.data_oriented`` object, as ``obj.kernel`` gives it) called with its
-    arguments by position or by name, as Taichi's call takes them; its compiled variants launched
-    directly after their first call where :func:`fast_launch` allows (the module docstring), else
-    Taichi's public call every time. Whatever else it is given is called as it is."""
+    """``bound`` (``obj.kernel`` of a ``ti.data_oriented`` object) called with arguments by position or name,
+    each variant the ordinary way once (so the compile and the cache see it), then directly."""
 
     def __init__(self, bound):
         self._bound = bound
@@ -290,9 +245,8 @@ class Launcher:
         """Taichi's kernel, None where every call is Taichi's public one."""
         self._owner = owner
         self._name = primal.func.__qualname__ if direct else ""
-        # The parameters the call site passes, by name in order (the owner, ``self``, is not one).
+        # The call site's parameters and its template arguments' places (the owner, ``self``, not counted).
         self._names = tuple(inspect.signature(primal.func).parameters)[1:] if direct else ()
-        # The template arguments' places among those the call site passes (Taichi's count the owner first).
         self._templates = tuple(i - 1 for i in primal.template_slot_locations if i > 0) if direct else ()
         # Ndarray arguments select a variant by element type and dimensions (Taichi's features of them).
         self._arrays = (
@@ -308,12 +262,10 @@ class Launcher:
         self._count = len(primal.arguments) - 1 if direct else 0
         """The arguments the call site passes (the owner is not one)."""
         self._variants: dict = {}
-        """key → (the compiled kernel, the template arguments it was compiled for, kept alive, and the
-        compiled kernel's data for the program's launch, or None where ``launch_kernel`` launches it)."""
+        """key → (compiled kernel, its template arguments kept alive, its launch data or None)."""
 
     def _in_order(self, args: tuple, kwargs: dict) -> tuple | None:
-        """The arguments by position, those given by name put at their parameter's place; None where
-        they do not fill the parameters once each (Taichi's call then says what is wrong)."""
+        """The arguments by position; None where they do not fill the parameters once each."""
         rest = self._names[len(args) :]
         if len(args) > len(self._names) or set(kwargs) != set(rest):
             return None
@@ -333,7 +285,7 @@ class Launcher:
         if self._arrays:
             key += tuple((getattr(args[i], "dtype", None), len(getattr(args[i], "shape", ()))) for i in self._arrays)
         entry = self._variants.get(key)
-        if entry is None:  # the first call of this variant: Taichi's own path compiles it and launches
+        if entry is None:  # the variant's first call: Taichi's own path compiles it and launches
             result = self._bound(*args)
             if len(self._variants) < MOST_VARIANTS:
                 compiled = self._primal.compiled_kernels[self._primal.ensure_compiled(self._owner, *args)]
@@ -346,21 +298,19 @@ class Launcher:
         self._primal.runtime.materialize()  # fields allocated since the last kernel call, as a call does
         if entry[2] is not None:
             context = self._context(entry[0], args)
-            if context is None:  # an argument Taichi refuses (its call says how) or one this does not set
+            if context is None:  # an argument Taichi refuses (its call says how)
                 return self._bound(*args)
             if _observers:  # Taichi's launch_kernel, which observers see, is not on this path
                 _tell("launched", self._name, False)
             try:
                 impl.get_runtime().prog.launch_kernel(entry[2], context)
-            except Exception as error:  # Taichi's own exceptions for its C++ ones, as its launch raises them
+            except Exception as error:  # Taichi's exceptions for its C++ ones, as its launch raises them
                 raise handle_exception_from_cpp(error) from None
             return None
         return self._primal.launch_kernel(entry[0], self._owner, *args)
 
     def _context(self, compiled, args):
-        """The launch context with every argument set as ``Kernel.launch_kernel`` sets it, without
-        building its closures and type dispatch a call; None where an argument is not what Taichi takes
-        for its type (Taichi's own call then refuses it, in its words) or an ndarray carries a gradient."""
+        """The launch context with every argument set; None for one Taichi refuses or an ndarray with a gradient."""
         context = compiled.make_launch_context()
         for setter, value in zip(self._setters, args):
             if setter is None:

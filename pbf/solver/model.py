@@ -1,15 +1,5 @@
-"""The Model: everything the solver derives from a scene, once, before anything is allocated.
-
-A :class:`Model` is frozen. It holds the counts, the particle mass and volume, the grid, and one
-parameter object per stage of the step (:class:`GridParams`, :class:`BoundaryParams`,
-:class:`DensityParams`, :class:`VelocityParams`). What may change between substeps travels apart, in
-:class:`Control`, and reaches the kernels as arguments.
-
-The stages write these numbers into fields of scene constants (``pbf.solver.constants``) that their
-kernels read as data: only the switches that remove code and the arrays' capacity buckets
-(:func:`allocation`) enter the compiled kernels, so Taichi's offline cache serves every scene of the
-same features and buckets with the kernels one of them compiled (docs/ARCHITECTURE.md).
-"""
+"""The Model, what the solver derives from a scene once (a parameter object per stage), and :class:`Control`,
+what may change between substeps (docs/ARCHITECTURE.md, "How a parameter travels")."""
 
 from __future__ import annotations
 
@@ -40,43 +30,33 @@ from pbf.solver import acceleration, backend, sph
 Vec3 = tuple[float, float, float]
 
 NEIGHBOUR_REACH = 2
-"""Grid cells per h. Cells h/2 wide put every neighbour within 2 cells, so a particle checks the 5×5×5
-cells around it, (5/2)³ h³ of space against 27 h³ for cells h wide: fewer distance tests, the same
-lists."""
+"""Grid cells per h: a particle checks the 5×5×5 cells h/2 wide around it, (5/2)³ h³ against 27 h³."""
 MAX_CORRECTION = 0.1
 """Largest position correction of one iteration, in h (a fifth of a spacing at h = 2.2 s)."""
 SCORR_N = 8
-"""The exponent n of s_corr (Eq. 11). The paper's 4 still pushes at the lattice spacing, so water at rest
-kept jostling; 8 confines the term to pairs closer than about 0.3 h (pbf.solver.density)."""
+"""n of s_corr (Eq. 11): 8 confines it to pairs closer than about 0.3 h (docs/METHOD.md, "Artificial pressure")."""
 SCORR_DQ = 0.2
 """Δq/h of s_corr (Eq. 11), the paper's."""
 STABLE_GAIN = 1.8
 """Largest per-iteration gain ω·μ allowed for any error mode: below 2, so every mode decays."""
 BYTES_PER_PARTICLE = 600
-"""Memory one particle needs: its float32/int32 fields plus its neighbour slots (pbf.solver.grid.SLOTS),
-rounded up for the compact list that replaces them after an overflow."""
+"""Memory one particle needs: its fields and neighbour slots, with room for the compact list of an overflow."""
 BYTES_PER_CELL = 12
 """Grid memory per cell: count, start and a scan scratch, int32 each."""
 PARTICLE_BUCKET_FLOOR = 2**14
 """The smallest particle allocation (:func:`allocation`): every preset below it shares one compile."""
 CELL_BUCKET_FLOOR = 2**16
-"""The smallest grid allocation in cells (:func:`allocation`)."""
 
 
 def allocation(count: int, floor: int) -> int:
-    """The number of entries allocated for ``count``: the next power of two, at least ``floor``.
-
-    A field's shape is part of the key Taichi's offline cache files a compiled kernel under: sized by
-    buckets, a scene whose counts fall in the buckets of a run before starts from the cache, at the
-    price of at most twice the memory of those arrays."""
+    """The entries allocated for ``count``: the next power of two, at least ``floor``. A field's shape keys
+    Taichi's offline cache, so a scene in the buckets of a run before starts from the cache."""
     return max(int(floor), 1 << max(int(count) - 1, 0).bit_length())
 
 
 def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple[int, int]:
-    """The (particles, cells) buckets a scene allocates: ``own`` (its :func:`allocation` of each) where
-    it is among the ``compiled`` pairs or none fits, else the pair of ``compiled`` that holds it, is at
-    most one size up on each and adds at most ``limit_bytes`` of memory, the smallest such
-    (``pbf.solver.buckets``: the results are the same in any bucket, a compile is not)."""
+    """The (particles, cells) buckets a scene allocates: ``own``, or the smallest ``compiled`` pair at most one
+    size up on each that adds at most ``limit_bytes``."""
     particles, cells = own
     if own in compiled:
         return own
@@ -105,7 +85,6 @@ class GridParams:
     resolution: tuple[int, int, int]
     """Cells per axis, each at least h / reach wide."""
     reach: int
-    """Cells per h: every neighbour lies within ``reach`` cells of a particle's own."""
     allocated_particles: int = 0
     """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
     cell_bucket: int = 0
@@ -115,9 +94,7 @@ class GridParams:
     def covering(
         cls, particle_count: int, lower_m, upper_m, kernel_radius_m: float, reach: int = NEIGHBOUR_REACH
     ) -> GridParams:
-        """The finest grid over the box whose cells are at least h / reach wide (with a 1e-4 margin
-        against float32 rounding), so the cells within ``reach`` of a particle's own hold all its
-        neighbours."""
+        """The finest grid over the box with cells at least h / reach wide (a 1e-4 margin for float32)."""
         extent = np.array(upper_m, np.float64) - np.array(lower_m, np.float64)
         cell = kernel_radius_m / reach * (1 + 1e-4)
         resolution = tuple(max(1, int(math.floor(e / cell))) for e in extent)
@@ -152,8 +129,7 @@ class BodyParams:
     inertia_kg_m2: tuple[Vec3, ...] = ()
     """The principal moments of inertia about the centre of mass, along the body's own axes."""
     initial: tuple[tuple[float, ...], ...] = ()
-    """Each body's state at the start: position (3), quaternion (w, x, y, z), velocity (3), angular
-    velocity (3): 13 numbers (``pbf.solver.bodies.STATE_LAYOUT``)."""
+    """Each body's 13 numbers at the start: position, quaternion (w, x, y, z), velocity, angular velocity."""
     rest_density_kg_m3: float = 1000.0
     particle_volume_m3: float = 0.0
     """V = m/ρ0 of a fluid particle: the reaction is −Σ_i V p_i ∇ψ_b(x_i) (``pbf.solver.bodies``)."""
@@ -198,8 +174,7 @@ class BodyParams:
 
 @dataclass(frozen=True)
 class BoundaryParams:
-    """The container, its piston and the obstacles (``pbf.solver.boundary``): collision and the ghost
-    density behind them."""
+    """The container, its piston, the obstacles and bodies (``pbf.solver.boundary``)."""
 
     lower_m: Vec3
     upper_m: Vec3
@@ -209,23 +184,21 @@ class BoundaryParams:
     """The fluid lattice's pitch: the ghost lattice behind the walls mirrors it."""
     kernel_radius_m: float
     wall_density: bool
-    """Whether the ghost density behind walls (and inside obstacles) is added to the constraint."""
+    """Whether the ghost density behind walls and inside obstacles is added to the constraint."""
     wall_mirror: bool
-    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``) rather than
-    its tables."""
+    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``), not its tables."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
     piston_stroke_m: float = 0.0
     """Stroke S of the piston wave maker that moves the lower-x wall (0: the wall stands still)."""
     piston_period_s: float = 1.0
     bodies: BodyParams = BodyParams()
-    """The rigid bodies, one more moving boundary (none: compiled out)."""
+    """The rigid bodies (none: compiled out)."""
 
 
 @dataclass(frozen=True)
 class DensityParams:
-    """The density constraint in dimensionless form (``pbf.solver.density``, its docstring has the
-    equations)."""
+    """The density constraint in dimensionless form (``pbf.solver.density``)."""
 
     particle_count: int
     kernel_radius_m: float
@@ -245,8 +218,7 @@ class DensityParams:
     surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
     wall_mirror: bool = False
-    """Whether the ghost fluid behind the container's walls is the fluid's mirror image (``pbf.solver.density``)
-    rather than the fixed ghost lattice of ``Container.ghost``."""
+    """Whether the container's ghost is the fluid's mirror image, not the fixed lattice of ``Container.ghost``."""
 
 
 @dataclass(frozen=True)
@@ -260,16 +232,15 @@ class VelocityParams:
 
 @dataclass(frozen=True)
 class Push:
-    """A hand in the water (the window's mouse drag): particles within ``radius_m`` of ``point_m`` have
-    their velocity blended toward ``velocity_m_s`` by w = (1 − (d/R)²)³, smooth in space and never
-    beyond the hand's own velocity."""
+    """A hand in the water (the mouse): velocities within ``radius_m`` of ``point_m`` blended toward
+    ``velocity_m_s`` by w = (1 − (d/R)²)³."""
 
     point_m: Vec3
     velocity_m_s: Vec3
     radius_m: float
 
     def __post_init__(self):
-        # Checked here, so that control.push never carries a NaN or an overflow into a kernel.
+        # No NaN or overflow reaches a kernel.
         for name in ("point_m", "velocity_m_s"):
             object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name), FLOAT32_SAFE))
         object.__setattr__(
@@ -288,8 +259,7 @@ class Push:
 
 @dataclass
 class Control:
-    """What may change between substeps (the window's sliders, a sweep's settings): kernel arguments,
-    never compile-time constants. Starts from the scene's values."""
+    """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values."""
 
     iterations: int
     """Jacobi iterations per substep (the most, with a target)."""
@@ -311,14 +281,13 @@ class Control:
     push: Push | None = None
     """The hand in the water while the user drags it, else None."""
     emitters_on: bool = True
-    """Whether the emitters pour; while off, the layers they would have added are skipped."""
+    """Whether the emitters pour (while off, their layers are skipped)."""
     wave_maker_on: bool = True
-    """Whether the piston moves; while off it stands still, and it resumes from where it stopped."""
+    """Whether the piston moves (it resumes from where it stopped)."""
 
     def __setattr__(self, name: str, value) -> None:
-        """Every assignment checked, in __init__ too: the type, finiteness and the bounds of the field's
-        scene key (CONTROL_KEYS), or a TypeError/ValueError naming control.<field>, what is allowed and
-        what was given; a name that is no field is refused rather than silently added."""
+        """Every assignment checked against its scene key's bounds (CONTROL_KEYS), or a TypeError/ValueError
+        naming control.<field>; an unknown name is refused."""
         if name not in CONTROL_CHECKS:
             closest = difflib.get_close_matches(name, list(CONTROL_CHECKS), n=1)
             hint = f"did you mean control.{closest[0]}? " if closest else ""
@@ -329,7 +298,7 @@ class Control:
     def from_scene(cls, scene: Scene) -> Control:
         s = scene.solver
         control = cls.__new__(cls)
-        # The largest |g| the scene's frames can follow (pbf.scene.timestep._check_time), before any field.
+        # The largest |g| the scene's frames can follow, set before any field.
         object.__setattr__(control, "_most_gravity_m_s2", scene.fastest_followed_m_s / scene.time.frame_dt_s)
         control.__init__(
             s.iterations,
@@ -347,10 +316,7 @@ class Control:
 
 @dataclass(frozen=True)
 class Features:
-    """What a substep's kernels compile in, as one frozen, hashable value (a compile-time argument: each
-    distinct value is one compile). The terms the control may switch come from the control; the wave
-    maker, the bodies and mirrored walls are fixed when the solver is built and named here so that the
-    description is whole. Build it with :meth:`of`, which hands out one object per value."""
+    """What a substep's kernels compile in, one compile per value; build it with :meth:`of`."""
 
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
@@ -364,8 +330,7 @@ class Features:
 
     @classmethod
     def of(cls, model: Model, control: Control, in_place: bool = False) -> Features:
-        """The features of ``model``'s scene under ``control``; ``in_place``: for a substep of Δt = 0 that
-        only sorts and finds neighbours (a restore), without the divergence pre-correction."""
+        """The features of ``model``'s scene under ``control``; ``in_place``: a Δt = 0 substep (a restore)."""
         return _features(
             control.target_density_error > 0.0,
             0 if in_place else control.divergence_iterations,
@@ -378,27 +343,24 @@ class Features:
 
 @functools.cache
 def _features(*values) -> Features:
-    """One Features object per value: Taichi tells compile-time arguments that are objects apart by
-    identity, so an equal value must be the same object, or every substep would compile anew."""
+    """One Features object per value: Taichi tells template objects apart by identity."""
     return Features(*values)
 
 
 def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]:
-    """The bounds and doc of a scene key, read from its declaration (``pbf.scene.schema.key``)."""
+    """The bounds of a scene key, from its declaration (``pbf.scene.schema.key``), and their description."""
     declared = {f.name: f for f in dataclasses.fields(table)}[name]
     return declared.metadata["check"].bounds, f"the bounds of {dotted}"
 
 
 def _given(value) -> str:
-    """What an assignment gave, for a message: the value as the schema echoes it, and its type."""
     return f"{_show(value)} ({type(value).__name__})"
 
 
 def _checked_number(
     label: str, value, kind: type, bounds: tuple[float, float], meaning: str, above_lowest: bool = False
 ):
-    """``value`` as an int or a finite float within ``bounds`` (above the lowest, if asked), or a
-    TypeError (wrong type: a bool, a string, a float for an integer) or ValueError naming ``label``."""
+    """``value`` as an int or a finite float within ``bounds``, or a TypeError/ValueError naming ``label``."""
     lowest, highest = bounds
     interval = f"{'(' if above_lowest else '['}{_num(lowest)}, {_num(highest)}]"
     allowed = f"{'an integer' if kind is int else 'a finite number'} in {interval} ({meaning})"
@@ -507,8 +469,7 @@ CONTROL_CHECKS = {
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
-    """The weights of ``solver.expert.acceleration`` for as many iterations as a substep may run; ``lowest``
-    is the smallest factor 1 − ω μ a plain iteration applies to any error mode."""
+    """The weights of ``solver.expert.acceleration``; ``lowest``: the smallest factor 1 − ω μ of an iteration."""
     if expert.acceleration == "stable":
         return acceleration.stable_weights(lowest, MAX_ITERATIONS)
     rho = expert.chebyshev_rho if expert.acceleration == "chebyshev" else 0.0
@@ -516,8 +477,7 @@ def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
 
 
 def available_memory_bytes() -> int:
-    """Memory the fields can still take: the GPU's on a GPU backend, the host's free memory on the CPU
-    backend and before a backend has started (``pbf.solver.backend.device_memory_bytes``)."""
+    """Memory the fields can still take (``pbf.solver.backend.device_memory_bytes``)."""
     return backend.device_memory_bytes()
 
 
@@ -527,11 +487,11 @@ class Model:
 
     scene: Scene
     capacity: int
-    """The scene's particles: those of the blocks at the start and all that the emitters will add."""
+    """The scene's particles: the blocks' and all that the emitters will add."""
     allocated: int
     """The length of the per-particle arrays: ``capacity`` rounded up to its bucket (:func:`allocation`)."""
     particle_mass_kg: float
-    """m = ρ0 / Σ_j W(x_j): the mass that puts the lattice at exactly ρ0 (see sph.lattice_density_sum)."""
+    """m = ρ0 / Σ_j W(x_j): the lattice at exactly ρ0 (``pbf.solver.sph.lattice_density_sum``)."""
     particle_volume_m3: float
     """V = m/ρ0, the volume each particle stands for."""
     grid: GridParams
@@ -539,14 +499,12 @@ class Model:
     density: DensityParams
     velocity: VelocityParams
     iteration_weights: tuple[float, ...]
-    """w_1 … w_100 of the Jacobi iterations' acceleration (``solver.expert.acceleration``, ``pbf.solver.acceleration``),
-    one per iteration a substep may run (the schema's most)."""
+    """w_1 … w_100 of the iterations' acceleration (``pbf.solver.acceleration``), the most a substep may run."""
 
     @classmethod
     def from_scene(cls, scene: Scene, compiled=frozenset(), reuse_limit_bytes: int = 0) -> Model:
-        """Derive everything once; raise SceneError if the particles and grid would not fit in memory.
-        ``compiled``: the (particles, cells) bucket pairs compiled before, of which the arrays may take
-        one a size up that adds at most ``reuse_limit_bytes`` (:func:`reused_allocation`)."""
+        """Derive everything once; SceneError if it would not fit in memory. ``compiled``, ``reuse_limit_bytes``:
+        the buckets the arrays may take instead (:func:`reused_allocation`)."""
         spacing, h = scene.fluid.spacing_m, scene.kernel_radius_m
         n = scene.particle_capacity
         lower, upper = scene.container.min_m, scene.container.max_m
@@ -603,11 +561,7 @@ class Model:
         )
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lattice positions (m) and velocities (m/s) of every block, float32 arrays of shape (n, 3).
-
-        Sites sit at min + (i + ½) s, so a block touching a wall starts half a spacing from it, exactly
-        where the ghost planes of :func:`pbf.solver.sph.wall_density_table` complete its neighbourhood.
-        """
+        """Every block's lattice, (n, 3) float32 positions (m) at min + (i + ½) s and velocities (m/s)."""
         spacing = self.scene.fluid.spacing_m
         positions, velocities = [np.zeros((0, 3))], [np.zeros((0, 3))]
         for block in self.scene.fluid.blocks:
@@ -625,9 +579,7 @@ class Model:
 
 
 def _culprit(scene: Scene) -> tuple[str, str]:
-    """The key that makes a scene's particle count what it is, and what to do about it: the budget
-    when it asks for more than the blocks and emitters need, else the emitter that adds the most when
-    the emitters add more than the blocks hold, else the spacing."""
+    """The key that makes a scene's particle count what it is (budget, largest emitter or spacing), and a remedy."""
     blocks, emitted = scene.particle_count, scene.emitted_count
     if scene.fluid.max_particles > blocks + emitted:
         return "fluid.max_particles", (
@@ -642,9 +594,7 @@ def _culprit(scene: Scene) -> tuple[str, str]:
 
 
 def _check_memory(scene: Scene, particles: int, cells: int, allocated: int, allocated_cells: int) -> None:
-    """Refuse, before Taichi allocates anything, a scene whose arrays (at their allocated lengths) would
-    not fit in memory or outgrow the kernels' int32 indices, naming the key that makes the difference
-    (``_culprit``). The figures are exact Python integers, so no count wraps before it is compared."""
+    """Refuse a scene whose arrays would not fit in memory or outgrow int32 indices, naming the key to change."""
     need = allocated * BYTES_PER_PARTICLE + allocated_cells * BYTES_PER_CELL
     have = available_memory_bytes()
     if need > 0.8 * have:
@@ -665,8 +615,7 @@ INT32_MAX = 2**31 - 1
 
 
 def _check_indices(scene: Scene, particles: int, cells: int, slots: int = 64) -> None:
-    """The largest arrays, the neighbour slots (``slots`` per particle: pbf.solver.grid.SLOTS, which
-    imports this module) and the cell starts (cells + 1), must be indexable with int32."""
+    """The neighbour slots (``slots`` a particle: pbf.solver.grid.SLOTS) and cell starts must fit int32 indices."""
     if particles * slots > INT32_MAX:
         culprit, remedy = _culprit(scene)
         raise SceneError(

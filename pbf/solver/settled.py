@@ -1,19 +1,5 @@
-"""Settled starts kept on disk, beside Taichi's compiled kernels: a warm start skips settling.
-
-A scene with ``time.settle_s`` steps its blocks for that long before t = 0 (``Simulation._settle``).
-Settling is deterministic, so a start that finds its result on disk restores it instead; since
-``restore(snapshot())`` is exact, a start from the file steps bit for bit as one that settled.
-
-The file is named by a hash of everything the settled state depends on (:func:`settled_key`): the
-scene's physics (every table but the view's: name, description, camera, render, surface), the
-package's solver and scene code (every ``.py`` file of ``pbf/solver`` and ``pbf/scene``), Taichi's and
-NumPy's versions, the backend's ``ti.init`` options and device (the compile mode rounds differently)
-and whether the GPU backends' choices are taken (other rounding). A change to any of them names
-another file; stale files are never read, only left behind.
-
-The files live in ``pbf_settled/`` of Taichi's offline cache folder (``TI_OFFLINE_CACHE_FILE_PATH``),
-only while the offline cache is on: an empty folder is a cold start in every respect.
-"""
+"""Settled starts (``time.settle_s``) kept in Taichi's offline cache folder, named by a hash of all they
+depend on (:func:`settled_key`): settling is deterministic, so a start restores the file, bit for bit."""
 
 from __future__ import annotations
 
@@ -32,18 +18,15 @@ from pbf.solver.launch import compile_config
 from pbf.solver.state import Snapshot
 
 FOLDER = "pbf_settled"
-"""The settled starts' folder inside Taichi's offline cache folder."""
 VIEW_KEYS = ("source", "name", "description", "camera", "render", "surface")
-"""Scene fields that do not move a particle: left out of the key, so a scene that differs only in
-them shares its settled start."""
+"""Scene fields that do not move a particle, left out of the key."""
 CODE = ("solver", "scene")
 """The package folders whose code the settled state depends on."""
 
 
 @functools.cache
 def _code() -> str:
-    """A hash of every ``.py`` file of the package folders in CODE, by relative path and content (read once
-    a process)."""
+    """A hash of every ``.py`` file of the package folders in CODE, by path and content."""
     digest = hashlib.sha256()
     package = Path(__file__).resolve().parent.parent
     for folder in CODE:
@@ -54,7 +37,7 @@ def _code() -> str:
 
 
 def settled_key(scene) -> str:
-    """The hash that names ``scene``'s settled start on this backend (module docstring)."""
+    """The hash naming ``scene``'s settled start: its physics, the code, the versions, the backend's options."""
     physics = {f.name: getattr(scene, f.name) for f in dataclasses.fields(scene) if f.name not in VIEW_KEYS}
     digest = hashlib.sha256()
     options = sorted((name, str(value)) for name, value in backend._options.items())  # str: a type's name
@@ -107,8 +90,7 @@ def store(scene, snapshot: Snapshot) -> None:
         arrays["bodies"] = snapshot.bodies
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        # Written under a temporary name and renamed: a start that runs beside this one reads the
-        # whole file or none.
+        # Written under a temporary name and renamed: a start beside this one reads all or nothing.
         handle, temporary = tempfile.mkstemp(dir=folder, suffix=".tmp")
     except OSError:
         return

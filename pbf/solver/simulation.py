@@ -31,21 +31,14 @@ from pbf.solver.postprocess import VelocityPostprocess
 from pbf.solver.state import Snapshot, State
 from pbf.solver.substep import SubstepKernels
 
-STAGES = (
-    "predict, sort by cell, neighbour lists",
-    "solver iterations",
-    "velocity, vorticity, XSPH, x = x*",
-)
+STAGES = ("predict, sort by cell, neighbour lists", "solver iterations", "velocity, vorticity, XSPH, x = x*")
 """The stages :meth:`Simulation.substep` reports to its :class:`StageHook`, in order."""
 
 
 SETTLE_DAMPING = 0.9
-"""Velocities are multiplied by this after each substep of settling (``time.settle_s``): zeroing them
-left only the iterations' creep, and settled too slowly; 0.9 comes to rest within a second."""
+"""Velocities are multiplied by this after each substep of settling (``time.settle_s``)."""
 SETTLE_FINISH_S = 0.25
-"""With ``time.settle_substeps``, settling ends with this long at the run's own Δt: the solver's rest
-compression depends on Δt, and a tank settled at a coarser one alone started with the particles at
-0.2 m/s as it took up the finer Δt's (`hydrostatic`)."""
+"""Settling's last seconds, at the run's own Δt under ``time.settle_substeps`` (docs/METHOD.md, "Rest")."""
 
 
 class StageHook(Protocol):
@@ -56,8 +49,6 @@ class StageHook(Protocol):
 
 
 class NoHook:
-    """The default hook: does nothing, at the cost of entering a null context per stage."""
-
     _null = contextlib.nullcontext()
 
     def stage(self, name: str) -> ContextManager:
@@ -66,8 +57,7 @@ class NoHook:
 
 @dataclass(frozen=True)
 class Readout:
-    """Per-particle Taichi fields for code on the same device (renderers), in the solver's current
-    sorted order, valid until the next step. Read them; never write them."""
+    """Per-particle fields for renderers on the device, in sorted order, read-only, valid until the next step."""
 
     count: int
     radius_m: float
@@ -79,21 +69,8 @@ class Readout:
 
 @dataclass(frozen=True)
 class Neighbourhood:
-    """The neighbour lists of the last neighbour search, for code on the same device (renderers), in the
-    order of :class:`Readout`, valid until the next step. A kernel walks them with the grid's one
-    neighbour loop::
-
-        @ti.kernel
-        def sums(self, grid: ti.template(), x: ti.template(), entries: pbf.solver.NeighbourList, n: ti.i32):
-            for i in range(n):
-                acc = ti.Vector([0.0, 0.0, 0.0])
-                grid.for_each_neighbour(i, entries, self.pair, acc)   # self.pair(i, j, acc): a ti.func
-
-        sums(hood.grid, hood.positions, hood.entries, hood.count)
-
-    Each particle's list holds every other particle within ``support_m`` of it where the lists were
-    built (x* at the start of the last substep; the particles have moved a little since), itself
-    excluded, none dropped."""
+    """The last neighbour search's lists for renderers on the device, in the order of :class:`Readout`,
+    valid until the next step (a kernel that walks them: docs/ARCHITECTURE.md, "The data each stage owns")."""
 
     count: int
     """Particles the lists cover (the first ``count`` of the readout's fields)."""
@@ -102,16 +79,13 @@ class Neighbourhood:
     positions: object
     """(n,) vector(3, f32) field of positions, m (the readout's)."""
     grid: object
-    """The neighbour grid: a ``ti.template()`` argument whose ``for_each_neighbour(i, entries, task, acc)``
-    calls ``task(i, j, acc)`` for each neighbour j of i."""
+    """The grid, a ``ti.template()``: ``for_each_neighbour(i, entries, task, acc)`` calls ``task(i, j, acc)``."""
     entries: object
-    """The lists themselves, an ndarray for a ``pbf.solver.NeighbourList`` kernel argument (it may be
-    replaced by a longer one between steps: pass it at each call)."""
+    """The lists, for a ``pbf.solver.NeighbourList`` argument (it may be replaced between steps: pass it each call)."""
 
 
 def _particle_array(name: str, values) -> np.ndarray:
-    """A snapshot's per-particle array as float32 (NumPy's rounding, as snapshot() itself stores them),
-    or a TypeError for what holds no real numbers."""
+    """A snapshot's per-particle array as float32, or a TypeError for what holds no real numbers."""
     try:
         array = np.asarray(values)
     except (ValueError, TypeError) as error:  # ragged lists
@@ -151,23 +125,16 @@ class Simulation:
         quiet: bool = False,
         hook: StageHook | None = None,
     ):
-        scene = schema.load_scene(scene, overrides)  # any kind of scene, checked, with the overrides
+        scene = schema.load_scene(scene, overrides)
         self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
-        # Validates memory before Taichi allocates anything; the arrays may take a bucket compiled before.
         self.model = Model.from_scene(scene, buckets.compiled(), buckets.REUSE_LIMIT_BYTES)
         buckets.record(self.model.allocated, self.model.grid.allocated_cells)
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
-        # Every array all scenes have first, each sized by its bucket and in the same order, then the
-        # arrays of the features a scene may lack (obstacles, bodies, emitters): Taichi's offline cache
-        # names a kernel by the shapes and the places of the fields it touches, so a scene of other
-        # sizes or constants, with or without those features, finds the kernels a run before compiled
-        # (pbf.solver.constants, pbf.solver.model.allocation).
-        # What differs by backend, chosen here: on a GPU backend (or the CPU told to act as one, for the
-        # tests) loops over the particles' bucket, two iterations a call and no decision read by the host;
-        # on the CPU loops over the live count, an iteration a call and the error target's decision read
-        # after each. The lists lie slot-major on a GPU (NeighbourGrid.slot_major).
+        # The arrays every scene has first, in one order, then those of features a scene may lack: the
+        # offline cache keys a kernel by its fields' shapes and places (docs/ARCHITECTURE.md). The
+        # backend's choices are made here (docs/METHOD.md, "One substep on every backend").
         on_device = keeps_decisions_on_device()
         self.state = State(model.allocated)
         self.boundaries = Boundaries(model.boundary, solids=False)
@@ -197,8 +164,7 @@ class Simulation:
         """The stages composed into three kernels (``pbf.solver.substep``)."""
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
-        """The state reset() returns to, taken the first time (settling is deterministic, so later
-        resets restore it instead of settling again: 2 s of substeps at 64,000 particles)."""
+        """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
         self.reset()
 
     @property
@@ -228,11 +194,8 @@ class Simulation:
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
-        """Step ``seconds`` with the velocities damped by SETTLE_DAMPING after each substep (the wave
-        maker standing still), then start the clock at t = 0 from there: the blocks come close to the
-        positions and the pressure the solver itself holds at rest, so a tank at rest starts near rest
-        instead of sagging into it (docs/VALIDATION.md). With ``time.settle_substeps`` all but the last
-        SETTLE_FINISH_S run at that coarser Δt, the rest at the run's own."""
+        """Step ``seconds`` with damped velocities, the wave maker still (all but SETTLE_FINISH_S at the
+        coarser Δt of ``time.settle_substeps``), then start the clock at t = 0 there."""
         t = self.scene.time
         fine = t.frame_dt_s / self.control.substeps
         finish = min(seconds, SETTLE_FINISH_S) if t.settle_substeps else seconds
@@ -253,8 +216,7 @@ class Simulation:
         self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
-        """Positions, velocities, the divergence pressure (creation order), time and frame, the bodies:
-        what :meth:`restore` takes."""
+        """What :meth:`restore` takes: the particles' kept fields (creation order), clocks, emitters, bodies."""
         return Snapshot(
             self.positions(),
             self.velocities(),
@@ -267,12 +229,8 @@ class Simulation:
         )
 
     def restore(self, snapshot: Snapshot) -> None:
-        """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it.
-
-        Anything else is refused before the state changes: a TypeError for what is not a Snapshot or
-        holds no numbers, a ValueError naming the part (shapes, a non-finite value, a particle outside
-        the container, a speed the scene's frames cannot follow, emitted layers that are not this
-        scene's emitters' or would overflow its particle budget, a negative time)."""
+        """Return to a :meth:`snapshot`; the next steps replay exactly those that followed it. Anything
+        else is refused before the state changes: a TypeError, or a ValueError naming the part."""
         positions, velocities, fields, emitted = self._checked_snapshot(snapshot)
         bodies = self._checked_bodies(snapshot)
         self.state.load({**fields, "x": positions, "v": velocities})
@@ -342,7 +300,7 @@ class Simulation:
         return positions, velocities, fields, self._checked_layers(snapshot.emitted_layers, count)
 
     def _checked_bodies(self, snapshot) -> np.ndarray | None:
-        """The bodies' states of the snapshot (their start when it holds none), checked against this scene's."""
+        """The snapshot's bodies (their start when it holds none), checked."""
         if self.bodies is None:
             if snapshot.bodies is not None and len(snapshot.bodies):
                 raise ValueError(f"restore: the snapshot holds {len(snapshot.bodies)} bodies; this scene has none")
@@ -360,8 +318,7 @@ class Simulation:
         return bodies
 
     def _check_inside(self, positions: np.ndarray, velocities: np.ndarray) -> None:
-        """Every particle inside this scene's container, and no faster than its frames can follow
-        (a snapshot of another scene is caught here, or by its count and emitted layers)."""
+        """Every particle inside this scene's container, and no faster than its frames can follow."""
         lower, upper = (np.array(c, np.float64) for c in (self.scene.container.min_m, self.scene.container.max_m))
         slack = 1e-6 * (np.abs(lower) + np.abs(upper) + 1.0)  # float32 rounding of a particle at the wall
         outside = np.any((positions < lower - slack) | (positions > upper + slack), axis=1)
@@ -382,9 +339,7 @@ class Simulation:
             )
 
     def _checked_layers(self, layers, count: int) -> list[int]:
-        """Emitted layers: one whole number per emitter of this scene, from 0 to its total, such that
-        the particles still to come fit the budget. (Fewer particles than the layers stand for are
-        fine: layers skipped while the emitters were off or a nozzle drowned add none.)"""
+        """Emitted layers: a whole number per emitter, 0 to its total, the particles to come within budget."""
         emitters, spacing = self.scene.emitters, self.scene.fluid.spacing_m
         if not isinstance(layers, (tuple, list, np.ndarray)):
             raise TypeError(
@@ -417,20 +372,16 @@ class Simulation:
         return layers
 
     def _after_restore(self) -> None:
-        """What every restore resets besides the particles: the piston, the frame's counters and the
-        neighbour lists."""
+        """What a restore resets besides the particles: the piston, the frame's counters, the lists."""
         self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
         self.iterations_used = 0
-        self.pressure_substeps = 0
-        """Substeps summed in ``State.pressure_sum`` since the frame began (pressures())."""
+        self.pressure_substeps = 0  # summed in State.pressure_sum since the frame began
         self._find_neighbours_in_place()
 
     def _find_neighbours_in_place(self) -> None:
-        """The particles sorted by cell and their neighbour lists where they stand, for stats() and the
-        renderers before the first step: the substep's first kernel with Δt = 0. Outside the substep the
-        host may read, so a list that would not fit is grown and made again here."""
+        """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
         features = Features.of(self.model, self.control, in_place=True)
         self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
         most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
@@ -455,9 +406,7 @@ class Simulation:
 
     def substeps_needed(self) -> int:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
-        time.max_cfl spacings in one substep, less under 4 iterations (``Scene.travel_per_substep_m``:
-        no tunnelling into the pile at a wall, no compression piling up faster than the iterations
-        remove it)."""
+        ``Scene.travel_per_substep_m`` in one (docs/METHOD.md, "Time steps")."""
         t = self.scene.time
         fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
@@ -479,15 +428,14 @@ class Simulation:
         return min(needed, t.max_substeps)
 
     def _outside_inputs(self, dt: float) -> None:
-        """What acts on the water from outside Algorithm 1, before its prediction: new water from the
-        nozzles, the user's hand (velocities, capped so the CFL limit holds), the bodies' rigid step, and
-        moving walls placed where they stand at the end of the substep, where x* is projected."""
+        """What acts from outside Algorithm 1: nozzles, the hand, the bodies' rigid step, moving walls placed
+        where they stand at the substep's end."""
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
             hand_limit_m_s = self.scene.travel_per_substep_m(control.iterations) / dt
             self.integrator.push(control.push, hand_limit_m_s)
-            if self.bodies is not None:  # and the bodies it touches
+            if self.bodies is not None:
                 self.bodies.grab(control.push, hand_limit_m_s)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
@@ -495,8 +443,7 @@ class Simulation:
         self.boundaries.move(self.piston_time_s, dt)
 
     def substep(self, dt: float | None = None) -> None:
-        """One PBF step of Δt (Algorithm 1); Δt defaults to frame_dt_s / control.substeps and may be at
-        most frame_dt_s."""
+        """One PBF step (Algorithm 1) of Δt ≤ frame_dt_s, by default frame_dt_s / control.substeps."""
         control, hook, kernels = self.control, self.hook, self.kernels
         dt = self._checked_dt(dt)
         features = Features.of(self.model, control)  # what the kernels compile in
@@ -530,7 +477,6 @@ class Simulation:
         self.last_dt_s = dt
 
     def _checked_dt(self, dt) -> float:
-        """A substep's Δt: ``dt`` checked, or frame_dt_s / control.substeps for None."""
         frame_dt = self.scene.time.frame_dt_s
         if dt is None:
             return frame_dt / self.control.substeps
@@ -563,13 +509,9 @@ class Simulation:
         return self.state.velocities()
 
     def pressures(self) -> np.ndarray:
-        """(n,) float32 pressure in Pa, in creation order: the mean over the last frame's substeps (or
-        over those run since, with :meth:`substep`) of p = −ρ0 h² (L/Δt² + Λ), L the multiplier the
-        position iterations moved the particle by and Λ the divergence pre-correction's
-        (``DensityConstraint.lam_total``). Under accelerated weights one substep's pressure alternates
-        from substep to substep; a frame's mean holds still (docs/VALIDATION.md, the hydrostatic
-        tank). Zero before the first substep after a restore. Each particle's value is still noisy (a
-        few per cent of ρ0 g H): average over frames for a field."""
+        """(n,) float32 pressure in Pa, in creation order: p = −ρ0 h² (L/Δt² + Λ) averaged over the last frame's
+        substeps (docs/METHOD.md, "The pressure read-out"); zero before the first substep. Noisy per
+        particle: average over frames for a field."""
         total = self.state.in_creation_order(self.state.pressure_sum)
         return total / np.float32(max(self.pressure_substeps, 1))
 
@@ -578,9 +520,7 @@ class Simulation:
         return self.state.in_creation_order(self.grid.neighbour_count).astype(np.int32)
 
     def body_states(self) -> np.ndarray:
-        """(bodies, 19) float32 copy of the rigid bodies' state, in the scene's order
-        (``pbf.solver.bodies.STATE_LAYOUT``: position, quaternion (w, x, y, z), velocity, angular
-        velocity, the water's last force and torque on each); (0, 19) without bodies."""
+        """(bodies, 19) float32 copy of the rigid bodies' state (``pbf.solver.bodies.STATE_LAYOUT``)."""
         return np.zeros((0, STATE_WIDTH), np.float32) if self.bodies is None else self.bodies.state()
 
     def readout(self) -> Readout:

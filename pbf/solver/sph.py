@@ -1,12 +1,5 @@
-"""The SPH smoothing kernel: the cubic B-spline (Monaghan 1992), as Taichi functions and NumPy twins.
-
-The paper pairs poly6 for density with the spiky gradient, which is not the gradient of the density
-it constrains: each projection then feeds energy into a resting fluid, the more so with more
-iterations. The cubic spline gives density and gradient from one function, so the projection is a
-true Gauss-Newton step (docs/METHOD.md). h is the support radius (W = 0 for r ≥ h).
-
-The NumPy twins compute derived constants once (particle mass, wall density table) and give tests an
-independent implementation to check the Taichi versions against.
+"""The cubic B-spline kernel (Monaghan 1992), as Taichi functions and NumPy twins (for constants and
+tests): density and gradient from one function (docs/METHOD.md, "The kernel"). W = 0 for r ≥ h.
 """
 
 import math
@@ -19,9 +12,7 @@ SIGMA_3D = 8.0 / math.pi
 
 @ti.func
 def kernel_scale(h):
-    """(1/h, σ, σ/h²) of the kernel at support radius h, σ = 8/(π h³), for :func:`scaled_kernel` and
-    :func:`scaled_kernel_and_gradient`: h is data, so a caller works this out once per particle rather
-    than per pair."""
+    """(1/h, σ, σ/h²) at support radius h, σ = 8/(π h³): worked out once per particle, not per pair."""
     inverse_h = 1.0 / h
     sigma = SIGMA_3D * inverse_h * inverse_h * inverse_h
     return ti.Vector([inverse_h, sigma, sigma * inverse_h * inverse_h])
@@ -37,11 +28,8 @@ def scaled_kernel(r2, k):
 
 @ti.func
 def scaled_kernel_and_gradient(r: ti.template(), k):
-    """(W, ∇W) at offset r, k = kernel_scale(h), sharing one square root: the solver's inner loops need both.
-
-    ∇W = W'(|r|) r/|r| with W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½ (no division, and zero force at r = 0)
-    and −σ/h⁵ · 6(1 − q)²/q beyond. Both pieces are computed and one selected (no branch on q).
-    """
+    """(W, ∇W) at offset r, k = kernel_scale(h): ∇W = W'(|r|) r/|r|, W'/|r| = σ/h⁵ · 6(3q − 2) for q ≤ ½
+    (zero at r = 0) and −σ/h⁵ · 6(1 − q)²/q beyond; both computed, one selected (no branch)."""
     q = r.norm() * k[0]
     t = ti.max(1.0 - q, 0.0)
     inner = q <= 0.5
@@ -103,23 +91,14 @@ def lattice_offsets(spacing, h):
 
 
 def lattice_density_sum(spacing, h):
-    """Σ_j W(x_j) over a full lattice: the number density a truncated kernel actually sees, in 1/m³.
-
-    It differs from 1/s³ by a few per cent, so the particle mass is derived from it (not from ρ0 s³)
-    to make the initial block sit exactly at rest density.
-    """
+    """Σ_j W(x_j) over a full lattice (1/m³), not 1/s³: the mass derived from it puts the lattice at ρ0."""
     return float(kernel_np(np.linalg.norm(lattice_offsets(spacing, h), axis=1), h).sum())
 
 
 def wall_density_table(spacing, h, samples):
-    """Missing density ρ_wall(d)/ρ0 of a particle at distance d from a flat wall, for d in [0, h].
-
-    A particle next to a wall lacks the neighbours that would lie behind it. We restore them as ghost
-    lattice planes behind the wall, mirroring the fluid lattice: the ghost planes sit at distances
-    d + s/2 + k s from the particle (k = 0, 1, ...), each plane a square lattice of spacing s. At the
-    initial lattice (d = s/2) this restores the interior density exactly, so a block resting against a
-    wall neither stacks nor shows a density dip. Returned as the table and its derivative in d.
-    """
+    """Missing density ρ_wall(d)/ρ0 of a particle at distance d in [0, h] from a flat wall, and its
+    derivative in d: ghost lattice planes at d + s/2 + k s behind the wall, so that a lattice touching
+    the wall (d = s/2) reads exactly the interior density."""
     d = np.linspace(0.0, h, samples)
     density = ghost_lattice_density(d, spacing, h)
     return density, np.gradient(density, d)
@@ -139,16 +118,9 @@ def ghost_lattice_density(d, spacing, h):
 
 
 def surface_ghost_calibration(spacing, h):
-    """(g_below, g_top, ψ_top): the free-surface ghost of ``pbf.solver.density`` calibrated on a
-    lattice filling the half-space below a flat surface, in units of s.
-
-    g is the smoothed colour gradient |Σ_j V W_ij ĝ_j| (self included) of a particle, ĝ_j = h Σ_k V
-    ∇W_jk the colour gradient of each neighbour; g_top and g_below are its values in the lattice's top
-    layer and in the layer under it; ψ_top/ρ0 is what the top layer misses, the density of the lattice
-    planes above it (``ghost_lattice_density`` at d = s/2). The solver maps g to the ghost density
-    linearly, 0 at g_below and ψ_top at g_top, so the top layer of a lattice reads ρ0 and every layer
-    under it is left as it is.
-    """
+    """(g_below, g_top, ψ_top) of the free-surface ghost on a half-space lattice, in units of s: the smoothed
+    colour gradient g = |Σ_j V W_ij ĝ_j| of the layer below the top and of the top, and the density the top
+    misses; the ghost, linear in g from 0 to ψ_top, puts the top layer at ρ0."""
     s = 1.0
     h = h / spacing
     n = int(math.ceil(h)) + 1
@@ -171,15 +143,9 @@ def surface_ghost_calibration(spacing, h):
 
 
 def wall_overlap_tables(spacing, h, samples):
-    """Ghost density that two walls (an edge) and three walls (a corner) both count, as ρ/ρ0.
-
-    ``wall_density_table`` restores the lattice behind one flat wall. Near an edge the ghost lattices
-    of the two walls overlap in the quadrant behind both, which the sum counts twice; near a corner
-    the octant behind all three is counted three times by the walls and removed three times by the
-    edges. Inclusion–exclusion: density = Σ walls − Σ edges (quadrant) + corner (octant).
-    Returns the quadrant table Q[i, k] at distances (d_i, d_k) and the octant table O[i, j, k] on
-    the grid d = linspace(0, h, samples) per axis, each with its gradient tables.
-    """
+    """Ghost density (ρ/ρ0) counted twice at an edge and thrice at a corner, for inclusion–exclusion:
+    density = Σ walls − Σ edges (quadrant) + corner (octant). Returns the quadrant table Q[i, k], the
+    octant table O[i, j, k] on d = linspace(0, h, samples) per axis, and their gradient tables."""
     n = int(math.ceil(h / spacing))
     behind = 0.5 * spacing + np.arange(n + 1) * spacing  # ghost planes beyond the wall, from d
     lateral = np.arange(-n, n + 1) * spacing
@@ -209,14 +175,9 @@ def wall_overlap_tables(spacing, h, samples):
 
 
 def jacobi_gain(kernel_ratio, relaxation, samples=24):
-    """Largest gain μ of one Jacobi density projection over all wave vectors of an interior lattice.
-
-    Linearised about a lattice of spacing s, one projection maps the constraint error C to
-    (1 − μ(k)) C for each Fourier mode k, with μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂)
-    (ĝ_j the dimensionless gradient of pbf.solver.density). A mode with μ > 2 grows every iteration,
-    which the cubic spline at h = 2.2 s reaches near wavelengths of 4 s. Depends only on h/s and ε̂,
-    so it is computed in units of s.
-    """
+    """Largest gain μ of one Jacobi density projection over all wave vectors of an interior lattice:
+    one projection maps mode k of C to (1 − μ(k)) C, μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂);
+    μ > 2 grows (docs/METHOD.md, "A Jacobi step that no mode outgrows"). In units of s."""
     h = float(kernel_ratio)
     offsets = lattice_offsets(1.0, h)
     offsets = offsets[np.linalg.norm(offsets, axis=1) > 0.0]

@@ -1,9 +1,5 @@
-"""Particle state: what persists from one substep to the next, kept apart from the stages' scratch.
-
-Every per-particle quantity is declared once, in :data:`PARTICLE_FIELDS`: the state allocates it,
-the grid's sort carries it along (:meth:`State.gather`), the emitters give new particles its initial
-value, and snapshots keep it where it says so. A stage's own per-particle array that must follow
-the sort (the predicted positions x*) is attached with :meth:`State.carry`.
+"""Particle state, what persists between substeps: each per-particle quantity declared once, in
+:data:`PARTICLE_FIELDS`; a stage's own array that must follow the sort is attached with :meth:`State.carry`.
 """
 
 from dataclasses import dataclass, field
@@ -22,14 +18,12 @@ class ParticleField:
     name: str
     """The attribute of State that holds it."""
     dtype: object
-    """ti.f32 or ti.i32."""
     components: int
     """1 (a scalar) or 3 (a vector)."""
     unit: str
     doc: str
     kept: bool
-    """Whether a :class:`Snapshot` keeps it; a field not kept starts from its initial value after a
-    restore."""
+    """Whether a :class:`Snapshot` keeps it (if not, a restore starts it at its initial value)."""
     initial: str = "zero"
     """A new particle's value: "zero", or "creation" (the creation index)."""
 
@@ -61,7 +55,7 @@ PARTICLE_FIELDS = (
 )
 """The particles' quantities, in the order the sort carries them."""
 SNAPSHOT_NAMES = {"x": "positions_m", "v": "velocities_m_s"}
-"""Kept fields that a :class:`Snapshot` holds under a name of their own; the others are in its ``fields``."""
+"""Kept fields a :class:`Snapshot` holds under their own name; the others are in its ``fields``."""
 
 
 @dataclass(frozen=True)
@@ -79,29 +73,22 @@ class Snapshot:
     piston_time_s: float | None = None
     """How long the wave maker had run (None: as long as the scene, it was never switched off)."""
     fields: dict = field(default_factory=dict)
-    """The other kept per-particle fields by name (``PARTICLE_FIELDS``), (n,) or (n, 3) float32 each;
-    one left out starts at zero (e.g. ``multiplier``: no divergence pressure, as at rest)."""
+    """The other kept per-particle fields by name, (n,) or (n, 3) float32; one left out starts at zero."""
     bodies: np.ndarray | None = None
-    """(bodies, 19) float32, one row per rigid body (``pbf.solver.bodies.STATE_LAYOUT``: position,
-    quaternion, velocity, angular velocity, the fluid's last force and torque); None: as the scene sets them."""
+    """(bodies, 19) float32 (``pbf.solver.bodies.STATE_LAYOUT``); None: as the scene sets them."""
 
 
 @ti.data_oriented
 class State:
-    """The particles of a simulation: a (capacity,) field per entry of :data:`PARTICLE_FIELDS`, the
-    capacity holding the blocks and everything the emitters will add. The first ``active[None]``
-    slots hold the live particles in the grid's sorted order (slot i holds particle ``index[i]``);
-    emitters append after them."""
+    """A (capacity,) field per :data:`PARTICLE_FIELDS` entry; slots below ``active[None]`` hold the live ones."""
 
     def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
         self.capacity = capacity
         self.fields = tuple(fields)
         self.active = ti.field(ti.i32, shape=())
         self.loop_bound = capacity if keeps_decisions_on_device() else self.active
-        """What loops over the live particles run to (:meth:`live_bound`, each skipping the slots past the
-        live count): on a GPU the capacity, a count the kernel knows (a bound read at run time is a
-        one-thread task, a launch); on the CPU the live count, where that task costs little and idle
-        slots do (docs/BENCHMARKS.md, "Backends: the CPU's path and the GPU's")."""
+        """What loops over the live particles run to: on a GPU the capacity (a bound read at run time is a
+        one-thread task), on the CPU the live count."""
         self._carried = []
         """(field, scratch) of every per-particle array the sort carries, the state's own first."""
         for spec in self.fields:
@@ -125,8 +112,7 @@ class State:
         return int(self.active[None])
 
     def load(self, values: dict) -> None:
-        """Make the particles of ``values`` (field name → (n,) or (n, 3) array in creation order; x is
-        required) the live ones, n ≤ capacity; a field not given starts at its initial value."""
+        """Make ``values`` (name → array in creation order; x required) the live particles, the rest initial."""
         n = len(values["x"])
         for spec in self.fields:
             shape = (self.capacity,) if spec.components == 1 else (self.capacity, spec.components)
@@ -146,9 +132,7 @@ class State:
 
     @ti.func
     def gather(self, slot, i):
-        """Particle i's carried arrays into ``slot`` of their scratch: the grid's sort calls it for every
-        particle (``NeighbourGrid.order_loops``), and :meth:`take_gathered` brings the sorted arrays back
-        in a later loop (the neighbour visit's, or one of their own)."""
+        """Particle i's carried arrays into ``slot`` of their scratch (the sort), until :meth:`take_gathered`."""
         for k in ti.static(range(len(self._carried))):
             self._carried[k][1][slot] = self._carried[k][0][i]
 
@@ -159,15 +143,14 @@ class State:
             self._carried[k][0][slot] = self._carried[k][1][slot]
 
     def scratch_of(self, values):
-        """The scratch that :meth:`gather` fills for the carried array ``values``: the sorted copy, until
-        :meth:`take_gathered`."""
+        """The scratch :meth:`gather` fills for the carried array ``values``."""
         return next(scratch for field, scratch in self._carried if field is values)
 
     @ti.func
     def reset_new(self, slot):
         """A new particle's fields, except position and velocity, at their initial values (the emitters)."""
         for k in ti.static([k for k, spec in enumerate(self.fields) if spec.name not in ("x", "v")]):
-            # The creation index for "creation", else zero: a number the compile knows, not a branch.
+            # The creation index for "creation", else zero, without a branch.
             creation = ti.static(int(self.fields[k].initial == "creation"))
             self._carried[k][0][slot] = ti.cast(slot * creation, self.fields[k].dtype)
 
@@ -182,8 +165,7 @@ class State:
             self._unsorted_scalar[self.index[i]] = values[i]
 
     def in_creation_order(self, values) -> np.ndarray:
-        """A per-particle field (in the current sorted order) as a NumPy array in creation order: (n,)
-        for a scalar field, (n, 3) for a vector field."""
+        """A per-particle field as a NumPy array in creation order, (n,) or (n, 3)."""
         if hasattr(values, "n"):
             self._unsort(values)
             return self._unsorted.to_numpy()[: self.count]
@@ -191,15 +173,15 @@ class State:
         return self._unsorted_scalar.to_numpy()[: self.count]
 
     def positions(self) -> np.ndarray:
-        """(n, 3) float32 positions in metres of the live particles, in the order they were created."""
+        """(n, 3) float32 positions (m) in creation order."""
         return self.in_creation_order(self.x)
 
     def velocities(self) -> np.ndarray:
-        """(n, 3) float32 velocities in m/s of the live particles, in the order they were created."""
+        """(n, 3) float32 velocities (m/s) in creation order."""
         return self.in_creation_order(self.v)
 
     def kept_fields(self) -> dict:
-        """Every kept field but x and v, by name, in creation order (what a Snapshot's ``fields`` holds)."""
+        """Every kept field but x and v, by name, in creation order (a Snapshot's ``fields``)."""
         return {
             spec.name: self.in_creation_order(getattr(self, spec.name))
             for spec in self.fields

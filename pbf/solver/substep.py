@@ -1,17 +1,5 @@
-"""The substep's kernels: the stages of Algorithm 1, each a set of loops (``@ti.func``) in a module of its
-own, composed into few calls, the same on every backend.
-
-* :meth:`SubstepKernels.find_neighbours`, lines 1-7: v += Δt g and x* = x + Δt v
-  (``pbf.solver.integrate``), the counting sort by the cell of x* with the state reordered alike, the
-  neighbour lists (``pbf.solver.grid``), the divergence pre-correction and x* again
-  (``pbf.solver.divergence``), and the denominators of λ (Eq. 10) at x* (``DensityConstraint.prepare``);
-* :meth:`SubstepKernels.iterate`, lines 8-19: ``per_call`` Jacobi iterations a call
-  (``pbf.solver.iterations``, ``pbf.solver.density``), every call but the last;
-* :meth:`SubstepKernels.iterate_and_finish`: the same kernel with the end compiled in, the last call's
-  iterations, x* settled into the first buffer, then lines 20-23 (``pbf.solver.postprocess``).
-
-On a GPU every call costs the host time: a substep of 4 iterations is 3 calls.
-"""
+"""The substep's three kernels, the same on every backend, composed of the stages' ``@ti.func`` loops
+(docs/METHOD.md, "One substep on every backend")."""
 
 import taichi as ti
 
@@ -21,22 +9,18 @@ from pbf.solver.launch import Launcher
 
 @ti.data_oriented
 class SubstepKernels:
-    """The kernels that run a substep's stages (the module docstring); the stages themselves are the
-    objects given, each from its module."""
+    """The kernels that run the stages of ``stages``, the Simulation."""
 
     def __init__(self, stages):
-        """``stages``: the Simulation, whose stages these kernels compose."""
         self.state, self.integrator, self.grid = stages.state, stages.integrator, stages.grid
         self.density, self.divergence = stages.density, stages.divergence
         self.iterations, self.postprocess = stages.iterations, stages.postprocess
-        # The calls, launched past Taichi's per-call Python once compiled (pbf.solver.launch).
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
 
     def find_neighbours(self, dt: float, gravity, features) -> None:
-        """Lines 1-7 and what the iterations need before they start (the module docstring), one call.
-        With ``dt`` 0 and no gravity the particles stay where they are and only the sort and the lists
-        are made (a restore)."""
+        """Lines 1-7, the divergence pre-correction and the denominators of λ (Eq. 10) at x*, one call;
+        with ``dt`` 0 and no gravity, only the sort and the lists (a restore)."""
         gx, gy, gz = (float(g) for g in gravity)
         self._find_neighbours(entries=self.grid.neighbours, dt=dt, gx=gx, gy=gy, gz=gz, features=features)
 
@@ -57,10 +41,8 @@ class SubstepKernels:
         first_of_frame: bool,
         max_speed: float,
     ) -> None:
-        """The iterations from ``start`` (the last call's), x* settled, then lines 20-23: v, confinement
-        at ε = control.vorticity, XSPH at c = control.xsph, v capped at ``max_speed`` (0: not), x = x*,
-        and the pressure at ``pressure_per_impulse`` Pa per unit of the multipliers (``State.pressure_sum``
-        starts again at the ``first_of_frame`` substep)."""
+        """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
+        and the pressure (``pressure_per_impulse`` Pa a unit of multiplier, restarted ``first_of_frame``)."""
         self._call(
             features,
             control,
