@@ -299,15 +299,20 @@ def gpu_blocks() -> bool:
     return on_gpu() or _gpu_blocks_on_cpu
 
 
-@contextlib.contextmanager
 def in_gpu_blocks(enabled: bool = True):
     """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
-    global _gpu_blocks_on_cpu
-    before, _gpu_blocks_on_cpu = _gpu_blocks_on_cpu, enabled
+    return _choosing("_gpu_blocks_on_cpu", enabled)
+
+
+@contextlib.contextmanager
+def _choosing(name: str, enabled: bool):
+    """The module's choice ``name`` set to ``enabled`` for what is built inside, then set back."""
+    before = globals()[name]
+    globals()[name] = enabled
     try:
         yield
     finally:
-        _gpu_blocks_on_cpu = before
+        globals()[name] = before
 
 
 def sums_in_shared_memory() -> bool:
@@ -320,15 +325,9 @@ def keeps_decisions_on_device() -> bool:
     return on_gpu() or _decisions_on_device_on_cpu
 
 
-@contextlib.contextmanager
 def decisions_on_device(enabled: bool = True):
     """Simulations built inside take the GPU backends' device-resident path on any backend."""
-    global _decisions_on_device_on_cpu
-    before, _decisions_on_device_on_cpu = _decisions_on_device_on_cpu, enabled
-    try:
-        yield
-    finally:
-        _decisions_on_device_on_cpu = before
+    return _choosing("_decisions_on_device_on_cpu", enabled)
 
 
 @contextlib.contextmanager
