@@ -326,7 +326,8 @@ class Obstacles:
 
     def allocate(self) -> None:
         """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``), as
-        many for none as for a few: their count is data, and every scene shares the same code."""
+        many for none as for a few: their count is data; their code is compiled in only where there are
+        obstacles (:meth:`GhostTables.summed`)."""
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
