@@ -15,8 +15,9 @@ import math
 
 import numpy as np
 
+from pbf.scene import SceneError, load_scene
 from pbf.solver import Simulation
-from pbf.solver.backend import start_backend
+from pbf.solver.backend import BackendError, start_backend
 
 
 def column_tops(positions: np.ndarray, lower, upper, columns: int) -> np.ndarray:
@@ -41,10 +42,16 @@ def main(argv=None) -> int:
     parser.add_argument("--columns", type=int, default=8, help="columns along x and along z (default: 8)")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto)")
     args = parser.parse_args(argv)
-    if args.columns < 2 or any(not math.isfinite(t) or t < 0 for t in args.times):
-        parser.error("--columns: at least 2; --times: finite seconds ≥ 0")
-    start_backend(args.arch)
-    sim = Simulation(args.preset, quiet=True)
+    if args.columns < 2:
+        parser.error(f"--columns: expected at least 2, got {args.columns}")
+    if any(not math.isfinite(t) or t < 0 for t in args.times):
+        parser.error(f"--times: expected finite seconds ≥ 0, got {' '.join(map(str, args.times))}")
+    try:  # before the backend starts
+        scene = load_scene(args.preset)
+        start_backend(args.arch)
+    except (SceneError, BackendError) as error:
+        parser.error(str(error))
+    sim = Simulation(scene, quiet=True)
     lower, upper = np.asarray(sim.scene.container.min_m), np.asarray(sim.scene.container.max_m)
     width = (upper[0] - lower[0]) / args.columns, (upper[2] - lower[2]) / args.columns
     print(f"{sim.scene.name}: the tops of {args.columns} × {args.columns} columns")

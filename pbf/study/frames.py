@@ -165,8 +165,8 @@ SAME_SURFACE_SPACINGS = 2.0
 """Neighbouring pixels of water whose depths differ by less than this are on one surface (twice the
 renderer's narrow range: a surface seen at a slant changes depth from pixel to pixel)."""
 POOLS = (("hydrostatic", 60), ("dam_break", 180), ("dam_break", 480))
-"""The settled pools measured: preset and frame (t = 1 s; t = 3 s, the issue's moment, when the seed's
-pool still sloshes; t = 8 s, when it has come to rest)."""
+"""The settled pools measured: preset and frame (t = 1 s; t = 3 s, the moment the look is judged at,
+when the seed's pool still sloshes; t = 8 s, when it has come to rest)."""
 SPLASH = ("dam_break", range(27, 41))
 """The splash measured: the seed scene's frames 27-40."""
 POUR = ("pour", 150)
