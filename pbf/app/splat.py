@@ -94,6 +94,109 @@ DROP_RADIUS_SPACINGS = (3.0 / (4.0 * math.pi)) ** (1.0 / 3.0)
 """A drop's sphere, in spacings: the volume of a spacing cubed (0.62)."""
 
 
+@ti.func
+def _unit_normal_to_rows(m, value):
+    """A unit vector that (m − value I) maps to zero, for a symmetric m and its eigenvalue ``value`` of
+    multiplicity one: the longest of the cross products of the matrix's rows (any unit vector where all
+    vanish)."""
+    shifted = m - value * ti.Matrix.identity(ti.f32, 3)
+    r0, r1, r2 = (
+        ti.Vector([shifted[0, 0], shifted[0, 1], shifted[0, 2]]),
+        ti.Vector([shifted[1, 0], shifted[1, 1], shifted[1, 2]]),
+        ti.Vector([shifted[2, 0], shifted[2, 1], shifted[2, 2]]),
+    )
+    best = r0.cross(r1)
+    c02, c12 = r0.cross(r2), r1.cross(r2)
+    if c02.norm_sqr() > best.norm_sqr():
+        best = c02
+    if c12.norm_sqr() > best.norm_sqr():
+        best = c12
+    result = ti.Vector([1.0, 0.0, 0.0])
+    if best.norm_sqr() > 0.0:
+        result = best / ti.sqrt(best.norm_sqr())
+    return result
+
+
+@ti.func
+def _second_vector(m, first, value):
+    """The unit eigenvector of symmetric m for eigenvalue ``value`` orthogonal to its unit eigenvector
+    ``first``: the null vector of m − value I restricted to the plane normal to ``first`` (a 2 × 2
+    problem, robust where two eigenvalues are close)."""
+    u = ti.Vector([-first[2], 0.0, first[0]])
+    if ti.abs(first[0]) <= ti.abs(first[1]):
+        u = ti.Vector([0.0, first[2], -first[1]])
+    u = u / ti.sqrt(u.norm_sqr())
+    v = first.cross(u)
+    mu, mv = m @ u, m @ v
+    m00, m01, m11 = u.dot(mu) - value, u.dot(mv), v.dot(mv) - value
+    result = u
+    if ti.abs(m00) >= ti.abs(m11):
+        if ti.max(ti.abs(m00), ti.abs(m01)) > 0.0:
+            if ti.abs(m00) >= ti.abs(m01):
+                m01 /= m00
+                m00 = 1.0 / ti.sqrt(1.0 + m01 * m01)
+                m01 *= m00
+            else:
+                m00 /= m01
+                m01 = 1.0 / ti.sqrt(1.0 + m00 * m00)
+                m00 *= m01
+            result = m01 * u - m00 * v
+    elif ti.max(ti.abs(m11), ti.abs(m01)) > 0.0:
+        if ti.abs(m11) >= ti.abs(m01):
+            m01 /= m11
+            m11 = 1.0 / ti.sqrt(1.0 + m01 * m01)
+            m01 *= m11
+        else:
+            m11 /= m01
+            m01 = 1.0 / ti.sqrt(1.0 + m11 * m11)
+            m11 *= m01
+        result = m11 * u - m01 * v
+    return result
+
+
+@ti.func
+def symmetric_eigen(m):
+    """Eigenvalues and unit eigenvectors (the matrix's columns, a rotation) of a symmetric 3 × 3 matrix,
+    in closed form (Eberly 2014, "A robust eigensolver for 3 × 3 symmetric matrices",
+    Geometric Tools): the eigenvalues from the trigonometric solution of the characteristic cubic, the
+    eigenvector of the one farthest from the others from cross products of rows, the second within the
+    plane normal to it, the third their cross product. Equal or close eigenvalues (a lattice's
+    covariance) need no special case; a diagonal matrix gives its diagonal and the coordinate axes."""
+    largest = ti.max(
+        ti.abs(m[0, 0]), ti.abs(m[0, 1]), ti.abs(m[0, 2]), ti.abs(m[1, 1]), ti.abs(m[1, 2]), ti.abs(m[2, 2])
+    )
+    values = ti.Vector([m[0, 0], m[1, 1], m[2, 2]])
+    vectors = ti.Matrix.identity(ti.f32, 3)
+    if largest > 0.0:
+        a = m / largest  # scaled: no overflow in the cubic's terms
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        if off > 0.0:
+            q = (a[0, 0] + a[1, 1] + a[2, 2]) / 3.0
+            b00, b11, b22 = a[0, 0] - q, a[1, 1] - q, a[2, 2] - q
+            p = ti.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0)
+            c00 = b11 * b22 - a[1, 2] * a[1, 2]
+            c01 = a[0, 1] * b22 - a[1, 2] * a[0, 2]
+            c02 = a[0, 1] * a[1, 2] - b11 * a[0, 2]
+            half_det = ti.min(ti.max(0.5 * (b00 * c00 - a[0, 1] * c01 + a[0, 2] * c02) / (p * p * p), -1.0), 1.0)
+            angle = ti.acos(half_det) / 3.0
+            beta2 = 2.0 * ti.cos(angle)
+            beta0 = 2.0 * ti.cos(angle + 2.0 * math.pi / 3.0)
+            beta1 = -(beta0 + beta2)
+            values = q + p * ti.Vector([beta0, beta1, beta2])
+            if half_det >= 0.0:  # the largest eigenvalue lies farthest from the others
+                e2 = _unit_normal_to_rows(a, values[2])
+                e1 = _second_vector(a, e2, values[1])
+                e0 = e1.cross(e2)
+                vectors = ti.Matrix.cols([e0, e1, e2])
+            else:
+                e0 = _unit_normal_to_rows(a, values[0])
+                e1 = _second_vector(a, e0, values[1])
+                e2 = e0.cross(e1)
+                vectors = ti.Matrix.cols([e0, e1, e2])
+            values *= largest
+    return values, vectors
+
+
 @ti.data_oriented
 class Ellipsoids:
     """A splat per particle: an ellipsoid with the axes of the weighted covariance of its neighbours and
@@ -165,11 +268,9 @@ class Ellipsoids:
                 second = ti.Matrix(
                     [[acc[4], acc[5], acc[6]], [acc[5], acc[7], acc[8]], [acc[6], acc[8], acc[9]]]
                 ) / total - mean.outer_product(mean)
-                # C is symmetric and positive semi-definite, so its SVD is its eigen decomposition. Taichi's
-                # iterative ti.sym_eig never returned on a lattice's covariance (equal eigenvalues); its
-                # 3 × 3 SVD runs a fixed count of Jacobi sweeps.
-                axes, singular, _ = ti.svd(second)
-                sigma = ti.Vector([singular[0, 0], singular[1, 1], singular[2, 2]])
+                # In closed form: Taichi's iterative ti.sym_eig never returned on a lattice's covariance
+                # (equal eigenvalues), and its SVD's Jacobi sweeps took most of this kernel's time.
+                sigma, axes = symmetric_eigen(second)
                 largest = ti.max(sigma[0], sigma[1], sigma[2])
                 if largest > 0.0:
                     floor = largest / AXIS_RATIO
