@@ -1,15 +1,17 @@
-"""Splatting particles on a GPU backend: a thread per (particle, pixel) of the particle's footprint.
+"""Splats of particles: the surface style's ellipsoids (Yu & Turk, :class:`Ellipsoids`), and how either
+renderer splats on a GPU backend: a thread per (particle, pixel) of the particle's footprint.
 
-Both headless renderers project each particle's sphere to a screen rectangle and test its pixels
+Both headless renderers project each particle to a screen rectangle and test its pixels
 (``pbf.app.render.SphereRenderer``, ``pbf.app.fluid_render.FluidRenderer``). On the CPU backend a
-thread per particle walks its rectangle, column by column, in memory order. On a GPU backend that
-leaves threads idle behind the few particles near the camera that cover thousands of pixels, and
-Mesa's software Vulkan driver (lavapipe 22.3) loses atomic operations inside a loop whose trip count
-differs between threads (a per-particle loop of 40 atomic adds kept 1 in 10 of them): its frames had
-holes. Here instead the rectangles' areas are prefix-summed into a list of work items, one per
-(particle, pixel); each item finds its particle by a binary search over the sums and does its one
-atomic at the top level of the loop. The image does not depend on the order of the items (each
-pixel keeps the least key, or sums integers), so it is the same as the per-particle loops'.
+thread per particle walks its rectangle, column by column, in memory order (the surface: a thread per
+band of rows walks the splats that reach into it). On a GPU backend that leaves threads idle behind
+the few particles near the camera that cover thousands of pixels, and Mesa's software Vulkan driver
+(lavapipe 22.3) loses atomic operations inside a loop whose trip count differs between threads (a
+per-particle loop of 40 atomic adds kept 1 in 10 of them): its frames had holes. Here instead the
+rectangles' areas are prefix-summed into a list of work items, one per (particle, pixel); each item
+finds its particle by a binary search over the sums and does its one atomic at the top level of the
+loop. The image does not depend on the order of the items (each pixel keeps the least key, or sums
+integers), so it is the same as the CPU's loops'.
 """
 
 import math
@@ -301,23 +303,46 @@ class Ellipsoids:
     @ti.func
     def frame(self, i, eye, right, up, forward):
         """Splat i's view in its own frame x' = G (x − c): G (c − eye) and the images G right, G up and
-        G forward of the camera's axes, from which :meth:`hit` tests a pixel with a few products
-        (computed once per splat, not per pixel)."""
+        G forward of the camera's axes, from which :meth:`row` and :meth:`hit` test a pixel with a few
+        products (computed once per splat, not per pixel)."""
         inverse = self.inverse[i]
         return inverse @ (self.centre[i] - eye), inverse @ right, inverse @ up, inverse @ forward
 
     @ti.func
-    def hit(self, offset, along_right, along_up, along_forward, u, w):
-        """Where the ray eye + t (u right + w up + forward) first meets a splat seen as :meth:`frame`
-        gives it: (t, the view depth, or -1 where it misses; the chord it cuts, m). In the splat's frame
-        the ray is G (eye − c) + t G ray and the splat the unit sphere: t² |G ray|² − 2 t (G ray)·(G (c −
-        eye)) + |G (c − eye)|² − 1 = 0."""
-        along = along_right * u + along_up * w + along_forward
-        a, b = along.norm_sqr(), along.dot(offset)
-        disc = b * b - a * (offset.norm_sqr() - 1.0)
+    def row(self, seen, w):
+        """The rays eye + t (u right + w up + forward) of one image row (w fixed) against a splat seen as
+        :meth:`frame` gives it, as polynomials in u: in the splat's frame the ray is G (eye − c) + t g(u),
+        g(u) = u G right + (w G up + G forward), and the splat the unit sphere, which the ray meets where
+        t² |g|² − 2 t g·o + |o|² − 1 = 0 (o = G (c − eye)). Returned: the coefficients of |g|² (quadratic),
+        of g·o (linear) and of the discriminant (g·o)² − |g|² (|o|² − 1) = |g|² − |g × o|² (quadratic:
+        written with the cross product, which keeps float32's digits where the splat is small against
+        its distance, instead of the difference of two terms of about |o|² |g|² each), and the interval
+        of u where that is positive: the splat's span on the row (empty, lower > upper, where it misses)."""
+        offset, along_right, along_up, along_forward = seen[0], seen[1], seen[2], seen[3]
+        p = along_up * w + along_forward
+        right_o, p_o = along_right.cross(offset), p.cross(offset)
+        a = ti.Vector([along_right.norm_sqr(), 2.0 * along_right.dot(p), p.norm_sqr()])
+        b = ti.Vector([along_right.dot(offset), p.dot(offset)])
+        d = ti.Vector([a[0] - right_o.norm_sqr(), a[1] - 2.0 * right_o.dot(p_o), a[2] - p_o.norm_sqr()])
+        lower, upper = 1.0, -1.0
+        # The splat lies wholly in front of the eye (the caller's bound), so its outline is an ellipse and
+        # d[0] < 0; the roots by the form without cancellation (q = −(d₁ + sign(d₁) √Δ) / 2: q / d₀, d₂ / q).
+        discriminant = d[1] * d[1] - 4.0 * d[0] * d[2]
+        if d[0] < 0.0 and discriminant > 0.0:
+            q = -0.5 * (d[1] + ti.select(d[1] < 0.0, -1.0, 1.0) * ti.sqrt(discriminant))
+            first, second = q / d[0], d[2] / q
+            lower, upper = ti.min(first, second), ti.max(first, second)
+        return a, b, d, lower, upper
+
+    @ti.func
+    def hit(self, a, b, d, u, w):
+        """Where the ray of column u on row w (a, b, d: :meth:`row`'s coefficients) first meets the splat:
+        (t, the view depth, or -1 where it misses; the chord it cuts, m)."""
+        disc = (d[0] * u + d[1]) * u + d[2]
         t, chord = -1.0, 0.0
         if disc > 0.0:
+            length = (a[0] * u + a[1]) * u + a[2]
             root = ti.sqrt(disc)
-            t = (b - root) / a
-            chord = 2.0 * root / a * ti.sqrt(u * u + w * w + 1.0)
+            t = (b[0] * u + b[1] - root) / length
+            chord = 2.0 * root / length * ti.sqrt(u * u + w * w + 1.0)
         return t, chord
