@@ -641,47 +641,59 @@ class FluidRenderer:
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
         depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
         where one is nearer than the water."""
-        for row, col in self.image:
-            solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
-            if ti.static(self.with_solids):
-                ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
-                hit_normal = ti.Vector([0.0, 1.0, 0.0])
-                solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
-                solid_colour = self._solid_colour(hit_normal, light)
-            # The four coarse pixels around this pixel's centre, and their bilinear weights.
-            y = (row + 0.5) / COARSE - 0.5
-            x = (col + 0.5) / COARSE - 0.5
-            r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.coarse_height - 2)
-            c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
-            fy = ti.min(ti.max(y - r0, 0.0), 1.0)
-            fx = ti.min(ti.max(x - c0, 0.0), 1.0)
-            coverage, depth = 0.0, 0.0
-            colour = ti.Vector([0.0, 0.0, 0.0])
-            for dr, dc in ti.static(ti.ndrange(2, 2)):
-                w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
-                sample = self.smooth_depth[r0 + dr, c0 + dc]
-                if sample < solid:  # water, and nearer than any body here
-                    coverage += w
-                    depth += w * sample
-                    colour += w * self.colour[r0 + dr, c0 + dc]
-            # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
-            # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
-            # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
-            share = coverage
-            if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
-                self.image[row, col] = self.background[row, col]
-            else:
-                background = ti.cast(self.background[row, col], ti.f32) / 255.0
-                if solid < FAR:
-                    background = solid_colour
-                water = background
-                if coverage > 0.0:
-                    water = ti.min(colour / coverage, 1.0)
-                blended = share * water + (1.0 - share) * background
-                self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
-            self.image_depth[row, col] = solid
-            if coverage >= 0.5:
-                self.image_depth[row, col] = depth / coverage
+        if ti.static(self.per_item):  # a GPU backend: a thread per pixel
+            for row, col in self.image:
+                self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+        else:
+            # The CPU backend: a thread per row, along it in order, which costs less than a loop over the
+            # field's pixels for this light work per pixel (docs/RENDERING.md, "Cost").
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+
+    @ti.func
+    def _compose_pixel(self, row, col, eye, right, up, forward, focal, light):
+        """:meth:`_compose` at one pixel."""
+        solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_solids):
+            ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
+            hit_normal = ti.Vector([0.0, 1.0, 0.0])
+            solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
+            solid_colour = self._solid_colour(hit_normal, light)
+        # The four coarse pixels around this pixel's centre, and their bilinear weights.
+        y = (row + 0.5) / COARSE - 0.5
+        x = (col + 0.5) / COARSE - 0.5
+        r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.coarse_height - 2)
+        c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
+        fy = ti.min(ti.max(y - r0, 0.0), 1.0)
+        fx = ti.min(ti.max(x - c0, 0.0), 1.0)
+        coverage, depth = 0.0, 0.0
+        colour = ti.Vector([0.0, 0.0, 0.0])
+        for dr, dc in ti.static(ti.ndrange(2, 2)):
+            w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
+            sample = self.smooth_depth[r0 + dr, c0 + dc]
+            if sample < solid:  # water, and nearer than any body here
+                coverage += w
+                depth += w * sample
+                colour += w * self.colour[r0 + dr, c0 + dc]
+        # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
+        # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
+        # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
+        share = coverage
+        if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
+            self.image[row, col] = self.background[row, col]
+        else:
+            background = ti.cast(self.background[row, col], ti.f32) / 255.0
+            if solid < FAR:
+                background = solid_colour
+            water = background
+            if coverage > 0.0:
+                water = ti.min(colour / coverage, 1.0)
+            blended = share * water + (1.0 - share) * background
+            self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
+        self.image_depth[row, col] = solid
+        if coverage >= 0.5:
+            self.image_depth[row, col] = depth / coverage
 
     def _project_segments(self, view, focal: float) -> None:
         """The segments clipped to the space in front of the eye and projected to the image, into
@@ -758,9 +770,35 @@ class FluidRenderer:
     @ti.kernel
     def _pack(self, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
         """``image`` as packed RGBA words in GGUI's canvas layout ((W, H), y up)."""
-        for row, col in self.image:
-            c = ti.cast(self.image[row, col], ti.u32)
-            out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
+        if ti.static(self.per_item):
+            for row, col in self.image:
+                self._pack_pixel(out, row, col)
+        else:  # the CPU backend: a thread per row, as in _compose
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._pack_pixel(out, row, col)
+
+    @ti.func
+    def _pack_pixel(self, out: ti.template(), row, col):
+        c = ti.cast(self.image[row, col], ti.u32)
+        out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
+
+    @ti.kernel
+    def _rgb(self, out: ti.types.ndarray(dtype=ti.u8, ndim=3)):
+        """``image`` as an (H, W, 3) host array: on a GPU backend the frame's one copy to the host."""
+        if ti.static(self.per_item):
+            for row, col in self.image:
+                self._rgb_pixel(out, row, col)
+        else:  # the CPU backend: a thread per row, as in _compose (a field's to_numpy loops per pixel)
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._rgb_pixel(out, row, col)
+
+    @ti.func
+    def _rgb_pixel(self, out: ti.template(), row, col):
+        c = self.image[row, col]
+        for channel in ti.static(range(3)):
+            out[row, col, channel] = c[channel]
 
     def surface(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The last draw's surface at the coarse passes' resolution (``coarse_height`` × ``coarse_width``,
@@ -785,7 +823,9 @@ class FluidRenderer:
         an ellipsoid from ``neighbourhood`` (``Simulation.neighbourhood()`` of these positions), or a sphere
         without it."""
         self.draw(view, positions, count, light_direction, neighbourhood)
-        return self.image.to_numpy()
+        rgb = np.empty((self.height, self.width, 3), np.uint8)
+        self._rgb(rgb)
+        return rgb
 
     def draw(self, view, positions, count: int, light_direction, neighbourhood=None) -> None:
         """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
