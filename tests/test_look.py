@@ -5,10 +5,11 @@ scenes; the renderer of spheres before the anisotropic splats failed both (docs/
 
 import numpy as np
 import pytest
+import taichi as ti
 
 from pbf.app.fluid_render import SPLAT_RADIUS_SPACINGS
 from pbf.app.render import SceneRenderer
-from pbf.app.splat import DROP_RADIUS_SPACINGS, Ellipsoids
+from pbf.app.splat import DROP_RADIUS_SPACINGS, Ellipsoids, symmetric_eigen
 from pbf.solver import Simulation
 from pbf.study.frames import particles_top, speckle, top_face
 from scenes import column_scene, small_dam_break
@@ -20,6 +21,39 @@ def semi_axes(inverse: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The semi-axes' lengths (ascending) and unit directions (columns) of the ellipsoid |G x| ≤ 1."""
     lengths, directions = np.linalg.eigh(np.linalg.inv(inverse.T @ inverse))
     return np.sqrt(lengths), directions
+
+
+def test_the_closed_form_eigen_decomposition_holds_for_equal_and_close_eigenvalues():
+    # Covariances of a spacing squared (1e-4 m²): random ones, and those of a lattice (three equal
+    # eigenvalues), a flat surface (two equal), a sheet, a filament, one with a zero eigenvalue, a
+    # diagonal one and zero. Taichi's SVD, which the splats used before, loses its accuracy at this
+    # scale (its error grows as the matrix shrinks; docs/RENDERING.md).
+    rng = np.random.default_rng(3)
+    spectra = [rng.uniform(0.0, 1.0, 3) for _ in range(200)]
+    spectra += [np.ones(3), [0.25, 1.0, 1.0], [0.25, 0.25, 1.0], [0.0, 0.3, 1.0], [1.0, 1.0 + 1e-6, 1.0 - 1e-6]] * 20
+    matrices = []
+    for spectrum in spectra:
+        rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        matrices.append((rotation * spectrum) @ rotation.T * 1e-4)
+    matrices += [np.diag([1e-4, 3e-4, 2e-4]), np.eye(3) * 1e-4, np.zeros((3, 3))]
+    given = np.array(matrices, np.float32)
+    n = len(given)
+    source = ti.Matrix.field(3, 3, ti.f32, n)
+    values, vectors = ti.Vector.field(3, ti.f32, n), ti.Matrix.field(3, 3, ti.f32, n)
+    source.from_numpy(given)
+
+    @ti.kernel
+    def decompose():
+        for i in range(n):
+            values[i], vectors[i] = symmetric_eigen(source[i])
+
+    decompose()
+    a, lam, v = given.astype(np.float64), values.to_numpy().astype(np.float64), vectors.to_numpy().astype(np.float64)
+    scale = np.maximum(np.abs(a).max(axis=(1, 2)), 1e-30)
+    residual = np.linalg.norm(a @ v - v * lam[:, None, :], axis=1).max(axis=1) / scale
+    assert residual.max() < 1e-3
+    assert np.abs(np.einsum("nji,njk->nik", v, v) - np.eye(3)).max() < 1e-5  # orthonormal axes
+    assert (np.abs(np.sort(lam, axis=1) - np.linalg.eigvalsh(a)).max(axis=1) / scale).max() < 1e-3
 
 
 def test_splats_are_flat_at_the_surface_round_in_the_bulk_and_drops_alone():

@@ -6,11 +6,12 @@ narrow-range filter for screen-space fluid rendering", PACMCGIT 1(1)), all as Ta
 1-4 run at half the image's resolution in each direction (the filter's width in pixels halves too, so
 a quarter of the pixels costs an eighth); only the composition is at full resolution.
 
-1. *Splat.* Every particle is a sphere; each pixel keeps the nearest sphere's view depth (an
-   ``atomic_min``) and adds the chord its ray cuts through the sphere, scaled by (particle
-   volume / sphere volume) so that the sum is the ray's path length through water however much the
-   spheres overlap. The chords are added as fixed-point integers, so the sum does not depend on the
-   order the threads add them in and the image is the same on every run.
+1. *Splat.* Every particle is an ellipsoid (``pbf.app.splat.Ellipsoids``: a sphere without neighbour
+   lists); each pixel keeps the nearest one's view depth and adds the chord its ray cuts through each,
+   scaled by (particle volume / splat volume) so that the sum is the ray's path length through water
+   however much the splats overlap. The chords are added as fixed-point integers, so the sum does not
+   depend on the order they are added in and the image is the same on every run. On the CPU a thread
+   per band of rows owns its pixels; on a GPU a thread per (splat, pixel) adds by atomics.
 2. *Smooth.* The narrow-range filter, separably along rows then columns: a Gaussian over the pixels
    within a few spacings (its width in pixels shrinks with depth), in which a sample more than the
    threshold μ off the surface, behind it (another layer, the background) or in front of it (a drop),
@@ -57,6 +58,8 @@ NEAR_M = 1e-3
 """Line segments are clipped this far in front of the eye."""
 COARSE = 2
 """The surface passes run at 1/COARSE of the image's width and height."""
+BAND_ROWS = 16
+"""On the CPU backend the splat pass gives each thread a band of this many coarse rows (``_splat``)."""
 SPLAT_RADIUS_SPACINGS = 0.75
 """Sphere radius of a particle in the splat, in spacings: more than √2/2, so that a lattice of
 particles seen along one of its axes leaves no pinholes between its spheres."""
@@ -193,6 +196,8 @@ class FluidRenderer:
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
         self.splats = None
+        self.splat_rows = None
+        """Per splat, the coarse rows [first, last + 1) of its bounding disc (``_splat``, CPU backend)."""
         """The particles' splats (``pbf.app.splat.Ellipsoids``), allocated on first use for the positions'
         capacity."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
@@ -356,13 +361,27 @@ class FluidRenderer:
         return row, col, extent
 
     @ti.func
-    def _splat_pixel(self, splats: ti.template(), seen: ti.template(), scale, r, c, focal):
-        """A splat (``seen``: its ``Ellipsoids.frame``) at coarse pixel (r, c): the nearest depth, and the
-        chord its ray cuts times ``scale`` (particle volume / sphere volume × the splat's share of the
-        sphere's volume / the thickness step) as fixed-point steps."""
-        u = (c + 0.5 - 0.5 * self.coarse_width) / focal
+    def _row(self, splats: ti.template(), seen: ti.template(), r, focal):
+        """Row r of a splat (``seen``: its ``Ellipsoids.frame``): its rays' coefficients
+        (``Ellipsoids.row``), and the columns [c0, c1) whose pixel centres lie within its outline."""
         w = (0.5 * self.coarse_height - r - 0.5) / focal
-        t, chord = splats.hit(seen[0], seen[1], seen[2], seen[3], u, w)
+        a, b, d, lower, upper = splats.row(seen, w)
+        c0, c1 = 0, 0
+        if lower <= upper:
+            middle = 0.5 * self.coarse_width - 0.5  # the column whose centre is at u = 0
+            first = ti.cast(ti.ceil(ti.max(lower * focal + middle, -1.0)), ti.i32)
+            last = ti.cast(ti.floor(ti.min(upper * focal + middle, self.coarse_width)), ti.i32)
+            c0, c1 = ti.max(0, first), ti.min(self.coarse_width, last + 1)
+        return a, b, d, w, c0, c1
+
+    @ti.func
+    def _splat_pixel(self, splats: ti.template(), a, b, d, w, scale, r, c, focal):
+        """A splat's row r (a, b, d, w: :meth:`_row`'s) at coarse pixel (r, c), by atomics (threads of
+        other splats write the pixel too): the nearest depth, and the chord its ray cuts times ``scale``
+        (particle volume / sphere volume × the splat's share of the sphere's volume / the thickness step)
+        as fixed-point steps."""
+        u = (c + 0.5 - 0.5 * self.coarse_width) / focal
+        t, chord = splats.hit(a, b, d, u, w)
         if t > 0.0:
             if t < self.depth[r, c]:  # a plain read first: most splats lie behind a nearer one
                 ti.atomic_min(self.depth[r, c], t)
@@ -376,27 +395,44 @@ class FluidRenderer:
     def _splat(
         self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
     ):
-        width, height = self.coarse_width, self.coarse_height
+        """The CPU backend's splat: a thread per band of ``BAND_ROWS`` coarse rows, which walks the splats
+        in order and, of those whose bounding disc reaches into its band, the rows within the band and on
+        each the columns within the splat's outline (:meth:`_row`). A thread alone writes its band's
+        pixels, so it keeps the nearest depth and adds the chords with plain reads and writes, not the
+        atomics that a thread per splat needs (their cost was most of the pass); the sums are of integers
+        and the least depth is the least in any order, so the image is the same. Half of the bounding
+        disc's pixels lie outside the outline of a flattened splat, and testing them cost more than their
+        share: a hit and a miss side by side defeat the branch predictor."""
+        height = self.coarse_height
         for i in range(count):
             row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
+            r0, r1 = 0, 0
             if extent > 0.0:
-                seen = splats.frame(i, eye, right, up, forward)
-                scale = self._chord_scale(splats, i)
-                # Each row visits the span of the bounding disc.
                 r0, r1 = ti.max(0, ti.cast(row - extent, ti.i32)), ti.min(height, ti.cast(row + extent, ti.i32) + 1)
-                for r in range(r0, r1):
-                    offset = r + 0.5 - row
-                    half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-                    c0, c1 = ti.max(0, ti.cast(col - half, ti.i32)), ti.min(width, ti.cast(col + half, ti.i32) + 1)
-                    for c in range(c0, c1):
-                        self._splat_pixel(splats, seen, scale, r, c, focal)
+            self.splat_rows[i] = ti.Vector([r0, r1])
+        for band in range((height + BAND_ROWS - 1) // BAND_ROWS):
+            low, high = band * BAND_ROWS, ti.min((band + 1) * BAND_ROWS, height)
+            for i in range(count):
+                rows = self.splat_rows[i]
+                if rows[0] < high and rows[1] > low:
+                    seen = splats.frame(i, eye, right, up, forward)
+                    scale = self._chord_scale(splats, i)
+                    for r in range(ti.max(rows[0], low), ti.min(rows[1], high)):
+                        a, b, d, w, c0, c1 = self._row(splats, seen, r, focal)
+                        for c in range(c0, c1):
+                            u = (c + 0.5 - 0.5 * self.coarse_width) / focal
+                            t, chord = splats.hit(a, b, d, u, w)
+                            if t > 0.0:  # (``+=`` would compile to an atomic add)
+                                steps = self.thickness_steps[r, c] + ti.cast(chord * scale + 0.5, ti.i32)
+                                self.depth[r, c] = ti.min(self.depth[r, c], t)
+                                self.thickness_steps[r, c] = steps
 
     @ti.kernel
     def _splat_items(
         self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
     ):
-        """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
-        (``pbf.app.splat``): the same tests and integer sums, so the same image."""
+        """:meth:`_splat` on a GPU backend: a thread per (particle, pixel) of each particle's bounding
+        square (``pbf.app.splat``), by atomics; the same tests and integer sums, so the same image."""
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
             row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
@@ -406,15 +442,13 @@ class FluidRenderer:
                 c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(width, ti.cast(col + extent, ti.i32) + 1)
             self.footprints.set(i, c0, c1, r0, r1)
         self.footprints.scan(count)
-        for w in range(self.footprints.total(count)):
-            i, c, r = self.footprints.item(w, count)
-            # The per-particle loops visit only the disc of the bounding square; so does this.
-            row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
-            offset = r + 0.5 - row
-            half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-            if ti.max(0, ti.cast(col - half, ti.i32)) <= c < ti.min(width, ti.cast(col + half, ti.i32) + 1):
-                seen = splats.frame(i, eye, right, up, forward)
-                self._splat_pixel(splats, seen, self._chord_scale(splats, i), r, c, focal)
+        for item in range(self.footprints.total(count)):
+            i, c, r = self.footprints.item(item, count)
+            # The CPU's bands visit only the columns within the splat's outline; so does this.
+            seen = splats.frame(i, eye, right, up, forward)
+            a, b, d, w, c0, c1 = self._row(splats, seen, r, focal)
+            if c0 <= c < c1:
+                self._splat_pixel(splats, a, b, d, w, self._chord_scale(splats, i), r, c, focal)
 
     @ti.kernel
     def _filter(
@@ -607,47 +641,59 @@ class FluidRenderer:
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
         depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
         where one is nearer than the water."""
-        for row, col in self.image:
-            solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
-            if ti.static(self.with_solids):
-                ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
-                hit_normal = ti.Vector([0.0, 1.0, 0.0])
-                solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
-                solid_colour = self._solid_colour(hit_normal, light)
-            # The four coarse pixels around this pixel's centre, and their bilinear weights.
-            y = (row + 0.5) / COARSE - 0.5
-            x = (col + 0.5) / COARSE - 0.5
-            r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.coarse_height - 2)
-            c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
-            fy = ti.min(ti.max(y - r0, 0.0), 1.0)
-            fx = ti.min(ti.max(x - c0, 0.0), 1.0)
-            coverage, depth = 0.0, 0.0
-            colour = ti.Vector([0.0, 0.0, 0.0])
-            for dr, dc in ti.static(ti.ndrange(2, 2)):
-                w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
-                sample = self.smooth_depth[r0 + dr, c0 + dc]
-                if sample < solid:  # water, and nearer than any body here
-                    coverage += w
-                    depth += w * sample
-                    colour += w * self.colour[r0 + dr, c0 + dc]
-            # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
-            # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
-            # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
-            share = coverage
-            if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
-                self.image[row, col] = self.background[row, col]
-            else:
-                background = ti.cast(self.background[row, col], ti.f32) / 255.0
-                if solid < FAR:
-                    background = solid_colour
-                water = background
-                if coverage > 0.0:
-                    water = ti.min(colour / coverage, 1.0)
-                blended = share * water + (1.0 - share) * background
-                self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
-            self.image_depth[row, col] = solid
-            if coverage >= 0.5:
-                self.image_depth[row, col] = depth / coverage
+        if ti.static(self.per_item):  # a GPU backend: a thread per pixel
+            for row, col in self.image:
+                self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+        else:
+            # The CPU backend: a thread per row, along it in order, which costs less than a loop over the
+            # field's pixels for this light work per pixel (docs/RENDERING.md, "Cost").
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+
+    @ti.func
+    def _compose_pixel(self, row, col, eye, right, up, forward, focal, light):
+        """:meth:`_compose` at one pixel."""
+        solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_solids):
+            ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
+            hit_normal = ti.Vector([0.0, 1.0, 0.0])
+            solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
+            solid_colour = self._solid_colour(hit_normal, light)
+        # The four coarse pixels around this pixel's centre, and their bilinear weights.
+        y = (row + 0.5) / COARSE - 0.5
+        x = (col + 0.5) / COARSE - 0.5
+        r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.coarse_height - 2)
+        c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
+        fy = ti.min(ti.max(y - r0, 0.0), 1.0)
+        fx = ti.min(ti.max(x - c0, 0.0), 1.0)
+        coverage, depth = 0.0, 0.0
+        colour = ti.Vector([0.0, 0.0, 0.0])
+        for dr, dc in ti.static(ti.ndrange(2, 2)):
+            w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
+            sample = self.smooth_depth[r0 + dr, c0 + dc]
+            if sample < solid:  # water, and nearer than any body here
+                coverage += w
+                depth += w * sample
+                colour += w * self.colour[r0 + dr, c0 + dc]
+        # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
+        # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
+        # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
+        share = coverage
+        if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
+            self.image[row, col] = self.background[row, col]
+        else:
+            background = ti.cast(self.background[row, col], ti.f32) / 255.0
+            if solid < FAR:
+                background = solid_colour
+            water = background
+            if coverage > 0.0:
+                water = ti.min(colour / coverage, 1.0)
+            blended = share * water + (1.0 - share) * background
+            self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
+        self.image_depth[row, col] = solid
+        if coverage >= 0.5:
+            self.image_depth[row, col] = depth / coverage
 
     def _project_segments(self, view, focal: float) -> None:
         """The segments clipped to the space in front of the eye and projected to the image, into
@@ -724,9 +770,35 @@ class FluidRenderer:
     @ti.kernel
     def _pack(self, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
         """``image`` as packed RGBA words in GGUI's canvas layout ((W, H), y up)."""
-        for row, col in self.image:
-            c = ti.cast(self.image[row, col], ti.u32)
-            out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
+        if ti.static(self.per_item):
+            for row, col in self.image:
+                self._pack_pixel(out, row, col)
+        else:  # the CPU backend: a thread per row, as in _compose
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._pack_pixel(out, row, col)
+
+    @ti.func
+    def _pack_pixel(self, out: ti.template(), row, col):
+        c = ti.cast(self.image[row, col], ti.u32)
+        out[col, self.height - 1 - row] = c[0] | (c[1] << 8) | (c[2] << 16) | ti.u32(0xFF000000)
+
+    @ti.kernel
+    def _rgb(self, out: ti.types.ndarray(dtype=ti.u8, ndim=3)):
+        """``image`` as an (H, W, 3) host array: on a GPU backend the frame's one copy to the host."""
+        if ti.static(self.per_item):
+            for row, col in self.image:
+                self._rgb_pixel(out, row, col)
+        else:  # the CPU backend: a thread per row, as in _compose (a field's to_numpy loops per pixel)
+            for row in range(self.height):
+                for col in range(self.width):
+                    self._rgb_pixel(out, row, col)
+
+    @ti.func
+    def _rgb_pixel(self, out: ti.template(), row, col):
+        c = self.image[row, col]
+        for channel in ti.static(range(3)):
+            out[row, col, channel] = c[channel]
 
     def surface(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The last draw's surface at the coarse passes' resolution (``coarse_height`` × ``coarse_width``,
@@ -751,7 +823,9 @@ class FluidRenderer:
         an ellipsoid from ``neighbourhood`` (``Simulation.neighbourhood()`` of these positions), or a sphere
         without it."""
         self.draw(view, positions, count, light_direction, neighbourhood)
-        return self.image.to_numpy()
+        rgb = np.empty((self.height, self.width, 3), np.uint8)
+        self._rgb(rgb)
+        return rgb
 
     def draw(self, view, positions, count: int, light_direction, neighbourhood=None) -> None:
         """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
@@ -771,6 +845,7 @@ class FluidRenderer:
         if count:
             if self.splats is None or self.splats.capacity < positions.shape[0]:
                 self.splats = Ellipsoids(positions.shape[0], self.radius, self.spacing)
+                self.splat_rows = ti.Vector.field(2, ti.i32, shape=self.splats.capacity)
             self.splats.update(positions, count, neighbourhood)
         if count and self.per_item:
             if self.footprints is None or self.footprints.capacity < positions.shape[0]:

@@ -1,15 +1,17 @@
-"""Splatting particles on a GPU backend: a thread per (particle, pixel) of the particle's footprint.
+"""Splats of particles: the surface style's ellipsoids (Yu & Turk, :class:`Ellipsoids`), and how either
+renderer splats on a GPU backend: a thread per (particle, pixel) of the particle's footprint.
 
-Both headless renderers project each particle's sphere to a screen rectangle and test its pixels
+Both headless renderers project each particle to a screen rectangle and test its pixels
 (``pbf.app.render.SphereRenderer``, ``pbf.app.fluid_render.FluidRenderer``). On the CPU backend a
-thread per particle walks its rectangle, column by column, in memory order. On a GPU backend that
-leaves threads idle behind the few particles near the camera that cover thousands of pixels, and
-Mesa's software Vulkan driver (lavapipe 22.3) loses atomic operations inside a loop whose trip count
-differs between threads (a per-particle loop of 40 atomic adds kept 1 in 10 of them): its frames had
-holes. Here instead the rectangles' areas are prefix-summed into a list of work items, one per
-(particle, pixel); each item finds its particle by a binary search over the sums and does its one
-atomic at the top level of the loop. The image does not depend on the order of the items (each
-pixel keeps the least key, or sums integers), so it is the same as the per-particle loops'.
+thread per particle walks its rectangle, column by column, in memory order (the surface: a thread per
+band of rows walks the splats that reach into it). On a GPU backend that leaves threads idle behind
+the few particles near the camera that cover thousands of pixels, and Mesa's software Vulkan driver
+(lavapipe 22.3) loses atomic operations inside a loop whose trip count differs between threads (a
+per-particle loop of 40 atomic adds kept 1 in 10 of them): its frames had holes. Here instead the
+rectangles' areas are prefix-summed into a list of work items, one per (particle, pixel); each item
+finds its particle by a binary search over the sums and does its one atomic at the top level of the
+loop. The image does not depend on the order of the items (each pixel keeps the least key, or sums
+integers), so it is the same as the CPU's loops'.
 """
 
 import math
@@ -94,6 +96,109 @@ DROP_RADIUS_SPACINGS = (3.0 / (4.0 * math.pi)) ** (1.0 / 3.0)
 """A drop's sphere, in spacings: the volume of a spacing cubed (0.62)."""
 
 
+@ti.func
+def _unit_normal_to_rows(m, value):
+    """A unit vector that (m − value I) maps to zero, for a symmetric m and its eigenvalue ``value`` of
+    multiplicity one: the longest of the cross products of the matrix's rows (any unit vector where all
+    vanish)."""
+    shifted = m - value * ti.Matrix.identity(ti.f32, 3)
+    r0, r1, r2 = (
+        ti.Vector([shifted[0, 0], shifted[0, 1], shifted[0, 2]]),
+        ti.Vector([shifted[1, 0], shifted[1, 1], shifted[1, 2]]),
+        ti.Vector([shifted[2, 0], shifted[2, 1], shifted[2, 2]]),
+    )
+    best = r0.cross(r1)
+    c02, c12 = r0.cross(r2), r1.cross(r2)
+    if c02.norm_sqr() > best.norm_sqr():
+        best = c02
+    if c12.norm_sqr() > best.norm_sqr():
+        best = c12
+    result = ti.Vector([1.0, 0.0, 0.0])
+    if best.norm_sqr() > 0.0:
+        result = best / ti.sqrt(best.norm_sqr())
+    return result
+
+
+@ti.func
+def _second_vector(m, first, value):
+    """The unit eigenvector of symmetric m for eigenvalue ``value`` orthogonal to its unit eigenvector
+    ``first``: the null vector of m − value I restricted to the plane normal to ``first`` (a 2 × 2
+    problem, robust where two eigenvalues are close)."""
+    u = ti.Vector([-first[2], 0.0, first[0]])
+    if ti.abs(first[0]) <= ti.abs(first[1]):
+        u = ti.Vector([0.0, first[2], -first[1]])
+    u = u / ti.sqrt(u.norm_sqr())
+    v = first.cross(u)
+    mu, mv = m @ u, m @ v
+    m00, m01, m11 = u.dot(mu) - value, u.dot(mv), v.dot(mv) - value
+    result = u
+    if ti.abs(m00) >= ti.abs(m11):
+        if ti.max(ti.abs(m00), ti.abs(m01)) > 0.0:
+            if ti.abs(m00) >= ti.abs(m01):
+                m01 /= m00
+                m00 = 1.0 / ti.sqrt(1.0 + m01 * m01)
+                m01 *= m00
+            else:
+                m00 /= m01
+                m01 = 1.0 / ti.sqrt(1.0 + m00 * m00)
+                m00 *= m01
+            result = m01 * u - m00 * v
+    elif ti.max(ti.abs(m11), ti.abs(m01)) > 0.0:
+        if ti.abs(m11) >= ti.abs(m01):
+            m01 /= m11
+            m11 = 1.0 / ti.sqrt(1.0 + m01 * m01)
+            m01 *= m11
+        else:
+            m11 /= m01
+            m01 = 1.0 / ti.sqrt(1.0 + m11 * m11)
+            m11 *= m01
+        result = m11 * u - m01 * v
+    return result
+
+
+@ti.func
+def symmetric_eigen(m):
+    """Eigenvalues and unit eigenvectors (the matrix's columns, a rotation) of a symmetric 3 × 3 matrix,
+    in closed form (Eberly 2014, "A robust eigensolver for 3 × 3 symmetric matrices",
+    Geometric Tools): the eigenvalues from the trigonometric solution of the characteristic cubic, the
+    eigenvector of the one farthest from the others from cross products of rows, the second within the
+    plane normal to it, the third their cross product. Equal or close eigenvalues (a lattice's
+    covariance) need no special case; a diagonal matrix gives its diagonal and the coordinate axes."""
+    largest = ti.max(
+        ti.abs(m[0, 0]), ti.abs(m[0, 1]), ti.abs(m[0, 2]), ti.abs(m[1, 1]), ti.abs(m[1, 2]), ti.abs(m[2, 2])
+    )
+    values = ti.Vector([m[0, 0], m[1, 1], m[2, 2]])
+    vectors = ti.Matrix.identity(ti.f32, 3)
+    if largest > 0.0:
+        a = m / largest  # scaled: no overflow in the cubic's terms
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        if off > 0.0:
+            q = (a[0, 0] + a[1, 1] + a[2, 2]) / 3.0
+            b00, b11, b22 = a[0, 0] - q, a[1, 1] - q, a[2, 2] - q
+            p = ti.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0)
+            c00 = b11 * b22 - a[1, 2] * a[1, 2]
+            c01 = a[0, 1] * b22 - a[1, 2] * a[0, 2]
+            c02 = a[0, 1] * a[1, 2] - b11 * a[0, 2]
+            half_det = ti.min(ti.max(0.5 * (b00 * c00 - a[0, 1] * c01 + a[0, 2] * c02) / (p * p * p), -1.0), 1.0)
+            angle = ti.acos(half_det) / 3.0
+            beta2 = 2.0 * ti.cos(angle)
+            beta0 = 2.0 * ti.cos(angle + 2.0 * math.pi / 3.0)
+            beta1 = -(beta0 + beta2)
+            values = q + p * ti.Vector([beta0, beta1, beta2])
+            if half_det >= 0.0:  # the largest eigenvalue lies farthest from the others
+                e2 = _unit_normal_to_rows(a, values[2])
+                e1 = _second_vector(a, e2, values[1])
+                e0 = e1.cross(e2)
+                vectors = ti.Matrix.cols([e0, e1, e2])
+            else:
+                e0 = _unit_normal_to_rows(a, values[0])
+                e1 = _second_vector(a, e0, values[1])
+                e2 = e0.cross(e1)
+                vectors = ti.Matrix.cols([e0, e1, e2])
+            values *= largest
+    return values, vectors
+
+
 @ti.data_oriented
 class Ellipsoids:
     """A splat per particle: an ellipsoid with the axes of the weighted covariance of its neighbours and
@@ -165,11 +270,9 @@ class Ellipsoids:
                 second = ti.Matrix(
                     [[acc[4], acc[5], acc[6]], [acc[5], acc[7], acc[8]], [acc[6], acc[8], acc[9]]]
                 ) / total - mean.outer_product(mean)
-                # C is symmetric and positive semi-definite, so its SVD is its eigen decomposition. Taichi's
-                # iterative ti.sym_eig never returned on a lattice's covariance (equal eigenvalues); its
-                # 3 × 3 SVD runs a fixed count of Jacobi sweeps.
-                axes, singular, _ = ti.svd(second)
-                sigma = ti.Vector([singular[0, 0], singular[1, 1], singular[2, 2]])
+                # In closed form: Taichi's iterative ti.sym_eig never returned on a lattice's covariance
+                # (equal eigenvalues), and its SVD's Jacobi sweeps took most of this kernel's time.
+                sigma, axes = symmetric_eigen(second)
                 largest = ti.max(sigma[0], sigma[1], sigma[2])
                 if largest > 0.0:
                     floor = largest / AXIS_RATIO
@@ -200,23 +303,46 @@ class Ellipsoids:
     @ti.func
     def frame(self, i, eye, right, up, forward):
         """Splat i's view in its own frame x' = G (x − c): G (c − eye) and the images G right, G up and
-        G forward of the camera's axes, from which :meth:`hit` tests a pixel with a few products
-        (computed once per splat, not per pixel)."""
+        G forward of the camera's axes, from which :meth:`row` and :meth:`hit` test a pixel with a few
+        products (computed once per splat, not per pixel)."""
         inverse = self.inverse[i]
         return inverse @ (self.centre[i] - eye), inverse @ right, inverse @ up, inverse @ forward
 
     @ti.func
-    def hit(self, offset, along_right, along_up, along_forward, u, w):
-        """Where the ray eye + t (u right + w up + forward) first meets a splat seen as :meth:`frame`
-        gives it: (t, the view depth, or -1 where it misses; the chord it cuts, m). In the splat's frame
-        the ray is G (eye − c) + t G ray and the splat the unit sphere: t² |G ray|² − 2 t (G ray)·(G (c −
-        eye)) + |G (c − eye)|² − 1 = 0."""
-        along = along_right * u + along_up * w + along_forward
-        a, b = along.norm_sqr(), along.dot(offset)
-        disc = b * b - a * (offset.norm_sqr() - 1.0)
+    def row(self, seen, w):
+        """The rays eye + t (u right + w up + forward) of one image row (w fixed) against a splat seen as
+        :meth:`frame` gives it, as polynomials in u: in the splat's frame the ray is G (eye − c) + t g(u),
+        g(u) = u G right + (w G up + G forward), and the splat the unit sphere, which the ray meets where
+        t² |g|² − 2 t g·o + |o|² − 1 = 0 (o = G (c − eye)). Returned: the coefficients of |g|² (quadratic),
+        of g·o (linear) and of the discriminant (g·o)² − |g|² (|o|² − 1) = |g|² − |g × o|² (quadratic:
+        written with the cross product, which keeps float32's digits where the splat is small against
+        its distance, instead of the difference of two terms of about |o|² |g|² each), and the interval
+        of u where that is positive: the splat's span on the row (empty, lower > upper, where it misses)."""
+        offset, along_right, along_up, along_forward = seen[0], seen[1], seen[2], seen[3]
+        p = along_up * w + along_forward
+        right_o, p_o = along_right.cross(offset), p.cross(offset)
+        a = ti.Vector([along_right.norm_sqr(), 2.0 * along_right.dot(p), p.norm_sqr()])
+        b = ti.Vector([along_right.dot(offset), p.dot(offset)])
+        d = ti.Vector([a[0] - right_o.norm_sqr(), a[1] - 2.0 * right_o.dot(p_o), a[2] - p_o.norm_sqr()])
+        lower, upper = 1.0, -1.0
+        # The splat lies wholly in front of the eye (the caller's bound), so its outline is an ellipse and
+        # d[0] < 0; the roots by the form without cancellation (q = −(d₁ + sign(d₁) √Δ) / 2: q / d₀, d₂ / q).
+        discriminant = d[1] * d[1] - 4.0 * d[0] * d[2]
+        if d[0] < 0.0 and discriminant > 0.0:
+            q = -0.5 * (d[1] + ti.select(d[1] < 0.0, -1.0, 1.0) * ti.sqrt(discriminant))
+            first, second = q / d[0], d[2] / q
+            lower, upper = ti.min(first, second), ti.max(first, second)
+        return a, b, d, lower, upper
+
+    @ti.func
+    def hit(self, a, b, d, u, w):
+        """Where the ray of column u on row w (a, b, d: :meth:`row`'s coefficients) first meets the splat:
+        (t, the view depth, or -1 where it misses; the chord it cuts, m)."""
+        disc = (d[0] * u + d[1]) * u + d[2]
         t, chord = -1.0, 0.0
         if disc > 0.0:
+            length = (a[0] * u + a[1]) * u + a[2]
             root = ti.sqrt(disc)
-            t = (b - root) / a
-            chord = 2.0 * root / a * ti.sqrt(u * u + w * w + 1.0)
+            t = (b[0] * u + b[1] - root) / length
+            chord = 2.0 * root / length * ti.sqrt(u * u + w * w + 1.0)
         return t, chord
