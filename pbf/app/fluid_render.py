@@ -196,10 +196,10 @@ class FluidRenderer:
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
         self.splats = None
-        self.splat_rows = None
-        """Per splat, the coarse rows [first, last + 1) of its bounding disc (``_splat``, CPU backend)."""
         """The particles' splats (``pbf.app.splat.Ellipsoids``), allocated on first use for the positions'
         capacity."""
+        self.splat_rows = None
+        """Per splat, the coarse rows [first, last + 1) of its bounding disc (``_splat``, CPU backend)."""
         points = np.zeros((0, 3), np.float32) if segments is None else np.asarray(segments, np.float32)
         self.segment_points = points.reshape(-1, 2, 3).astype(np.float64)
         """The line segments' end points, m (a few: the container's edges)."""
