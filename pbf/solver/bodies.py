@@ -1,16 +1,13 @@
 """Rigid bodies two-way coupled with the water: boxes and spheres as moving boundaries with ghost density.
 
-A body is one more part of ``pbf.solver.boundary.Boundaries``: the fluid sees the ghost fluid inside
-it (a box's is the obstacles' 27-term ghost in the body's frame, a sphere's the half-space table along
-its radius), and the divergence pre-correction sees its velocity v + ω × (p − c). The body takes the
-reaction of the water's pressure and of the collision's push,
+A body is one more part of ``pbf.solver.boundary.Boundaries``: the fluid sees the ghost fluid inside it
+and, in the divergence pre-correction, its velocity v + ω × (p − c). It takes the reaction of the
+water's pressure and of the collision's push, summed over fixed blocks of particles in order,
 
     F_b = Σ_i V p_i ∇ψ_b(x_i) − Σ_{i pushed by b} m D_i / Δt²,   τ_b = Σ_i (x_i − c_b) × f_i,
 
-summed over fixed blocks of particles in order (no float atomics). Each substep, before the water's
-prediction, each body takes a symplectic Euler step under gravity and the last substep's reaction,
-then its contacts are resolved by sequential impulses in a fixed order. The method and why:
-docs/BODIES.md.
+and each substep takes a symplectic Euler step, then its contacts by sequential impulses in a fixed
+order. The method and why: docs/BODIES.md.
 """
 
 import math
@@ -31,27 +28,21 @@ STATE_LAYOUT = (
     ("force_n", 3),
     ("torque_n_m", 3),
 )
-"""A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``): the pose, the velocities and the
-fluid's reaction of the last substep (the next step starts from it)."""
+"""A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``), the last substep's reaction included."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
 FRICTION = 0.4
 """Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
 COLLISION_AT_REST = 1.0
 """The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
-at the walls: the water under a floating box then sits where the ghost's lattice stands, and the box
-floats at its draft (docs/VALIDATION.md)."""
+at the walls: a floating box then floats at its draft (docs/VALIDATION.md)."""
 COLLISION_MOVING = 0.2
-"""The least fraction of r, for a body that moves: the ghost's pressure must meet a moving body rather
-than the collision, which would hand the water in the way the body's whole velocity in one substep."""
+"""The least fraction of r, for a moving body: its ghost's pressure, not the collision, must meet the water."""
 COLLISION_GIVE = 1.0
-"""The collision distance is r (COLLISION_AT_REST) less this many times the distance the body's fastest
-point moves in a substep, and at least COLLISION_MOVING r. At 1 the grown body's surface at the end of
-a substep stands no further out than a resting body's stood at its start: a moving body does not sweep
-the water with its collision, and a floating box's bobbing leaves the distance near r (the values
-tried: benchmarks/bodies.py collision)."""
+"""The collision distance is r less this many times the distance the body's fastest point moves in a
+substep (at least COLLISION_MOVING r): at 1 a moving body does not sweep the water with its collision
+(docs/BODIES.md; the values tried: benchmarks/bodies.py collision)."""
 CONTACT_SWEEPS = 8
-"""Passes over all contacts per substep: a box resting on four corners needs several for the impulses at one
-corner to stop undoing those at the others."""
+"""Passes over all contacts per substep: a box on four corners needs several to settle its impulses."""
 
 
 CORNERS = 8
@@ -137,10 +128,8 @@ class Bodies:
     mirrored = False
 
     def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
-        """``capacity``: the per-particle arrays' length (a bucket). The bodies' arrays have slots of a
-        bucket too (``pbf.solver.model.allocation``) and every number the kernels read is data
-        (``self.constants``), shapes and obstacles included, so that every scene with bodies shares one
-        compile."""
+        """``capacity``: the per-particle arrays' length (a bucket). The bodies' slots are a bucket too and
+        every number the kernels read is data, so every scene with bodies shares one compile."""
         bodies = params.bodies
         self.params = bodies
         self.tables = tables
@@ -150,9 +139,8 @@ class Bodies:
         self.particle_radius = params.particle_radius_m
         self.kernel_radius = params.kernel_radius_m
         slots = allocation(self.count, 8)
-        # The arrays that follow the particles' bucket first, closed into a SNode tree of their own by a
-        # launch (the fill), then the bodies' slots in another: the rigid step's kernels, which touch
-        # only the slots, are then shared by scenes of any particle bucket.
+        # The particles' arrays first, closed into a SNode tree of their own by a launch (the fill), then
+        # the bodies' slots: the rigid step's kernels are then shared by scenes of any particle bucket.
         self.block = max(64, math.ceil(capacity / 1024))
         self.blocks = math.ceil(capacity / self.block)
         self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
@@ -210,9 +198,8 @@ class Bodies:
             volume=float(bodies.particle_volume_m3),
             wall_density=int(params.wall_density),
         )
-        """The counts, the container, the radii and the particle volume as data. ``wall_margin``: how far
-        inside the container a way out of a body must lead (a little less than the walls' collision
-        distance, so that rounding does not shut a way flush with it)."""
+        """``wall_margin``: how far inside the container a way out of a body must lead (a little less than
+        the walls' collision distance, so that rounding does not shut a way flush with it)."""
         # One kernel writes them all: a from_numpy per field would compile a kernel per field.
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
         for b in range(self.count):
@@ -290,8 +277,7 @@ class Bodies:
 
     @ti.func
     def _set_fastest(self):
-        """``fastest`` for the bodies as they move now, by the one thread of a launch that has just changed
-        their velocities."""
+        """``fastest`` for the bodies as they move now (one thread, after their velocities changed)."""
         top = 0.0
         for b in range(self.constants[None].count):
             top = ti.max(top, self.fastest_point(b))
@@ -320,9 +306,8 @@ class Bodies:
             self._set_fastest()
 
     def grab(self, push, speed_limit_m_s: float) -> None:
-        """The hand in the water (``model.Push``) carries the bodies it touches as it does the water: each
-        body's velocity blended toward the hand's by w = (1 − (d/R)²)³, d the hand's distance from its
-        surface, and its spin damped alike. The hand's speed is capped at ``speed_limit_m_s``."""
+        """The hand in the water (``model.Push``, its speed capped at ``speed_limit_m_s``) carries a body as
+        the water: velocity blended toward the hand's by w = (1 − (d/R)²)³, d from its surface, spin damped."""
         velocity = np.asarray(push.velocity_m_s, np.float64)
         speed = float(np.linalg.norm(velocity))
         if speed > speed_limit_m_s:
@@ -358,9 +343,8 @@ class Bodies:
 
     @ti.kernel
     def _step(self, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32):
-        # One thread takes the whole rigid step: the motion, the contacts in a fixed order and the
-        # collision distances. The work grows with the few bodies, not the particles, and a launch per
-        # part would cost more than the part.
+        # One thread takes the whole rigid step: the work grows with the few bodies, and a launch per part
+        # would cost more than the part.
         for _ in range(1):
             count = self.constants[None].count
             for b in range(count):
@@ -390,9 +374,7 @@ class Bodies:
 
     @ti.func
     def collision_reach(self, b, dt):
-        """How far outside body b the collision keeps particle centres this substep: r at rest, less
-        the distance the body's fastest point moves in Δt (times COLLISION_GIVE), at least
-        COLLISION_MOVING r (the constants say why)."""
+        """How far outside body b the collision keeps particle centres this substep (COLLISION_GIVE)."""
         r = self.constants[None].particle_radius
         return ti.max(COLLISION_MOVING * r, COLLISION_AT_REST * r - COLLISION_GIVE * self.fastest_point(b) * dt)
 
@@ -403,14 +385,10 @@ class Bodies:
 
     @ti.func
     def _contacts(self):
-        """Every contact, CONTACT_SWEEPS times over, in a fixed order: each body against the container and
-        the obstacles, then each pair of bodies (corners inside the other box, then, where none is,
-        edges across). Each candidate is tested where the contacts before it left the bodies and
-        resolved at once (sequential impulses).
-
-        The candidates are numbered and walked by runtime loops (``slot``: a body or a pair; ``m``: the
-        candidate), so that :meth:`_resolve` is inlined once: Taichi inlines every ``ti.func`` call, and
-        a call per wall, axis and kind of pair made the compile far longer (docs/BODIES.md, "Compile time")."""
+        """Every contact, CONTACT_SWEEPS times over, in a fixed order (sequential impulses): each body against
+        the container and the obstacles, then each pair of bodies (corners inside the other box, then,
+        where none is, edges across). The candidates are numbered and walked by runtime loops, so that
+        :meth:`_resolve` is inlined once (docs/BODIES.md, "Compile time")."""
         (count, pairs, static_candidates) = (
             self.constants[None].count,
             self.constants[None].pairs,
@@ -427,10 +405,14 @@ class Bodies:
                 for m in range(candidates):
                     found, point, normal, depth = _no_contact()
                     first, second = a, b
-                    if b < 0:
-                        found, point, normal, depth = self._static_candidate(a, m)
+                    if b < 0 and self.sphere[a]:
+                        found, point, normal, depth = self._sphere_static_candidate(a, m)
+                    elif b < 0:
+                        found, point, normal, depth = self._box_static_candidate(a, m)
+                    elif self.sphere[a] or self.sphere[b]:
+                        found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
                     elif m < 2 * CORNERS or corners == 0:  # edges only where no corner is inside
-                        found, first, second, point, normal, depth = self._pair_candidate(a, b, m)
+                        found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
                     if found:
                         self._resolve(first, second, point, normal, depth)
                         if m < 2 * CORNERS:
@@ -454,20 +436,10 @@ class Bodies:
         return self.position[b] + self.rotation[b] @ (signs * self.half[b])
 
     @ti.func
-    def _static_candidate(self, b, m):
-        """Candidate m of body b against what does not move: whether it touches, the point, the outward
-        normal and the depth. m < CONTAINER_CANDIDATES: the container, at a box's corner m // 6 (a
-        sphere: m < 6, its extreme point), along axis m // 2 % 3, below the lower wall (m even) or
-        above the upper (m odd); then CORNERS per obstacle (a sphere: the first, its closest point)."""
-        found, point, normal, depth = _no_contact()
-        if self.sphere[b]:
-            found, point, normal, depth = self._sphere_static_candidate(b, m)
-        else:
-            found, point, normal, depth = self._box_static_candidate(b, m)
-        return found, point, normal, depth
-
-    @ti.func
     def _box_static_candidate(self, b, m):
+        """Candidate m of box b against what does not move (found, point, outward normal, depth):
+        m < CONTAINER_CANDIDATES the container at corner m // 6, along axis m // 2 % 3, below the lower
+        wall (m even) or above the upper; then CORNERS per obstacle."""
         found, point, normal, depth = _no_contact()
         if m < CONTAINER_CANDIDATES:
             axis, above = m // 2 % 3, m % 2
@@ -491,6 +463,7 @@ class Bodies:
 
     @ti.func
     def _sphere_static_candidate(self, b, m):
+        """:meth:`_box_static_candidate` of a sphere: m < 6 its extreme points, the first per obstacle."""
         found, point, normal, depth = _no_contact()
         radius = self.half[b][0]
         if m < 6:
@@ -514,9 +487,8 @@ class Bodies:
 
     @ti.func
     def _sphere_at_box(self, c, radius, half):
-        """A sphere of ``radius`` centred at c in a box's frame (centre 0, half extents ``half``): whether
-        they overlap, the box's point closest to c, the normal from the box toward the sphere and the
-        depth."""
+        """A sphere at c in a box's frame (centre 0, half extents ``half``): whether they overlap, the box's
+        point closest to c, the normal from the box toward the sphere and the depth."""
         closest = ti.max(-half, ti.min(c, half))
         gap = c - closest
         distance = gap.norm()
@@ -549,10 +521,9 @@ class Bodies:
 
     @ti.func
     def _resolve(self, a, b, point, normal, depth):
-        """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a (b < 0: a fixed wall).
-        The bodies move apart (a alone against a wall, else in inverse proportion to their masses),
-        then the velocity into the contact is taken away (no bounce) and, within Coulomb's cone, the
-        sliding: one loop over the two impulses, so that the impulse code is inlined once."""
+        """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a (b < 0: a fixed wall): the
+        bodies move apart by inverse mass, then the approach is taken away (no bounce) and, within
+        Coulomb's cone, the sliding (one loop over the two impulses: their code inlined once)."""
         pair = b >= 0
         other = ti.max(b, 0)  # (a valid index where there is no other body; its terms are left out)
         ma = self.inverse_mass[a]
@@ -606,22 +577,9 @@ class Bodies:
                             self._apply(body, impulse, arm)
 
     @ti.func
-    def _pair_candidate(self, a, b, m):
-        """Candidate m of bodies a and b: whether they overlap there, the body the normal points to and
-        the other, the point, the normal and the depth. Two spheres or a sphere and a box: one
-        candidate. Two boxes: m < 16 the corners of a inside b, then those of b inside a; then edge
-        (m − 16) // 12 of a across edge (m − 16) % 12 of b (:meth:`_edge_candidate`)."""
-        found, point, normal, depth = _no_contact()
-        first, second = a, b
-        if self.sphere[a] or self.sphere[b]:
-            found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
-        else:
-            found, first, second, point, normal, depth = self._box_pair_candidate(a, b, m)
-        return found, first, second, point, normal, depth
-
-    @ti.func
     def _sphere_pair_candidate(self, a, b):
-        """Two spheres, or a sphere and a box: their one candidate."""
+        """Two spheres, or a sphere and a box: their one candidate (found, the body the normal points to
+        and the other, point, normal, depth)."""
         found, point, normal, depth = _no_contact()
         first, second = a, b
         if self.sphere[a] and self.sphere[b]:
@@ -646,7 +604,8 @@ class Bodies:
 
     @ti.func
     def _box_pair_candidate(self, a, b, m):
-        """Two boxes: a corner of one inside the other (m < 16), or an edge across an edge."""
+        """Two boxes: m < 16 the corners of a inside b, then of b inside a; then edge (m − 16) // 12 of a
+        across edge (m − 16) % 12 of b (:meth:`_edge_candidate`)."""
         found, point, normal, depth = _no_contact()
         first, second = a, b
         if m < 2 * CORNERS:
@@ -682,11 +641,9 @@ class Bodies:
 
     @ti.func
     def _edge_candidate(self, a, b, k):
-        """Edge k // 12 of box a across edge k % 12 of box b, no corner of either inside the other: the
-        closest points p (on a's edge) and q (on b's) of edges that are not parallel; where p lies
-        inside b and q inside a the edges cross through each other's volume. The normal is their edges'
-        cross product, turned from b to a, and the depth the boxes' overlap along it (separating axis
-        test: the two boxes' projected half widths less the distance between their centres)."""
+        """Edge k // 12 of box a across edge k % 12 of box b: where the closest points of edges that are not
+        parallel lie each inside the other box, the normal is the edges' cross product (from b to a) and
+        the depth the boxes' overlap along it (their projected half widths less the centres' distance)."""
         found, point, normal, depth = _no_contact()
         p0, p1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
         q0, q1 = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
@@ -752,8 +709,7 @@ class Bodies:
 
     @ti.func
     def _box_ghost(self, p, centre, r, half):
-        """A box's ghost: ``GhostTables.box`` (the obstacles' 27-term expansion of a box into
-        half-spaces, quadrants and octants) at p in the body's frame, its gradient rotated back."""
+        """A box's ghost: the obstacles' (``GhostTables.box``) in the body's frame, its gradient rotated back."""
         density, gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
         return density, r @ gradient
 
@@ -807,10 +763,8 @@ class Bodies:
 
     @ti.func
     def _exit(self, p, centre, r, local, grown):
-        """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out
-        stays inside the container, so that a particle under a box on the floor leaves by a side rather
-        than through the floor, from which the container would put it back inside the box; the nearest
-        face when every way out is shut."""
+        """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out stays
+        inside the container (under a box on the floor: a side), else the nearest face."""
         (lower, wall_margin, upper) = (
             self.constants[None].lower,
             self.constants[None].wall_margin,
@@ -840,10 +794,8 @@ class Bodies:
         q, _pusher = self.push_out(p)
         return q
 
-    # The collision's push, recorded per particle so that the body feels it (:meth:`gather`). x* follows
-    # the iterations' two-step recurrence (``pbf.solver.acceleration``), each step collided, which is
-    # linear in the pushes: their part D follows the same recurrence, D^{k+1} = D^{k−1} + w (D^k −
-    # D^{k−1}) + c^{k+1}, c the push of iteration k + 1.
+    # The collision's push per particle, for the body's reaction (:meth:`gather`): it follows the
+    # iterations' recurrence, D^{k+1} = D^{k−1} + w (D^k − D^{k−1}) + c^{k+1}, c the push of iteration k + 1.
 
     @ti.func
     def record_start(self, i, pushed, pusher):
@@ -931,8 +883,7 @@ class Bodies:
                 self.torque[b] = torque
 
     def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
-        """The fluid's reaction on every body over the substep just solved, F_b = Σ_i V p_i ∇ψ_b(x_i)
-        − Σ_{i pushed by b} m D_i / Δt² and its torque (module docstring), p_i = −ρ0 h² (L_i/Δt² + Λ_i);
-        the next :meth:`advance` applies it."""
+        """The fluid's reaction on every body over the substep just solved (module docstring), with
+        p_i = −ρ0 h² (L_i/Δt² + Λ_i); the next :meth:`advance` applies it."""
         scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
         self._gather(x, lam_total, multiplier, active, scale / dt**2, scale, -self.particle_mass / dt**2)

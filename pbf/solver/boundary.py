@@ -1,13 +1,12 @@
 """The boundaries of the fluid, behind one interface: the container (an axis-aligned box whose
 lower-x wall may be a piston wave maker), the static box obstacles and the rigid bodies.
 
-Every boundary offers the solver the same Taichi functions of a position p: ``project(p)`` (the
-collision of Algorithm 1, line 15), ``ghost(p)`` (the density ρ/ρ0 of the ghost fluid behind it and
-its gradient) and ``velocity(p)`` (that ghost's velocity, for the divergence pre-correction); and on
-the host ``move(clock_s, dt)`` and ``speed_limit_m_s()``. :class:`Boundaries` holds them in a fixed
-order. The ghost behind a wall is looked up in tables by wall distance, with inclusion–exclusion
-tables at edges and corners; an obstacle, the intersection of three slabs, expands into at most 27
-signed terms of the same tables (:meth:`GhostTables.box`; docs/METHOD.md, "Walls and obstacles").
+Every boundary offers the same Taichi functions of a position p: ``project(p)`` (line 15's
+collision), ``ghost(p)`` (the ghost fluid's density ρ/ρ0 behind it and its gradient) and
+``velocity(p)`` (that ghost's velocity); on the host ``move(clock_s, dt)`` and ``speed_limit_m_s()``.
+:class:`Boundaries` holds them in a fixed order. The ghost is looked up in tables by wall distance
+(inclusion–exclusion at edges and corners); an obstacle, three slabs' intersection, expands into at
+most 27 signed terms of them (:meth:`GhostTables.box`; docs/METHOD.md, "Walls and obstacles").
 """
 
 import math
@@ -31,8 +30,7 @@ class GhostTables:
     fluid lattice, by wall distance, with their gradients (``pbf.solver.sph``); shared by every boundary."""
 
     def __init__(self, spacing_m: float, kernel_radius_m: float, edges_and_corners: bool):
-        self.constants = scene_constants(kernel_radius=kernel_radius_m)
-        """h as data (``pbf.solver.constants``): the tables' distances are in h."""
+        self.constants = scene_constants(kernel_radius=kernel_radius_m)  # the tables' distances are in h
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
@@ -97,10 +95,9 @@ class GhostTables:
 
     @ti.func
     def box(self, p, lower, upper):
-        """Ghost density ρ/ρ0 of the axis-aligned box lower–upper at p, and its gradient (1/m): the
-        27-term expansion of the module docstring (obstacles; bodies in their own frame). Written with
-        selections and one lookup of each table (:meth:`half_spaces`): it is inlined in the iterations'
-        kernel, whose compile time grows faster than its length (docs/BODIES.md, "Compile time")."""
+        """Ghost density ρ/ρ0 of the axis-aligned box lower–upper at p and its gradient (1/m), the 27-term
+        expansion, with selections and one lookup of each table: it is inlined in the iterations' kernel,
+        whose compile time grows faster than its length (docs/BODIES.md, "Compile time")."""
         h = self.constants[None].kernel_radius
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
@@ -189,15 +186,11 @@ class Container:
             wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
         )
-        """The particle radius r, the walls, h and h − r as data (``pbf.solver.constants``): a wall's
-        mirror images come within h of a particle only if it is closer than h − r to the wall. Whether
-        the walls have a ghost density and whether the lower-x wall is a piston are data too."""
+        """``mirror_reach``: a wall's mirror images come within h of a particle only if it is closer than h − r."""
         self.mirrored = params.wall_mirror
-        """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``,
-        ``pbf.solver.density``) rather than the tables: then the density constraint leaves out
-        :meth:`ghost` and mirrors the fluid in the walls :meth:`mirror_walls` names."""
+        """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``): the
+        density constraint then leaves out :meth:`ghost` and mirrors the fluid in :meth:`mirror_walls`."""
         self.wave_maker = params.piston_stroke_m > 0.0
-        """Whether the container's lower-x wall is a piston wave maker."""
         self.piston_stroke_m = params.piston_stroke_m
         self.piston_period_s = params.piston_period_s
         self.piston_x = ti.field(ti.f32, shape=())
@@ -208,7 +201,7 @@ class Container:
         self.piston_x[None] = params.lower_m[0]
         self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
         self._piston_x_host = float(np.float32(params.lower_m[0]))
-        """piston_x as the device holds it, kept on the host so that moving the piston reads nothing back."""
+        """piston_x as the device holds it: moving the piston reads nothing back."""
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
@@ -221,9 +214,8 @@ class Container:
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
     def move(self, piston_time_s: float, dt: float = 0.0) -> tuple[float, float]:
-        """Place moving walls where they stand at the end of the coming substep of ``dt``, where x* is
-        projected, so a particle the piston pushes leaves with its velocity (v = (x* − x)/Δt), which the
-        divergence pre-correction sees (0 when ``dt`` is 0). Returns the piston's place and velocity."""
+        """Place moving walls where they stand at the end of the coming substep of ``dt`` (where x* is
+        projected: a particle the piston pushes leaves with its velocity). Returns its place and velocity."""
         if not self.wave_maker:
             return self._piston_x_host, 0.0
         position = self.piston_position_m(piston_time_s)
@@ -325,14 +317,12 @@ class Obstacles:
         self.count = len(params.obstacles)
 
     def allocate(self) -> None:
-        """The obstacles' arrays and constants, in slots of a bucket (``pbf.solver.model.allocation``), as
-        many for none as for a few: their count is data; their code is compiled in only where there are
-        obstacles (:meth:`GhostTables.summed`)."""
+        """The obstacles' arrays, in slots of a bucket as many for none as for a few (their count is data;
+        their code is compiled in only where there are obstacles, :meth:`GhostTables.summed`)."""
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
         self.constants = scene_constants(radius=radius, count=count, wall_density=int(params.wall_density))
-        """The particle radius, the obstacle count and whether they have a ghost density, as data."""
         lower, upper = np.zeros((slots, 3), np.float32), np.zeros((slots, 3), np.float32)
         # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
         exit_lower, exit_upper = np.zeros((slots, 3), np.int32), np.zeros((slots, 3), np.int32)
@@ -370,9 +360,8 @@ class Obstacles:
 
     @ti.func
     def _push_out(self, p, o):
-        """p moved out of obstacle o (grown by the particle radius) through the nearest open face.
-        Obstacles are at least two spacings thick and a particle moves at most time.max_cfl spacings
-        in a substep, so the nearest face is the one it came through."""
+        """p moved out of obstacle o (grown by the particle radius) through the nearest open face: the one
+        it came through, as obstacles are thicker than a substep's move."""
         radius = self.constants[None].radius
         lower = self.lower[o] - radius
         upper = self.upper[o] + radius
@@ -414,8 +403,7 @@ class Boundaries:
         self.parts = (self.container, self.obstacles)
         self.bodies = None
         self.with_bodies = params.bodies.count > 0
-        """The rigid bodies (``pbf.solver.bodies``), the last part; None in a scene without them, whose
-        kernels then hold no code of theirs."""
+        """Whether the last part is the rigid bodies (``pbf.solver.bodies``); without, no code of theirs."""
         if solids:
             self.allocate_solids(capacity)
 
@@ -465,10 +453,9 @@ class Boundaries:
 
     @ti.func
     def project_recorded(self, p, i, stage: ti.template(), amount):
-        """:meth:`project` for particle i's x* where a substep moves it: ``stage`` is "start" (x* as
-        predicted), "iteration" (after a Jacobi iteration of weight ``amount``) or "between" (stepped
-        back by ``amount``). With bodies, their push goes on the record their reaction reads
-        (``Bodies.record_start``, ``record_iteration``, ``record_between``); without, it is :meth:`project`."""
+        """:meth:`project` for particle i's x* at ``stage`` "start", "iteration" (of weight ``amount``) or
+        "between" (stepped back by ``amount``); with bodies, their push goes on the record their reaction
+        reads (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
         q = p
         if ti.static(self.with_bodies):
             q, pushed, pusher = self._project_pushed(p)

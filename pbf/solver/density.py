@@ -9,14 +9,11 @@ V = m/ρ0 and the dimensionless gradient ĝ_ij = V h ∇W(x_i − x_j),
     Δx_i = h [Σ_j (λ̂_i + λ̂_j + s_corr) ĝ_ij + λ̂_i ĝ_wall],  s_corr = −k (W_ij / W(Δq))ⁿ
 
 Every constant (ε̂, k, n, Δq/h) is dimensionless. ω = STABLE_GAIN / gain under-relaxes the Jacobi
-iterations so that no error mode grows (``pbf.solver.sph.jacobi_gain``). The denominator is computed
-once a substep at x* and kept, a diagonal preconditioner (:meth:`DensityConstraint.prepare`); so is
-ψ_i, the ghost fluid beyond the free surface (``solver.surface_density``), read from the smoothed
-colour gradient. With ``solver.wall_mirror`` the ghost behind the container's walls is the fluid's
-mirror image (:meth:`DensityConstraint.image_sums`) instead of the tables. Iterations are Jacobi,
-alternating between two buffers (``PredictedPositions``) and accelerated by ``pbf.solver.acceleration``.
-Why each of these: docs/METHOD.md ("A Jacobi step that no mode outgrows", "Artificial pressure",
-"Walls and obstacles", "The free surface").
+iterations so that no error mode grows. The denominator (a diagonal preconditioner) and ψ_i, the ghost
+fluid beyond the free surface, are computed once a substep at x* (:meth:`DensityConstraint.prepare`).
+With ``solver.wall_mirror`` the ghost behind the container's walls is the fluid's mirror image
+(:meth:`DensityConstraint.image_sums`). Why each of these: docs/METHOD.md ("A Jacobi step that no mode
+outgrows", "Artificial pressure", "Walls and obstacles", "The free surface").
 """
 
 import taichi as ti
@@ -37,9 +34,8 @@ SURFACE_SKIP = 0.002
 @ti.func
 def position(x: ti.template(), j):
     """x_j of the triple (first, second, from_second): the iterations' two buffers, read from the one
-    ``from_second`` picks (a field alone is ``(x, x, 0)``). The choice is made per neighbour, inside the
-    walk, so that a kernel holds one copy of each walk, not one per buffer: a branch every thread takes
-    the same way."""
+    ``from_second`` picks (a field alone is ``(x, x, 0)``), per neighbour, so a kernel holds one copy of
+    each walk, not one per buffer."""
     xj = ti.static(x[0])[j]
     if x[2]:
         xj = ti.static(x[1])[j]
@@ -54,11 +50,9 @@ class DensityConstraint:
     def __init__(self, params: DensityParams, boundaries, grid):
         particle_count = params.particle_count
         self.h = params.kernel_radius_m
-        """h on the host (``pressure_scale``)."""
         self.boundaries = boundaries
         self.grid = grid
-        self.wall_mirror = params.wall_mirror
-        """Whether the container's walls mirror the fluid (compiles the images' walk in)."""
+        self.wall_mirror = params.wall_mirror  # compiles the images' walk in
         g_below, g_top, psi_top = params.surface_calibration
         self.constants = scene_constants(
             h=params.kernel_radius_m,
@@ -73,7 +67,6 @@ class DensityConstraint:
             surface_slope=1.0 / ((SURFACE_RAMP[1] - SURFACE_RAMP[0]) * (g_top - g_below)),
             surface_top=psi_top,
         )
-        """The scene's constants as data (``pbf.solver.constants``), the surface ghost's switch included."""
         self.surface = ti.field(ti.f32, shape=particle_count)
         """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
         iteration (0 with the ghost off)."""
@@ -91,10 +84,8 @@ class DensityConstraint:
         self.error_sum = TreeSum(particle_count)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
-        """L_i, the multiplier of the whole correction this substep's iterations made: the pressure
-        impulse (see pressure_scale). Δx^k is linear in λ̂^k and the positions combine with the
-        iterations' weights (``pbf.solver.acceleration``), so L does too: L^{k+1} = L^{k−1} +
-        w (L^k + λ̂^k − L^{k−1}), Σ_k λ̂^k for plain Jacobi (w = 1)."""
+        """L_i, the multiplier of the substep's whole correction (the pressure impulse, pressure_scale):
+        it combines as the positions do, L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1})."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)
         """L^{k−1} of lam_total's recurrence."""
         self.denominator = ti.field(ti.f32, shape=particle_count)
@@ -136,8 +127,7 @@ class DensityConstraint:
 
     @ti.func
     def particle_constants(self):
-        """h, V and the kernel's scale for a walk of a particle's neighbours, read once per particle, not
-        per neighbour."""
+        """h, V and the kernel's scale, read once per particle, not per neighbour."""
         h, volume = self.constants[None].h, self.constants[None].volume
         return h, volume, kernel_scale(h)
 

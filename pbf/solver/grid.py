@@ -49,16 +49,14 @@ def _named_type(names: tuple[str, ...]):
 
 @ti.data_oriented
 class NeighbourGrid:
-    """The uniform grid and exact neighbour lists of the module docstring. ``active``: the 0-D field of
-    live particles; ``slot_major`` (the lists' layout) and ``loop_bound`` (what loops over the particles
-    run to, ``State.loop_bound``) are the backend's, chosen by the Simulation."""
+    """The uniform grid and exact neighbour lists of the module docstring; ``slot_major`` and
+    ``loop_bound`` are the backend's, chosen by the Simulation."""
 
     def __init__(self, params: GridParams, active, slot_major: bool, loop_bound):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         allocated = params.allocated_particles or particle_count
         self.particle_count = particle_count
         self.active = active
-        """The 0-D field of live particles (``State.active``): the first ``active[None]`` slots are sorted."""
         extent = np.asarray(params.upper_m, dtype=np.float64) - np.asarray(params.lower_m, dtype=np.float64)
         self.reach = reach
         """Cells per h: every neighbour within h lies within ``reach`` cells of a particle's own."""
@@ -71,7 +69,6 @@ class NeighbourGrid:
             resolution=tuple(int(r) for r in resolution),
             inverse_cell_size=tuple(float(r / e) for r, e in zip(resolution, extent)),
         )
-        """h, the grid's lower corner, cells per axis and 1 / cell size per axis, as data."""
         cell_count = params.allocated_cells
         particle_count = allocated
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
@@ -92,12 +89,10 @@ class NeighbourGrid:
         self.status = ti.field(ti.i32, shape=2)
         """What the builds saw since the host last asked (:meth:`take_status`)."""
         self.loop_bound = loop_bound
-        """What loops over the live particles run to (``State.loop_bound``)."""
+        """What loops over the live particles run to (``State.loop_bound``); the first ``active[None]`` are live."""
         self.slot_major = slot_major
-        """How the one-visit list lies (fixed for a backend at compile time): on a GPU slot-major, the k-th
-        neighbours of all particles side by side (entry i + k·n), so that the threads of a warp, which
-        walk their lists in step, read one contiguous run per k; on the CPU particle-major (entry
-        i·SLOTS + k), so that one thread reads its list from one stretch of memory."""
+        """The one-visit list's layout: on a GPU slot-major (entry i + k·n: a warp walking its lists in step
+        reads one contiguous run per k), on the CPU particle-major (entry i·SLOTS + k: one stretch a thread)."""
         self.neighbour_scan = ExclusiveScan(particle_count)
         self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
         """Flat neighbour list: the neighbours of sorted particle i, itself excluded, are the
@@ -142,8 +137,8 @@ class NeighbourGrid:
 
     @ti.func
     def clear_for_visit(self, i):
-        """Thread i of the loop before a visit clears what the visit gathers: the overflow flag (thread
-        0) and the sum of i's block of the overflow's prefix sum (no loop or one-thread task of its own)."""
+        """Thread i of the loop before a visit clears what the visit gathers: the overflow flag and i's
+        block sum of the overflow's prefix sum (no task of its own)."""
         if i == 0:
             self.overflow[None] = 0
         self.neighbour_scan.clear_block(i)
@@ -159,20 +154,16 @@ class NeighbourGrid:
     @ti.func
     def order_loops(self, key: ti.template(), mover: ti.template()):
         """Steps 2-3 once every particle is counted (:meth:`count_in_cell`), for the top level of a kernel:
-        :attr:`sorted_from`, and ``mover.gather(slot, i)`` of each particle into its sorted slot.
-
-        The atomic counter's ranks change from run to run, so each particle's place inside its cell is
-        its rank by a key that belongs to it (its creation index; its slot before the sort breaks a
-        tie): the permutation depends only on where the particles are, and runs replay bit for bit."""
-        # Over the allocated cells, a count the kernel knows (their bucket): the cells past the grid's
-        # hold no particle and add nothing.
+        :attr:`sorted_from`, and ``mover.gather(slot, i)`` of each particle into its sorted slot. The atomic
+        counter's ranks change from run to run, so a particle's place in its cell is its rank by ``key``
+        (its slot before the sort breaks a tie): runs replay bit for bit."""
+        # Over the allocated cells (their bucket, a count the kernel knows); those past the grid's are empty.
         self.cell_scan.scan(self.cell_particles, self.cell_start, self.cell_scan.length, True)
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 cell = self.particle_cell[i]
                 self.cell_members[self.cell_start[cell] + self.rank_in_cell[i]] = i
-                # Clear the counts for the next sort here rather than in a loop over all cells of its
-                # own: the scan has read them, and a loop of its own is a launch more.
+                # Cleared for the next sort here, once the scan has read them: a loop of its own is a launch.
                 self.cell_particles[cell] = 0
                 self.cell_scan.clear_block(cell)
         for slot in range(read_count(self.loop_bound, 1)):
@@ -224,14 +215,11 @@ class NeighbourGrid:
 
     @ti.func
     def for_each_neighbour(self, i, entries: ti.template(), task: ti.template(), acc: ti.template()):
-        """``task(i, j, acc)`` for every neighbour j of sorted particle i in the lists ``entries`` (the
-        ndarray :attr:`neighbours`, a ``NeighbourList`` kernel argument), in the list's order; ``acc``
-        is the caller's accumulator (a vector, or :func:`named` values), passed by reference. The one
-        walk of the lists: every pass of the solver and the renderers' sums go through it.
-
-        Slot-major (a GPU) the walk reads the next entry before the task gathers x_j, so that the
-        dependent load is in flight meanwhile; in a row (the CPU) it reads ``entries[k]`` as it goes,
-        which the cores read ahead themselves. The order of every sum is the same."""
+        """``task(i, j, acc)`` for every neighbour j of sorted particle i in ``entries`` (:attr:`neighbours`,
+        a ``NeighbourList`` argument), in the list's order; ``acc`` (a vector or :func:`named` values) is
+        passed by reference. The one walk of the lists: every pass of the solver and the renderers' sums.
+        Slot-major (a GPU) it reads the next entry before the task gathers x_j, so the dependent load is
+        in flight meanwhile; in a row (the CPU) the cores read ahead themselves."""
         first, last, stride = self.listed(i, entries)
         if ti.static(self.slot_major):
             upcoming = 0
@@ -271,17 +259,15 @@ class NeighbourGrid:
                 for j in range(first, last):
                     xj = x[j]
                     if ti.static(self.slot_major):
-                        # A GPU thread stores only neighbours: a warp's threads take the branch
-                        # together or wait for one another, and every store skipped is a scattered
-                        # write saved (the candidates are 3-6 times the neighbours).
+                        # A GPU thread stores only neighbours: each store skipped is a scattered write
+                        # saved (the candidates are 3-6 times the neighbours).
                         if j != i and (xj - xi).norm_sqr() < h2:
                             if found < room:
                                 neighbours[start + found * stride] = j
                             found += 1
                     else:
-                        # Branch-free on the CPU: write every candidate to the next free entry and
-                        # advance only past neighbours. A branch on the distance test mispredicts on
-                        # most candidates.
+                        # Branch-free on the CPU (a branch on the distance mispredicts): write every
+                        # candidate to the next free entry, advance only past neighbours.
                         if found < room:
                             neighbours[start + found] = j
                         found += ti.select(j != i and (xj - xi).norm_sqr() < h2, 1, 0)
@@ -297,12 +283,10 @@ class NeighbourGrid:
         self, gathered: ti.template(), x: ti.template(), neighbours: ti.template(), mover: ti.template()
     ):
         """Step 4 over the live particles, both visits, for the top level of a kernel whose loop before
-        cleared what they gather (:meth:`clear_for_visit`). ``gathered`` is the sorted positions' scratch
-        of a ``mover`` (:meth:`order_loops`), taken back by each thread of the first visit, or ``x``
-        itself without one. The second visit runs over no particles unless the first overflowed; its
-        starts come from a prefix sum whose first pass up the first visit did and whose pass down each
-        thread does for itself (``ExclusiveScan.start_of``). A compact list longer than the array is
-        cut at its end and ``status`` says so, for :meth:`settle_frame`."""
+        cleared what they gather (:meth:`clear_for_visit`). ``gathered``: a ``mover``'s sorted positions
+        (:meth:`order_loops`), taken back by the first visit, or ``x``. The second visit runs only after
+        an overflow, each thread finding its start itself (``ExclusiveScan.start_of``); a compact list
+        longer than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
                 mover.take_gathered(i)

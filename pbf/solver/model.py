@@ -286,7 +286,7 @@ class Control:
     """Whether the piston moves (it resumes from where it stopped)."""
 
     def __setattr__(self, name: str, value) -> None:
-        """Every assignment checked against its scene key's bounds (CONTROL_KEYS), or a TypeError/ValueError
+        """Every assignment checked against its scene key's bounds (MIRRORED), or a TypeError/ValueError
         naming control.<field>; an unknown name is refused."""
         if name not in CONTROL_CHECKS:
             closest = difflib.get_close_matches(name, list(CONTROL_CHECKS), n=1)
@@ -407,9 +407,8 @@ def _checked_bool(label: str, value) -> bool:
     return bool(value)
 
 
-def _setting(kind: type, table, name: str, dotted: str):
-    """The check of a Control field that mirrors scene key ``dotted`` (``table``'s field ``name``)."""
-    field_name = next(k for k, v in CONTROL_KEYS.items() if v == dotted)
+def _setting(field_name: str, kind: type, table, name: str, dotted: str):
+    """The check of Control's ``field_name``, which mirrors scene key ``dotted`` (``table``'s field ``name``)."""
     label = f"control.{field_name}"
     if kind is bool:
         return lambda control, value: _checked_bool(label, value)
@@ -439,27 +438,20 @@ def _push(control, value) -> Push | None:
     return value
 
 
-CONTROL_KEYS = {
-    "iterations": "solver.iterations",
-    "min_iterations": "solver.min_iterations",
-    "substeps": "time.substeps",
-    "target_density_error": "solver.target_density_error",
-    "step_back": "solver.expert.step_back",
-    "divergence_iterations": "solver.divergence_iterations",
-    "xsph": "viscosity.xsph",
-    "vorticity": "vorticity.epsilon",
-    "gravity_m_s2": "gravity_m_s2",
-}
-"""The scene key each Control field starts from, and whose bounds it keeps."""
+MIRRORED = (
+    ("iterations", int, Solver, "iterations", "solver.iterations"),
+    ("min_iterations", int, Solver, "min_iterations", "solver.min_iterations"),
+    ("substeps", int, Time, "substeps", "time.substeps"),
+    ("target_density_error", float, Solver, "target_density_error", "solver.target_density_error"),
+    ("step_back", bool, Expert, "step_back", "solver.expert.step_back"),
+    ("divergence_iterations", int, Solver, "divergence_iterations", "solver.divergence_iterations"),
+    ("xsph", float, Viscosity, "xsph", "viscosity.xsph"),
+    ("vorticity", float, Vorticity, "epsilon", "vorticity.epsilon"),
+)
+"""(Control field, type, schema table, its field, scene key): the fields that start from a scene key and
+keep its bounds."""
 CONTROL_CHECKS = {
-    "iterations": _setting(int, Solver, "iterations", "solver.iterations"),
-    "min_iterations": _setting(int, Solver, "min_iterations", "solver.min_iterations"),
-    "substeps": _setting(int, Time, "substeps", "time.substeps"),
-    "target_density_error": _setting(float, Solver, "target_density_error", "solver.target_density_error"),
-    "step_back": _setting(bool, Expert, "step_back", "solver.expert.step_back"),
-    "divergence_iterations": _setting(int, Solver, "divergence_iterations", "solver.divergence_iterations"),
-    "xsph": _setting(float, Viscosity, "xsph", "viscosity.xsph"),
-    "vorticity": _setting(float, Vorticity, "epsilon", "vorticity.epsilon"),
+    **{field: _setting(field, *rest) for field, *rest in MIRRORED},
     "gravity_m_s2": _gravity,
     "push": _push,
     "emitters_on": lambda control, value: _checked_bool("control.emitters_on", value),

@@ -1,17 +1,14 @@
 """Prefix sums and reductions over Taichi fields: parallel, in float32, bit-identical on any thread count.
 
-Both walk a tree of blocks: level 0 cuts the values into blocks of consecutive entries, each level
-above cuts the block results of the one below, up to a level of one block. A block is one thread's
-loop in index order and a level one parallel loop at the top level of the calling kernel, so the
-order of every addition depends on the indices alone: no atomic, no host round trip, and a scan or a
-sum adds loops to the caller's launch, never a launch of its own. A prefix sum goes up the tree a
-pass a level and down it in one pass. On CUDA float sums add up in shared memory instead
+Both walk a tree of blocks (level 0: blocks of consecutive entries; each level above: blocks of the
+results below, up to one block). A block is one thread's loop in index order and a level one parallel
+loop in the calling kernel, so the order of every addition depends on the indices alone: no atomic, no
+host round trip, no launch of its own. On CUDA float sums add up in shared memory instead
 (:meth:`TreeSum._reduce_in_blocks`), in a fixed order all the same.
 
-Float sums are compensated: each block keeps a float32 pair (high, low), Knuth's TwoSum carrying the
-rounding error of every addition into the low part, as exact as float64 without it (Metal and many
-integrated GPUs lack it). Under Taichi's fast math LLVM may rewrite (a + b) − a as b; every TwoSum
-step therefore passes through an integer xor with a zero the compiler cannot see (``_opaque``).
+Float sums are compensated (a float32 pair (high, low), Knuth's TwoSum: as exact as float64 without
+it, which Metal and many integrated GPUs lack). Fast math may rewrite (a + b) − a as b, so every
+TwoSum step passes through an integer xor with a zero the compiler cannot see (``_opaque``).
 """
 
 import math
@@ -21,45 +18,36 @@ import taichi as ti
 from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
 
 Template = ti.template()
-"""A compile-time argument's annotation, short for signatures of many."""
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level but the top."""
 GPU_SCAN_TOP = 512
-"""The most entries the top level of a prefix sum's tree holds on a GPU backend, as one block: a level
-of a few hundred block sums is read whole by :meth:`ExclusiveScan.start_of` rather than summed up by
-one more pass (a launch)."""
+"""The most entries the top level of a prefix sum's tree holds on a GPU backend, as one block, read
+whole by :meth:`ExclusiveScan.start_of` rather than summed by one more pass (a launch)."""
 GPU_SUM_THREADS = 256
-"""Threads of a GPU block that adds up a float sum in shared memory (a work-group size every GPU backend
-takes)."""
+"""Threads of a GPU block that adds up a float sum in shared memory (any GPU backend takes it)."""
 GPU_SUM_ONE_BLOCK = 16_384
 """Up to this many entries one block adds up a sum: one launch."""
 GPU_SUM_PER_THREAD = 16
-"""Entries a thread adds up first when a sum takes more than one block (two launches): more blocks in
-flight hide the reads' latency."""
+"""Entries a thread adds up first when a sum takes more than one block (more blocks hide latency)."""
 GPU_SUM_MOST_BLOCKS = 1024
-"""At most this many level-0 blocks: each thread of the loop runs one pass of it on any GPU, so that
-every thread of a block meets each of its syncs."""
+"""At most this many level-0 blocks: each thread runs one pass, so every thread meets each sync."""
 CPU_BLOCKS = 1024
-"""On the CPU: about this many level-0 blocks (of 64 entries at least), and up to this many entries in a
-block above level 0, so that the tree has two levels."""
+"""On the CPU: about this many level-0 blocks (≥ 64 entries each) and entries a block above: two levels."""
 CPU_SCAN_BLOCKS = 256
-"""The prefix sum's CPU_BLOCKS: few enough that each level-0 block of the pass down adds up the block
-sums before its own, instead of a pass (a task) over the top level."""
+"""The prefix sum's CPU_BLOCKS: few enough that each block of the pass down adds the sums before its own."""
 
 
 def block_sizes(length: int, blocks: int = CPU_BLOCKS) -> tuple[int, int]:
-    """Entries per block at level 0 and above it, for ``length`` values on the running backend: on the
-    CPU few long blocks (a level is a task, a dispatch to the thread pool), on a GPU blocks of 32 (a
-    long block idles thousands of threads)."""
+    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), on a GPU
+    blocks of 32 (a long block idles thousands of threads)."""
     if gpu_blocks():
         return GPU_BLOCK, GPU_BLOCK
     return max(64, math.ceil(length / blocks)), blocks
 
 
 class Tree:
-    """The static shape of a block tree over ``length`` entries: block sizes, each level's length and
-    offset in one flat scratch field. The partition never depends on the live count, so a result
-    depends only on the values."""
+    """The static shape of a block tree over ``length`` entries (block sizes, each level's length and
+    offset in one scratch field): it never depends on the live count, so a result depends on the values."""
 
     def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS, top: int = 0):
         """``top``: the most entries the top level may hold as one block (:data:`GPU_SCAN_TOP`)."""
@@ -73,7 +61,6 @@ class Tree:
         self.blocks[-1] = max(self.blocks[-1], self.lengths[-1])  # the top level is one block
         self.top = len(self.lengths) - 1
         self.block_counts = self.lengths[1:] + [1]
-        """Blocks of each level, the top's one."""
         self.offsets = [0, 0]
         for level_length in self.lengths[1:]:
             self.offsets.append(self.offsets[-1] + level_length)
@@ -157,9 +144,8 @@ class ExclusiveScan:
 
     @ti.func
     def add_to_block(self, k, amount):
-        """Add ``amount`` to the sum of entry k's level-0 block, for a caller that counts its values itself:
-        the scan's first pass up is then done (``scan(..., counted=True)``). With a single block (no level
-        above) the sum lands in scratch that nothing reads."""
+        """Add ``amount`` to the sum of entry k's level-0 block, for a caller that counts its values itself
+        (then ``scan(..., counted=True)`` skips its first pass up)."""
         ti.atomic_add(self.sums[self.tree.offsets[1] + k // self.tree.blocks[0]], amount)
 
     @ti.func
@@ -201,13 +187,10 @@ class ExclusiveScan:
     @ti.func
     def scan(self, values: ti.template(), starts: ti.template(), count: ti.template(), counted: ti.template() = False):
         """starts[k] = Σ_{l<k} values[l] for k ≤ count ≤ length (starts[count] is the total), ``count`` a
-        0-D field, a Python int or a value. Called at a kernel's top level. After the passes up, one
-        pass down: each level-0 block works out its own start (:meth:`start_of` from level 1), since a
-        pass down per level would be a task each.
-
-        Every level loops over all of its blocks, a count the kernel knows, and skips those past the
-        live entries: a count read outside the loops would be a one-thread task of its own.
-        ``counted``: :meth:`add_to_block` gathered the level-0 sums, and the first pass up is skipped."""
+        0-D field, a Python int or a value. Called at a kernel's top level. After the passes up, one pass
+        down: each level-0 block works out its own start (:meth:`start_of`). Every level loops over all
+        its blocks and skips those past the live entries (a count read outside the loops would be a
+        one-thread task). ``counted``: :meth:`add_to_block` gathered the level-0 sums."""
         self.up(values, count, 1, counted)
         block = ti.static(self.tree.blocks[0])
         for b in range(ti.static(self.tree.block_counts[0])):
@@ -233,10 +216,9 @@ class TreeSum:
         self.length = length
         self.tree = Tree(length, block)
         self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
-        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`), fewer launches than the
-        tree: on CUDA unless ``shared`` says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`): on CUDA unless ``shared``
+        says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
         self._reduce = self._reduce_in_blocks if self.in_shared_memory else self._reduce_in_tree
-        """How a sum is made, chosen here: in shared memory or as a tree of blocks."""
         threads = GPU_SUM_THREADS
         if length <= GPU_SUM_ONE_BLOCK:
             self.per_thread = math.ceil(max(length, 1) / threads)
@@ -262,9 +244,8 @@ class TreeSum:
 
     @ti.func
     def sum_then(self, values: Template, slot: Template, count: Template, then: Template, context: Template):
-        """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``) by the one thread that holds the
-        total, in the same loop: a decision on the sum (``pbf.solver.iterations``) costs no task.
-        ``context`` (a tuple of the kernel's arguments) reaches ``then`` as it is."""
+        """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``; ``context`` a tuple of the
+        kernel's arguments) by the thread that holds the total: a decision on the sum costs no task."""
         self._reduce(values, slot, count, False, then, context)
 
     @ti.func
@@ -277,9 +258,7 @@ class TreeSum:
         self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
     ):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
-        # entries), then the block halves its partial sums in shared memory. The partition depends on
-        # the length alone, so the order of every addition is fixed. One loop a level, each thread one
-        # pass, so every thread meets each sync.
+        # entries), then the block halves its partial sums in shared memory: an order fixed by the length.
         threads = ti.static(GPU_SUM_THREADS)
         for level in ti.static(range(2 if self.blocks > 1 else 1)):
             top = ti.static(level == 1 or self.blocks == 1)
