@@ -169,6 +169,7 @@ def test_a_falling_block_falls_freely():
     assert vertical == pytest.approx(np.full_like(vertical, -9.81 * sim.time_s), rel=2e-4)
 
 
+@pytest.mark.slow  # the full seed scene (8,000 particles) for a second: the target's stop is in test_backend_choices.py
 def test_the_seed_preset_reaches_its_error_target():
     # The seed preset, measured as docs/BENCHMARKS.md does: the mean over the first second (60 frames)
     # of stats()["mean_density_error"] after each frame, and the largest max_density_error, at the impact.

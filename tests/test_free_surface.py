@@ -22,7 +22,7 @@ def density_ratios(positions, sim):
     return sim.model.particle_volume_m3 * sph.kernel_np(distances, sim.scene.kernel_radius_m).sum(axis=1)
 
 
-@pytest.mark.parametrize("kernel_ratio", [2.0, 2.2])
+@pytest.mark.parametrize("kernel_ratio", [pytest.param(2.0, marks=pytest.mark.slow), 2.2])  # 2.2: the default
 def test_the_ghost_completes_the_top_layer_of_a_lattice_and_nothing_else(kernel_ratio):
     # Without gravity a lattice stays put for a substep; its top layer, a smoothing radius from the
     # side walls, must read ρ0 with the ghost added, and every layer under it must get none.

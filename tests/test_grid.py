@@ -97,6 +97,9 @@ def check(points, lower, upper, h, reach=1, checked=True, slot_major=None):
 
 
 REACHES = pytest.mark.parametrize("reach", [1, 2])  # cells h wide (3×3×3 visited) or h/2 (5×5×5)
+# Reach 2 slow where it repeats reach 1's case: its cells are walked in the default run by the random and
+# cell-border points, the slot-major lists and the unchecked builds, each at reach 2 as well.
+REACH_1_AND_SLOW_2 = pytest.mark.parametrize("reach", [1, pytest.param(2, marks=pytest.mark.slow)])
 
 
 @REACHES
@@ -122,7 +125,7 @@ def test_points_on_cell_borders(reach):
     assert sum(map(len, expected)) > 3000
 
 
-@REACHES
+@REACH_1_AND_SLOW_2
 def test_all_points_in_one_cell(reach):
     # 4,000 particles in one cell: 15,996,000 pairs, far more than any fixed capacity would hold.
     # Checked with NumPy in blocks of rows (Python sets of 64 million indices, at 8,000, took 7 GB).
@@ -146,7 +149,7 @@ def test_all_points_in_one_cell(reach):
         assert np.array_equal(np.sort(lists[rows[:, 0]], axis=1), column + (column >= rows))
 
 
-@REACHES
+@REACH_1_AND_SLOW_2
 def test_points_outside_grid_are_clamped_not_lost(reach):
     rng = np.random.default_rng(3)
     points = rng.uniform(-0.2, 1.2, size=(1500, 3))

@@ -63,6 +63,7 @@ def test_block_filling_a_tank_starts_at_rest():
     assert sim.stats()["max_speed_m_s"] < 0.35 * G * 3 / 60
 
 
+@pytest.mark.slow  # the free fall is test_convergence.py's, the walls' edges and corners the tank's above
 def test_block_in_a_top_corner_falls_freely():
     # The same against the ceiling's corner: the block must fall like a body, not be thrown off.
     sim = Simulation(scene([{"min_m": [0.0, 0.2, 0.2], "max_m": [0.2, 0.4, 0.4]}], substeps=4))
@@ -85,7 +86,7 @@ def test_jet_at_50_m_s_into_a_wall():
     assert sim.stats()["kinetic_energy_j"] < 0.2 * kinetic
 
 
-@pytest.mark.parametrize("substeps", [1, 2])
+@pytest.mark.parametrize("substeps", [1, pytest.param(2, marks=pytest.mark.slow)])  # the same limit at work
 def test_time_step_beyond_the_stable_range_is_substepped(substeps):
     # Against a too-large Δt: a 1/15 s frame of a falling block would move particles several spacings
     # per step; the CFL limit adds substeps instead of exploding.
