@@ -232,8 +232,10 @@ def test_bad_input_writes_nothing(tmp_path, capsys, argv, message):
     assert not out.exists()
 
 
-def test_legend_shows_the_colour_map_and_its_range():
-    # Only the top right corner changes, and the bar holds the colour map's top and bottom colours.
+def test_legend_shows_the_colour_map_and_its_range(monkeypatch):
+    # Only the top right corner changes, and the bar holds the colour map's top and bottom colours. The
+    # frame without it: the same renderer's, the legend's blend left out (one Simulation compiled, not
+    # two; a frame of legend = false is test_headless_frame_shows_water_where_the_particles_are's).
     import matplotlib
 
     from pbf.app.legend import BAR_PX, legend_line
@@ -241,8 +243,10 @@ def test_legend_shows_the_colour_map_and_its_range():
     scene = small_dam_break()
     scene["render"] = {"width_px": 640, "height_px": 360, "legend": True, "colour_map": "viridis"}
     sim = Simulation(scene)
-    with_legend = SceneRenderer(sim).frame()
-    plain = SceneRenderer(Simulation(dict(scene, render={**scene["render"], "legend": False}))).frame()
+    renderer = SceneRenderer(sim)
+    with_legend = renderer.frame()
+    monkeypatch.setattr("pbf.app.render.draw_legend", lambda image, _: image)
+    plain = renderer.frame()
     rows, cols = np.nonzero(np.any(with_legend != plain, axis=2))
     assert cols.min() > 640 * 0.6 and rows.max() < 360 * 0.7
     column = with_legend[:, cols.min() + BAR_PX[0] // 2].astype(int)
