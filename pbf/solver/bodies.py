@@ -30,27 +30,20 @@ STATE_LAYOUT = (
 )
 """A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``), the last substep's reaction included."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
-FRICTION = 0.4
-"""Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
+_STARTS = tuple(sum(width for _, width in STATE_LAYOUT[:k]) for k in range(len(STATE_LAYOUT)))
+FRICTION = 0.4  # Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)
 COLLISION_AT_REST = 1.0
-"""The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
-at the walls: a floating box then floats at its draft (docs/VALIDATION.md)."""
+"""Particle centres stay this fraction of the particle radius r outside a body at rest, as at the walls: a
+floating box then floats at its draft (docs/VALIDATION.md)."""
 COLLISION_MOVING = 0.2
 """The least fraction of r, for a moving body: its ghost's pressure, not the collision, must meet the water."""
 COLLISION_GIVE = 1.0
 """The collision distance is r less this many times the distance the body's fastest point moves in a
-substep (at least COLLISION_MOVING r): at 1 a moving body does not sweep the water with its collision
-(docs/BODIES.md; the values tried: benchmarks/bodies.py collision)."""
-CONTACT_SWEEPS = 8
-"""Passes over all contacts per substep: a box on four corners needs several to settle its impulses."""
-
-
-CORNERS = 8
-"""A box's corners; candidates of a body against an obstacle (a sphere uses the first)."""
-CONTAINER_CANDIDATES = 6 * CORNERS
-"""Candidates of a body against the container: per corner, below and above each axis's walls."""
-EDGE_PAIRS = 12 * 12
-"""Edge-across-edge candidates of two boxes."""
+substep: at 1 a moving body does not sweep the water with its collision (docs/BODIES.md)."""
+CONTACT_SWEEPS = 8  # passes over all contacts per substep: a box on four corners needs several to settle
+CORNERS = 8  # a box's corners; the candidates of a body against an obstacle (a sphere uses the first)
+CONTAINER_CANDIDATES = 6 * CORNERS  # against the container: per corner, below and above each axis's walls
+EDGE_PAIRS = 12 * 12  # edge-across-edge candidates of two boxes
 
 
 @ti.func
@@ -123,7 +116,8 @@ def _no_contact():
 @ti.data_oriented
 class Bodies:
     """The rigid bodies: their state on the device, the boundary interface the fluid sees (``ghost``,
-    ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`)."""
+    ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`). The host
+    writes and reads the state through one kernel each way: a from_numpy per field compiles a kernel each."""
 
     mirrored = False
 
@@ -134,8 +128,7 @@ class Bodies:
         self.params = bodies
         self.tables = tables
         self.obstacles = obstacles
-        self.count = bodies.count
-        """The number of bodies, for the host side; kernels read ``constants[None].count``."""
+        self.count = bodies.count  # for the host side; kernels read constants[None].count
         self.particle_radius = params.particle_radius_m
         self.kernel_radius = params.kernel_radius_m
         slots = allocation(self.count, 8)
@@ -145,45 +138,33 @@ class Bodies:
         self.blocks = math.ceil(capacity / self.block)
         self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
         self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
-        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)
-        """The part of x*_i this substep that the bodies' collision accounts for, D_i (m; see record_start)."""
-        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)
-        """D_i as the iteration before left it (the two-step recurrence's other term)."""
-        self.pusher = ti.field(ti.i32, shape=capacity)
-        """The body that pushed particle i last this substep (−1: none); it takes the reaction of D_i."""
+        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i: x*_i's move by the bodies' collision
+        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i as the iteration before left it
+        self.pusher = ti.field(ti.i32, shape=capacity)  # the body that pushed i last (−1: none) takes D_i
         self.pusher.fill(-1)
         self.sphere = ti.field(ti.i32, shape=slots)
-        self.half = ti.Vector.field(3, ti.f32, shape=slots)
-        """Half extents along the body's axes (a sphere: its radius on each), m."""
+        self.half = ti.Vector.field(3, ti.f32, shape=slots)  # half extents (a sphere: its radius on each), m
         self.inverse_mass = ti.field(ti.f32, shape=slots)
-        self.inertia = ti.Vector.field(3, ti.f32, shape=slots)
-        """Principal moments of inertia along the body's axes, kg m²."""
+        self.inertia = ti.Vector.field(3, ti.f32, shape=slots)  # principal moments along its axes, kg m²
         self.position = ti.Vector.field(3, ti.f32, shape=slots)
         self.quaternion = ti.Vector.field(4, ti.f32, shape=slots)
         self.linear_velocity = ti.Vector.field(3, ti.f32, shape=slots)
         self.angular_velocity = ti.Vector.field(3, ti.f32, shape=slots)
-        self.force = ti.Vector.field(3, ti.f32, shape=slots)
-        """The fluid's reaction on the body over the last substep, N."""
-        self.torque = ti.Vector.field(3, ti.f32, shape=slots)
-        """Its torque about the centre of mass, N m."""
-        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)
-        """The rotation matrix of the quaternion, kept beside it for the fluid's kernels."""
+        self.force = ti.Vector.field(3, ti.f32, shape=slots)  # the fluid's reaction over the last substep, N
+        self.torque = ti.Vector.field(3, ti.f32, shape=slots)  # its torque about the centre of mass, N m
+        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)  # the quaternion's, for the fluid's kernels
+        state = (self.position, self.quaternion, self.linear_velocity, self.angular_velocity, self.force, self.torque)
+        self._state = tuple(zip(state, _STARTS))  # STATE_LAYOUT's fields and their first columns
         self.particle_mass = bodies.rest_density_kg_m3 * bodies.particle_volume_m3
-        self.reach = ti.field(ti.f32, shape=slots)
-        """Each body's collision distance this substep, m (:meth:`collision_reach`)."""
-        self.bounding = ti.field(ti.f32, shape=slots)
-        """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
-        self.fastest = ti.field(ti.f32, shape=())
-        """The fastest any point of a body moves now (m/s, :meth:`speed_limit_m_s`), kept by the launches
-        that change the bodies' velocities."""
+        self.reach = ti.field(ti.f32, shape=slots)  # the collision distance this substep, m (collision_reach)
+        self.bounding = ti.field(ti.f32, shape=slots)  # bounding sphere's radius about the centre, m
+        self.fastest = ti.field(ti.f32, shape=())  # speed_limit_m_s, kept by each launch that changes it
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
         self.pairs = len(pairs)
         pair_slots = allocation(self.pairs, 8)
-        self.pair_first = ti.field(ti.i32, shape=pair_slots)
+        self.pair_first = ti.field(ti.i32, shape=pair_slots)  # the pairs a < b in order (_contacts)
         self.pair_second = ti.field(ti.i32, shape=pair_slots)
-        """The pairs of bodies a < b in order, for :meth:`_contacts`' one loop over bodies and pairs."""
         self.static_candidates = CONTAINER_CANDIDATES + CORNERS * obstacles.count
-        """Candidates of each body against the container and the obstacles (:meth:`_static_candidate`)."""
         self.constants = scene_constants(
             count=self.count,
             pairs=self.pairs,
@@ -198,9 +179,8 @@ class Bodies:
             volume=float(bodies.particle_volume_m3),
             wall_density=int(params.wall_density),
         )
-        """``wall_margin``: how far inside the container a way out of a body must lead (a little less than
-        the walls' collision distance, so that rounding does not shut a way flush with it)."""
-        # One kernel writes them all: a from_numpy per field would compile a kernel per field.
+        # wall_margin: a way out of a body must lead this far inside the container (a little less than the
+        # walls' collision distance, so that rounding does not shut a way flush with it).
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
         for b in range(self.count):
             extents = bodies.half_extents_m[b]
@@ -215,8 +195,7 @@ class Bodies:
         self._describe(rows, pair_rows)
         self._rest_reach()
         self._launch_step = Launcher(self._step)  # past Taichi's per-call Python (pbf.solver.launch)
-        self.held = False
-        """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
+        self.held = False  # while True (settling before t = 0) advance leaves the bodies where they are
 
     # ------------------------------------------------------------------ host side
 
@@ -240,17 +219,11 @@ class Bodies:
             self._store(state)
         return state
 
-    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel.
-
     @ti.kernel
     def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         for b in range(self.constants[None].count):
-            self.position[b] = ti.Vector([rows[b, i] for i in ti.static(range(0, 3))])
-            self.quaternion[b] = ti.Vector([rows[b, i] for i in ti.static(range(3, 7))])
-            self.linear_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(7, 10))])
-            self.angular_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(10, 13))])
-            self.force[b] = ti.Vector([rows[b, i] for i in ti.static(range(13, 16))])
-            self.torque[b] = ti.Vector([rows[b, i] for i in ti.static(range(16, 19))])
+            for field, start in ti.static(self._state):
+                field[b] = ti.Vector([rows[b, start + i] for i in ti.static(range(field.n))])
             self.rotation[b] = quaternion_matrix(self.quaternion[b])
         for _ in range(1):
             self._set_fastest()
@@ -258,14 +231,9 @@ class Bodies:
     @ti.kernel
     def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         for b in range(self.constants[None].count):
-            for i in ti.static(range(3)):
-                rows[b, i] = self.position[b][i]
-                rows[b, 7 + i] = self.linear_velocity[b][i]
-                rows[b, 10 + i] = self.angular_velocity[b][i]
-                rows[b, 13 + i] = self.force[b][i]
-                rows[b, 16 + i] = self.torque[b][i]
-            for i in ti.static(range(4)):
-                rows[b, 3 + i] = self.quaternion[b][i]
+            for field, start in ti.static(self._state):
+                for i in ti.static(range(field.n)):
+                    rows[b, start + i] = field[b][i]
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
@@ -389,11 +357,8 @@ class Bodies:
         the container and the obstacles, then each pair of bodies (corners inside the other box, then,
         where none is, edges across). The candidates are numbered and walked by runtime loops, so that
         :meth:`_resolve` is inlined once (docs/BODIES.md, "Compile time")."""
-        (count, pairs, static_candidates) = (
-            self.constants[None].count,
-            self.constants[None].pairs,
-            self.constants[None].static_candidates,
-        )
+        count, pairs = self.constants[None].count, self.constants[None].pairs
+        static_candidates = self.constants[None].static_candidates
         for _sweep in range(CONTACT_SWEEPS):
             for slot in range(count + pairs):
                 a, b = slot, -1  # a body against the container and the obstacles
@@ -405,10 +370,8 @@ class Bodies:
                 for m in range(candidates):
                     found, point, normal, depth = _no_contact()
                     first, second = a, b
-                    if b < 0 and self.sphere[a]:
-                        found, point, normal, depth = self._sphere_static_candidate(a, m)
-                    elif b < 0:
-                        found, point, normal, depth = self._box_static_candidate(a, m)
+                    if b < 0:
+                        found, point, normal, depth = self._static_candidate(a, m)
                     elif self.sphere[a] or self.sphere[b]:
                         found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
                     elif m < 2 * CORNERS or corners == 0:  # edges only where no corner is inside
@@ -420,7 +383,7 @@ class Bodies:
 
     @ti.func
     def _pair_candidates(self, a, b):
-        """How many candidates bodies a and b have (:meth:`_pair_candidate`): one unless both are boxes;
+        """How many candidates bodies a and b have (:meth:`_box_pair_candidate`): one unless both are boxes;
         none for two boxes whose bounding spheres are apart (no corner or edge test)."""
         candidates = 1
         if not (self.sphere[a] or self.sphere[b]):
@@ -436,15 +399,22 @@ class Bodies:
         return self.position[b] + self.rotation[b] @ (signs * self.half[b])
 
     @ti.func
-    def _box_static_candidate(self, b, m):
-        """Candidate m of box b against what does not move (found, point, outward normal, depth):
-        m < CONTAINER_CANDIDATES the container at corner m // 6, along axis m // 2 % 3, below the lower
-        wall (m even) or above the upper; then CORNERS per obstacle."""
+    def _static_candidate(self, b, m):
+        """Candidate m of body b against what does not move (found, point, outward normal, depth):
+        m < CONTAINER_CANDIDATES the container at corner m // 6 (a sphere: m < 6, at its extreme point),
+        along axis m // 2 % 3, below the lower wall (m even) or above the upper; then CORNERS per obstacle
+        (a sphere: the first)."""
         found, point, normal, depth = _no_contact()
-        if m < CONTAINER_CANDIDATES:
+        sphere, radius = self.sphere[b], self.half[b][0]
+        if m < CONTAINER_CANDIDATES and (m < 6 or not sphere):
             axis, above = m // 2 % 3, m % 2
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
-            point = self._corner(b, m // 6)
+            if sphere:
+                point = self.position[b] - radius * unit
+                if above:
+                    point = self.position[b] + radius * unit
+            else:
+                point = self._corner(b, m // 6)
             if above:
                 depth, normal = component(point, axis) - component(self.constants[None].upper, axis), -unit
             else:
@@ -454,35 +424,15 @@ class Bodies:
             o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
             lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
             centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-            point = self._corner(b, k)
-            local = point - centre
-            if (ti.abs(local) < half).all():
-                normal, depth = self._box_exit(local, half)
-                found = True
-        return found, point, normal, depth
-
-    @ti.func
-    def _sphere_static_candidate(self, b, m):
-        """:meth:`_box_static_candidate` of a sphere: m < 6 its extreme points, the first per obstacle."""
-        found, point, normal, depth = _no_contact()
-        radius = self.half[b][0]
-        if m < 6:
-            axis, above = m // 2 % 3, m % 2
-            unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
-            centre = component(self.position[b], axis)
-            if above:
-                depth = centre + radius - component(self.constants[None].upper, axis)
-                point, normal = self.position[b] + radius * unit, -unit
-            else:
-                depth = component(self.constants[None].lower, axis) - (centre - radius)
-                point, normal = self.position[b] - radius * unit, unit
-            found = depth > 0.0
-        if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
-            o = (m - CONTAINER_CANDIDATES) // CORNERS
-            lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
-            centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-            found, closest, normal, depth = self._sphere_at_box(self.position[b] - centre, radius, half)
-            point = self.position[b] - radius * normal
+            if sphere and k == 0:
+                found, _closest, normal, depth = self._sphere_at_box(self.position[b] - centre, radius, half)
+                point = self.position[b] - radius * normal
+            elif not sphere:
+                point = self._corner(b, k)
+                local = point - centre
+                if (ti.abs(local) < half).all():
+                    normal, depth = self._box_exit(local, half)
+                    found = True
         return found, point, normal, depth
 
     @ti.func
@@ -683,35 +633,23 @@ class Bodies:
 
     @ti.func
     def ghost_of(self, p, b):
-        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
+        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m): a sphere's is the half-space table at the
+        distance from its surface, along the radius; a box's the obstacles' (``GhostTables.box``) in its frame."""
         density = 0.0
         gradient = ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
         if self.sphere[b]:
-            density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
+            offset = p - centre
+            distance = offset.norm()
+            surface = distance - self.half[b][0]
+            if surface < self.constants[None].kernel_radius:
+                density, slope = self.tables.wall(surface)
+                gradient = slope * offset / ti.max(distance, 1e-12)
         else:
-            density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
+            r, half = self.rotation[b], self.half[b]
+            density, local_gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
+            gradient = r @ local_gradient
         return density, gradient
-
-    @ti.func
-    def _sphere_ghost(self, p, centre, radius):
-        """A sphere's ghost: the half-space table at the distance from its surface, along the radius."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        offset = p - centre
-        distance = offset.norm()
-        surface = distance - radius
-        if surface < self.constants[None].kernel_radius:
-            value, slope = self.tables.wall(surface)
-            density = value
-            gradient = slope * offset / ti.max(distance, 1e-12)
-        return density, gradient
-
-    @ti.func
-    def _box_ghost(self, p, centre, r, half):
-        """A box's ghost: the obstacles' (``GhostTables.box``) in the body's frame, its gradient rotated back."""
-        density, gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
-        return density, r @ gradient
 
     @ti.func
     def ghost(self, p):
@@ -726,51 +664,34 @@ class Bodies:
         pusher = -1
         for b in range(self.constants[None].count):
             moved = False
+            centre = self.position[b]
             if self.sphere[b]:
-                q, moved = self._push_out_of_sphere(q, b)
+                offset = q - centre
+                distance = offset.norm()
+                reach = self.half[b][0] + self.reach[b]
+                moved = distance < reach
+                if moved:
+                    direction = ti.Vector([0.0, 1.0, 0.0])
+                    if distance > 1e-12:
+                        direction = offset / distance
+                    q = centre + reach * direction
             else:
-                q, moved = self._push_out_of_box(q, b)
+                r = self.rotation[b]
+                local = r.transpose() @ (q - centre)
+                grown = self.half[b] + self.reach[b]
+                moved = (ti.abs(local) < grown).all()
+                if moved:
+                    q = self._exit(q, centre, r, local, grown)
             if moved:
                 pusher = b
         return q, pusher
 
     @ti.func
-    def _push_out_of_sphere(self, p, b):
-        q = p
-        centre = self.position[b]
-        offset = q - centre
-        distance = offset.norm()
-        reach = self.half[b][0] + self.reach[b]
-        moved = distance < reach
-        if moved:
-            direction = ti.Vector([0.0, 1.0, 0.0])
-            if distance > 1e-12:
-                direction = offset / distance
-            q = centre + reach * direction
-        return q, moved
-
-    @ti.func
-    def _push_out_of_box(self, p, b):
-        q = p
-        centre = self.position[b]
-        r = self.rotation[b]
-        local = r.transpose() @ (q - centre)
-        grown = self.half[b] + self.reach[b]
-        moved = (ti.abs(local) < grown).all()
-        if moved:
-            q = self._exit(q, centre, r, local, grown)
-        return q, moved
-
-    @ti.func
     def _exit(self, p, centre, r, local, grown):
         """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out stays
         inside the container (under a box on the floor: a side), else the nearest face."""
-        (lower, wall_margin, upper) = (
-            self.constants[None].lower,
-            self.constants[None].wall_margin,
-            self.constants[None].upper,
-        )
-        low, high = lower + wall_margin, upper - wall_margin
+        wall_margin = self.constants[None].wall_margin
+        low, high = self.constants[None].lower + wall_margin, self.constants[None].upper - wall_margin
         best, exit = 1e30, p
         nearest, fallback = 1e30, p
         for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times
