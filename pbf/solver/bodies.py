@@ -409,16 +409,19 @@ class Bodies:
         if m < CONTAINER_CANDIDATES and (m < 6 or not sphere):
             axis, above = m // 2 % 3, m % 2
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
+            low, high = component(self.constants[None].lower, axis), component(self.constants[None].upper, axis)
             if sphere:
-                point = self.position[b] - radius * unit
+                centre = component(self.position[b], axis)
                 if above:
-                    point = self.position[b] + radius * unit
+                    depth, point, normal = centre + radius - high, self.position[b] + radius * unit, -unit
+                else:
+                    depth, point, normal = low - (centre - radius), self.position[b] - radius * unit, unit
             else:
                 point = self._corner(b, m // 6)
-            if above:
-                depth, normal = component(point, axis) - component(self.constants[None].upper, axis), -unit
-            else:
-                depth, normal = component(self.constants[None].lower, axis) - component(point, axis), unit
+                if above:
+                    depth, normal = component(point, axis) - high, -unit
+                else:
+                    depth, normal = low - component(point, axis), unit
             found = depth > 0.0
         if m >= CONTAINER_CANDIDATES:
             o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS

@@ -185,23 +185,19 @@ class Container:
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
             wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
-        )
-        """``mirror_reach``: a wall's mirror images come within h of a particle only if it is closer than h − r."""
+        )  # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r
+        # mirrored: the ghost behind these walls is the fluid's mirror image (solver.wall_mirror): the density
+        # constraint then leaves out ghost() and mirrors the fluid in mirror_walls().
         self.mirrored = params.wall_mirror
-        """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``): the
-        density constraint then leaves out :meth:`ghost` and mirrors the fluid in :meth:`mirror_walls`."""
         self.wave_maker = params.piston_stroke_m > 0.0
         self.piston_stroke_m = params.piston_stroke_m
         self.piston_period_s = params.piston_period_s
-        self.piston_x = ti.field(ti.f32, shape=())
-        """Where the piston wall stands now (m); set by :meth:`move` before each substep."""
-        self.piston_v = ti.field(ti.f32, shape=())
-        """The piston's velocity over the coming substep (m/s, along x)."""
+        self.piston_x = ti.field(ti.f32, shape=())  # where the piston wall stands now, m (set by move)
+        self.piston_v = ti.field(ti.f32, shape=())  # its velocity over the coming substep, m/s along x
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
         self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
-        self._piston_x_host = float(np.float32(params.lower_m[0]))
-        """piston_x as the device holds it: moving the piston reads nothing back."""
+        self._piston_x_host = float(np.float32(params.lower_m[0]))  # piston_x as the device holds it
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
@@ -402,8 +398,7 @@ class Boundaries:
         self.obstacles = Obstacles(params, self.tables)
         self.parts = (self.container, self.obstacles)
         self.bodies = None
-        self.with_bodies = params.bodies.count > 0
-        """Whether the last part is the rigid bodies (``pbf.solver.bodies``); without, no code of theirs."""
+        self.with_bodies = params.bodies.count > 0  # the last part is the bodies; without, no code of theirs
         if solids:
             self.allocate_solids(capacity)
 
@@ -440,25 +435,19 @@ class Boundaries:
         return q
 
     @ti.func
-    def _project_pushed(self, p):
-        """:meth:`project` with bodies, and the bodies' part of the move with the body that made it, less
-        what the container took back (a particle caught between a body and a wall lifts no body)."""
-        q = p
-        for k in ti.static(range(len(self.parts) - 1)):
-            q = self.parts[k].project(q)
-        before = q
-        q, pusher = self.bodies.push_out(q)
-        q = self.container.project(q)
-        return q, q - before, pusher
-
-    @ti.func
     def project_recorded(self, p, i, stage: ti.template(), amount):
         """:meth:`project` for particle i's x* at ``stage`` "start", "iteration" (of weight ``amount``) or
-        "between" (stepped back by ``amount``); with bodies, their push goes on the record their reaction
-        reads (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
+        "between" (stepped back by ``amount``); with bodies, their push, less what the container took back
+        (a particle caught between a body and a wall lifts no body), goes on the record their reaction reads
+        (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
         q = p
         if ti.static(self.with_bodies):
-            q, pushed, pusher = self._project_pushed(p)
+            for k in ti.static(range(len(self.parts) - 1)):
+                q = self.parts[k].project(q)
+            before = q
+            q, pusher = self.bodies.push_out(q)
+            q = self.container.project(q)
+            pushed = q - before
             if ti.static(stage == "start"):
                 self.bodies.record_start(i, pushed, pusher)
             elif ti.static(stage == "iteration"):
