@@ -92,8 +92,7 @@ def quaternion_matrix_np(q) -> np.ndarray:
 
 @ti.func
 def _closest_on_segments(p0, d1, q0, d2):
-    """The closest points of the segments p0 + s d1 and q0 + t d2, s and t in [0, 1] (Ericson 2005,
-    "Real-Time Collision Detection", §5.1.9), for segments that are not parallel."""
+    """The closest points of non-parallel segments p0 + s d1, q0 + t d2, s, t in [0, 1] (Ericson, §5.1.9)."""
     r = p0 - q0
     a, e, f = d1.dot(d1), d2.dot(d2), d2.dot(r)
     c, b = d1.dot(r), d1.dot(d2)
@@ -239,8 +238,8 @@ class Bodies:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
 
     def speed_limit_m_s(self) -> float:
-        """The fastest any point of a body moves, |v| + |ω| r_bound (a read from the device), for the CFL
-        limit; the frame's read brings it with the water's (``Diagnostics.frame_speeds``)."""
+        """The fastest any point of a body moves, |v| + |ω| r_bound, for the CFL limit (a read from the device;
+        ``Diagnostics.frame_speeds`` brings it with the water's)."""
         return float(self.fastest[None]) if self.count else 0.0
 
     @ti.func
@@ -456,8 +455,7 @@ class Bodies:
 
     @ti.func
     def _box_exit(self, local, half):
-        """For a point at ``local`` inside a box of half extents ``half`` (its own frame): the outward
-        normal of the nearest face and the depth below it."""
+        """The outward normal of the face nearest ``local`` inside a box of half extents ``half``, and its depth."""
         best, axis = 1e30, 0
         for a in ti.static(range(3)):
             gap = half[a] - ti.abs(local[a])
@@ -615,10 +613,8 @@ class Bodies:
                 body, at = b, p
                 if side == 1:
                     body, at = a, q
-                inside = (
-                    inside
-                    and (ti.abs(self.rotation[body].transpose() @ (at - self.position[body])) < self.half[body]).all()
-                )
+                local = self.rotation[body].transpose() @ (at - self.position[body])
+                inside = inside and (ti.abs(local) < self.half[body]).all()
             if inside:
                 normal = axis.normalized()
                 gap = (self.position[a] - self.position[b]).dot(normal)
@@ -638,8 +634,7 @@ class Bodies:
     def ghost_of(self, p, b):
         """Body b's ghost density ρ/ρ0 at p and its gradient (1/m): a sphere's is the half-space table at the
         distance from its surface, along the radius; a box's the obstacles' (``GhostTables.box``) in its frame."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
         if self.sphere[b]:
             offset = p - centre
@@ -781,8 +776,7 @@ class Bodies:
         for b, k in ti.ndrange(self.partial_force.shape[0], self.partial_force.shape[1]):
             if b < self.constants[None].count:
                 block, volume = self.constants[None].block, self.constants[None].volume
-                force = ti.Vector([0.0, 0.0, 0.0])
-                torque = ti.Vector([0.0, 0.0, 0.0])
+                force, torque = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
                 centre = self.position[b]
                 for i in range(k * block, ti.min((k + 1) * block, active[None])):
                     f = ti.Vector([0.0, 0.0, 0.0])
@@ -798,8 +792,7 @@ class Bodies:
                 self.partial_torque[b, k] = torque
         for b in range(self.force.shape[0]):
             if b < self.constants[None].count:
-                force = ti.Vector([0.0, 0.0, 0.0])
-                torque = ti.Vector([0.0, 0.0, 0.0])
+                force, torque = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.partial_force.shape[1]):  # in order: the same sum on any thread count
                     force += self.partial_force[b, k]
                     torque += self.partial_torque[b, k]

@@ -71,8 +71,7 @@ class GhostTables:
         """Bilinear quadrant density and its gradient in (da, db)."""
         i, s = self.cell(da)
         k, t = self.cell(db)
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0])
+        value, gradient = 0.0, ti.Vector([0.0, 0.0])
         for a, b in ti.static(ti.ndrange(2, 2)):
             weight = (s if a else 1.0 - s) * (t if b else 1.0 - t)
             value += weight * self.edge[i + a, k + b]
@@ -85,8 +84,7 @@ class GhostTables:
         i, s = self.cell(d[0])
         j, t = self.cell(d[1])
         k, u = self.cell(d[2])
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        value, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         for a, b, c in ti.static(ti.ndrange(2, 2, 2)):
             weight = (s if a else 1.0 - s) * (t if b else 1.0 - t) * (u if c else 1.0 - u)
             value += weight * self.corner[i + a, j + b, k + c]
@@ -99,8 +97,7 @@ class GhostTables:
         expansion, with selections and one lookup of each table: it is inlined in the iterations' kernel,
         whose compile time grows faster than its length (docs/BODIES.md, "Compile time")."""
         h = self.constants[None].kernel_radius
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
         if nearest.norm() < h:
             below, above = p < lower, p > upper
@@ -134,8 +131,7 @@ class GhostTables:
     def summed(self, solids: ti.template(), p):
         """The ghost density ρ/ρ0 of a set of solids (the obstacles, the bodies) at p and its gradient
         (1/m): ``solids.ghost_of(p, k)`` summed over their ``constants.count``, none without wall density."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         # A switch, not only a count: the box's 27 terms in a λ pass hold registers on a GPU even where no
         # obstacle is (docs/BENCHMARKS.md, "Registers and occupancy").
         if ti.static(solids.count > 0):
@@ -150,8 +146,7 @@ class GhostTables:
     def half_spaces(self, active, d):
         """Ghost density of the half-spaces marked in ``active`` (at distances d), and its derivative in
         each distance; none at all is the full lattice, ρ/ρ0 = 1."""
-        value = 0.0
-        slope = ti.Vector([0.0, 0.0, 0.0])
+        value, slope = 0.0, ti.Vector([0.0, 0.0, 0.0])
         count = active.sum()
         if count == 0:
             value = 1.0
@@ -270,10 +265,8 @@ class Container:
 
     @ti.func
     def ghost(self, p):
-        """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner), and its gradient
-        with respect to p (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner) and its gradient (1/m)."""
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         if self.constants[None].wall_density:
             lower = self._lower()
             upper, kernel_radius = self.constants[None].upper, self.constants[None].kernel_radius
@@ -462,8 +455,7 @@ class Boundaries:
     def ghost(self, p, leave_out_mirrored: ti.template()):
         """Ghost density ρ/ρ0 behind every boundary within h of p, and its gradient (1/m); with
         ``leave_out_mirrored`` without the boundaries whose ghost is the fluid's mirror image."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         for k in ti.static(range(len(self.parts))):
             if ti.static(not (leave_out_mirrored and self.parts[k].mirrored)):
                 d, g = self.parts[k].ghost(p)
