@@ -173,13 +173,11 @@ class Bodies:
             lower=tuple(float(v) for v in params.lower_m),
             upper=tuple(float(v) for v in params.upper_m),
             particle_radius=float(self.particle_radius),
-            wall_margin=0.99 * float(self.particle_radius),
+            wall_margin=0.99 * float(self.particle_radius),  # how far inside the walls a way out of a body ends (_exit)
             kernel_radius=float(self.kernel_radius),
             volume=float(bodies.particle_volume_m3),
             wall_density=int(params.wall_density),
         )
-        # wall_margin: a way out of a body must lead this far inside the container (a little less than the
-        # walls' collision distance, so that rounding does not shut a way flush with it).
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
         for b in range(self.count):
             extents = bodies.half_extents_m[b]
@@ -310,8 +308,7 @@ class Bodies:
 
     @ti.kernel
     def _step(self, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32):
-        # One thread takes the whole rigid step: the work grows with the few bodies, and a launch per part
-        # would cost more than the part.
+        # One thread: the work grows with the few bodies, and a launch per part would cost more than the part.
         for _ in range(1):
             count = self.constants[None].count
             for b in range(count):
@@ -399,10 +396,9 @@ class Bodies:
 
     @ti.func
     def _static_candidate(self, b, m):
-        """Candidate m of body b against what does not move (found, point, outward normal, depth):
-        m < CONTAINER_CANDIDATES the container at corner m // 6 (a sphere: m < 6, at its extreme point),
-        along axis m // 2 % 3, below the lower wall (m even) or above the upper; then CORNERS per obstacle
-        (a sphere: the first)."""
+        """Candidate m of body b against what does not move (found, point, outward normal, depth): m <
+        CONTAINER_CANDIDATES the container at corner m // 6 along axis m // 2 % 3, below the lower wall (m even)
+        or above the upper (a sphere: m < 6, its extreme point); then CORNERS per obstacle (a sphere: the first)."""
         found, point, normal, depth = _no_contact()
         sphere, radius = self.sphere[b], self.half[b][0]
         if m < CONTAINER_CANDIDATES and (m < 6 or not sphere):
@@ -466,11 +462,6 @@ class Bodies:
         return normal, best
 
     @ti.func
-    def _apply(self, b, impulse, arm):
-        self.linear_velocity[b] += self.inverse_mass[b] * impulse
-        self.angular_velocity[b] += self._inverse_inertia(b, arm.cross(impulse))
-
-    @ti.func
     def _resolve(self, a, b, point, normal, depth):
         """A contact at ``point``, ``depth`` deep, ``normal`` pointing into body a (b < 0: a fixed wall): the
         bodies move apart by inverse mass, then the approach is taken away (no bounce) and, within
@@ -525,7 +516,8 @@ class Bodies:
                             body, impulse, arm = a, strength * direction, ra
                             if side == 1:
                                 body, impulse, arm = b, -strength * direction, rb
-                            self._apply(body, impulse, arm)
+                            self.linear_velocity[body] += self.inverse_mass[body] * impulse
+                            self.angular_velocity[body] += self._inverse_inertia(body, arm.cross(impulse))
 
     @ti.func
     def _sphere_pair_candidate(self, a, b):
@@ -687,7 +679,8 @@ class Bodies:
     @ti.func
     def _exit(self, p, centre, r, local, grown):
         """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out stays
-        inside the container (under a box on the floor: a side), else the nearest face."""
+        ``wall_margin`` inside the container (under a box on the floor: a side), else the nearest face. The margin
+        is a little less than the walls' collision distance, so that rounding does not shut a way flush with it."""
         wall_margin = self.constants[None].wall_margin
         low, high = self.constants[None].lower + wall_margin, self.constants[None].upper - wall_margin
         best, exit = 1e30, p

@@ -258,9 +258,7 @@ class Container:
             above = upper[axis] - p[axis]
             if ti.min(below, above) < mirror_reach:
                 near[axis] = 1
-                plane[axis] = upper[axis]
-                if below <= above:
-                    plane[axis] = lower[axis]
+                plane[axis] = lower[axis] if below <= above else upper[axis]
         return near, plane
 
     @ti.func
@@ -340,30 +338,23 @@ class Obstacles:
 
     @ti.func
     def project(self, p):
-        """p moved out of every obstacle grown by the particle radius."""
+        """p moved out of every obstacle grown by the particle radius, through the nearest open face: the one
+        it came through, as obstacles are thicker than a substep's move."""
         q = p
         if ti.static(self.count > 0):  # as in GhostTables.summed
             for o in range(self.constants[None].count):
-                q = self._push_out(q, o)
-        return q
-
-    @ti.func
-    def _push_out(self, p, o):
-        """p moved out of obstacle o (grown by the particle radius) through the nearest open face: the one
-        it came through, as obstacles are thicker than a substep's move."""
-        radius = self.constants[None].radius
-        lower = self.lower[o] - radius
-        upper = self.upper[o] + radius
-        q = p
-        if (p > lower).all() and (p < upper).all():
-            best, axis, target = 1e30, 0, 0.0
-            for a in ti.static(range(3)):
-                if self.exit_lower[o][a] and p[a] - lower[a] < best:
-                    best, axis, target = p[a] - lower[a], a, lower[a]
-                if self.exit_upper[o][a] and upper[a] - p[a] < best:
-                    best, axis, target = upper[a] - p[a], a, upper[a]
-            if best < 1e30:
-                q[axis] = target
+                radius = self.constants[None].radius
+                lower = self.lower[o] - radius
+                upper = self.upper[o] + radius
+                if (q > lower).all() and (q < upper).all():
+                    best, axis, target = 1e30, 0, 0.0
+                    for a in ti.static(range(3)):
+                        if self.exit_lower[o][a] and q[a] - lower[a] < best:
+                            best, axis, target = q[a] - lower[a], a, lower[a]
+                        if self.exit_upper[o][a] and upper[a] - q[a] < best:
+                            best, axis, target = upper[a] - q[a], a, upper[a]
+                    if best < 1e30:
+                        q[axis] = target
         return q
 
     @ti.func
