@@ -179,13 +179,9 @@ class Bodies:
             wall_density=int(params.wall_density),
         )
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
-        for b in range(self.count):
-            extents = bodies.half_extents_m[b]
-            rows[b, 0] = bodies.shapes[b] == "sphere"
-            rows[b, 1:4] = extents
-            rows[b, 4] = 1.0 / bodies.masses_kg[b]
-            rows[b, 5:8] = bodies.inertia_kg_m2[b]
-            rows[b, 8] = float(np.linalg.norm(extents)) if bodies.shapes[b] == "box" else extents[0]
+        for b, (shape, extents) in enumerate(zip(bodies.shapes, bodies.half_extents_m)):
+            bounding = float(np.linalg.norm(extents)) if shape == "box" else extents[0]
+            rows[b] = [shape == "sphere", *extents, 1.0 / bodies.masses_kg[b], *bodies.inertia_kg_m2[b], bounding]
         pair_rows = np.zeros((pair_slots, 2), np.int32)
         if pairs:
             pair_rows[: len(pairs)] = pairs
@@ -571,8 +567,7 @@ class Bodies:
         """Edge k (0-11) of box b in world coordinates: its two ends. Edges 4a to 4a + 3 run along the
         box's axis a, at the four sign combinations of the other two half extents."""
         axis = k // 4
-        first = ti.select(k & 1, 1.0, -1.0)
-        second = ti.select(k & 2, 1.0, -1.0)
+        first, second = ti.select(k & 1, 1.0, -1.0), ti.select(k & 2, 1.0, -1.0)
         half = self.half[b]
         start, end = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
         for i in ti.static(range(3)):  # a static index per component: no runtime index into a vector

@@ -152,14 +152,12 @@ class GhostTables:
             value = 1.0
         elif count == 1:
             a = ti.select(active[0], 0, ti.select(active[1], 1, 2))
-            wall, wall_slope = self.wall(component(d, a))
-            value = wall
+            value, wall_slope = self.wall(component(d, a))
             slope = ti.Vector([ti.select(a == i, wall_slope, 0.0) for i in ti.static(range(3))])
         elif count == 2:
             left_out = ti.select(active[0] == 0, 0, ti.select(active[1] == 0, 1, 2))
             a, b = ti.select(left_out == 0, 1, 0), ti.select(left_out == 2, 1, 2)
-            quadrant, g = self.quadrant(component(d, a), component(d, b))
-            value = quadrant
+            value, g = self.quadrant(component(d, a), component(d, b))
             slope = ti.Vector([ti.select(a == i, g[0], ti.select(b == i, g[1], 0.0)) for i in ti.static(range(3))])
         else:
             value, slope = self.octant(d)
