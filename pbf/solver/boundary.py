@@ -170,6 +170,7 @@ class Container:
 
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
+        # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r.
         self.constants = scene_constants(
             radius=params.particle_radius_m,
             lower=tuple(params.lower_m),
@@ -178,7 +179,7 @@ class Container:
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
             wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
-        )  # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r
+        )
         # mirrored: the ghost behind these walls is the fluid's mirror image (solver.wall_mirror): the density
         # constraint then leaves out ghost() and mirrors the fluid in mirror_walls().
         self.mirrored = params.wall_mirror
@@ -190,7 +191,7 @@ class Container:
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
         self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
-        self._piston_x_host = float(np.float32(params.lower_m[0]))  # piston_x as the device holds it
+        self._piston_x_host = float(np.float32(params.lower_m[0]))  # piston_x as the device has it: no read back
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
