@@ -30,27 +30,20 @@ STATE_LAYOUT = (
 )
 """A body's row in :meth:`Bodies.state` (a snapshot's ``bodies``), the last substep's reaction included."""
 STATE_WIDTH = sum(width for _, width in STATE_LAYOUT)
-FRICTION = 0.4
-"""Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)."""
+_STARTS = tuple(sum(width for _, width in STATE_LAYOUT[:k]) for k in range(len(STATE_LAYOUT)))
+FRICTION = 0.4  # Coulomb friction coefficient of body contacts (wet wood or plastic on plastic)
 COLLISION_AT_REST = 1.0
-"""The collision keeps particle centres this fraction of the particle radius r outside a body at rest, as
-at the walls: a floating box then floats at its draft (docs/VALIDATION.md)."""
+"""Particle centres stay this fraction of the particle radius r outside a body at rest, as at the walls: a
+floating box then floats at its draft (docs/VALIDATION.md)."""
 COLLISION_MOVING = 0.2
 """The least fraction of r, for a moving body: its ghost's pressure, not the collision, must meet the water."""
 COLLISION_GIVE = 1.0
 """The collision distance is r less this many times the distance the body's fastest point moves in a
-substep (at least COLLISION_MOVING r): at 1 a moving body does not sweep the water with its collision
-(docs/BODIES.md; the values tried: benchmarks/bodies.py collision)."""
-CONTACT_SWEEPS = 8
-"""Passes over all contacts per substep: a box on four corners needs several to settle its impulses."""
-
-
-CORNERS = 8
-"""A box's corners; candidates of a body against an obstacle (a sphere uses the first)."""
-CONTAINER_CANDIDATES = 6 * CORNERS
-"""Candidates of a body against the container: per corner, below and above each axis's walls."""
-EDGE_PAIRS = 12 * 12
-"""Edge-across-edge candidates of two boxes."""
+substep: at 1 a moving body does not sweep the water with its collision (docs/BODIES.md)."""
+CONTACT_SWEEPS = 8  # passes over all contacts per substep: a box on four corners needs several to settle
+CORNERS = 8  # a box's corners; the candidates of a body against an obstacle (a sphere uses the first)
+CONTAINER_CANDIDATES = 6 * CORNERS  # against the container: per corner, below and above each axis's walls
+EDGE_PAIRS = 12 * 12  # edge-across-edge candidates of two boxes
 
 
 @ti.func
@@ -99,8 +92,7 @@ def quaternion_matrix_np(q) -> np.ndarray:
 
 @ti.func
 def _closest_on_segments(p0, d1, q0, d2):
-    """The closest points of the segments p0 + s d1 and q0 + t d2, s and t in [0, 1] (Ericson 2005,
-    "Real-Time Collision Detection", §5.1.9), for segments that are not parallel."""
+    """The closest points of non-parallel segments p0 + s d1, q0 + t d2, s, t in [0, 1] (Ericson, §5.1.9)."""
     r = p0 - q0
     a, e, f = d1.dot(d1), d2.dot(d2), d2.dot(r)
     c, b = d1.dot(r), d1.dot(d2)
@@ -123,7 +115,8 @@ def _no_contact():
 @ti.data_oriented
 class Bodies:
     """The rigid bodies: their state on the device, the boundary interface the fluid sees (``ghost``,
-    ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`)."""
+    ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`). The host
+    writes and reads the state through one kernel each way: a from_numpy per field compiles a kernel each."""
 
     mirrored = False
 
@@ -134,8 +127,7 @@ class Bodies:
         self.params = bodies
         self.tables = tables
         self.obstacles = obstacles
-        self.count = bodies.count
-        """The number of bodies, for the host side; kernels read ``constants[None].count``."""
+        self.count = bodies.count  # for the host side; kernels read constants[None].count
         self.particle_radius = params.particle_radius_m
         self.kernel_radius = params.kernel_radius_m
         slots = allocation(self.count, 8)
@@ -145,45 +137,33 @@ class Bodies:
         self.blocks = math.ceil(capacity / self.block)
         self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
         self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
-        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)
-        """The part of x*_i this substep that the bodies' collision accounts for, D_i (m; see record_start)."""
-        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)
-        """D_i as the iteration before left it (the two-step recurrence's other term)."""
-        self.pusher = ti.field(ti.i32, shape=capacity)
-        """The body that pushed particle i last this substep (−1: none); it takes the reaction of D_i."""
+        self.shift = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i: x*_i's move by the bodies' collision
+        self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i as the iteration before left it
+        self.pusher = ti.field(ti.i32, shape=capacity)  # the body that pushed i last (−1: none) takes D_i
         self.pusher.fill(-1)
         self.sphere = ti.field(ti.i32, shape=slots)
-        self.half = ti.Vector.field(3, ti.f32, shape=slots)
-        """Half extents along the body's axes (a sphere: its radius on each), m."""
+        self.half = ti.Vector.field(3, ti.f32, shape=slots)  # half extents (a sphere: its radius on each), m
         self.inverse_mass = ti.field(ti.f32, shape=slots)
-        self.inertia = ti.Vector.field(3, ti.f32, shape=slots)
-        """Principal moments of inertia along the body's axes, kg m²."""
+        self.inertia = ti.Vector.field(3, ti.f32, shape=slots)  # principal moments along its axes, kg m²
         self.position = ti.Vector.field(3, ti.f32, shape=slots)
         self.quaternion = ti.Vector.field(4, ti.f32, shape=slots)
         self.linear_velocity = ti.Vector.field(3, ti.f32, shape=slots)
         self.angular_velocity = ti.Vector.field(3, ti.f32, shape=slots)
-        self.force = ti.Vector.field(3, ti.f32, shape=slots)
-        """The fluid's reaction on the body over the last substep, N."""
-        self.torque = ti.Vector.field(3, ti.f32, shape=slots)
-        """Its torque about the centre of mass, N m."""
-        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)
-        """The rotation matrix of the quaternion, kept beside it for the fluid's kernels."""
+        self.force = ti.Vector.field(3, ti.f32, shape=slots)  # the fluid's reaction over the last substep, N
+        self.torque = ti.Vector.field(3, ti.f32, shape=slots)  # its torque about the centre of mass, N m
+        self.rotation = ti.Matrix.field(3, 3, ti.f32, shape=slots)  # the quaternion's, for the fluid's kernels
+        state = (self.position, self.quaternion, self.linear_velocity, self.angular_velocity, self.force, self.torque)
+        self._state = tuple(zip(state, _STARTS))  # STATE_LAYOUT's fields and their first columns
         self.particle_mass = bodies.rest_density_kg_m3 * bodies.particle_volume_m3
-        self.reach = ti.field(ti.f32, shape=slots)
-        """Each body's collision distance this substep, m (:meth:`collision_reach`)."""
-        self.bounding = ti.field(ti.f32, shape=slots)
-        """Radius of each body's bounding sphere about its centre, m: |ω| times it bounds a point's speed."""
-        self.fastest = ti.field(ti.f32, shape=())
-        """The fastest any point of a body moves now (m/s, :meth:`speed_limit_m_s`), kept by the launches
-        that change the bodies' velocities."""
+        self.reach = ti.field(ti.f32, shape=slots)  # the collision distance this substep, m (collision_reach)
+        self.bounding = ti.field(ti.f32, shape=slots)  # bounding sphere's radius about the centre, m
+        self.fastest = ti.field(ti.f32, shape=())  # speed_limit_m_s, kept by each launch that changes it
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
         self.pairs = len(pairs)
         pair_slots = allocation(self.pairs, 8)
-        self.pair_first = ti.field(ti.i32, shape=pair_slots)
+        self.pair_first = ti.field(ti.i32, shape=pair_slots)  # the pairs a < b in order (_contacts)
         self.pair_second = ti.field(ti.i32, shape=pair_slots)
-        """The pairs of bodies a < b in order, for :meth:`_contacts`' one loop over bodies and pairs."""
         self.static_candidates = CONTAINER_CANDIDATES + CORNERS * obstacles.count
-        """Candidates of each body against the container and the obstacles (:meth:`_static_candidate`)."""
         self.constants = scene_constants(
             count=self.count,
             pairs=self.pairs,
@@ -193,30 +173,22 @@ class Bodies:
             lower=tuple(float(v) for v in params.lower_m),
             upper=tuple(float(v) for v in params.upper_m),
             particle_radius=float(self.particle_radius),
-            wall_margin=0.99 * float(self.particle_radius),
+            wall_margin=0.99 * float(self.particle_radius),  # how far inside the walls a way out of a body ends (_exit)
             kernel_radius=float(self.kernel_radius),
             volume=float(bodies.particle_volume_m3),
             wall_density=int(params.wall_density),
         )
-        """``wall_margin``: how far inside the container a way out of a body must lead (a little less than
-        the walls' collision distance, so that rounding does not shut a way flush with it)."""
-        # One kernel writes them all: a from_numpy per field would compile a kernel per field.
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
-        for b in range(self.count):
-            extents = bodies.half_extents_m[b]
-            rows[b, 0] = bodies.shapes[b] == "sphere"
-            rows[b, 1:4] = extents
-            rows[b, 4] = 1.0 / bodies.masses_kg[b]
-            rows[b, 5:8] = bodies.inertia_kg_m2[b]
-            rows[b, 8] = float(np.linalg.norm(extents)) if bodies.shapes[b] == "box" else extents[0]
+        for b, (shape, extents) in enumerate(zip(bodies.shapes, bodies.half_extents_m)):
+            bounding = float(np.linalg.norm(extents)) if shape == "box" else extents[0]
+            rows[b] = [shape == "sphere", *extents, 1.0 / bodies.masses_kg[b], *bodies.inertia_kg_m2[b], bounding]
         pair_rows = np.zeros((pair_slots, 2), np.int32)
         if pairs:
             pair_rows[: len(pairs)] = pairs
         self._describe(rows, pair_rows)
         self._rest_reach()
         self._launch_step = Launcher(self._step)  # past Taichi's per-call Python (pbf.solver.launch)
-        self.held = False
-        """While True (settling before t = 0) :meth:`advance` leaves the bodies where they are."""
+        self.held = False  # while True (settling before t = 0) advance leaves the bodies where they are
 
     # ------------------------------------------------------------------ host side
 
@@ -240,17 +212,11 @@ class Bodies:
             self._store(state)
         return state
 
-    # One kernel each way, not a from_numpy or to_numpy per field: each of those compiles a kernel.
-
     @ti.kernel
     def _load(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         for b in range(self.constants[None].count):
-            self.position[b] = ti.Vector([rows[b, i] for i in ti.static(range(0, 3))])
-            self.quaternion[b] = ti.Vector([rows[b, i] for i in ti.static(range(3, 7))])
-            self.linear_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(7, 10))])
-            self.angular_velocity[b] = ti.Vector([rows[b, i] for i in ti.static(range(10, 13))])
-            self.force[b] = ti.Vector([rows[b, i] for i in ti.static(range(13, 16))])
-            self.torque[b] = ti.Vector([rows[b, i] for i in ti.static(range(16, 19))])
+            for field, start in ti.static(self._state):
+                field[b] = ti.Vector([rows[b, start + i] for i in ti.static(range(field.n))])
             self.rotation[b] = quaternion_matrix(self.quaternion[b])
         for _ in range(1):
             self._set_fastest()
@@ -258,21 +224,16 @@ class Bodies:
     @ti.kernel
     def _store(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         for b in range(self.constants[None].count):
-            for i in ti.static(range(3)):
-                rows[b, i] = self.position[b][i]
-                rows[b, 7 + i] = self.linear_velocity[b][i]
-                rows[b, 10 + i] = self.angular_velocity[b][i]
-                rows[b, 13 + i] = self.force[b][i]
-                rows[b, 16 + i] = self.torque[b][i]
-            for i in ti.static(range(4)):
-                rows[b, 3 + i] = self.quaternion[b][i]
+            for field, start in ti.static(self._state):
+                for i in ti.static(range(field.n)):
+                    rows[b, start + i] = field[b][i]
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Bodies move by their own dynamics (:meth:`advance`), not by a clock."""
 
     def speed_limit_m_s(self) -> float:
-        """The fastest any point of a body moves, |v| + |ω| r_bound (a read from the device), for the CFL
-        limit; the frame's read brings it with the water's (``Diagnostics.frame_speeds``)."""
+        """The fastest any point of a body moves, |v| + |ω| r_bound, for the CFL limit (a read from the device;
+        ``Diagnostics.frame_speeds`` brings it with the water's)."""
         return float(self.fastest[None]) if self.count else 0.0
 
     @ti.func
@@ -343,8 +304,7 @@ class Bodies:
 
     @ti.kernel
     def _step(self, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32):
-        # One thread takes the whole rigid step: the work grows with the few bodies, and a launch per part
-        # would cost more than the part.
+        # One thread: the work grows with the few bodies, and a launch per part would cost more than the part.
         for _ in range(1):
             count = self.constants[None].count
             for b in range(count):
@@ -389,11 +349,8 @@ class Bodies:
         the container and the obstacles, then each pair of bodies (corners inside the other box, then,
         where none is, edges across). The candidates are numbered and walked by runtime loops, so that
         :meth:`_resolve` is inlined once (docs/BODIES.md, "Compile time")."""
-        (count, pairs, static_candidates) = (
-            self.constants[None].count,
-            self.constants[None].pairs,
-            self.constants[None].static_candidates,
-        )
+        count, pairs = self.constants[None].count, self.constants[None].pairs
+        static_candidates = self.constants[None].static_candidates
         for _sweep in range(CONTACT_SWEEPS):
             for slot in range(count + pairs):
                 a, b = slot, -1  # a body against the container and the obstacles
@@ -405,10 +362,8 @@ class Bodies:
                 for m in range(candidates):
                     found, point, normal, depth = _no_contact()
                     first, second = a, b
-                    if b < 0 and self.sphere[a]:
-                        found, point, normal, depth = self._sphere_static_candidate(a, m)
-                    elif b < 0:
-                        found, point, normal, depth = self._box_static_candidate(a, m)
+                    if b < 0:
+                        found, point, normal, depth = self._static_candidate(a, m)
                     elif self.sphere[a] or self.sphere[b]:
                         found, first, second, point, normal, depth = self._sphere_pair_candidate(a, b)
                     elif m < 2 * CORNERS or corners == 0:  # edges only where no corner is inside
@@ -420,7 +375,7 @@ class Bodies:
 
     @ti.func
     def _pair_candidates(self, a, b):
-        """How many candidates bodies a and b have (:meth:`_pair_candidate`): one unless both are boxes;
+        """How many candidates bodies a and b have (:meth:`_box_pair_candidate`): one unless both are boxes;
         none for two boxes whose bounding spheres are apart (no corner or edge test)."""
         candidates = 1
         if not (self.sphere[a] or self.sphere[b]):
@@ -436,53 +391,42 @@ class Bodies:
         return self.position[b] + self.rotation[b] @ (signs * self.half[b])
 
     @ti.func
-    def _box_static_candidate(self, b, m):
-        """Candidate m of box b against what does not move (found, point, outward normal, depth):
-        m < CONTAINER_CANDIDATES the container at corner m // 6, along axis m // 2 % 3, below the lower
-        wall (m even) or above the upper; then CORNERS per obstacle."""
+    def _static_candidate(self, b, m):
+        """Candidate m of body b against what does not move (found, point, outward normal, depth): m <
+        CONTAINER_CANDIDATES the container at corner m // 6 along axis m // 2 % 3, below the lower wall (m even)
+        or above the upper (a sphere: m < 6, its extreme point); then CORNERS per obstacle (a sphere: the first)."""
         found, point, normal, depth = _no_contact()
-        if m < CONTAINER_CANDIDATES:
+        sphere, radius = self.sphere[b], self.half[b][0]
+        if m < CONTAINER_CANDIDATES and (m < 6 or not sphere):
             axis, above = m // 2 % 3, m % 2
             unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
-            point = self._corner(b, m // 6)
-            if above:
-                depth, normal = component(point, axis) - component(self.constants[None].upper, axis), -unit
+            low, high = component(self.constants[None].lower, axis), component(self.constants[None].upper, axis)
+            if sphere:
+                centre = component(self.position[b], axis)
+                if above:
+                    depth, point, normal = centre + radius - high, self.position[b] + radius * unit, -unit
+                else:
+                    depth, point, normal = low - (centre - radius), self.position[b] - radius * unit, unit
             else:
-                depth, normal = component(self.constants[None].lower, axis) - component(point, axis), unit
+                point = self._corner(b, m // 6)
+                if above:
+                    depth, normal = component(point, axis) - high, -unit
+                else:
+                    depth, normal = low - component(point, axis), unit
             found = depth > 0.0
         if m >= CONTAINER_CANDIDATES:
             o, k = (m - CONTAINER_CANDIDATES) // CORNERS, (m - CONTAINER_CANDIDATES) % CORNERS
             lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
             centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-            point = self._corner(b, k)
-            local = point - centre
-            if (ti.abs(local) < half).all():
-                normal, depth = self._box_exit(local, half)
-                found = True
-        return found, point, normal, depth
-
-    @ti.func
-    def _sphere_static_candidate(self, b, m):
-        """:meth:`_box_static_candidate` of a sphere: m < 6 its extreme points, the first per obstacle."""
-        found, point, normal, depth = _no_contact()
-        radius = self.half[b][0]
-        if m < 6:
-            axis, above = m // 2 % 3, m % 2
-            unit = ti.Vector([ti.select(axis == i, 1.0, 0.0) for i in ti.static(range(3))])
-            centre = component(self.position[b], axis)
-            if above:
-                depth = centre + radius - component(self.constants[None].upper, axis)
-                point, normal = self.position[b] + radius * unit, -unit
-            else:
-                depth = component(self.constants[None].lower, axis) - (centre - radius)
-                point, normal = self.position[b] - radius * unit, unit
-            found = depth > 0.0
-        if m >= CONTAINER_CANDIDATES and (m - CONTAINER_CANDIDATES) % CORNERS == 0:
-            o = (m - CONTAINER_CANDIDATES) // CORNERS
-            lower, upper = self.obstacles.lower[o], self.obstacles.upper[o]
-            centre, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
-            found, closest, normal, depth = self._sphere_at_box(self.position[b] - centre, radius, half)
-            point = self.position[b] - radius * normal
+            if sphere and k == 0:
+                found, _closest, normal, depth = self._sphere_at_box(self.position[b] - centre, radius, half)
+                point = self.position[b] - radius * normal
+            elif not sphere:
+                point = self._corner(b, k)
+                local = point - centre
+                if (ti.abs(local) < half).all():
+                    normal, depth = self._box_exit(local, half)
+                    found = True
         return found, point, normal, depth
 
     @ti.func
@@ -503,8 +447,7 @@ class Bodies:
 
     @ti.func
     def _box_exit(self, local, half):
-        """For a point at ``local`` inside a box of half extents ``half`` (its own frame): the outward
-        normal of the nearest face and the depth below it."""
+        """The outward normal of the face nearest ``local`` inside a box of half extents ``half``, and its depth."""
         best, axis = 1e30, 0
         for a in ti.static(range(3)):
             gap = half[a] - ti.abs(local[a])
@@ -513,11 +456,6 @@ class Bodies:
         normal = ti.Vector([0.0, 0.0, 0.0])
         normal[axis] = 1.0 if local[axis] >= 0.0 else -1.0
         return normal, best
-
-    @ti.func
-    def _apply(self, b, impulse, arm):
-        self.linear_velocity[b] += self.inverse_mass[b] * impulse
-        self.angular_velocity[b] += self._inverse_inertia(b, arm.cross(impulse))
 
     @ti.func
     def _resolve(self, a, b, point, normal, depth):
@@ -574,7 +512,8 @@ class Bodies:
                             body, impulse, arm = a, strength * direction, ra
                             if side == 1:
                                 body, impulse, arm = b, -strength * direction, rb
-                            self._apply(body, impulse, arm)
+                            self.linear_velocity[body] += self.inverse_mass[body] * impulse
+                            self.angular_velocity[body] += self._inverse_inertia(body, arm.cross(impulse))
 
     @ti.func
     def _sphere_pair_candidate(self, a, b):
@@ -628,8 +567,7 @@ class Bodies:
         """Edge k (0-11) of box b in world coordinates: its two ends. Edges 4a to 4a + 3 run along the
         box's axis a, at the four sign combinations of the other two half extents."""
         axis = k // 4
-        first = ti.select(k & 1, 1.0, -1.0)
-        second = ti.select(k & 2, 1.0, -1.0)
+        first, second = ti.select(k & 1, 1.0, -1.0), ti.select(k & 2, 1.0, -1.0)
         half = self.half[b]
         start, end = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
         for i in ti.static(range(3)):  # a static index per component: no runtime index into a vector
@@ -662,10 +600,8 @@ class Bodies:
                 body, at = b, p
                 if side == 1:
                     body, at = a, q
-                inside = (
-                    inside
-                    and (ti.abs(self.rotation[body].transpose() @ (at - self.position[body])) < self.half[body]).all()
-                )
+                local = self.rotation[body].transpose() @ (at - self.position[body])
+                inside = inside and (ti.abs(local) < self.half[body]).all()
             if inside:
                 normal = axis.normalized()
                 gap = (self.position[a] - self.position[b]).dot(normal)
@@ -683,35 +619,22 @@ class Bodies:
 
     @ti.func
     def ghost_of(self, p, b):
-        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        """Body b's ghost density ρ/ρ0 at p and its gradient (1/m): a sphere's is the half-space table at the
+        distance from its surface, along the radius; a box's the obstacles' (``GhostTables.box``) in its frame."""
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         centre = self.position[b]
         if self.sphere[b]:
-            density, gradient = self._sphere_ghost(p, centre, self.half[b][0])
+            offset = p - centre
+            distance = offset.norm()
+            surface = distance - self.half[b][0]
+            if surface < self.constants[None].kernel_radius:
+                density, slope = self.tables.wall(surface)
+                gradient = slope * offset / ti.max(distance, 1e-12)
         else:
-            density, gradient = self._box_ghost(p, centre, self.rotation[b], self.half[b])
+            r, half = self.rotation[b], self.half[b]
+            density, local_gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
+            gradient = r @ local_gradient
         return density, gradient
-
-    @ti.func
-    def _sphere_ghost(self, p, centre, radius):
-        """A sphere's ghost: the half-space table at the distance from its surface, along the radius."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
-        offset = p - centre
-        distance = offset.norm()
-        surface = distance - radius
-        if surface < self.constants[None].kernel_radius:
-            value, slope = self.tables.wall(surface)
-            density = value
-            gradient = slope * offset / ti.max(distance, 1e-12)
-        return density, gradient
-
-    @ti.func
-    def _box_ghost(self, p, centre, r, half):
-        """A box's ghost: the obstacles' (``GhostTables.box``) in the body's frame, its gradient rotated back."""
-        density, gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
-        return density, r @ gradient
 
     @ti.func
     def ghost(self, p):
@@ -726,51 +649,35 @@ class Bodies:
         pusher = -1
         for b in range(self.constants[None].count):
             moved = False
+            centre = self.position[b]
             if self.sphere[b]:
-                q, moved = self._push_out_of_sphere(q, b)
+                offset = q - centre
+                distance = offset.norm()
+                reach = self.half[b][0] + self.reach[b]
+                moved = distance < reach
+                if moved:
+                    direction = ti.Vector([0.0, 1.0, 0.0])
+                    if distance > 1e-12:
+                        direction = offset / distance
+                    q = centre + reach * direction
             else:
-                q, moved = self._push_out_of_box(q, b)
+                r = self.rotation[b]
+                local = r.transpose() @ (q - centre)
+                grown = self.half[b] + self.reach[b]
+                moved = (ti.abs(local) < grown).all()
+                if moved:
+                    q = self._exit(q, centre, r, local, grown)
             if moved:
                 pusher = b
         return q, pusher
 
     @ti.func
-    def _push_out_of_sphere(self, p, b):
-        q = p
-        centre = self.position[b]
-        offset = q - centre
-        distance = offset.norm()
-        reach = self.half[b][0] + self.reach[b]
-        moved = distance < reach
-        if moved:
-            direction = ti.Vector([0.0, 1.0, 0.0])
-            if distance > 1e-12:
-                direction = offset / distance
-            q = centre + reach * direction
-        return q, moved
-
-    @ti.func
-    def _push_out_of_box(self, p, b):
-        q = p
-        centre = self.position[b]
-        r = self.rotation[b]
-        local = r.transpose() @ (q - centre)
-        grown = self.half[b] + self.reach[b]
-        moved = (ti.abs(local) < grown).all()
-        if moved:
-            q = self._exit(q, centre, r, local, grown)
-        return q, moved
-
-    @ti.func
     def _exit(self, p, centre, r, local, grown):
         """p (at ``local`` in a box grown to ``grown``) moved out through the nearest face whose way out stays
-        inside the container (under a box on the floor: a side), else the nearest face."""
-        (lower, wall_margin, upper) = (
-            self.constants[None].lower,
-            self.constants[None].wall_margin,
-            self.constants[None].upper,
-        )
-        low, high = lower + wall_margin, upper - wall_margin
+        ``wall_margin`` inside the container (under a box on the floor: a side), else the nearest face. The margin
+        is a little less than the walls' collision distance, so that rounding does not shut a way flush with it."""
+        wall_margin = self.constants[None].wall_margin
+        low, high = self.constants[None].lower + wall_margin, self.constants[None].upper - wall_margin
         best, exit = 1e30, p
         nearest, fallback = 1e30, p
         for face in range(6):  # a runtime loop: the face's transform once in the kernel, not six times
@@ -857,8 +764,7 @@ class Bodies:
         for b, k in ti.ndrange(self.partial_force.shape[0], self.partial_force.shape[1]):
             if b < self.constants[None].count:
                 block, volume = self.constants[None].block, self.constants[None].volume
-                force = ti.Vector([0.0, 0.0, 0.0])
-                torque = ti.Vector([0.0, 0.0, 0.0])
+                force, torque = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
                 centre = self.position[b]
                 for i in range(k * block, ti.min((k + 1) * block, active[None])):
                     f = ti.Vector([0.0, 0.0, 0.0])
@@ -874,8 +780,7 @@ class Bodies:
                 self.partial_torque[b, k] = torque
         for b in range(self.force.shape[0]):
             if b < self.constants[None].count:
-                force = ti.Vector([0.0, 0.0, 0.0])
-                torque = ti.Vector([0.0, 0.0, 0.0])
+                force, torque = ti.Vector([0.0, 0.0, 0.0]), ti.Vector([0.0, 0.0, 0.0])
                 for k in range(self.partial_force.shape[1]):  # in order: the same sum on any thread count
                     force += self.partial_force[b, k]
                     torque += self.partial_torque[b, k]

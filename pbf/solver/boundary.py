@@ -71,8 +71,7 @@ class GhostTables:
         """Bilinear quadrant density and its gradient in (da, db)."""
         i, s = self.cell(da)
         k, t = self.cell(db)
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0])
+        value, gradient = 0.0, ti.Vector([0.0, 0.0])
         for a, b in ti.static(ti.ndrange(2, 2)):
             weight = (s if a else 1.0 - s) * (t if b else 1.0 - t)
             value += weight * self.edge[i + a, k + b]
@@ -85,8 +84,7 @@ class GhostTables:
         i, s = self.cell(d[0])
         j, t = self.cell(d[1])
         k, u = self.cell(d[2])
-        value = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        value, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         for a, b, c in ti.static(ti.ndrange(2, 2, 2)):
             weight = (s if a else 1.0 - s) * (t if b else 1.0 - t) * (u if c else 1.0 - u)
             value += weight * self.corner[i + a, j + b, k + c]
@@ -99,8 +97,7 @@ class GhostTables:
         expansion, with selections and one lookup of each table: it is inlined in the iterations' kernel,
         whose compile time grows faster than its length (docs/BODIES.md, "Compile time")."""
         h = self.constants[None].kernel_radius
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         nearest = ti.max(ti.max(lower - p, p - upper), 0.0)
         if nearest.norm() < h:
             below, above = p < lower, p > upper
@@ -134,8 +131,7 @@ class GhostTables:
     def summed(self, solids: ti.template(), p):
         """The ghost density ρ/ρ0 of a set of solids (the obstacles, the bodies) at p and its gradient
         (1/m): ``solids.ghost_of(p, k)`` summed over their ``constants.count``, none without wall density."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         # A switch, not only a count: the box's 27 terms in a λ pass hold registers on a GPU even where no
         # obstacle is (docs/BENCHMARKS.md, "Registers and occupancy").
         if ti.static(solids.count > 0):
@@ -150,21 +146,18 @@ class GhostTables:
     def half_spaces(self, active, d):
         """Ghost density of the half-spaces marked in ``active`` (at distances d), and its derivative in
         each distance; none at all is the full lattice, ρ/ρ0 = 1."""
-        value = 0.0
-        slope = ti.Vector([0.0, 0.0, 0.0])
+        value, slope = 0.0, ti.Vector([0.0, 0.0, 0.0])
         count = active.sum()
         if count == 0:
             value = 1.0
         elif count == 1:
             a = ti.select(active[0], 0, ti.select(active[1], 1, 2))
-            wall, wall_slope = self.wall(component(d, a))
-            value = wall
+            value, wall_slope = self.wall(component(d, a))
             slope = ti.Vector([ti.select(a == i, wall_slope, 0.0) for i in ti.static(range(3))])
         elif count == 2:
             left_out = ti.select(active[0] == 0, 0, ti.select(active[1] == 0, 1, 2))
             a, b = ti.select(left_out == 0, 1, 0), ti.select(left_out == 2, 1, 2)
-            quadrant, g = self.quadrant(component(d, a), component(d, b))
-            value = quadrant
+            value, g = self.quadrant(component(d, a), component(d, b))
             slope = ti.Vector([ti.select(a == i, g[0], ti.select(b == i, g[1], 0.0)) for i in ti.static(range(3))])
         else:
             value, slope = self.octant(d)
@@ -177,6 +170,7 @@ class Container:
 
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
+        # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r.
         self.constants = scene_constants(
             radius=params.particle_radius_m,
             lower=tuple(params.lower_m),
@@ -186,22 +180,18 @@ class Container:
             wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
         )
-        """``mirror_reach``: a wall's mirror images come within h of a particle only if it is closer than h − r."""
+        # mirrored: the ghost behind these walls is the fluid's mirror image (solver.wall_mirror): the density
+        # constraint then leaves out ghost() and mirrors the fluid in mirror_walls().
         self.mirrored = params.wall_mirror
-        """Whether the ghost behind these walls is the fluid's mirror image (``solver.wall_mirror``): the
-        density constraint then leaves out :meth:`ghost` and mirrors the fluid in :meth:`mirror_walls`."""
         self.wave_maker = params.piston_stroke_m > 0.0
         self.piston_stroke_m = params.piston_stroke_m
         self.piston_period_s = params.piston_period_s
-        self.piston_x = ti.field(ti.f32, shape=())
-        """Where the piston wall stands now (m); set by :meth:`move` before each substep."""
-        self.piston_v = ti.field(ti.f32, shape=())
-        """The piston's velocity over the coming substep (m/s, along x)."""
+        self.piston_x = ti.field(ti.f32, shape=())  # where the piston wall stands now, m (set by move)
+        self.piston_v = ti.field(ti.f32, shape=())  # its velocity over the coming substep, m/s along x
         self.piston_rest_x = params.lower_m[0]
         self.piston_x[None] = params.lower_m[0]
         self._launch_place = Launcher(self._place)  # past Taichi's per-call Python (pbf.solver.launch)
-        self._piston_x_host = float(np.float32(params.lower_m[0]))
-        """piston_x as the device holds it: moving the piston reads nothing back."""
+        self._piston_x_host = float(np.float32(params.lower_m[0]))  # piston_x as the device has it: no read back
 
     def piston_position_m(self, piston_time_s: float) -> float:
         """The piston wall after it has run ``piston_time_s``: x = x_min + S/2 (1 − cos 2πt/T), at rest
@@ -267,17 +257,13 @@ class Container:
             above = upper[axis] - p[axis]
             if ti.min(below, above) < mirror_reach:
                 near[axis] = 1
-                plane[axis] = upper[axis]
-                if below <= above:
-                    plane[axis] = lower[axis]
+                plane[axis] = lower[axis] if below <= above else upper[axis]
         return near, plane
 
     @ti.func
     def ghost(self, p):
-        """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner), and its gradient
-        with respect to p (1/m)."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        """Ghost density ρ_wall/ρ0 of the walls within h (walls − edges + corner) and its gradient (1/m)."""
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         if self.constants[None].wall_density:
             lower = self._lower()
             upper, kernel_radius = self.constants[None].upper, self.constants[None].kernel_radius
@@ -351,30 +337,23 @@ class Obstacles:
 
     @ti.func
     def project(self, p):
-        """p moved out of every obstacle grown by the particle radius."""
+        """p moved out of every obstacle grown by the particle radius, through the nearest open face: the one
+        it came through, as obstacles are thicker than a substep's move."""
         q = p
         if ti.static(self.count > 0):  # as in GhostTables.summed
             for o in range(self.constants[None].count):
-                q = self._push_out(q, o)
-        return q
-
-    @ti.func
-    def _push_out(self, p, o):
-        """p moved out of obstacle o (grown by the particle radius) through the nearest open face: the one
-        it came through, as obstacles are thicker than a substep's move."""
-        radius = self.constants[None].radius
-        lower = self.lower[o] - radius
-        upper = self.upper[o] + radius
-        q = p
-        if (p > lower).all() and (p < upper).all():
-            best, axis, target = 1e30, 0, 0.0
-            for a in ti.static(range(3)):
-                if self.exit_lower[o][a] and p[a] - lower[a] < best:
-                    best, axis, target = p[a] - lower[a], a, lower[a]
-                if self.exit_upper[o][a] and upper[a] - p[a] < best:
-                    best, axis, target = upper[a] - p[a], a, upper[a]
-            if best < 1e30:
-                q[axis] = target
+                radius = self.constants[None].radius
+                lower = self.lower[o] - radius
+                upper = self.upper[o] + radius
+                if (q > lower).all() and (q < upper).all():
+                    best, axis, target = 1e30, 0, 0.0
+                    for a in ti.static(range(3)):
+                        if self.exit_lower[o][a] and q[a] - lower[a] < best:
+                            best, axis, target = q[a] - lower[a], a, lower[a]
+                        if self.exit_upper[o][a] and upper[a] - q[a] < best:
+                            best, axis, target = upper[a] - q[a], a, upper[a]
+                    if best < 1e30:
+                        q[axis] = target
         return q
 
     @ti.func
@@ -402,8 +381,7 @@ class Boundaries:
         self.obstacles = Obstacles(params, self.tables)
         self.parts = (self.container, self.obstacles)
         self.bodies = None
-        self.with_bodies = params.bodies.count > 0
-        """Whether the last part is the rigid bodies (``pbf.solver.bodies``); without, no code of theirs."""
+        self.with_bodies = params.bodies.count > 0  # the last part is the bodies; without, no code of theirs
         if solids:
             self.allocate_solids(capacity)
 
@@ -440,25 +418,19 @@ class Boundaries:
         return q
 
     @ti.func
-    def _project_pushed(self, p):
-        """:meth:`project` with bodies, and the bodies' part of the move with the body that made it, less
-        what the container took back (a particle caught between a body and a wall lifts no body)."""
-        q = p
-        for k in ti.static(range(len(self.parts) - 1)):
-            q = self.parts[k].project(q)
-        before = q
-        q, pusher = self.bodies.push_out(q)
-        q = self.container.project(q)
-        return q, q - before, pusher
-
-    @ti.func
     def project_recorded(self, p, i, stage: ti.template(), amount):
         """:meth:`project` for particle i's x* at ``stage`` "start", "iteration" (of weight ``amount``) or
-        "between" (stepped back by ``amount``); with bodies, their push goes on the record their reaction
-        reads (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
+        "between" (stepped back by ``amount``); with bodies, their push, less what the container took back
+        (a particle caught between a body and a wall lifts no body), goes on the record their reaction reads
+        (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
         q = p
         if ti.static(self.with_bodies):
-            q, pushed, pusher = self._project_pushed(p)
+            for k in ti.static(range(len(self.parts) - 1)):
+                q = self.parts[k].project(q)
+            before = q
+            q, pusher = self.bodies.push_out(q)
+            q = self.container.project(q)
+            pushed = q - before
             if ti.static(stage == "start"):
                 self.bodies.record_start(i, pushed, pusher)
             elif ti.static(stage == "iteration"):
@@ -473,8 +445,7 @@ class Boundaries:
     def ghost(self, p, leave_out_mirrored: ti.template()):
         """Ghost density ρ/ρ0 behind every boundary within h of p, and its gradient (1/m); with
         ``leave_out_mirrored`` without the boundaries whose ghost is the fluid's mirror image."""
-        density = 0.0
-        gradient = ti.Vector([0.0, 0.0, 0.0])
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
         for k in ti.static(range(len(self.parts))):
             if ti.static(not (leave_out_mirrored and self.parts[k].mirrored)):
                 d, g = self.parts[k].ghost(p)
