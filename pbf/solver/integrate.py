@@ -27,12 +27,9 @@ class Integrator:
 
     @ti.func
     def advance_particle(self, dt, gravity, i):
-        """v_i ← v_i + Δt g and x*_i ← x_i + Δt v_i, kept inside the boundaries; returns x*_i."""
-        v = self.state.v[i] + dt * gravity
-        self.state.v[i] = v
-        x_star = self.boundaries.project_recorded(self.state.x[i] + dt * v, i, "start", 1.0)
-        self.predicted.first[i] = x_star
-        return x_star
+        """v_i ← v_i + Δt g, then :meth:`predict_particle`."""
+        self.state.v[i] = self.state.v[i] + dt * gravity
+        return self.predict_particle(dt, i)
 
     @ti.kernel
     def damp(self, factor: ti.f32):

@@ -21,10 +21,8 @@ class JacobiIterations:
         self.density = density
         self.active = active
         self.loop_bound = loop_bound
-        self.per_call = per_call
-        """Iterations a kernel call runs (each a copy of an iteration's code)."""
-        self.reads_decisions = reads_decisions
-        """Whether the host reads after each call whether the target was met (and launches no more)."""
+        self.per_call = per_call  # iterations a kernel call runs (each a copy of an iteration's code)
+        self.reads_decisions = reads_decisions  # the host reads after each call whether the target was met
         # The first iteration weighs its λ by 1 (DensityConstraint.multiplier_pass starts L afresh there).
         assert weights[0] == 1.0, f"the first iteration's weight is 1 in every table, not {weights[0]}"
         self.table = ti.field(ti.f32, shape=len(weights))
@@ -72,14 +70,9 @@ class JacobiIterations:
 
     @ti.func
     def iterate(self, first: ti.template(), second: ti.template(), neighbours: ti.template(), run: ti.template()):
-        """Iterations ``run.start`` … ``run.start + per_call − 1`` (each over no particles once the target
-        was met), for the top level of a kernel:
-
-            for all particles: λ̂_i from C_i (Eqs. 1, 10)                           lines 9-11
-            for all particles: Δx_i (Eqs. 11-12), collided, x*_i ← x*_i + Δx_i   lines 12-17
-            with a target: Σ max(C_i, 0), then the rules (:meth:`received`)
-
-        Each thread reads the loop's state itself: read outside the loops it would be a one-thread task."""
+        """Iterations ``run.start`` … ``run.start + per_call − 1`` (over no particles once the target was
+        met), for the top level of a kernel: λ̂_i (Eqs. 1, 10, lines 9-11); Δx_i (Eqs. 11-12), collided,
+        x*_i += Δx_i (lines 12-17); with a target Σ max(C_i, 0), then the rules (:meth:`received`)."""
         density = self.density
         for u in ti.static(range(self.per_call)):
             for i in range(read_count(self.loop_bound, 1)):

@@ -28,8 +28,7 @@ try:  # the internals this module reads, in the Taichi it was written for
 except ImportError:  # pragma: no cover - another Taichi: its public call only
     impl = None
 
-WRITTEN_FOR = (1, 7, 4)
-"""The Taichi version whose internals this module reads (``ti.__version__``)."""
+WRITTEN_FOR = (1, 7, 4)  # the Taichi version whose internals this module reads (``ti.__version__``)
 PUBLIC_LAUNCH_VAR = "PBF_PUBLIC_LAUNCH"
 """Set to anything but "" or "0": every Launcher made afterwards takes Taichi's public call."""
 
@@ -55,8 +54,7 @@ def current_arch():
     return None if config is None else config.arch
 
 
-TAICHI_START_LINE = "[Taichi] Starting on arch="
-"""The line ``ti.init`` prints on every start, which no option silences."""
+TAICHI_START_LINE = "[Taichi] Starting on arch="  # printed by every ti.init; no option silences it
 
 
 def start_taichi(**options) -> None:
@@ -84,10 +82,8 @@ class Observer:
 
 
 _observers: list[Observer] = []
-_wrapped: list[tuple[type, str, object]] = []
-"""(class, attribute, Taichi's own) for each wrapper in place while observers watch."""
-_depth = 0
-"""Element accesses under way (what one launches inside is part of it)."""
+_wrapped: list[tuple[type, str, object]] = []  # (class, attribute, Taichi's own) of each wrapper in place
+_depth = 0  # element accesses under way (what one launches inside is part of it)
 
 
 def _overrides(observer: Observer, name: str) -> bool:
@@ -184,10 +180,8 @@ def profiled_tasks() -> list[tuple[str, float]]:
     return [(record.name, record.kernel_time) for record in profiler._traced_records]
 
 
-MOST_VARIANTS = 64
-"""Variants a Launcher keeps; past them it calls the ordinary way (a NaN template argument adds one a call)."""
-PLAIN = (bool, int, float, str, type(None))
-"""Template arguments told apart by value and type (Taichi compiles True and 1 alike)."""
+MOST_VARIANTS = 64  # variants a Launcher keeps; past them the ordinary call (a NaN template adds one a call)
+PLAIN = (bool, int, float, str, type(None))  # template arguments told apart by value and type
 
 
 def _variant(value):
@@ -198,8 +192,7 @@ def _variant(value):
     return id(value)  # fields and objects: the Launcher keeps them alive while it holds the key
 
 
-REALS = (float, int, np.floating, np.integer)
-"""What Taichi takes for a float argument (anything else goes to its own launch, which refuses it)."""
+REALS = (float, int, np.floating, np.integer)  # a float argument (anything else: Taichi's launch refuses it)
 INTEGERS = (int, np.integer)
 
 
@@ -241,8 +234,7 @@ class Launcher:
             and not getattr(bound, "_is_staticmethod", True)
             and isinstance(primal, Kernel)
         )
-        self._primal = primal if direct else None
-        """Taichi's kernel, None where every call is Taichi's public one."""
+        self._primal = primal if direct else None  # Taichi's kernel; None: every call is the public one
         self._owner = owner
         self._name = primal.func.__qualname__ if direct else ""
         # The call site's parameters and its template arguments' places (the owner, ``self``, not counted).
@@ -259,10 +251,8 @@ class Launcher:
             else ()
         )
         self._setters = _argument_setters(primal) if direct else None
-        self._count = len(primal.arguments) - 1 if direct else 0
-        """The arguments the call site passes (the owner is not one)."""
-        self._variants: dict = {}
-        """key → (compiled kernel, its template arguments kept alive, its launch data or None)."""
+        self._count = len(primal.arguments) - 1 if direct else 0  # the call site's arguments (not the owner)
+        self._variants: dict = {}  # key → (compiled kernel, its template arguments kept alive, launch data)
 
     def _in_order(self, args: tuple, kwargs: dict) -> tuple | None:
         """The arguments by position; None where they do not fill the parameters once each."""

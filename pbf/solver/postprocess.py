@@ -9,11 +9,9 @@ Both terms are made dimensionless like the density constraint (V = m/ρ0 is the 
     Δv_i  = Δt ε h |ω_i| (N × ω_i)                        Eq. 14; ε h |ω|² is an acceleration
     Δv_i += c Σ_j V (v_j − v_i) W_ij                      Eq. 15
 
-The h in Eq. 14 makes confinement fade as resolution rises, as the vorticity it restores is the part
-lost to coarse particles. Every pass reads v_j as (x*_j − x_j)/Δt instead of a stored velocity, so
-the velocity update needs no pass of its own and the smoothed velocity can be written straight into
-v (nothing in that pass reads v). The first pass keeps each v_i (``velocity_now``) and the last pass
-reads v_j from there, not from x_j, so it also moves x to x*: no loop of its own for line 23.
+The h in Eq. 14 makes confinement fade as resolution rises (it restores what coarse particles lose).
+The first pass reads v_j as (x*_j − x_j)/Δt and keeps v_i (``velocity_now``); the second reads v_j
+from there, so it writes v and moves x to x* in the same loop: no pass of its own for lines 21 or 23.
 """
 
 import taichi as ti
@@ -33,11 +31,9 @@ class VelocityPostprocess:
     def __init__(self, params: VelocityParams, state, grid):
         self.state = state
         self.constants = scene_constants(h=params.kernel_radius_m, volume=params.particle_volume_m3)
-        """h (m) and V (m³) as data (``pbf.solver.constants``)."""
         self.grid = grid
         self.omega = ti.Vector.field(3, ti.f32, shape=params.particle_count)
-        self.omega_norm = ti.field(ti.f32, shape=params.particle_count)
-        """|ω_i|, read once per pair by the location vector η: computed once per particle."""
+        self.omega_norm = ti.field(ti.f32, shape=params.particle_count)  # |ω_i|, read per pair by η
         self.velocity_now = ti.Vector.field(3, ti.f32, shape=params.particle_count)
         """v_i = (x*_i − x_i)/Δt from the first pass, for the pass after it (the module docstring)."""
 
@@ -48,8 +44,7 @@ class VelocityPostprocess:
 
     @ti.func
     def particle(self, x_pred: ti.template(), i, run: ti.template()):
-        """What a walk of particle i's neighbours reads once for the particle: h, V, the kernel's scale,
-        1/Δt, x*_i and v_i."""
+        """What a walk reads once for particle i: h, V, the kernel's scale, 1/Δt, x*_i and v_i."""
         h, volume = self.constants[None].h, self.constants[None].volume
         inverse_dt = 1.0 / run.dt
         return h, volume, kernel_scale(h), inverse_dt, x_pred[i], self.velocity(x_pred, i, inverse_dt)
@@ -72,13 +67,10 @@ class VelocityPostprocess:
 
     @ti.func
     def finish(self, x_pred: ti.template(), neighbours: ti.template(), impulse: ti.template(), run: ti.template()):
-        """Lines 20-23 for the top level of a kernel: v = (x* − x)/Δt, confinement (``run.vorticity``, at
-        ε = ``run.epsilon``) and XSPH (c = ``run.xsph_c``) on v, v capped at ``run.max_speed`` (m/s,
-        ``time.max_speed_m_s``; 0: no cap), then x = x*; and the pressure (Pa) of the multipliers
-        ``impulse`` (L, per particle) and Λ, at ``run.pressure_per_impulse`` Pa per unit of L, added to
-        ``State.pressure_sum`` (which starts again at the ``run.first_of_frame`` substep). Every loop runs
-        over the particles' bucket and reads what it needs itself: a loop bound or a value worked out
-        outside the loops would be a one-thread task, a launch on a GPU."""
+        """Lines 20-23 for the top level of a kernel: v = (x* − x)/Δt, confinement (at ε = ``run.epsilon``)
+        and XSPH (c = ``run.xsph_c``), v capped at ``run.max_speed`` (0: no cap), x = x*; and the pressure
+        of the multipliers ``impulse`` (L) and Λ, at ``run.pressure_per_impulse`` Pa per unit of L, added
+        to ``State.pressure_sum`` (restarted at the ``run.first_of_frame`` substep)."""
         bound = ti.static(self.state.loop_bound)
         for i in range(read_count(bound, 1)):  # line 21, v_i kept for the pass below; Eq. 13
             if i < self.state.active[None]:

@@ -155,22 +155,15 @@ class State:
             self._carried[k][0][slot] = ti.cast(slot * creation, self.fields[k].dtype)
 
     @ti.kernel
-    def _unsort(self, values: ti.template()):
+    def _unsort(self, values: ti.template(), unsorted: ti.template()):
         for i in range(self.active[None]):
-            self._unsorted[self.index[i]] = values[i]
-
-    @ti.kernel
-    def _unsort_scalar(self, values: ti.template()):
-        for i in range(self.active[None]):
-            self._unsorted_scalar[self.index[i]] = values[i]
+            unsorted[self.index[i]] = values[i]
 
     def in_creation_order(self, values) -> np.ndarray:
         """A per-particle field as a NumPy array in creation order, (n,) or (n, 3)."""
-        if hasattr(values, "n"):
-            self._unsort(values)
-            return self._unsorted.to_numpy()[: self.count]
-        self._unsort_scalar(values)
-        return self._unsorted_scalar.to_numpy()[: self.count]
+        unsorted = self._unsorted if hasattr(values, "n") else self._unsorted_scalar
+        self._unsort(values, unsorted)
+        return unsorted.to_numpy()[: self.count]
 
     def positions(self) -> np.ndarray:
         """(n, 3) float32 positions (m) in creation order."""
