@@ -128,7 +128,7 @@ def vulkan_devices() -> list[dict]:
             # VkPhysicalDeviceProperties: five uint32 (apiVersion … deviceType), deviceName[256], < 1 kB of limits.
             properties = ctypes.create_string_buffer(4096)
             vulkan.vkGetPhysicalDeviceProperties(ctypes.c_void_p(handle), properties)
-            api, _, _, _, kind = struct.unpack_from("<5I", properties.raw, 0)
+            api, _, _, _, code = struct.unpack_from("<5I", properties.raw, 0)
             name = properties.raw[20:276].split(b"\0")[0].decode(errors="replace")
             # VkPhysicalDeviceMemoryProperties: memoryHeapCount at 260, 16-byte heaps (size, flags) from 264.
             memory = ctypes.create_string_buffer(1024)
@@ -138,14 +138,8 @@ def vulkan_devices() -> list[dict]:
                 for k in range(min(struct.unpack_from("<I", memory.raw, 260)[0], 16))
             ]
             local = max((size for size, flags in heaps if flags & 1), default=0)  # VK_MEMORY_HEAP_DEVICE_LOCAL_BIT
-            devices.append(
-                {
-                    "name": name,
-                    "type": VK_PHYSICAL_DEVICE_TYPE.get(kind, "other"),
-                    "api_minor": (api >> 12) & 0x3FF,
-                    "memory_bytes": local,
-                }
-            )
+            kind = VK_PHYSICAL_DEVICE_TYPE.get(code, "other")
+            devices.append({"name": name, "type": kind, "api_minor": (api >> 12) & 0x3FF, "memory_bytes": local})
     finally:
         vulkan.vkDestroyInstance(instance, None)
     return devices
@@ -177,47 +171,39 @@ def _metal_device() -> Device | None:
     return Device("metal", "Apple GPU") if sys.platform == "darwin" else None
 
 
+UNAVAILABLE = {
+    "cuda": "no CUDA GPU is available",
+    "vulkan": "no Vulkan device is available (no Vulkan loader or driver; on Debian/Ubuntu 'apt-get install "
+    "mesa-vulkan-drivers libvulkan1' gives a software one)",
+    "metal": "Metal exists only on macOS",
+    "gpu": "no GPU backend can start here (no CUDA GPU, no Metal, no Vulkan device)",
+}
+"""Why a backend asked for by name cannot start, for its BackendError."""
+
+
 def _choose(requested: str) -> tuple[Device, str]:
     """The device to start for ``requested`` and why; BackendError when a named backend has none."""
     if requested == "cpu":
         return _cpu_device(), "requested"
-    if requested == "cuda":
+    finders = {"cuda": _cuda_device, "vulkan": _vulkan_device, "metal": _metal_device}
+    if requested in finders:
+        device, reason = finders[requested](), "requested"
+    else:  # auto or gpu: CUDA first
         device = _cuda_device()
-        if device is None:
-            raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
-        return device, "requested"
-    if requested == "vulkan":
-        device = _vulkan_device()
-        if device is None:
-            raise BackendError(
-                "arch='vulkan' was requested but no Vulkan device is available (no Vulkan loader or "
-                "driver; on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' gives a "
-                "software one); use arch='cpu' or 'auto'"
-            )
-        return device, "requested"
-    if requested == "metal":
-        device = _metal_device()
-        if device is None:
-            raise BackendError("arch='metal' was requested but Metal exists only on macOS; use arch='cpu' or 'auto'")
-        return device, "requested"
-    cuda = _cuda_device()
-    if cuda is not None:
-        return cuda, "CUDA GPU found" if requested == "auto" else "the best GPU backend found"
-    other = _metal_device() or _vulkan_device()
-    if requested == "gpu":
-        if other is None:
-            raise BackendError(
-                "arch='gpu' was requested but no GPU backend can start here (no CUDA GPU, no Metal, "
-                "no Vulkan device); use arch='cpu' or 'auto'"
-            )
-        return other, "the best GPU backend found"
-    if other is not None and not other.software:
-        return other, f"no CUDA GPU, a {other.arch} device found"
-    if other is not None:
-        return _cpu_device(), (
-            f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than the CPU backend"
-        )
-    return _cpu_device(), "no GPU found"
+        if device is not None:
+            return device, "CUDA GPU found" if requested == "auto" else "the best GPU backend found"
+        device, reason = _metal_device() or _vulkan_device(), "the best GPU backend found"
+        if requested == "auto":
+            if device is None:
+                return _cpu_device(), "no GPU found"
+            if device.software:
+                return _cpu_device(), (
+                    f"no GPU found; the Vulkan device {device.name!r} is a software driver, slower than the CPU backend"
+                )
+            return device, f"no CUDA GPU, a {device.arch} device found"
+    if device is None:
+        raise BackendError(f"arch={requested!r} was requested but {UNAVAILABLE[requested]}; use arch='cpu' or 'auto'")
+    return device, reason
 
 
 def _cpu_device() -> Device:
@@ -365,14 +351,10 @@ def _cuda_free_bytes() -> int | None:
 
 def device_memory_bytes() -> int:
     """Memory the backend can still give the fields, bytes: the GPU's where it can tell, else the host's."""
-    if _started is None:
-        return host_available_bytes()
-    device = _started
+    device = _started or _cpu_device()
     if device.arch == "cuda":
         return _cuda_free_bytes() or device.memory_bytes or host_available_bytes()
-    if device.memory_bytes:
-        return device.memory_bytes
-    return host_available_bytes()
+    return device.memory_bytes or host_available_bytes()
 
 
 def memory_place() -> str:
