@@ -287,18 +287,18 @@ def gpu_blocks() -> bool:
 
 def in_gpu_blocks(enabled: bool = True):
     """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
-    return _choosing("_gpu_blocks_on_cpu", enabled)
+    return _choosing(sys.modules[__name__], "_gpu_blocks_on_cpu", enabled)
 
 
 @contextlib.contextmanager
-def _choosing(name: str, enabled: bool):
-    """The module's choice ``name`` set to ``enabled`` for what is built inside, then set back."""
-    before = globals()[name]
-    globals()[name] = enabled
+def _choosing(owner, name: str, value):
+    """``owner``'s choice ``name`` set to ``value`` for what is built (or first compiled) inside, then set back."""
+    before = getattr(owner, name)
+    setattr(owner, name, value)
     try:
         yield
     finally:
-        globals()[name] = before
+        setattr(owner, name, before)
 
 
 def sums_in_shared_memory() -> bool:
@@ -313,19 +313,12 @@ def keeps_decisions_on_device() -> bool:
 
 def decisions_on_device(enabled: bool = True):
     """Simulations built inside take the GPU backends' device-resident path on any backend."""
-    return _choosing("_decisions_on_device_on_cpu", enabled)
+    return _choosing(sys.modules[__name__], "_decisions_on_device_on_cpu", enabled)
 
 
-@contextlib.contextmanager
 def light_compile():
     """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
-    config = compile_config()
-    before = config.advanced_optimization
-    config.advanced_optimization = False
-    try:
-        yield
-    finally:
-        config.advanced_optimization = before
+    return _choosing(compile_config(), "advanced_optimization", False)
 
 
 def host_available_bytes() -> int:

@@ -98,14 +98,8 @@ class GridParams:
         extent = np.array(upper_m, np.float64) - np.array(lower_m, np.float64)
         cell = kernel_radius_m / reach * (1 + 1e-4)
         resolution = tuple(max(1, int(math.floor(e / cell))) for e in extent)
-        return cls(
-            particle_count,
-            tuple(map(float, lower_m)),
-            tuple(map(float, upper_m)),
-            float(kernel_radius_m),
-            resolution,
-            reach,
-        )
+        lower, upper = tuple(map(float, lower_m)), tuple(map(float, upper_m))
+        return cls(particle_count, lower, upper, float(kernel_radius_m), resolution, reach)
 
     @property
     def cell_count(self) -> int:
@@ -113,7 +107,6 @@ class GridParams:
 
     @property
     def allocated_cells(self) -> int:
-        """Per-cell arrays' length: :func:`allocation` of the cell count, or a larger bucket (``cell_bucket``)."""
         return self.cell_bucket or allocation(self.cell_count, CELL_BUCKET_FLOOR)
 
 
@@ -140,36 +133,20 @@ class BodyParams:
 
     @classmethod
     def from_scene(cls, scene: Scene, particle_volume_m3: float) -> BodyParams:
-        shapes, halves, masses, inertias, initial = [], [], [], [], []
+        rows = []  # one per body: shape, half extents, mass, inertia, initial state
         for body in scene.bodies:
-            half = body.half_extents()
-            mass = body.mass_kg()
+            half, mass = body.half_extents(), body.mass_kg()
+            a2, b2, c2 = (x**2 for x in half)
             if body.shape == "sphere":
-                inertia = np.full(3, 0.4 * mass * half[0] ** 2)
+                inertia = np.full(3, 0.4 * mass * a2)
             else:  # a box of edges 2a, 2b, 2c: I_x = m (b² + c²) / 3
-                inertia = (
-                    mass
-                    / 3.0
-                    * np.array([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2, half[0] ** 2 + half[1] ** 2])
-                )
-            shapes.append(body.shape)
-            halves.append(tuple(map(float, half)))
-            masses.append(float(mass))
-            inertias.append(tuple(map(float, inertia)))
-            initial.append(
-                tuple(
-                    map(float, (*body.position_m, *body.quaternion(), *body.velocity_m_s, *body.angular_velocity_rad_s))
-                )
+                inertia = mass / 3.0 * np.array([b2 + c2, a2 + c2, a2 + b2])
+            state = (*body.position_m, *body.quaternion(), *body.velocity_m_s, *body.angular_velocity_rad_s)
+            rows.append(
+                (body.shape, tuple(map(float, half)), float(mass), tuple(map(float, inertia)), tuple(map(float, state)))
             )
-        return cls(
-            tuple(shapes),
-            tuple(halves),
-            tuple(masses),
-            tuple(inertias),
-            tuple(initial),
-            scene.fluid.rest_density_kg_m3,
-            particle_volume_m3,
-        )
+        columns = tuple(zip(*rows)) or ((),) * 5
+        return cls(*columns, scene.fluid.rest_density_kg_m3, particle_volume_m3)
 
 
 @dataclass(frozen=True)
@@ -186,7 +163,8 @@ class BoundaryParams:
     wall_density: bool
     """Whether the ghost density behind walls and inside obstacles is added to the constraint."""
     wall_mirror: bool
-    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``), not its tables."""
+    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``), not the fixed lattice
+    of ``Container.ghost``."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
     piston_stroke_m: float = 0.0
@@ -203,7 +181,6 @@ class DensityParams:
     particle_count: int
     kernel_radius_m: float
     particle_volume_m3: float
-    """V = m/ρ0."""
     relaxation: float
     """ε̂ of Eq. (10), dimensionless."""
     omega: float
@@ -212,13 +189,11 @@ class DensityParams:
     inverse_w_dq: float
     """1 / W(Δq h, h), the s_corr reference of Eq. (11), 1/m⁻³."""
     max_correction: float
-    """Largest move of one iteration, in h."""
     surface_density: bool = False
-    """Whether the ghost density beyond the free surface is added (``pbf.solver.density``)."""
+    """Whether the ghost density beyond the free surface is added."""
     surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
     wall_mirror: bool = False
-    """Whether the container's ghost is the fluid's mirror image, not the fixed lattice of ``Container.ghost``."""
 
 
 @dataclass(frozen=True)
@@ -239,22 +214,12 @@ class Push:
     velocity_m_s: Vec3
     radius_m: float
 
-    def __post_init__(self):
-        # No NaN or overflow reaches a kernel.
+    def __post_init__(self):  # no NaN or overflow reaches a kernel
         for name in ("point_m", "velocity_m_s"):
             object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name), FLOAT32_SAFE))
-        object.__setattr__(
-            self,
-            "radius_m",
-            _checked_number(
-                "control.push.radius_m",
-                self.radius_m,
-                float,
-                (0.0, FLOAT32_SAFE),
-                "radius of the hand, m",
-                above_lowest=True,
-            ),
-        )
+        bounds = (0.0, FLOAT32_SAFE)
+        radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, "radius of the hand, m", True)
+        object.__setattr__(self, "radius_m", radius)
 
 
 @dataclass
@@ -321,9 +286,7 @@ class Features:
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
     divergence_iterations: int
-    """Iterations of the divergence pre-correction; 0 leaves the pass out."""
     vorticity: bool
-    """Vorticity confinement (Eqs. 13-14)."""
     wave_maker: bool
     bodies: bool
     wall_mirror: bool
@@ -347,12 +310,6 @@ def _features(*values) -> Features:
     return Features(*values)
 
 
-def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]:
-    """The bounds of a scene key, from its declaration (``pbf.scene.schema.key``), and their description."""
-    declared = {f.name: f for f in dataclasses.fields(table)}[name]
-    return declared.metadata["check"].bounds, f"the bounds of {dotted}"
-
-
 def _given(value) -> str:
     return f"{_show(value)} ({type(value).__name__})"
 
@@ -364,14 +321,12 @@ def _checked_number(
     lowest, highest = bounds
     interval = f"{'(' if above_lowest else '['}{_num(lowest)}, {_num(highest)}]"
     allowed = f"{'an integer' if kind is int else 'a finite number'} in {interval} ({meaning})"
-    is_bool = isinstance(value, (bool, np.bool_))
+    numeric = numbers.Integral if kind is int else numbers.Real
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numeric):
+        raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
     if kind is int:
-        if is_bool or not isinstance(value, numbers.Integral):
-            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
         converted = int(value)
     else:
-        if is_bool or not isinstance(value, numbers.Real):
-            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
         try:
             converted = float(value)
         except OverflowError:
@@ -408,11 +363,13 @@ def _checked_bool(label: str, value) -> bool:
 
 
 def _setting(field_name: str, kind: type, table, name: str, dotted: str):
-    """The check of Control's ``field_name``, which mirrors scene key ``dotted`` (``table``'s field ``name``)."""
+    """The check of Control's ``field_name``, which mirrors scene key ``dotted`` (``table``'s field ``name``):
+    the bounds of its declaration (``pbf.scene.schema.key``)."""
     label = f"control.{field_name}"
     if kind is bool:
         return lambda control, value: _checked_bool(label, value)
-    bounds, meaning = _scene_key(table, name, dotted)
+    bounds = {f.name: f for f in dataclasses.fields(table)}[name].metadata["check"].bounds
+    meaning = f"the bounds of {dotted}"
     return lambda control, value: _checked_number(label, value, kind, bounds, meaning)
 
 

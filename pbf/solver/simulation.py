@@ -138,7 +138,6 @@ class Simulation:
         on_device = keeps_decisions_on_device()
         self.state = State(model.allocated)
         self.boundaries = Boundaries(model.boundary, solids=False)
-        """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
         self.grid = NeighbourGrid(model.grid, self.state.active, slot_major=on_gpu(), loop_bound=self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
@@ -153,15 +152,13 @@ class Simulation:
             per_call=2 if on_device else 1,
             reads_decisions=not on_device,
         )
-        """The substep's Jacobi iterations and the rules that stop them (``pbf.solver.iterations``)."""
         self.boundaries.allocate_solids(model.allocated)
         self.bodies = self.boundaries.bodies
         """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.kernels = SubstepKernels(self)
-        """The stages composed into three kernels (``pbf.solver.substep``)."""
+        self.kernels = SubstepKernels(self)  # the stages composed into three kernels
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
@@ -460,15 +457,9 @@ class Simulation:
             # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
             pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
-            first = self.pressure_substeps == 0
+            first, top = self.pressure_substeps == 0, self.scene.time.max_speed_m_s
             kernels.iterate_and_finish(
-                last,
-                dt,
-                features,
-                control,
-                pressure_per_impulse=pressure,
-                first_of_frame=first,
-                max_speed=self.scene.time.max_speed_m_s,
+                last, dt, features, control, pressure_per_impulse=pressure, first_of_frame=first, max_speed=top
             )
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
