@@ -44,6 +44,7 @@ _decisions_on_device_on_cpu = False
 _gpu_blocks_on_cpu = False
 """Counts of launches lay the sums out in a GPU's blocks on the CPU (:func:`in_gpu_blocks`)."""
 
+CPU_DEVICE = Device("cpu", "")
 SOFTWARE_VULKAN = ("llvmpipe", "lavapipe", "swiftshader")
 """Names of software Vulkan devices (Mesa's lavapipe reports "llvmpipe (LLVM …)")."""
 
@@ -184,7 +185,7 @@ UNAVAILABLE = {
 def _choose(requested: str) -> tuple[Device, str]:
     """The device to start for ``requested`` and why; BackendError when a named backend has none."""
     if requested == "cpu":
-        return _cpu_device(), "requested"
+        return CPU_DEVICE, "requested"
     finders = {"cuda": _cuda_device, "vulkan": _vulkan_device, "metal": _metal_device}
     if requested in finders:
         device, reason = finders[requested](), "requested"
@@ -195,19 +196,15 @@ def _choose(requested: str) -> tuple[Device, str]:
         device, reason = _metal_device() or _vulkan_device(), "the best GPU backend found"
         if requested == "auto":
             if device is None:
-                return _cpu_device(), "no GPU found"
+                return CPU_DEVICE, "no GPU found"
             if device.software:
-                return _cpu_device(), (
+                return CPU_DEVICE, (
                     f"no GPU found; the Vulkan device {device.name!r} is a software driver, slower than the CPU backend"
                 )
             return device, f"no CUDA GPU, a {device.arch} device found"
     if device is None:
         raise BackendError(f"arch={requested!r} was requested but {UNAVAILABLE[requested]}; use arch='cpu' or 'auto'")
     return device, reason
-
-
-def _cpu_device() -> Device:
-    return Device("cpu", "")
 
 
 def start_backend(
@@ -344,7 +341,7 @@ def _cuda_free_bytes() -> int | None:
 
 def device_memory_bytes() -> int:
     """Memory the backend can still give the fields, bytes: the GPU's where it can tell, else the host's."""
-    device = _started or _cpu_device()
+    device = _started or CPU_DEVICE
     if device.arch == "cuda":
         return _cuda_free_bytes() or device.memory_bytes or host_available_bytes()
     return device.memory_bytes or host_available_bytes()

@@ -383,8 +383,7 @@ def _gravity(control, value) -> Vec3:
         raise ValueError(
             f"control.gravity_m_s2: expected |g| ≤ {_num(most)} m/s², what the scene's frames can "
             f"follow (time.max_substeps × time.max_cfl (less under 4 solver.iterations) × fluid.spacing_m / "
-            f"time.frame_dt_s²), got "
-            f"|g| = {_num(length)} m/s²"
+            f"time.frame_dt_s²), got |g| = {_num(length)} m/s²"
         )
     return vector
 

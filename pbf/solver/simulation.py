@@ -77,7 +77,6 @@ class Neighbourhood:
     support_m: float
     """h, the radius the lists were searched within, m."""
     positions: object
-    """(n,) vector(3, f32) field of positions, m (the readout's)."""
     grid: object
     """The grid, a ``ti.template()``: ``for_each_neighbour(i, entries, task, acc)`` calls ``task(i, j, acc)``."""
     entries: object
@@ -209,8 +208,7 @@ class Simulation:
         if self.bodies is not None:
             self.bodies.held = False
         self.control.wave_maker_on = True
-        settled = self.snapshot()
-        self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
+        self.restore(replace(self.snapshot(), time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
         """What :meth:`restore` takes: the particles' kept fields (creation order), clocks, emitters, bodies."""
@@ -408,10 +406,8 @@ class Simulation:
         fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
             fastest = min(fastest, t.max_speed_m_s)
-        speed = (
-            max(fastest, self.boundaries.speed_limit_m_s(bodies))
-            + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
-        )
+        walls = self.boundaries.speed_limit_m_s(bodies)
+        speed = max(fastest, walls) + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
         travel = self.scene.travel_per_substep_m(self.control.iterations)
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / travel))
         if needed > t.max_substeps:
@@ -457,9 +453,15 @@ class Simulation:
             # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
             pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
-            first, top = self.pressure_substeps == 0, self.scene.time.max_speed_m_s
+            first = self.pressure_substeps == 0
             kernels.iterate_and_finish(
-                last, dt, features, control, pressure_per_impulse=pressure, first_of_frame=first, max_speed=top
+                last,
+                dt,
+                features,
+                control,
+                pressure_per_impulse=pressure,
+                first_of_frame=first,
+                max_speed=self.scene.time.max_speed_m_s,
             )
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
