@@ -228,22 +228,16 @@ def start_backend(
         return _started.arch
     device, reason = _choose(requested)
     threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
+    profiler = {"kernel_profiler": True} if kernel_profiler else {}
     _options.clear()
-    _options.update(
-        arch=getattr(ti, device.arch),
-        default_fp=ti.f32,
-        log_level=ti.WARN,
-        advanced_optimization=not fast_compile,
-        **threads,
-        **({"kernel_profiler": True} if kernel_profiler else {}),
-    )
+    _options.update(arch=getattr(ti, device.arch), default_fp=ti.f32, log_level=ti.WARN)
+    _options.update(advanced_optimization=not fast_compile, **threads, **profiler)
     try:
         start_taichi(**_options)
         running = current_arch()
     except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
         raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
-    if device.arch != "cpu" and running != getattr(ti, device.arch):
-        # Taichi's own fallback to the CPU.
+    if device.arch != "cpu" and running != getattr(ti, device.arch):  # Taichi's own fallback to the CPU
         ti.reset()
         raise BackendError(
             f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "

@@ -81,9 +81,7 @@ class GridParams:
     """Lower corner of the gridded box (the container), m."""
     upper_m: Vec3
     kernel_radius_m: float
-    """h: neighbours are the particles closer than this."""
     resolution: tuple[int, int, int]
-    """Cells per axis, each at least h / reach wide."""
     reach: int
     allocated_particles: int = 0
     """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
@@ -363,8 +361,7 @@ def _checked_bool(label: str, value) -> bool:
 
 
 def _setting(field_name: str, kind: type, table, name: str, dotted: str):
-    """The check of Control's ``field_name``, which mirrors scene key ``dotted`` (``table``'s field ``name``):
-    the bounds of its declaration (``pbf.scene.schema.key``)."""
+    """The check of Control's ``field_name``: the declared bounds of scene key ``dotted`` (``table``'s ``name``)."""
     label = f"control.{field_name}"
     if kind is bool:
         return lambda control, value: _checked_bool(label, value)
@@ -404,8 +401,7 @@ MIRRORED = (
     ("xsph", float, Viscosity, "xsph", "viscosity.xsph"),
     ("vorticity", float, Vorticity, "epsilon", "vorticity.epsilon"),
 )
-"""(Control field, type, schema table, its field, scene key): the fields that start from a scene key and
-keep its bounds."""
+"""(Control field, type, schema table, its field, scene key): the fields that start from a scene key, in its bounds."""
 CONTROL_CHECKS = {
     **{field: _setting(field, *rest) for field, *rest in MIRRORED},
     "gravity_m_s2": _gravity,
@@ -413,7 +409,6 @@ CONTROL_CHECKS = {
     "emitters_on": lambda control, value: _checked_bool("control.emitters_on", value),
     "wave_maker_on": lambda control, value: _checked_bool("control.wave_maker_on", value),
 }
-"""How each Control field is checked on assignment."""
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
@@ -483,29 +478,22 @@ class Model:
             surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
             wall_mirror=s.wall_mirror,
         )
+        boundary = BoundaryParams(
+            lower,
+            upper,
+            scene.particle_radius_m,
+            spacing,
+            h,
+            s.expert.wall_density,
+            s.wall_mirror,
+            tuple((o.min_m, o.max_m) for o in scene.obstacles),
+            scene.wave_maker.stroke_m,
+            scene.wave_maker.period_s,
+            BodyParams.from_scene(scene, volume),
+        )
+        weights = iteration_weights(s.expert, 1.0 - omega * gain)
         return cls(
-            scene,
-            n,
-            allocated,
-            mass,
-            volume,
-            grid,
-            BoundaryParams(
-                lower,
-                upper,
-                scene.particle_radius_m,
-                spacing,
-                h,
-                s.expert.wall_density,
-                s.wall_mirror,
-                tuple((o.min_m, o.max_m) for o in scene.obstacles),
-                scene.wave_maker.stroke_m,
-                scene.wave_maker.period_s,
-                BodyParams.from_scene(scene, volume),
-            ),
-            density,
-            VelocityParams(allocated, h, volume),
-            iteration_weights(s.expert, 1.0 - omega * gain),
+            scene, n, allocated, mass, volume, grid, boundary, density, VelocityParams(allocated, h, volume), weights
         )
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:
