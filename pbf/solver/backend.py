@@ -1,8 +1,7 @@
 """Choosing and starting Taichi's backend once per process, and what the host knows of its device.
 ``auto`` never takes a software Vulkan driver (the CPU backend is faster); ``gpu`` takes the best GPU
 backend that starts; one asked for by name that cannot start is a BackendError (docs/BENCHMARKS.md,
-"Backends: the CPU's path and the GPU's").
-"""
+"Backends: the CPU's path and the GPU's")."""
 
 import contextlib
 import ctypes

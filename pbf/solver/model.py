@@ -149,7 +149,7 @@ class BodyParams:
 
 @dataclass(frozen=True)
 class BoundaryParams:
-    """The container, its piston, the obstacles and bodies (``pbf.solver.boundary``)."""
+    """The container, its piston, obstacles and bodies (``pbf.solver.boundary``); flags: the solver keys so named."""
 
     lower_m: Vec3
     upper_m: Vec3
@@ -159,14 +159,11 @@ class BoundaryParams:
     """The fluid lattice's pitch: the ghost lattice behind the walls mirrors it."""
     kernel_radius_m: float
     wall_density: bool
-    """Whether the ghost density behind walls and inside obstacles is added to the constraint."""
     wall_mirror: bool
-    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``), not the fixed lattice
-    of ``Container.ghost``."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
     piston_stroke_m: float = 0.0
-    """Stroke S of the piston wave maker that moves the lower-x wall (0: the wall stands still)."""
+    """``wave_maker.stroke_m``: 0, the lower-x wall stands still."""
     piston_period_s: float = 1.0
     bodies: BodyParams = BodyParams()
     """The rigid bodies (none: compiled out)."""
@@ -174,7 +171,7 @@ class BoundaryParams:
 
 @dataclass(frozen=True)
 class DensityParams:
-    """The density constraint in dimensionless form (``pbf.solver.density``)."""
+    """The density constraint in dimensionless form (``pbf.solver.density``); flags: the solver keys so named."""
 
     particle_count: int
     kernel_radius_m: float
@@ -188,7 +185,6 @@ class DensityParams:
     """1 / W(Δq h, h), the s_corr reference of Eq. (11), 1/m⁻³."""
     max_correction: float
     surface_density: bool = False
-    """Whether the ghost density beyond the free surface is added."""
     surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
     wall_mirror: bool = False
@@ -215,31 +211,24 @@ class Push:
     def __post_init__(self):  # no NaN or overflow reaches a kernel
         for name in ("point_m", "velocity_m_s"):
             object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name), FLOAT32_SAFE))
-        bounds = (0.0, FLOAT32_SAFE)
-        radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, "radius of the hand, m", True)
+        bounds, meaning = (0.0, FLOAT32_SAFE), "radius of the hand, m"
+        radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, meaning, above_lowest=True)
         object.__setattr__(self, "radius_m", radius)
 
 
 @dataclass
 class Control:
-    """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values."""
+    """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values. The
+    fields in MIRRORED mean what their scene keys do (docs/KEYS.md), within the same bounds."""
 
     iterations: int
-    """Jacobi iterations per substep (the most, with a target)."""
     min_iterations: int
-    """Jacobi iterations every substep runs before the target may stop them."""
     substeps: int
-    """Substeps per frame asked for; the CFL limit may take more."""
     target_density_error: float
-    """Stop iterating once the mean of max(ρ/ρ0 − 1, 0) is below this; 0 runs all iterations."""
     step_back: bool
-    """Take back the share of the last iteration the target did not need (``DensityConstraint.step_back``)."""
     divergence_iterations: int
-    """Iterations of the divergence pre-correction; 0 skips the pass."""
     xsph: float
-    """XSPH c (Eq. 15), dimensionless; 0 skips the term."""
     vorticity: float
-    """Vorticity confinement ε (Eq. 14), dimensionless; 0 skips the term."""
     gravity_m_s2: Vec3
     push: Push | None = None
     """The hand in the water while the user drags it, else None."""
@@ -339,8 +328,7 @@ def _checked_vector(label: str, value, largest: float, meaning: str = "m or m/s"
     """Three finite numbers each within ±``largest``, as a tuple of floats, or TypeError/ValueError."""
     allowed = f"three finite numbers [x, y, z] within ±{_num(largest)} ({meaning})"
     if (
-        isinstance(value, (str, bytes))
-        or not isinstance(value, (tuple, list, np.ndarray))
+        not isinstance(value, (tuple, list, np.ndarray))
         or len(value) != 3
         or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value)
     ):

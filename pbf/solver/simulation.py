@@ -532,12 +532,6 @@ class Simulation:
     def stats(self) -> dict:
         """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
         figures = self.diagnostics.compute(self.grid.neighbours)
-        figures.update(
-            time_s=self.time_s,
-            frame=self.frame,
-            particles=self.particle_count,
-            backend=self.backend,
-            iterations=self.iterations_used,
-            substeps=self.frame_substeps,
-        )
+        figures.update(time_s=self.time_s, frame=self.frame, particles=self.particle_count, backend=self.backend)
+        figures.update(iterations=self.iterations_used, substeps=self.frame_substeps)
         return figures
