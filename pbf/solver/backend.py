@@ -57,7 +57,7 @@ def _cuda_device() -> Device | None:
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
         return None
     name, memory = "CUDA GPU", None
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
         device, total = ctypes.c_int(), ctypes.c_size_t()
         buffer = ctypes.create_string_buffer(256)
@@ -66,8 +66,6 @@ def _cuda_device() -> Device | None:
                 name = buffer.value.decode(errors="replace")
             if cuda.cuDeviceTotalMem_v2(ctypes.byref(total), device) == 0:
                 memory = total.value
-    except (OSError, AttributeError):
-        pass
     try:
         start_taichi(arch=ti.cuda, log_level=ti.ERROR)
         found = current_arch() == ti.cuda
@@ -321,14 +319,12 @@ def host_available_bytes() -> int:
 
 def _cuda_free_bytes() -> int | None:
     """Free memory of the CUDA device in the calling thread's context (Taichi's, once started)."""
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
         context, free, total = ctypes.c_void_p(), ctypes.c_size_t(), ctypes.c_size_t()
         if cuda.cuCtxGetCurrent(ctypes.byref(context)) == 0 and context.value:
             if cuda.cuMemGetInfo_v2(ctypes.byref(free), ctypes.byref(total)) == 0:
                 return free.value
-    except (OSError, AttributeError):
-        pass
     return None
 
 

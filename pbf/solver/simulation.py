@@ -411,13 +411,12 @@ class Simulation:
         travel = self.scene.travel_per_substep_m(self.control.iterations)
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / travel))
         if needed > t.max_substeps:
-            warnings.warn(
+            message = (
                 f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
                 f"{travel / self.scene.fluid.spacing_m:.3g} spacings a substep (time.max_cfl = {t.max_cfl} at "
-                f"{self.control.iterations} iterations); capped at time.max_substeps = {t.max_substeps}",
-                RuntimeWarning,
-                stacklevel=3,
+                f"{self.control.iterations} iterations); capped at time.max_substeps = {t.max_substeps}"
             )
+            warnings.warn(message, RuntimeWarning, stacklevel=3)
         return min(needed, t.max_substeps)
 
     def _outside_inputs(self, dt: float) -> None:
