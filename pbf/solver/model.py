@@ -64,12 +64,10 @@ def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple
     def extra(pair):
         return (pair[0] - particles) * BYTES_PER_PARTICLE + (pair[1] - cells) * BYTES_PER_CELL
 
-    fitting = [
-        pair
-        for pair in compiled
-        if particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
-    ]
-    return min(fitting, key=lambda pair: (extra(pair), pair), default=own)
+    def fits(pair):
+        return particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
+
+    return min(filter(fits, compiled), key=lambda pair: (extra(pair), pair), default=own)
 
 
 @dataclass(frozen=True)
@@ -248,21 +246,12 @@ class Control:
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:
-        s = scene.solver
         control = cls.__new__(cls)
         # The largest |g| the scene's frames can follow, set before any field.
         object.__setattr__(control, "_most_gravity_m_s2", scene.fastest_followed_m_s / scene.time.frame_dt_s)
-        control.__init__(
-            s.iterations,
-            min(s.min_iterations, s.iterations),
-            scene.time.substeps,
-            s.target_density_error,
-            s.expert.step_back,
-            s.divergence_iterations,
-            scene.viscosity.xsph,
-            scene.vorticity.epsilon,
-            scene.gravity_m_s2,
-        )
+        start = {field: functools.reduce(getattr, dotted.split("."), scene) for field, *_, dotted in MIRRORED}
+        start["min_iterations"] = min(start["min_iterations"], start["iterations"])
+        control.__init__(**start, gravity_m_s2=scene.gravity_m_s2)
         return control
 
 
