@@ -182,8 +182,7 @@ class Simulation:
         if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
             self.restore(settled_start)
         else:
-            positions, velocities = self.model.initial_particles()
-            self.restore(Snapshot(positions, velocities, 0.0, 0))
+            self.restore(Snapshot(*self.model.initial_particles(), 0.0, 0))
             if self.scene.time.settle_s > 0.0:
                 self._settle(self.scene.time.settle_s)
                 settled.store(self.scene, self.snapshot())
