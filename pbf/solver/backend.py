@@ -1,8 +1,7 @@
 """Choosing and starting Taichi's backend once per process, and what the host knows of its device.
 ``auto`` never takes a software Vulkan driver (the CPU backend is faster); ``gpu`` takes the best GPU
 backend that starts; one asked for by name that cannot start is a BackendError (docs/BENCHMARKS.md,
-"Backends: the CPU's path and the GPU's").
-"""
+"Backends: the CPU's path and the GPU's")."""
 
 import contextlib
 import ctypes
@@ -44,6 +43,7 @@ _decisions_on_device_on_cpu = False
 _gpu_blocks_on_cpu = False
 """Counts of launches lay the sums out in a GPU's blocks on the CPU (:func:`in_gpu_blocks`)."""
 
+CPU_DEVICE = Device("cpu", "")
 SOFTWARE_VULKAN = ("llvmpipe", "lavapipe", "swiftshader")
 """Names of software Vulkan devices (Mesa's lavapipe reports "llvmpipe (LLVM …)")."""
 
@@ -57,7 +57,7 @@ def _cuda_device() -> Device | None:
     if ctypes.util.find_library("cuda") is None and not os.path.exists("/proc/driver/nvidia"):
         return None
     name, memory = "CUDA GPU", None
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
         device, total = ctypes.c_int(), ctypes.c_size_t()
         buffer = ctypes.create_string_buffer(256)
@@ -66,8 +66,6 @@ def _cuda_device() -> Device | None:
                 name = buffer.value.decode(errors="replace")
             if cuda.cuDeviceTotalMem_v2(ctypes.byref(total), device) == 0:
                 memory = total.value
-    except (OSError, AttributeError):
-        pass
     try:
         start_taichi(arch=ti.cuda, log_level=ti.ERROR)
         found = current_arch() == ti.cuda
@@ -128,7 +126,7 @@ def vulkan_devices() -> list[dict]:
             # VkPhysicalDeviceProperties: five uint32 (apiVersion … deviceType), deviceName[256], < 1 kB of limits.
             properties = ctypes.create_string_buffer(4096)
             vulkan.vkGetPhysicalDeviceProperties(ctypes.c_void_p(handle), properties)
-            api, _, _, _, kind = struct.unpack_from("<5I", properties.raw, 0)
+            api, _, _, _, code = struct.unpack_from("<5I", properties.raw, 0)
             name = properties.raw[20:276].split(b"\0")[0].decode(errors="replace")
             # VkPhysicalDeviceMemoryProperties: memoryHeapCount at 260, 16-byte heaps (size, flags) from 264.
             memory = ctypes.create_string_buffer(1024)
@@ -138,14 +136,8 @@ def vulkan_devices() -> list[dict]:
                 for k in range(min(struct.unpack_from("<I", memory.raw, 260)[0], 16))
             ]
             local = max((size for size, flags in heaps if flags & 1), default=0)  # VK_MEMORY_HEAP_DEVICE_LOCAL_BIT
-            devices.append(
-                {
-                    "name": name,
-                    "type": VK_PHYSICAL_DEVICE_TYPE.get(kind, "other"),
-                    "api_minor": (api >> 12) & 0x3FF,
-                    "memory_bytes": local,
-                }
-            )
+            kind = VK_PHYSICAL_DEVICE_TYPE.get(code, "other")
+            devices.append({"name": name, "type": kind, "api_minor": (api >> 12) & 0x3FF, "memory_bytes": local})
     finally:
         vulkan.vkDestroyInstance(instance, None)
     return devices
@@ -177,51 +169,39 @@ def _metal_device() -> Device | None:
     return Device("metal", "Apple GPU") if sys.platform == "darwin" else None
 
 
+UNAVAILABLE = {
+    "cuda": "no CUDA GPU is available",
+    "vulkan": "no Vulkan device is available (no Vulkan loader or driver; on Debian/Ubuntu 'apt-get install "
+    "mesa-vulkan-drivers libvulkan1' gives a software one)",
+    "metal": "Metal exists only on macOS",
+    "gpu": "no GPU backend can start here (no CUDA GPU, no Metal, no Vulkan device)",
+}
+"""Why a backend asked for by name cannot start, for its BackendError."""
+
+
 def _choose(requested: str) -> tuple[Device, str]:
     """The device to start for ``requested`` and why; BackendError when a named backend has none."""
     if requested == "cpu":
-        return _cpu_device(), "requested"
-    if requested == "cuda":
+        return CPU_DEVICE, "requested"
+    finders = {"cuda": _cuda_device, "vulkan": _vulkan_device, "metal": _metal_device}
+    if requested in finders:
+        device, reason = finders[requested](), "requested"
+    else:  # auto or gpu: CUDA first
         device = _cuda_device()
-        if device is None:
-            raise BackendError("arch='cuda' was requested but no CUDA GPU is available; use arch='cpu' or 'auto'")
-        return device, "requested"
-    if requested == "vulkan":
-        device = _vulkan_device()
-        if device is None:
-            raise BackendError(
-                "arch='vulkan' was requested but no Vulkan device is available (no Vulkan loader or "
-                "driver; on Debian/Ubuntu 'apt-get install mesa-vulkan-drivers libvulkan1' gives a "
-                "software one); use arch='cpu' or 'auto'"
-            )
-        return device, "requested"
-    if requested == "metal":
-        device = _metal_device()
-        if device is None:
-            raise BackendError("arch='metal' was requested but Metal exists only on macOS; use arch='cpu' or 'auto'")
-        return device, "requested"
-    cuda = _cuda_device()
-    if cuda is not None:
-        return cuda, "CUDA GPU found" if requested == "auto" else "the best GPU backend found"
-    other = _metal_device() or _vulkan_device()
-    if requested == "gpu":
-        if other is None:
-            raise BackendError(
-                "arch='gpu' was requested but no GPU backend can start here (no CUDA GPU, no Metal, "
-                "no Vulkan device); use arch='cpu' or 'auto'"
-            )
-        return other, "the best GPU backend found"
-    if other is not None and not other.software:
-        return other, f"no CUDA GPU, a {other.arch} device found"
-    if other is not None:
-        return _cpu_device(), (
-            f"no GPU found; the Vulkan device {other.name!r} is a software driver, slower than the CPU backend"
-        )
-    return _cpu_device(), "no GPU found"
-
-
-def _cpu_device() -> Device:
-    return Device("cpu", "")
+        if device is not None:
+            return device, "CUDA GPU found" if requested == "auto" else "the best GPU backend found"
+        device, reason = _metal_device() or _vulkan_device(), "the best GPU backend found"
+        if requested == "auto":
+            if device is None:
+                return CPU_DEVICE, "no GPU found"
+            if device.software:
+                return CPU_DEVICE, (
+                    f"no GPU found; the Vulkan device {device.name!r} is a software driver, slower than the CPU backend"
+                )
+            return device, f"no CUDA GPU, a {device.arch} device found"
+    if device is None:
+        raise BackendError(f"arch={requested!r} was requested but {UNAVAILABLE[requested]}; use arch='cpu' or 'auto'")
+    return device, reason
 
 
 def start_backend(
@@ -245,22 +225,16 @@ def start_backend(
         return _started.arch
     device, reason = _choose(requested)
     threads = {"cpu_max_num_threads": cpu_threads} if cpu_threads else {}
+    profiler = {"kernel_profiler": True} if kernel_profiler else {}
     _options.clear()
-    _options.update(
-        arch=getattr(ti, device.arch),
-        default_fp=ti.f32,
-        log_level=ti.WARN,
-        advanced_optimization=not fast_compile,
-        **threads,
-        **({"kernel_profiler": True} if kernel_profiler else {}),
-    )
+    _options.update(arch=getattr(ti, device.arch), default_fp=ti.f32, log_level=ti.WARN)
+    _options.update(advanced_optimization=not fast_compile, **threads, **profiler)
     try:
         start_taichi(**_options)
         running = current_arch()
     except Exception as error:  # Taichi raises RuntimeError and its own types when a driver fails
         raise BackendError(f"arch={requested!r}: Taichi could not start {device.arch}: {error}") from None
-    if device.arch != "cpu" and running != getattr(ti, device.arch):
-        # Taichi's own fallback to the CPU.
+    if device.arch != "cpu" and running != getattr(ti, device.arch):  # Taichi's own fallback to the CPU
         ti.reset()
         raise BackendError(
             f"arch={requested!r}: Taichi could not start {device.arch} on {device.name!r} (it fell "
@@ -301,18 +275,18 @@ def gpu_blocks() -> bool:
 
 def in_gpu_blocks(enabled: bool = True):
     """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
-    return _choosing("_gpu_blocks_on_cpu", enabled)
+    return _choosing(sys.modules[__name__], "_gpu_blocks_on_cpu", enabled)
 
 
 @contextlib.contextmanager
-def _choosing(name: str, enabled: bool):
-    """The module's choice ``name`` set to ``enabled`` for what is built inside, then set back."""
-    before = globals()[name]
-    globals()[name] = enabled
+def _choosing(owner, name: str, value):
+    """``owner``'s choice ``name`` set to ``value`` for what is built (or first compiled) inside, then set back."""
+    before = getattr(owner, name)
+    setattr(owner, name, value)
     try:
         yield
     finally:
-        globals()[name] = before
+        setattr(owner, name, before)
 
 
 def sums_in_shared_memory() -> bool:
@@ -327,19 +301,12 @@ def keeps_decisions_on_device() -> bool:
 
 def decisions_on_device(enabled: bool = True):
     """Simulations built inside take the GPU backends' device-resident path on any backend."""
-    return _choosing("_decisions_on_device_on_cpu", enabled)
+    return _choosing(sys.modules[__name__], "_decisions_on_device_on_cpu", enabled)
 
 
-@contextlib.contextmanager
 def light_compile():
     """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
-    config = compile_config()
-    before = config.advanced_optimization
-    config.advanced_optimization = False
-    try:
-        yield
-    finally:
-        config.advanced_optimization = before
+    return _choosing(compile_config(), "advanced_optimization", False)
 
 
 def host_available_bytes() -> int:
@@ -352,27 +319,21 @@ def host_available_bytes() -> int:
 
 def _cuda_free_bytes() -> int | None:
     """Free memory of the CUDA device in the calling thread's context (Taichi's, once started)."""
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         cuda = ctypes.CDLL(ctypes.util.find_library("cuda") or "libcuda.so.1")
         context, free, total = ctypes.c_void_p(), ctypes.c_size_t(), ctypes.c_size_t()
         if cuda.cuCtxGetCurrent(ctypes.byref(context)) == 0 and context.value:
             if cuda.cuMemGetInfo_v2(ctypes.byref(free), ctypes.byref(total)) == 0:
                 return free.value
-    except (OSError, AttributeError):
-        pass
     return None
 
 
 def device_memory_bytes() -> int:
     """Memory the backend can still give the fields, bytes: the GPU's where it can tell, else the host's."""
-    if _started is None:
-        return host_available_bytes()
-    device = _started
+    device = _started or CPU_DEVICE
     if device.arch == "cuda":
         return _cuda_free_bytes() or device.memory_bytes or host_available_bytes()
-    if device.memory_bytes:
-        return device.memory_bytes
-    return host_available_bytes()
+    return device.memory_bytes or host_available_bytes()
 
 
 def memory_place() -> str:

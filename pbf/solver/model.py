@@ -64,12 +64,10 @@ def reused_allocation(own: tuple[int, int], compiled, limit_bytes: int) -> tuple
     def extra(pair):
         return (pair[0] - particles) * BYTES_PER_PARTICLE + (pair[1] - cells) * BYTES_PER_CELL
 
-    fitting = [
-        pair
-        for pair in compiled
-        if particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
-    ]
-    return min(fitting, key=lambda pair: (extra(pair), pair), default=own)
+    def fits(pair):
+        return particles <= pair[0] <= 2 * particles and cells <= pair[1] <= 2 * cells and extra(pair) <= limit_bytes
+
+    return min(filter(fits, compiled), key=lambda pair: (extra(pair), pair), default=own)
 
 
 @dataclass(frozen=True)
@@ -81,9 +79,7 @@ class GridParams:
     """Lower corner of the gridded box (the container), m."""
     upper_m: Vec3
     kernel_radius_m: float
-    """h: neighbours are the particles closer than this."""
     resolution: tuple[int, int, int]
-    """Cells per axis, each at least h / reach wide."""
     reach: int
     allocated_particles: int = 0
     """Per-particle arrays' length (:func:`allocation` of ``particle_count``; 0: that)."""
@@ -98,14 +94,8 @@ class GridParams:
         extent = np.array(upper_m, np.float64) - np.array(lower_m, np.float64)
         cell = kernel_radius_m / reach * (1 + 1e-4)
         resolution = tuple(max(1, int(math.floor(e / cell))) for e in extent)
-        return cls(
-            particle_count,
-            tuple(map(float, lower_m)),
-            tuple(map(float, upper_m)),
-            float(kernel_radius_m),
-            resolution,
-            reach,
-        )
+        lower, upper = tuple(map(float, lower_m)), tuple(map(float, upper_m))
+        return cls(particle_count, lower, upper, float(kernel_radius_m), resolution, reach)
 
     @property
     def cell_count(self) -> int:
@@ -113,7 +103,6 @@ class GridParams:
 
     @property
     def allocated_cells(self) -> int:
-        """Per-cell arrays' length: :func:`allocation` of the cell count, or a larger bucket (``cell_bucket``)."""
         return self.cell_bucket or allocation(self.cell_count, CELL_BUCKET_FLOOR)
 
 
@@ -140,41 +129,25 @@ class BodyParams:
 
     @classmethod
     def from_scene(cls, scene: Scene, particle_volume_m3: float) -> BodyParams:
-        shapes, halves, masses, inertias, initial = [], [], [], [], []
+        rows = []  # one per body: shape, half extents, mass, inertia, initial state
         for body in scene.bodies:
-            half = body.half_extents()
-            mass = body.mass_kg()
+            half, mass = body.half_extents(), body.mass_kg()
+            a2, b2, c2 = (x**2 for x in half)
             if body.shape == "sphere":
-                inertia = np.full(3, 0.4 * mass * half[0] ** 2)
+                inertia = np.full(3, 0.4 * mass * a2)
             else:  # a box of edges 2a, 2b, 2c: I_x = m (b² + c²) / 3
-                inertia = (
-                    mass
-                    / 3.0
-                    * np.array([half[1] ** 2 + half[2] ** 2, half[0] ** 2 + half[2] ** 2, half[0] ** 2 + half[1] ** 2])
-                )
-            shapes.append(body.shape)
-            halves.append(tuple(map(float, half)))
-            masses.append(float(mass))
-            inertias.append(tuple(map(float, inertia)))
-            initial.append(
-                tuple(
-                    map(float, (*body.position_m, *body.quaternion(), *body.velocity_m_s, *body.angular_velocity_rad_s))
-                )
+                inertia = mass / 3.0 * np.array([b2 + c2, a2 + c2, a2 + b2])
+            state = (*body.position_m, *body.quaternion(), *body.velocity_m_s, *body.angular_velocity_rad_s)
+            rows.append(
+                (body.shape, tuple(map(float, half)), float(mass), tuple(map(float, inertia)), tuple(map(float, state)))
             )
-        return cls(
-            tuple(shapes),
-            tuple(halves),
-            tuple(masses),
-            tuple(inertias),
-            tuple(initial),
-            scene.fluid.rest_density_kg_m3,
-            particle_volume_m3,
-        )
+        columns = tuple(zip(*rows)) or ((),) * 5
+        return cls(*columns, scene.fluid.rest_density_kg_m3, particle_volume_m3)
 
 
 @dataclass(frozen=True)
 class BoundaryParams:
-    """The container, its piston, the obstacles and bodies (``pbf.solver.boundary``)."""
+    """The container, its piston, obstacles and bodies (``pbf.solver.boundary``); flags: the solver keys so named."""
 
     lower_m: Vec3
     upper_m: Vec3
@@ -184,13 +157,11 @@ class BoundaryParams:
     """The fluid lattice's pitch: the ghost lattice behind the walls mirrors it."""
     kernel_radius_m: float
     wall_density: bool
-    """Whether the ghost density behind walls and inside obstacles is added to the constraint."""
     wall_mirror: bool
-    """Whether the container's ghost is the fluid's mirror image (``solver.wall_mirror``), not its tables."""
     obstacles: tuple[tuple[Vec3, Vec3], ...] = ()
     """(lower, upper) corners of each static box obstacle, m."""
     piston_stroke_m: float = 0.0
-    """Stroke S of the piston wave maker that moves the lower-x wall (0: the wall stands still)."""
+    """``wave_maker.stroke_m``: 0, the lower-x wall stands still."""
     piston_period_s: float = 1.0
     bodies: BodyParams = BodyParams()
     """The rigid bodies (none: compiled out)."""
@@ -198,12 +169,11 @@ class BoundaryParams:
 
 @dataclass(frozen=True)
 class DensityParams:
-    """The density constraint in dimensionless form (``pbf.solver.density``)."""
+    """The density constraint in dimensionless form (``pbf.solver.density``); flags: the solver keys so named."""
 
     particle_count: int
     kernel_radius_m: float
     particle_volume_m3: float
-    """V = m/ρ0."""
     relaxation: float
     """ε̂ of Eq. (10), dimensionless."""
     omega: float
@@ -212,13 +182,10 @@ class DensityParams:
     inverse_w_dq: float
     """1 / W(Δq h, h), the s_corr reference of Eq. (11), 1/m⁻³."""
     max_correction: float
-    """Largest move of one iteration, in h."""
     surface_density: bool = False
-    """Whether the ghost density beyond the free surface is added (``pbf.solver.density``)."""
     surface_calibration: tuple[float, float, float] = (0.0, 1.0, 0.0)
     """(g_below, g_top, ψ_top) of ``pbf.solver.sph.surface_ghost_calibration``."""
     wall_mirror: bool = False
-    """Whether the container's ghost is the fluid's mirror image, not the fixed lattice of ``Container.ghost``."""
 
 
 @dataclass(frozen=True)
@@ -239,44 +206,27 @@ class Push:
     velocity_m_s: Vec3
     radius_m: float
 
-    def __post_init__(self):
-        # No NaN or overflow reaches a kernel.
+    def __post_init__(self):  # no NaN or overflow reaches a kernel
         for name in ("point_m", "velocity_m_s"):
             object.__setattr__(self, name, _checked_vector(f"control.push.{name}", getattr(self, name), FLOAT32_SAFE))
-        object.__setattr__(
-            self,
-            "radius_m",
-            _checked_number(
-                "control.push.radius_m",
-                self.radius_m,
-                float,
-                (0.0, FLOAT32_SAFE),
-                "radius of the hand, m",
-                above_lowest=True,
-            ),
-        )
+        bounds, meaning = (0.0, FLOAT32_SAFE), "radius of the hand, m"
+        radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, meaning, above_lowest=True)
+        object.__setattr__(self, "radius_m", radius)
 
 
 @dataclass
 class Control:
-    """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values."""
+    """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values. The
+    fields in MIRRORED mean what their scene keys do (docs/KEYS.md), within the same bounds."""
 
     iterations: int
-    """Jacobi iterations per substep (the most, with a target)."""
     min_iterations: int
-    """Jacobi iterations every substep runs before the target may stop them."""
     substeps: int
-    """Substeps per frame asked for; the CFL limit may take more."""
     target_density_error: float
-    """Stop iterating once the mean of max(ρ/ρ0 − 1, 0) is below this; 0 runs all iterations."""
     step_back: bool
-    """Take back the share of the last iteration the target did not need (``DensityConstraint.step_back``)."""
     divergence_iterations: int
-    """Iterations of the divergence pre-correction; 0 skips the pass."""
     xsph: float
-    """XSPH c (Eq. 15), dimensionless; 0 skips the term."""
     vorticity: float
-    """Vorticity confinement ε (Eq. 14), dimensionless; 0 skips the term."""
     gravity_m_s2: Vec3
     push: Push | None = None
     """The hand in the water while the user drags it, else None."""
@@ -296,21 +246,12 @@ class Control:
 
     @classmethod
     def from_scene(cls, scene: Scene) -> Control:
-        s = scene.solver
         control = cls.__new__(cls)
         # The largest |g| the scene's frames can follow, set before any field.
         object.__setattr__(control, "_most_gravity_m_s2", scene.fastest_followed_m_s / scene.time.frame_dt_s)
-        control.__init__(
-            s.iterations,
-            min(s.min_iterations, s.iterations),
-            scene.time.substeps,
-            s.target_density_error,
-            s.expert.step_back,
-            s.divergence_iterations,
-            scene.viscosity.xsph,
-            scene.vorticity.epsilon,
-            scene.gravity_m_s2,
-        )
+        start = {field: functools.reduce(getattr, dotted.split("."), scene) for field, *_, dotted in MIRRORED}
+        start["min_iterations"] = min(start["min_iterations"], start["iterations"])
+        control.__init__(**start, gravity_m_s2=scene.gravity_m_s2)
         return control
 
 
@@ -321,9 +262,7 @@ class Features:
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
     divergence_iterations: int
-    """Iterations of the divergence pre-correction; 0 leaves the pass out."""
     vorticity: bool
-    """Vorticity confinement (Eqs. 13-14)."""
     wave_maker: bool
     bodies: bool
     wall_mirror: bool
@@ -347,12 +286,6 @@ def _features(*values) -> Features:
     return Features(*values)
 
 
-def _scene_key(table, name: str, dotted: str) -> tuple[tuple[float, float], str]:
-    """The bounds of a scene key, from its declaration (``pbf.scene.schema.key``), and their description."""
-    declared = {f.name: f for f in dataclasses.fields(table)}[name]
-    return declared.metadata["check"].bounds, f"the bounds of {dotted}"
-
-
 def _given(value) -> str:
     return f"{_show(value)} ({type(value).__name__})"
 
@@ -364,14 +297,12 @@ def _checked_number(
     lowest, highest = bounds
     interval = f"{'(' if above_lowest else '['}{_num(lowest)}, {_num(highest)}]"
     allowed = f"{'an integer' if kind is int else 'a finite number'} in {interval} ({meaning})"
-    is_bool = isinstance(value, (bool, np.bool_))
+    numeric = numbers.Integral if kind is int else numbers.Real
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numeric):
+        raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
     if kind is int:
-        if is_bool or not isinstance(value, numbers.Integral):
-            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
         converted = int(value)
     else:
-        if is_bool or not isinstance(value, numbers.Real):
-            raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
         try:
             converted = float(value)
         except OverflowError:
@@ -386,8 +317,7 @@ def _checked_vector(label: str, value, largest: float, meaning: str = "m or m/s"
     """Three finite numbers each within ±``largest``, as a tuple of floats, or TypeError/ValueError."""
     allowed = f"three finite numbers [x, y, z] within ±{_num(largest)} ({meaning})"
     if (
-        isinstance(value, (str, bytes))
-        or not isinstance(value, (tuple, list, np.ndarray))
+        not isinstance(value, (tuple, list, np.ndarray))
         or len(value) != 3
         or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value)
     ):
@@ -408,11 +338,12 @@ def _checked_bool(label: str, value) -> bool:
 
 
 def _setting(field_name: str, kind: type, table, name: str, dotted: str):
-    """The check of Control's ``field_name``, which mirrors scene key ``dotted`` (``table``'s field ``name``)."""
+    """The check of Control's ``field_name``: the declared bounds of scene key ``dotted`` (``table``'s ``name``)."""
     label = f"control.{field_name}"
     if kind is bool:
         return lambda control, value: _checked_bool(label, value)
-    bounds, meaning = _scene_key(table, name, dotted)
+    bounds = {f.name: f for f in dataclasses.fields(table)}[name].metadata["check"].bounds
+    meaning = f"the bounds of {dotted}"
     return lambda control, value: _checked_number(label, value, kind, bounds, meaning)
 
 
@@ -426,8 +357,7 @@ def _gravity(control, value) -> Vec3:
         raise ValueError(
             f"control.gravity_m_s2: expected |g| ≤ {_num(most)} m/s², what the scene's frames can "
             f"follow (time.max_substeps × time.max_cfl (less under 4 solver.iterations) × fluid.spacing_m / "
-            f"time.frame_dt_s²), got "
-            f"|g| = {_num(length)} m/s²"
+            f"time.frame_dt_s²), got |g| = {_num(length)} m/s²"
         )
     return vector
 
@@ -448,8 +378,7 @@ MIRRORED = (
     ("xsph", float, Viscosity, "xsph", "viscosity.xsph"),
     ("vorticity", float, Vorticity, "epsilon", "vorticity.epsilon"),
 )
-"""(Control field, type, schema table, its field, scene key): the fields that start from a scene key and
-keep its bounds."""
+"""(Control field, type, schema table, its field, scene key): the fields that start from a scene key, in its bounds."""
 CONTROL_CHECKS = {
     **{field: _setting(field, *rest) for field, *rest in MIRRORED},
     "gravity_m_s2": _gravity,
@@ -457,7 +386,6 @@ CONTROL_CHECKS = {
     "emitters_on": lambda control, value: _checked_bool("control.emitters_on", value),
     "wave_maker_on": lambda control, value: _checked_bool("control.wave_maker_on", value),
 }
-"""How each Control field is checked on assignment."""
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
@@ -527,29 +455,22 @@ class Model:
             surface_calibration=sph.surface_ghost_calibration(spacing, h) if s.surface_density else (0.0, 1.0, 0.0),
             wall_mirror=s.wall_mirror,
         )
+        boundary = BoundaryParams(
+            lower,
+            upper,
+            scene.particle_radius_m,
+            spacing,
+            h,
+            s.expert.wall_density,
+            s.wall_mirror,
+            tuple((o.min_m, o.max_m) for o in scene.obstacles),
+            scene.wave_maker.stroke_m,
+            scene.wave_maker.period_s,
+            BodyParams.from_scene(scene, volume),
+        )
+        weights = iteration_weights(s.expert, 1.0 - omega * gain)
         return cls(
-            scene,
-            n,
-            allocated,
-            mass,
-            volume,
-            grid,
-            BoundaryParams(
-                lower,
-                upper,
-                scene.particle_radius_m,
-                spacing,
-                h,
-                s.expert.wall_density,
-                s.wall_mirror,
-                tuple((o.min_m, o.max_m) for o in scene.obstacles),
-                scene.wave_maker.stroke_m,
-                scene.wave_maker.period_s,
-                BodyParams.from_scene(scene, volume),
-            ),
-            density,
-            VelocityParams(allocated, h, volume),
-            iteration_weights(s.expert, 1.0 - omega * gain),
+            scene, n, allocated, mass, volume, grid, boundary, density, VelocityParams(allocated, h, volume), weights
         )
 
     def initial_particles(self) -> tuple[np.ndarray, np.ndarray]:

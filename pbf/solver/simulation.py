@@ -77,7 +77,6 @@ class Neighbourhood:
     support_m: float
     """h, the radius the lists were searched within, m."""
     positions: object
-    """(n,) vector(3, f32) field of positions, m (the readout's)."""
     grid: object
     """The grid, a ``ti.template()``: ``for_each_neighbour(i, entries, task, acc)`` calls ``task(i, j, acc)``."""
     entries: object
@@ -138,7 +137,6 @@ class Simulation:
         on_device = keeps_decisions_on_device()
         self.state = State(model.allocated)
         self.boundaries = Boundaries(model.boundary, solids=False)
-        """The container, its piston, the obstacles and the rigid bodies (``pbf.solver.boundary``)."""
         self.grid = NeighbourGrid(model.grid, self.state.active, slot_major=on_gpu(), loop_bound=self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
         self.density = DensityConstraint(model.density, self.boundaries, self.grid)
@@ -153,15 +151,13 @@ class Simulation:
             per_call=2 if on_device else 1,
             reads_decisions=not on_device,
         )
-        """The substep's Jacobi iterations and the rules that stop them (``pbf.solver.iterations``)."""
         self.boundaries.allocate_solids(model.allocated)
         self.bodies = self.boundaries.bodies
         """The rigid bodies (``pbf.solver.bodies``), None in a scene without them."""
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.kernels = SubstepKernels(self)
-        """The stages composed into three kernels (``pbf.solver.substep``)."""
+        self.kernels = SubstepKernels(self)  # the stages composed into three kernels
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
@@ -186,8 +182,7 @@ class Simulation:
         if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
             self.restore(settled_start)
         else:
-            positions, velocities = self.model.initial_particles()
-            self.restore(Snapshot(positions, velocities, 0.0, 0))
+            self.restore(Snapshot(*self.model.initial_particles(), 0.0, 0))
             if self.scene.time.settle_s > 0.0:
                 self._settle(self.scene.time.settle_s)
                 settled.store(self.scene, self.snapshot())
@@ -212,8 +207,7 @@ class Simulation:
         if self.bodies is not None:
             self.bodies.held = False
         self.control.wave_maker_on = True
-        settled = self.snapshot()
-        self.restore(replace(settled, time_s=0.0, frame=0, piston_time_s=None))
+        self.restore(replace(self.snapshot(), time_s=0.0, frame=0, piston_time_s=None))
 
     def snapshot(self) -> Snapshot:
         """What :meth:`restore` takes: the particles' kept fields (creation order), clocks, emitters, bodies."""
@@ -411,20 +405,17 @@ class Simulation:
         fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
             fastest = min(fastest, t.max_speed_m_s)
-        speed = (
-            max(fastest, self.boundaries.speed_limit_m_s(bodies))
-            + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
-        )
+        walls = self.boundaries.speed_limit_m_s(bodies)
+        speed = max(fastest, walls) + float(np.linalg.norm(self.control.gravity_m_s2)) * t.frame_dt_s
         travel = self.scene.travel_per_substep_m(self.control.iterations)
         needed = max(self.control.substeps, math.ceil(speed * t.frame_dt_s / travel))
         if needed > t.max_substeps:
-            warnings.warn(
+            message = (
                 f"{self.scene.name}: particles at {speed:.3g} m/s need {needed} substeps per frame for "
                 f"{travel / self.scene.fluid.spacing_m:.3g} spacings a substep (time.max_cfl = {t.max_cfl} at "
-                f"{self.control.iterations} iterations); capped at time.max_substeps = {t.max_substeps}",
-                RuntimeWarning,
-                stacklevel=3,
+                f"{self.control.iterations} iterations); capped at time.max_substeps = {t.max_substeps}"
             )
+            warnings.warn(message, RuntimeWarning, stacklevel=3)
         return min(needed, t.max_substeps)
 
     def _outside_inputs(self, dt: float) -> None:
@@ -539,12 +530,6 @@ class Simulation:
     def stats(self) -> dict:
         """Diagnostics of the current state (see Diagnostics.compute), with time and counts."""
         figures = self.diagnostics.compute(self.grid.neighbours)
-        figures.update(
-            time_s=self.time_s,
-            frame=self.frame,
-            particles=self.particle_count,
-            backend=self.backend,
-            iterations=self.iterations_used,
-            substeps=self.frame_substeps,
-        )
+        figures.update(time_s=self.time_s, frame=self.frame, particles=self.particle_count, backend=self.backend)
+        figures.update(iterations=self.iterations_used, substeps=self.frame_substeps)
         return figures
