@@ -13,17 +13,16 @@ REUSE_LIMIT_BYTES = 64 << 20
 """The most memory a larger bucket may add."""
 
 
-def _path() -> Path | None:
-    """The record's path: None while Taichi's offline cache is off."""
+def cache_folder(name: str) -> Path | None:
+    """``name`` in Taichi's offline cache folder, where the solver keeps what starts reuse: None while the
+    cache is off."""
     config = compile_config()
-    if not config.offline_cache:
-        return None
-    return Path(config.offline_cache_file_path) / FILE
+    return Path(config.offline_cache_file_path) / name if config.offline_cache else None
 
 
 def compiled() -> frozenset[tuple[int, int]]:
     """The (particles, cells) pairs recorded in this cache folder (lines that are not two positive integers skipped)."""
-    path = _path()
+    path = cache_folder(FILE)
     if path is None:
         return frozenset()
     try:
@@ -42,7 +41,7 @@ def compiled() -> frozenset[tuple[int, int]]:
 
 def record(particles: int, cells: int) -> None:
     """Add the pair a start allocates to the record (once); a folder that cannot be written is skipped."""
-    path = _path()
+    path = cache_folder(FILE)
     if path is None or (particles, cells) in compiled():
         return
     try:

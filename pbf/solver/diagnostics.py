@@ -15,12 +15,9 @@ class Diagnostics:
         self.density = density
         self.grid = grid
         self.mass = particle_mass_kg
-        self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]
-        """max(ρ/ρ0 − 1, 0), |v|² and the neighbour count of each particle."""
-        self.speed = ti.field(ti.f32, shape=state.capacity)
-        """|v| of each particle, for the maximum."""
-        self.sums = TreeSum(state.capacity, 6)
-        """Sums of the three terms (slots 0-2), then maxima of the error, |v| and the neighbours (3-5)."""
+        self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]  # max(ρ/ρ0 − 1, 0), |v|², neighbours
+        self.speed = ti.field(ti.f32, shape=state.capacity)  # |v|, for the maximum
+        self.sums = TreeSum(state.capacity, 6)  # the terms' sums (slots 0-2), the maxima (3-5)
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 

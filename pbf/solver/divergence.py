@@ -23,16 +23,12 @@ class DivergenceCorrection:
         self.state = state
         self.boundaries = boundaries
         self.grid = grid
-        self.constants = density.constants
-        """h, V, ω and ε̂: the density constraint's."""
-        self.denominator = ti.field(ti.f32, shape=params.particle_count)
-        """|Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂ at the fixed positions."""
-        self.deficit = ti.field(ti.f32, shape=params.particle_count)
-        """min(C_i, 0) at x: how far below ρ0 particle i may still fill."""
-        self.increment = ti.field(ti.f32, shape=params.particle_count)
-        """δλ̂_i of the current iteration (the warm start's Λ_i in the first)."""
+        self.constants = density.constants  # h, V, ω and ε̂: the density constraint's
+        self.denominator = ti.field(ti.f32, shape=params.particle_count)  # of δλ̂_i, at the fixed positions
+        self.deficit = ti.field(ti.f32, shape=params.particle_count)  # min(C_i, 0) at x: what i may still fill
+        self.increment = ti.field(ti.f32, shape=params.particle_count)  # δλ̂_i (the warm start's Λ_i first)
+        # ĝ_wall at x_i from the warm start: the density constraint's field, free until its iterations.
         self.wall_gradient = density.wall_gradient
-        """ĝ_wall at x_i, looked up by the warm start: the density constraint's field, free until its iterations."""
 
     @ti.func
     def change_pair(self, i, j, p: ti.template()):

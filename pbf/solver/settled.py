@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pbf.solver import backend
-from pbf.solver.launch import compile_config
+from pbf.solver.buckets import cache_folder
 from pbf.solver.state import Snapshot
 
 FOLDER = "pbf_settled"
@@ -55,17 +55,9 @@ def settled_key(scene) -> str:
     return digest.hexdigest()[:32]
 
 
-def _folder() -> Path | None:
-    """Where settled starts are kept: None while Taichi's offline cache is off."""
-    config = compile_config()
-    if not config.offline_cache:
-        return None
-    return Path(config.offline_cache_file_path) / FOLDER
-
-
 def load(scene) -> Snapshot | None:
     """``scene``'s settled start from disk, or None if none is kept (or the file cannot be read)."""
-    folder = _folder()
+    folder = cache_folder(FOLDER)
     if folder is None:
         return None
     path = folder / f"{settled_key(scene)}.npz"
@@ -81,7 +73,7 @@ def load(scene) -> Snapshot | None:
 def store(scene, snapshot: Snapshot) -> None:
     """Keep ``snapshot`` (the settled start at t = 0) as ``scene``'s; a folder that cannot be written
     is skipped (the next start settles again)."""
-    folder = _folder()
+    folder = cache_folder(FOLDER)
     if folder is None:
         return
     arrays = {"positions_m": snapshot.positions_m, "velocities_m_s": snapshot.velocities_m_s}
