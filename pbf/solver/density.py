@@ -68,8 +68,7 @@ class DensityConstraint:
             surface_top=psi_top,
         )
         self.surface = ti.field(ti.f32, shape=particle_count)
-        """ψ_i/ρ0, the density of the ghost fluid beyond the free surface, from the substep's first
-        iteration (0 with the ghost off)."""
+        """ψ_i/ρ0, the ghost fluid beyond the free surface, from the substep's first iteration."""
         self.colour_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
         """ĝ_i = Σ_j ĝ_ij + ĝ_wall at x* (:meth:`prepare`), which ψ is smoothed from."""
         self.plain_error = ti.field(ti.f32, shape=particle_count)
@@ -77,25 +76,22 @@ class DensityConstraint:
         self.lam = ti.field(ti.f32, shape=particle_count)
         """λ̂_i, the dimensionless Lagrange multiplier of each particle's constraint."""
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
-        """The held-still ghost's gradient at x_i (1/m), looked up by the λ pass for the Δx pass that
-        reads the same positions (:meth:`walls`)."""
-        self.error = ti.field(ti.f32, shape=particle_count)
-        """max(C_i, 0) of the last λ pass that measured it."""
+        """The held-still ghost's gradient at x_i (1/m), from the λ pass for the Δx pass (:meth:`walls`)."""
+        self.error = ti.field(ti.f32, shape=particle_count)  # max(C_i, 0) of the last λ pass
         self.error_sum = TreeSum(particle_count)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the substep's whole correction (the pressure impulse, pressure_scale):
         it combines as the positions do, L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1})."""
-        self.lam_before = ti.field(ti.f32, shape=particle_count)
-        """L^{k−1} of lam_total's recurrence."""
+        self.lam_before = ti.field(ti.f32, shape=particle_count)  # L^{k−1} of lam_total's recurrence
         self.denominator = ti.field(ti.f32, shape=particle_count)
-        """|∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂ of λ̂_i (Eq. 10) at x* (:meth:`prepare`): with the ghost
-        tables |Σ_j ĝ_ij + ĝ_wall|² + Σ_j |ĝ_ij|² + ε̂; with mirrored walls the images' terms too."""
+        """|∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂ of λ̂_i (Eq. 10) at x* (:meth:`prepare`), the images' terms
+        included with mirrored walls."""
 
     @ti.func
     def walls(self, i, xi):
-        """The ghost density ρ/ρ0 of the boundaries held still at xi (with ``solver.wall_mirror`` all but
-        the container's); its gradient is kept for the Δx pass that reads the same positions."""
+        """The ghost density ρ/ρ0 of the boundaries held still at xi (mirrored walls left out); its gradient
+        is kept for the Δx pass."""
         wall, gradient = self.boundaries.ghost(xi, True)
         self.wall_gradient[i] = gradient
         return wall
@@ -145,8 +141,7 @@ class DensityConstraint:
 
     @ti.func
     def mirrored_density_pair(self, i, j, p: ti.template()):
-        """:meth:`density_pair` with x_j's mirror images in the walls near x_i: they act like the pair,
-        and ∂C_i/∂x_j sums their reflected gradients."""
+        """:meth:`density_pair` with x_j's mirror images in the walls near x_i (∂C_i/∂x_j: reflected)."""
         xj = position(p.x, j)
         if ti.static(p.gradients):
             w, grad_w = scaled_kernel_and_gradient(p.xi - xj, p.scale)
@@ -196,9 +191,8 @@ class DensityConstraint:
 
     @ti.func
     def prepare(self, x: ti.template(), i, neighbours: ti.template()):
-        """The substep's constants of particle i's constraint at x* (before the first iteration): C_i, the
-        denominator of λ̂_i (Eq. 10) and the colour gradient the surface ghost is smoothed from, and
-        the walls' gradient for the first Δx pass."""
+        """Particle i's constants of the substep at x*: C_i, the denominator of λ̂_i (Eq. 10), the colour
+        gradient the surface ghost is smoothed from and the walls' gradient for the first Δx pass."""
         xi = x[i]
         h, relaxation = self.constants[None].h, self.constants[None].relaxation
         wall = self.walls(i, xi)
@@ -248,9 +242,8 @@ class DensityConstraint:
         k,
         weight,
     ):
-        """λ̂_i of iteration k (Eq. 10): C_i at the positions in the buffer ``from_second`` picks (the
-        first iteration's from :meth:`prepare`, with the surface ghost found then), combined into the
-        substep's L with this iteration's ``weight``, and its error kept for the sum."""
+        """λ̂_i of iteration k (Eq. 10) from C_i in the buffer ``from_second`` picks (the first iteration's
+        from :meth:`prepare`, the surface ghost found then), into L with this iteration's ``weight``."""
         c = 0.0
         if k == 0:  # x* in the first buffer, its sums made by prepare()
             self.surface[i] = self.surface_ghost(first, i, neighbours)
@@ -326,8 +319,8 @@ class DensityConstraint:
     def jacobi_step(
         self, first: ti.template(), second: ti.template(), from_second, i, neighbours: ti.template(), weight
     ):
-        """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the
-        other buffer's x_i (the iteration before) and collided with the boundaries (line 15), into that buffer."""
+        """x_i + Δx_i (Eqs. 11-12) from the buffer ``from_second`` picks, weighted against the other's (the
+        iteration before), collided (line 15), into the other."""
         h, max_correction = self.constants[None].h, self.constants[None].max_correction
         xi, earlier = first[i], second[i]
         if from_second:

@@ -42,28 +42,22 @@ class Emitters:
         self.emitters = emitters
         self.spacing = spacing_m
         self.state = state
-        self.capacity = state.capacity if capacity is None else min(int(capacity), state.capacity)
-        """The scene's particle budget: no append writes past it."""
-        self.grid = grid
-        """The neighbour grid of the last sort, to find water at a nozzle; None: no check."""
+        self.capacity = state.capacity if capacity is None else min(int(capacity), state.capacity)  # the budget
+        self.grid = grid  # the last sort's grid, to find water at a nozzle (None: no check)
         self.checks_water = grid is not None
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
-        self.emitted = [0] * len(emitters)
-        """Layers each emitter has added so far."""
-        self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]
-        """Where each emitter's sites start in ``site_offsets``."""
+        self.emitted = [0] * len(emitters)  # layers each emitter has added so far
+        self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]  # into site_offsets
         if self.offsets[-1]:
             # Sized by buckets, constants as data: one compile for every scene with emitters.
             self.constants = scene_constants(spacing=spacing_m, capacity=self.capacity)
             padded = np.zeros((allocation(self.offsets[-1], 64), 3), np.float32)
             padded[: self.offsets[-1]] = np.concatenate(self.sites)
-            self.site_offsets = ti.Vector.field(3, ti.f32, len(padded))
-            """Every nozzle's sites, emitter after emitter, from its centre (m)."""
+            self.site_offsets = ti.Vector.field(3, ti.f32, len(padded))  # every nozzle's sites from its centre, m
             self.site_offsets.from_numpy(padded)
+            # Per (layer, site) of a launch: 1 where water lies within half a spacing; per layer: any of them.
             self.taken = ti.field(ti.i32, allocation(LAYERS_PER_LAUNCH * max(len(sites) for sites in self.sites), 64))
-            """Per (layer, site) of a launch: 1 where water already lies within half a spacing."""
             self.layer_taken = ti.field(ti.i32, LAYERS_PER_LAUNCH)
-            """Per layer of a launch: 1 where any of its sites is taken (the layer is skipped)."""
 
     def layers_due(self, emitter: Emitter, time_s: float) -> int:
         """Layers emitted by ``time_s``: those with t_j ≤ time_s, at most the emitter's total."""

@@ -117,9 +117,8 @@ class NeighbourGrid:
 
     @ti.kernel
     def sort(self, x: ti.template(), key: ti.template()):
-        """Counting sort by cell of positions ``x`` (steps 1-3, one launch), particles of one cell in
-        ascending ``key``; fills :attr:`sorted_from`, and the caller reorders (the grid's tests; the
-        substep sorts inside its first kernel)."""
+        """Counting sort by cell of positions ``x`` (steps 1-3), ties by ``key``, into :attr:`sorted_from`;
+        the caller reorders (for the grid's tests; the substep sorts inside its first kernel)."""
         for i in range(read_count(self.loop_bound, 1)):
             self.clear_for_visit(i)
             if i < self.active[None]:
@@ -182,8 +181,7 @@ class NeighbourGrid:
 
     @ti.func
     def column_range(self, c, resolution, dx, dy):
-        """Slots of the cells (c.x+dx, c.y+dy, c.z-reach..c.z+reach) of a grid of ``resolution``:
-        contiguous because z varies fastest."""
+        """Slots of the cells (c.x+dx, c.y+dy, c.z-reach..c.z+reach): contiguous, as z varies fastest."""
         begin, end = 0, 0
         cx, cy = c[0] + dx, c[1] + dy
         if 0 <= cx < resolution[0] and 0 <= cy < resolution[1]:
@@ -196,9 +194,8 @@ class NeighbourGrid:
 
     @ti.func
     def listed(self, i, neighbours: ti.template()):
-        """Where the neighbours of particle i lie in ``neighbours``: (first, last, stride). Slot-major
-        (:attr:`slot_major`, a stride of the list's length over SLOTS) after a one-visit build; entries
-        in a row after an overflow's compact build and on the CPU."""
+        """(first, last, stride) of particle i's neighbours in ``neighbours``: slot-major after a one-visit
+        build on a GPU (:attr:`slot_major`), in a row after an overflow's compact build and on the CPU."""
         first = self.neighbour_start[i]
         _start, slot_stride = self.slots_of(i, neighbours.shape[0])
         stride = ti.select(self.overflow[None] > 0, 1, slot_stride)
@@ -312,14 +309,12 @@ class NeighbourGrid:
         self.find_neighbours(x, x, neighbours, self)
 
     def build(self, x) -> None:
-        """Neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` already sorted by cell (:meth:`sort`),
-        as the substep builds them, reading nothing: exact unless the compact list outgrew its array,
-        which :meth:`take_status` then says (once a frame in the solver)."""
+        """Neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` sorted by cell (:meth:`sort`), as the
+        substep builds them: exact unless the compact list outgrew its array (:meth:`take_status` says)."""
         self._build(x, self.neighbours)
 
     def build_neighbours(self, x) -> None:
-        """:meth:`build`, made again in a longer array if the compact list did not fit: exact lists, for
-        the grid's tests and tools (one read)."""
+        """:meth:`build`, made again in a longer array if the compact list did not fit (tests and tools)."""
         self.build(x)
         most_entries, truncated = (int(v) for v in self.status.to_numpy())
         if truncated:
@@ -329,17 +324,15 @@ class NeighbourGrid:
 
     @ti.func
     def take_status(self):
-        """The device's record of the builds since the last call, (MOST_ENTRIES, TRUNCATED), cleared: for
-        a kernel that reads it back with other figures in one transfer."""
+        """The builds' record since the last call, (MOST_ENTRIES, TRUNCATED), cleared: for a kernel's read."""
         status = ti.Vector([self.status[MOST_ENTRIES], self.status[TRUNCATED]])
         for k in ti.static(range(2)):
             self.status[k] = 0
         return status
 
     def settle_frame(self, most_entries: int, truncated: bool) -> None:
-        """Act on the record of the frame's builds (:meth:`take_status`, read once a frame): a compact
-        list over GROW_ABOVE of the array is grown by half; one cut short is grown the same way, with a
-        warning (that substep missed pairs)."""
+        """Act on the frame's record (:meth:`take_status`): a compact list over GROW_ABOVE of the array is
+        grown by half; one cut short too, with a warning (that substep missed pairs)."""
         most_entries = int(most_entries)
         if truncated or most_entries > GROW_ABOVE * self.neighbours.shape[0]:
             self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(max(most_entries, 1) * 1.5)))

@@ -91,9 +91,8 @@ class JacobiIterations:
 
     @ti.func
     def received(self, total, count, context: ti.template()):
-        """The rules after iteration k on the mean error, into the flags the next iteration reads: the target
-        met (after the least iterations): stop, stepping back the share of the last iteration it did not
-        need; the error risen: the weights restart."""
+        """The rules after iteration k, into the flags the next reads: the target met (after the least
+        iterations) stops, stepping back the share it did not need; a rising error restarts the weights."""
         k, iterations, target, min_iterations, step_back = context
         running, from_second, index = self._loop_state(True, k)
         if running and k < iterations:

@@ -76,8 +76,7 @@ def _live(count, block):
 
 @ti.func
 def read_count(count: ti.template(), gate: ti.template()):
-    """A count given as a 0-D field, a Python int or a value, read inside the loop that uses it, times
-    ``gate`` (1, or a 0-D field of 0 or 1)."""
+    """A count (a 0-D field, an int or a value) read inside the loop that uses it, times ``gate`` (1 or a 0-D field)."""
     return _read(count) * _read(gate)
 
 
@@ -155,8 +154,7 @@ class ExclusiveScan:
 
     @ti.func
     def up(self, values: ti.template(), count: ti.template(), gate: ti.template() = 1, counted: ti.template() = False):
-        """The passes up the tree of :meth:`scan` (from level 1 when ``counted``): enough for
-        :meth:`start_of`. Called at a kernel's top level."""
+        """The passes up the tree of :meth:`scan` (from level 1 when ``counted``), for :meth:`start_of`."""
         for level in ti.static(range(1 if counted else 0, self.tree.top)):
             block = ti.static(self.tree.blocks[level])
             for b in range(ti.static(self.tree.block_counts[level])):
@@ -171,9 +169,8 @@ class ExclusiveScan:
 
     @ti.func
     def start_of(self, values: ti.template(), k, lowest: ti.template() = 0):
-        """Σ_{l<k} values[l] worked out by the calling thread alone, after :meth:`up`: the entries before k
-        in its block, then before its block a level up, to the top; no pass down. ``lowest``: k is an
-        entry of that level (1: the start of level-0 block k)."""
+        """Σ_{l<k} values[l] by the calling thread alone, after :meth:`up` (no pass down): the entries before
+        k in its block, then before its block a level up, to the top. ``lowest``: k's level."""
         total = 0
         index = k
         for level in ti.static(range(lowest, self.tree.top + 1)):
@@ -238,8 +235,8 @@ class TreeSum:
 
     @ti.func
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
-        """high[slot] + low[slot] = Σ_{k < count} values[k], ``count`` ≤ length a Python int or a 0-D field
-        (read inside the loops). Called at a kernel's top level."""
+        """high[slot] + low[slot] = Σ_{k < count} values[k] (``count``: an int or a 0-D field), at a kernel's
+        top level."""
         self._reduce(values, slot, count, False, _nothing, 0.0)
 
     @ti.func

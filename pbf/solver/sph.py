@@ -40,13 +40,13 @@ def scaled_kernel_and_gradient(r: ti.template(), k):
 
 @ti.func
 def kernel(r2: ti.f32, h: ti.f32) -> ti.f32:
-    """W(r, h) from r² (:func:`scaled_kernel`, its scale worked out here)."""
+    """W(r, h) from r² (:func:`scaled_kernel` with its scale)."""
     return scaled_kernel(r2, kernel_scale(h))
 
 
 @ti.func
 def kernel_and_gradient(r: ti.template(), h: ti.f32):
-    """(W, ∇W) at offset r (:func:`scaled_kernel_and_gradient`, its scale worked out here)."""
+    """(W, ∇W) at offset r (:func:`scaled_kernel_and_gradient` with its scale)."""
     return scaled_kernel_and_gradient(r, kernel_scale(h))
 
 
@@ -96,9 +96,8 @@ def lattice_density_sum(spacing, h):
 
 
 def wall_density_table(spacing, h, samples):
-    """Missing density ρ_wall(d)/ρ0 of a particle at distance d in [0, h] from a flat wall, and its
-    derivative in d: ghost lattice planes at d + s/2 + k s behind the wall, so that a lattice touching
-    the wall (d = s/2) reads exactly the interior density."""
+    """Missing density ρ_wall(d)/ρ0 at distance d in [0, h] from a flat wall and its derivative: ghost
+    lattice planes at d + s/2 + k s behind it, so a lattice touching the wall reads the interior's."""
     d = np.linspace(0.0, h, samples)
     density = ghost_lattice_density(d, spacing, h)
     return density, np.gradient(density, d)
@@ -118,9 +117,8 @@ def ghost_lattice_density(d, spacing, h):
 
 
 def surface_ghost_calibration(spacing, h):
-    """(g_below, g_top, ψ_top) of the free-surface ghost on a half-space lattice, in units of s: the smoothed
-    colour gradient g = |Σ_j V W_ij ĝ_j| of the layer below the top and of the top, and the density the top
-    misses; the ghost, linear in g from 0 to ψ_top, puts the top layer at ρ0."""
+    """(g_below, g_top, ψ_top) of the free-surface ghost on a half-space lattice (units of s): the smoothed
+    colour gradient |Σ_j V W_ij ĝ_j| of the layer below the top and of the top, and what the top misses."""
     s = 1.0
     h = h / spacing
     n = int(math.ceil(h)) + 1
@@ -143,8 +141,7 @@ def surface_ghost_calibration(spacing, h):
 
 
 def wall_overlap_tables(spacing, h, samples):
-    """Ghost density (ρ/ρ0) counted twice at an edge and thrice at a corner, for inclusion–exclusion:
-    density = Σ walls − Σ edges (quadrant) + corner (octant). Returns the quadrant table Q[i, k], the
+    """For inclusion–exclusion (density = Σ walls − Σ edges + corner): the quadrant table Q[i, k] and the
     octant table O[i, j, k] on d = linspace(0, h, samples) per axis, and their gradient tables."""
     n = int(math.ceil(h / spacing))
     behind = 0.5 * spacing + np.arange(n + 1) * spacing  # ghost planes beyond the wall, from d
@@ -175,9 +172,8 @@ def wall_overlap_tables(spacing, h, samples):
 
 
 def jacobi_gain(kernel_ratio, relaxation, samples=24):
-    """Largest gain μ of one Jacobi density projection over all wave vectors of an interior lattice:
-    one projection maps mode k of C to (1 − μ(k)) C, μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂);
-    μ > 2 grows (docs/METHOD.md, "A Jacobi step that no mode outgrows"). In units of s."""
+    """Largest gain μ(k) = |Σ_j e^{ik·r_j} ĝ_j|² / (Σ_j |ĝ_j|² + ε̂) of one Jacobi density projection over
+    an interior lattice's wave vectors, in units of s (docs/METHOD.md, "A Jacobi step that no mode outgrows")."""
     h = float(kernel_ratio)
     offsets = lattice_offsets(1.0, h)
     offsets = offsets[np.linalg.norm(offsets, axis=1) > 0.0]
