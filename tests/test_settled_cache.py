@@ -17,7 +17,7 @@ SETTLING = ["time.settle_s=0.1"]
 @pytest.fixture
 def folder(tmp_path, monkeypatch):
     """The settled starts' folder, in a test's own temporary folder."""
-    monkeypatch.setattr(settled, "_folder", lambda: tmp_path)
+    monkeypatch.setattr(settled, "cache_folder", lambda name: tmp_path)
     return tmp_path
 
 
@@ -61,7 +61,7 @@ def test_a_file_cut_short_is_settled_again(folder):
 
 
 def test_nothing_is_kept_without_the_offline_cache(monkeypatch):
-    monkeypatch.setattr(settled, "_folder", lambda: None)
+    monkeypatch.setattr(settled, "cache_folder", lambda name: None)
     scene = load_scene(small_dam_break(), SETTLING)
     settled.store(scene, Simulation(scene).snapshot())
     assert settled.load(scene) is None

@@ -133,7 +133,7 @@ def test_the_bucket_taken_is_the_smallest_compiled_pair_at_most_one_size_up():
 
 def test_the_record_holds_each_pair_once_and_skips_what_it_cannot_read(monkeypatch, tmp_path):
     path = tmp_path / "cache" / buckets.FILE
-    monkeypatch.setattr(buckets, "_path", lambda: path)
+    monkeypatch.setattr(buckets, "cache_folder", lambda name: path)
     assert buckets.compiled() == frozenset()  # no record yet
     buckets.record(16384, 65536)
     buckets.record(16384, 65536)
@@ -142,6 +142,6 @@ def test_the_record_holds_each_pair_once_and_skips_what_it_cannot_read(monkeypat
     with path.open("a") as file:
         file.write("garbage\n-1 5\n0 65536\n1 2 3\n\u00e9 4\n")
     assert buckets.compiled() == {(16384, 65536), (32768, 65536)}
-    monkeypatch.setattr(buckets, "_path", lambda: None)  # the offline cache off: nothing read or written
+    monkeypatch.setattr(buckets, "cache_folder", lambda name: None)  # the offline cache off: nothing read or written
     assert buckets.compiled() == frozenset()
     buckets.record(65536, 65536)
