@@ -217,7 +217,9 @@ class Push:
 @dataclass
 class Control:
     """What may change between substeps (sliders, a sweep): kernel arguments, from the scene's values. The
-    fields in MIRRORED mean what their scene keys do (docs/KEYS.md), within the same bounds."""
+    fields in MIRRORED mean what their scene keys do (docs/KEYS.md), within the same bounds: iterations,
+    min_iterations, target_density_error, divergence_iterations (solver.*), step_back (solver.expert.*),
+    substeps (time.*), xsph (viscosity.xsph), vorticity (vorticity.epsilon), gravity_m_s2."""
 
     iterations: int
     min_iterations: int
