@@ -132,28 +132,29 @@ def _second_vector(m, first, value):
     mu, mv = m @ u, m @ v
     m00, m01, m11 = u.dot(mu) - value, u.dot(mv), v.dot(mv) - value
     result = u
-    if ti.abs(m00) >= ti.abs(m11):
+    if ti.abs(m00) >= ti.abs(m11):  # the null vector of the larger row: (m00, m01) or (m01, m11)
         if ti.max(ti.abs(m00), ti.abs(m01)) > 0.0:
-            if ti.abs(m00) >= ti.abs(m01):
-                m01 /= m00
-                m00 = 1.0 / ti.sqrt(1.0 + m01 * m01)
-                m01 *= m00
-            else:
-                m00 /= m01
-                m01 = 1.0 / ti.sqrt(1.0 + m00 * m00)
-                m00 *= m01
-            result = m01 * u - m00 * v
+            a, b = _unit_pair(m00, m01)
+            result = b * u - a * v
     elif ti.max(ti.abs(m11), ti.abs(m01)) > 0.0:
-        if ti.abs(m11) >= ti.abs(m01):
-            m01 /= m11
-            m11 = 1.0 / ti.sqrt(1.0 + m01 * m01)
-            m01 *= m11
-        else:
-            m11 /= m01
-            m01 = 1.0 / ti.sqrt(1.0 + m11 * m11)
-            m11 *= m01
-        result = m11 * u - m01 * v
+        a, b = _unit_pair(m11, m01)
+        result = a * u - b * v
     return result
+
+
+@ti.func
+def _unit_pair(a, b):
+    """(a, b) scaled to unit length, dividing by the larger so that nothing overflows (not both zero)."""
+    x, y = a, b
+    if ti.abs(x) >= ti.abs(y):
+        y /= x
+        x = 1.0 / ti.sqrt(1.0 + y * y)
+        y *= x
+    else:
+        x /= y
+        y = 1.0 / ti.sqrt(1.0 + x * x)
+        x *= y
+    return x, y
 
 
 @ti.func
