@@ -39,8 +39,8 @@ import time
 import numpy as np
 import pysplashsurf
 
+from pbf.app.mesh import Mesh, reconstruct
 from pbf.app.render import SceneRenderer
-from pbf.app.surface import Mesh, reconstruct
 from pbf.scene import from_dict, load_scene
 from pbf.solver import Simulation, start_backend
 
@@ -95,7 +95,7 @@ RESTING_COLUMN = {
     "time": {"substeps": 4},
     "solver": {"iterations": 4},
 }
-"""The resting column of tests/test_surface.py: 12 × 12 × 12 particles against five walls."""
+"""The resting column of tests/test_mesh.py: 12 × 12 × 12 particles against five walls."""
 
 
 def reconstruct_before(positions, scene) -> Mesh:

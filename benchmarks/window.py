@@ -173,7 +173,7 @@ def measure(
         viewer.draw = lambda: draw_through_set_image(viewer)
     if not settings.get("front_to_back", True):
         viewer.draw()  # makes the renderer
-        viewer.sphere_renderer.front_to_back = False
+        viewer.frames.spheres.front_to_back = False
     if not settings.get("panel", True):
         viewer.panel = lambda stats: None
 
@@ -286,11 +286,12 @@ def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
     particle whose fragment shader writes depth) and lines."""
     import taichi as ti
 
-    from pbf.app.render import LIGHT_DIRECTION
+    from pbf.app.render import LIGHT_DIRECTION, scene_edges
 
     if not hasattr(viewer, "ggui_edges"):
-        viewer.ggui_edges = ti.Vector.field(3, ti.f32, shape=len(viewer.edges))
-        viewer.ggui_edges.from_numpy(viewer.edges)
+        edges = scene_edges(viewer.sim.scene)
+        viewer.ggui_edges = ti.Vector.field(3, ti.f32, shape=len(edges))
+        viewer.ggui_edges.from_numpy(edges)
         viewer.ggui_camera = ti.ui.Camera()
     view = viewer.camera.view()
     camera = viewer.ggui_camera
@@ -304,7 +305,7 @@ def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
     scene.point_light(pos=tuple(view.eye + 10.0 * LIGHT_DIRECTION), color=(0.9, 0.9, 0.9))
     width, height = viewer.window.get_window_shape()
     particles = viewer.sim.readout()
-    colour = {"per_vertex_color": viewer.colours.update()} if per_vertex_colour else {"color": (0.3, 0.5, 0.9)}
+    colour = {"per_vertex_color": viewer.frames.colours.update()} if per_vertex_colour else {"color": (0.3, 0.5, 0.9)}
     scene.particles(
         particles.positions, radius=particles.radius_m * height / width, index_count=particles.count, **colour
     )

@@ -208,7 +208,7 @@ def test_a_dotted_name_resolves_only_when_it_exists(name, as_module, stale):
     ("line", "found"),
     [
         ("run `benchmarks/ab.py` (docs/VALIDATION.md).", ["benchmarks/ab.py", "docs/VALIDATION.md"]),
-        ("`pbf/scenes/*.toml`, tests/test_surface.py::test_x", ["pbf/scenes/*.toml", "tests/test_surface.py"]),
+        ("`pbf/scenes/*.toml`, tests/test_mesh.py::test_x", ["pbf/scenes/*.toml", "tests/test_mesh.py"]),
         ("/tmp/pbf/x.py, https://github.com/a/docs/x.md, `git show abc123:scenes/x.toml`", []),
     ],
 )

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from pbf.app.fluid_render import SPLAT_RADIUS_SPACINGS
 from pbf.app.render import SceneRenderer
 from pbf.app.splat import DROP_RADIUS_SPACINGS, Ellipsoids, symmetric_eigen
+from pbf.app.surface_render import SPLAT_RADIUS_SPACINGS
 from pbf.solver import Simulation
 from pbf.study.frames import particles_top, speckle, top_face
 from scenes import column_scene, small_dam_break
@@ -100,7 +100,7 @@ def test_a_settled_column_reads_as_one_flat_surface():
     sim.step(60)
     renderer = SceneRenderer(sim, *SIZE, style="surface")
     renderer.frame()
-    face = top_face(*renderer.fluid.surface(), renderer.view, sim.scene)
+    face = top_face(*renderer.renderer.surface(), renderer.view, sim.scene)
     assert face["pixels"] > 250
     assert face["flat"] >= 0.9 and face["median_deg"] <= 2.0
     # Not flatter than the water: the particles' own top has waves of about that tilt.
@@ -115,7 +115,7 @@ def test_a_splash_is_not_speckled():
     for frame in (15, 20, 25):
         sim.step(frame - sim.frame)
         renderer.frame()
-        normals, water, depth = renderer.fluid.surface()
+        normals, water, depth = renderer.renderer.surface()
         assert water.sum() > 2000  # a tenth of the frame
         shares.append(speckle(normals, water, depth, 2 * sim.scene.fluid.spacing_m))
     assert np.mean(shares) <= 0.04

@@ -14,7 +14,7 @@ import taichi as ti
 from pbf import Simulation
 from pbf.app import window as window_module
 from pbf.app.keys import HELP
-from pbf.app.render import EMPTY, SphereRenderer, unpack_rgb
+from pbf.app.render import EMPTY, SphereRenderer, scene_edges, unpack_rgb
 from pbf.app.window import WindowViewer, show_packed
 from scenes import small_dam_break
 
@@ -115,21 +115,23 @@ def test_a_frame_is_the_sphere_renderers_image_handed_over_as_it_is(sim):
     viewer.show()
     assert window.shown == 1 and len(window.canvas.images) == 1
     info = window.canvas.images[0]
-    packed = viewer.sphere_renderer.packed
+    packed = viewer.frames.spheres.packed
     assert list(info.shape) == [W, H] and info.field_source.name == "HostMappedPtr"
     assert info.dev_alloc.alloc_id == packed.ctypes.data  # the renderer's own array, no copy in between
     # The same picture as the headless renderer draws from the window's camera.
     particles = sim.readout()
-    reference = SphereRenderer(W, H, sim.scene.render.background_rgb, sim.scene.render.container_rgb, viewer.edges)
+    reference = SphereRenderer(
+        W, H, sim.scene.render.background_rgb, sim.scene.render.container_rgb, scene_edges(sim.scene)
+    )
     expected = reference.render(
-        viewer.camera.view(), particles.positions, viewer.colours.update(), particles.count, particles.radius_m
+        viewer.camera.view(), particles.positions, viewer.frames.colours.update(), particles.count, particles.radius_m
     )
     assert np.array_equal(unpack_rgb(packed), expected)
     viewer.surface = True  # key v: the surface renderer's image, through the same hand-over
     viewer.show()
-    assert window.canvas.images[-1].dev_alloc.alloc_id == viewer.surface_renderer.packed.ctypes.data
-    image = unpack_rgb(viewer.surface_renderer.packed)
-    assert np.array_equal(image, viewer.surface_renderer.image.to_numpy())
+    assert window.canvas.images[-1].dev_alloc.alloc_id == viewer.frames.surface.packed.ctypes.data
+    image = unpack_rgb(viewer.frames.surface.packed)
+    assert np.array_equal(image, viewer.frames.surface.image.to_numpy())
 
 
 def ring_pixels(before, after):
@@ -146,7 +148,7 @@ def test_a_ring_marks_the_water_under_the_mouse_and_the_hand_that_holds_it(sim):
     viewer = WindowViewer(sim, window)
     viewer.advance()
     viewer.show()
-    renderer = viewer.sphere_renderer
+    renderer = viewer.frames.spheres
     plain = renderer.packed.copy()
     keys = renderer.keys.to_numpy()
     water = np.argwhere((keys != EMPTY) & ((keys & 0xFFFFFFFF) < sim.particle_count))

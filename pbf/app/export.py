@@ -8,7 +8,7 @@ from plyfile import PlyData, PlyElement
 FORMATS = ("ply", "npz")
 """Particle file formats."""
 EXPORTS = FORMATS + ("mesh",)
-"""What ``--export`` takes: a particle format, or ``mesh``, the fluid's surface (``pbf.app.surface``,
+"""What ``--export`` takes: a particle format, or ``mesh``, the fluid's surface (``pbf.app.mesh``,
 in the format of the scene's ``surface.mesh_format``)."""
 
 

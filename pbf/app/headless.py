@@ -11,9 +11,9 @@ import imageio.v2 as imageio
 from tqdm import tqdm
 
 from pbf.app.export import write_particles
+from pbf.app.mesh import SurfaceError, body_mesh, reconstruct, write_mesh
 from pbf.app.outputs import bodies_name, frame_name, particles_name, surface_name
 from pbf.app.render import SceneRenderer
-from pbf.app.surface import SurfaceError, body_mesh, reconstruct, write_mesh
 from pbf.app.writer import FrameFiles
 
 

@@ -7,7 +7,7 @@ view ray with the particle's sphere, and the nearest hit wins through one 64-bit
 The interactive window (``pbf.app.window``) uses the same View, colours and background, so its frames
 look like these. Both read the simulation through its read-outs (``Simulation.readout``,
 ``Simulation.density_ratios``) and never change it. ``render.style = "surface"`` draws the water's
-surface instead, with the screen-space renderer of ``pbf.app.fluid_render``.
+surface instead, with the screen-space renderer of ``pbf.app.surface_render``.
 
 As the solver's, the renderers' kernels read the scene's numbers (colours, radii, counts of segments
 and bodies) as data (``pbf.solver.scene_constants``) and their arrays are sized by buckets
@@ -23,10 +23,10 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.constants import colour, padded
-from pbf.app.fluid_render import BODY_FLOOR, SEGMENT_FLOOR, FluidRenderer
 from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
+from pbf.app.surface_render import BODY_FLOOR, SEGMENT_FLOOR, SurfaceRenderer
 from pbf.scene import Render, Scene
 from pbf.solver import allocation as bucket
 from pbf.solver import quaternion_matrix_np, scene_constants
@@ -449,6 +449,15 @@ class SphereRenderer:
         for channel in ti.static(range(3)):
             out[row, col, channel] = ti.cast((word >> (8 * channel)) & 0xFF, ti.u8)
 
+    def depth_at(self, col: int, row_up: int, count: int) -> float | None:
+        """The view depth (m) of the sphere drawn at pixel (col, row_up) of the last draw (row 0 at the
+        bottom), None where the pixel shows none of the first ``count`` (the water's; the bodies' points
+        follow them)."""
+        key = int(self.keys[col, row_up])
+        if key == EMPTY or key & 0xFFFFFFFF >= count:
+            return None
+        return float(np.array([key >> 32], np.int32).view(np.float32)[0])
+
     def draw(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:
         """Render ``count`` spheres of ``radius_m`` (Taichi fields) and the segments into ``packed``
         and return it: (W, H) RGBA words, y up, as GGUI's canvas takes them."""
@@ -497,12 +506,13 @@ class SphereRenderer:
         return rgb
 
 
-def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
+def surface_renderer(sim, width_px: int, height_px: int) -> SurfaceRenderer:
     """The screen-space water renderer for a Simulation's scene: its particle volume, its container's
-    floor in tiles an eighth of the box wide, its colours, the container and obstacle edges."""
+    floor in tiles an eighth of the box wide, its colours, the container and obstacle edges, and its rigid
+    bodies (``Simulation.solids``)."""
     scene = sim.scene
     lower, upper = scene.container.min_m, scene.container.max_m
-    return FluidRenderer(
+    return SurfaceRenderer(
         width_px,
         height_px,
         scene.fluid.spacing_m,
@@ -514,7 +524,7 @@ def fluid_renderer(sim, width_px: int, height_px: int) -> FluidRenderer:
         horizon_rgb=scene.render.background_rgb,
         line_rgb=scene.render.container_rgb,
         segments=scene_edges(scene),
-        bodies=sim.bodies,
+        solids=sim.solids(),
         body_rgb=BODY_RGB,
     )
 
@@ -599,40 +609,89 @@ def _surface_points(shape: str, half: np.ndarray, pitch: float) -> np.ndarray:
     return np.concatenate(faces)
 
 
+STYLES = ("particles", "surface")
+"""What a frame draws: the particles as spheres, or the water's surface."""
+
+
 class SceneRenderer:
-    """A Simulation's frames as images: its camera, container and obstacle edges, and the particles as
-    coloured spheres or (``render.style = "surface"``) the water's surface, rendered headless."""
+    """A Simulation's frames, for headless files and the window alike: the one place that chooses the style
+    (``render.style``, or the window's key v) and gathers the rigid bodies for it. Particles are coloured
+    spheres with the bodies' surface points among them (``SphereRenderer``, ``BodyPoints``); the surface
+    style draws the water's surface with the bodies as solids (``SurfaceRenderer``). Each style's renderer
+    is made on first use, and again when the image size changes (``resize``)."""
 
     def __init__(self, sim, width_px=None, height_px=None, style=None):
         """``style`` "particles" or "surface" (default: the scene's ``render.style``)."""
-        scene = sim.scene
-        render = scene.render
+        render = sim.scene.render
         self.sim = sim
-        self.view = View.of_scene(scene)
-        width, height = width_px or render.width_px, height_px or render.height_px
-        if (style or render.style) == "surface":
-            self.colours = None
-            self.spheres = None
-            self.fluid = fluid_renderer(sim, width, height)
-        else:
-            self.fluid = None
-            self.colours = ParticleColours(sim, render)
-            self.spheres = SphereRenderer(
-                width, height, render.background_rgb, render.container_rgb, scene_edges(scene)
-            )
-        self.bodies = BodyPoints(sim) if scene.bodies and self.spheres is not None else None
+        self.view = View.of_scene(sim.scene)
+        """The scene's camera, which :meth:`frame` draws from."""
+        self.width, self.height = int(width_px or render.width_px), int(height_px or render.height_px)
+        self.style = style or render.style
+        self.spheres = None
+        self.surface = None
+        """The style's renderers, made on first use for the current size."""
+        self.colours = None
+        self.bodies = None
+        """The particles' colours and the rigid bodies' points (the particle style's), made on first use."""
 
-    def frame(self) -> np.ndarray:
-        """The current state as an (H, W, 3) uint8 image, a new array each call (copied from the device
-        once)."""
-        particles = self.sim.readout()
-        if self.fluid is not None:
-            return self.fluid.render(
-                self.view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
+    def resize(self, width_px: int, height_px: int) -> None:
+        """Draw at another size from the next frame on (a window resized)."""
+        if (width_px, height_px) != (self.width, self.height):
+            self.width, self.height = int(width_px), int(height_px)
+            self.spheres = self.surface = None
+
+    @property
+    def renderer(self):
+        """The current style's renderer at the current size (``width``, ``height``, ``packed``)."""
+        if self.style == "surface":
+            if self.surface is None:
+                self.surface = surface_renderer(self.sim, self.width, self.height)
+            return self.surface
+        if self.spheres is None:
+            render = self.sim.scene.render
+            self.spheres = SphereRenderer(
+                self.width, self.height, render.background_rgb, render.container_rgb, scene_edges(self.sim.scene)
             )
-        colours = self.colours.update()
-        positions, count = particles.positions, particles.count
+        if self.colours is None:
+            self.colours = ParticleColours(self.sim, self.sim.scene.render)
+            self.bodies = BodyPoints(self.sim) if self.sim.scene.bodies else None
+        return self.spheres
+
+    def _spheres(self):
+        """The particles' positions and colours with the bodies' points, and their count."""
+        particles = self.sim.readout()
+        positions, colours, count = particles.positions, self.colours.update(), particles.count
         if self.bodies is not None:
             positions, colours, count = self.bodies.combine(positions, colours, count)
-        image = self.spheres.render(self.view, positions, colours, count, particles.radius_m)
+        return positions, colours, count, particles.radius_m
+
+    def draw(self, view: View) -> np.ndarray:
+        """The current state seen through ``view`` as (W, H) packed RGBA words, y up: the layout GGUI's
+        canvas shows as it is (the renderer's own array, valid until the next draw)."""
+        renderer = self.renderer
+        if renderer is self.surface:
+            particles = self.sim.readout()
+            return renderer.draw_packed(
+                view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
+            )
+        return renderer.draw(view, *self._spheres())
+
+    def frame(self) -> np.ndarray:
+        """The current state from the scene's camera as an (H, W, 3) uint8 image, a new array each call
+        (copied from the device once), with the colour legend where the style has one."""
+        renderer = self.renderer
+        if renderer is self.surface:
+            particles = self.sim.readout()
+            return renderer.render(
+                self.view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
+            )
+        image = renderer.render(self.view, *self._spheres())
         return draw_legend(image, self.sim.scene.render) if self.sim.scene.render.legend else image
+
+    def depth_at(self, col: int, row_up: int) -> float | None:
+        """The view depth (m) of the water drawn at pixel (col, row_up) of the last draw (row 0 at the
+        bottom), None where there is none (background, a body)."""
+        if self.style == "surface":
+            return self.renderer.depth_at(col, row_up)
+        return self.renderer.depth_at(col, row_up, self.sim.particle_count)

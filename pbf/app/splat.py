@@ -2,7 +2,7 @@
 renderer splats on a GPU backend: a thread per (particle, pixel) of the particle's footprint.
 
 Both headless renderers project each particle to a screen rectangle and test its pixels
-(``pbf.app.render.SphereRenderer``, ``pbf.app.fluid_render.FluidRenderer``). On the CPU backend a
+(``pbf.app.render.SphereRenderer``, ``pbf.app.surface_render.SurfaceRenderer``). On the CPU backend a
 thread per particle walks its rectangle, column by column, in memory order (the surface: a thread per
 band of rows walks the splats that reach into it). On a GPU backend that leaves threads idle behind
 the few particles near the camera that cover thousands of pixels, and Mesa's software Vulkan driver

@@ -11,12 +11,12 @@ water's surface, esc quits.
 Every frame is rendered by the project's own Taichi renderers on the window's camera and handed to
 GGUI's canvas as one image: particles as ray-cast shaded spheres of their simulated radius with the
 container and obstacle edges (``pbf.app.render.SphereRenderer``, the headless frames' renderer), or
-the water's surface (``pbf.app.fluid_render``). GGUI draws that image and the panel. On a CPU with a
-software Vulkan driver (lavapipe) this costs a third of what GGUI's own particles cost, whose
-fragment shader writes depth and so shades every hidden layer of water (docs/BENCHMARKS.md,
-"The window"); GGUI has no custom shaders, and a mesh reconstructed every frame (``pbf.app.surface``)
-would cost more than the whole surface render. The panel shows the simulation's and the renderer's
-milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
+the water's surface (``pbf.app.surface_render``), both chosen by ``pbf.app.render.SceneRenderer``.
+GGUI draws that image and the panel. On a CPU with a software Vulkan driver (lavapipe) this costs a third of
+what GGUI's own particles cost, whose fragment shader writes depth and so shades every hidden layer of water
+(docs/BENCHMARKS.md, "The window"); GGUI has no custom shaders, and a mesh reconstructed every frame
+(``pbf.app.mesh``) would cost more than the whole surface render. The panel shows the simulation's and the
+renderer's milliseconds apart. ``WindowViewer`` runs it in the loop of ``pbf.app.loop``.
 """
 
 import contextlib
@@ -33,20 +33,10 @@ import numpy as np
 import taichi as ti
 from taichi.ui.utils import get_field_info
 
-from pbf.app.fluid_render import FAR
 from pbf.app.interact import Hand
 from pbf.app.keys import HELP
 from pbf.app.legend import legend_line
-from pbf.app.render import (
-    EMPTY,
-    LIGHT_DIRECTION,
-    BodyPoints,
-    ParticleColours,
-    SphereRenderer,
-    View,
-    fluid_renderer,
-    scene_edges,
-)
+from pbf.app.render import SceneRenderer, View
 
 PANEL = (0.01, 0.01, 0.3, 0.455)
 """The panel's x, y, width and height as fractions of the window (origin top left), without the help, in
@@ -244,15 +234,8 @@ class WindowViewer:
         self.camera = OrbitCamera.from_view(View.of_scene(sim.scene))
         width, height = window.get_window_shape()
         self.camera.clear_of(PANEL[0] + PANEL[2], width / height)  # the scene's framing, beside the panel
-        self.colours = ParticleColours(sim, self.render)
-        self.edges = scene_edges(sim.scene)
-        self.surface = self.render.style == "surface"
-        """Draw the water's surface (key v) rather than particles."""
-        self.sphere_renderer = None
-        self.surface_renderer = None
-        """Made on first use, and again when the window's size changes."""
-        self.body_points = BodyPoints(sim) if sim.scene.bodies else None
-        """The rigid bodies' surface points, drawn with the particles (``pbf.app.render.BodyPoints``)."""
+        self.frames = SceneRenderer(sim, width, height)
+        """The frames in the scene's style, at the window's size (``pbf.app.render.SceneRenderer``)."""
         self.paused = False
         self.step_once = False
         self.panel_shown = True
@@ -427,52 +410,36 @@ class WindowViewer:
             for line in HELP if self.help_shown else ():
                 gui.text(line)
 
+    @property
+    def surface(self) -> bool:
+        """Whether the window draws the water's surface (key v) rather than particles."""
+        return self.frames.style == "surface"
+
+    @surface.setter
+    def surface(self, on: bool) -> None:
+        self.frames.style = "surface" if on else "particles"
+
     def draw(self) -> None:
-        """Render the frame with our renderer at the window's size and hand it to GGUI's canvas."""
-        width, height = self.window.get_window_shape()
-        particles = self.sim.readout()
+        """Render the frame at the window's size and hand it to GGUI's canvas."""
+        self.frames.resize(*self.window.get_window_shape())
         view = self.camera.view()
-        if self.surface:
-            renderer = self.surface_renderer
-            if renderer is None or (renderer.width, renderer.height) != (width, height):  # first use, or resized
-                self.surface_renderer = renderer = fluid_renderer(self.sim, width, height)
-            packed = renderer.draw_packed(
-                view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
-            )
-        else:
-            renderer = self.sphere_renderer
-            if renderer is None or (renderer.width, renderer.height) != (width, height):
-                self.sphere_renderer = renderer = SphereRenderer(
-                    width, height, self.render.background_rgb, self.render.container_rgb, self.edges
-                )
-            positions, colours, count = particles.positions, self.colours.update(), particles.count
-            if self.body_points is not None:
-                positions, colours, count = self.body_points.combine(positions, colours, count)
-            packed = renderer.draw(view, positions, colours, count, particles.radius_m)
-        self.mark(packed, renderer, view, particles.count)
+        packed = self.frames.draw(view)
+        self.mark(packed, view)
         show_packed(self.window.get_canvas(), packed)
 
-    def cursor_depth(self, renderer, count: int) -> float | None:
-        """The view depth (m) of the water drawn under the cursor, None where there is none: one pixel of the
-        renderer's depth (the surface's) or of its nearest-hit keys (the spheres': view depth bits and
-        particle id, a body's points after the water's ``count``)."""
+    def cursor_depth(self) -> float | None:
+        """The view depth (m) of the water drawn under the cursor in the last frame, None where there is none."""
         if self.cursor is None:
             return None
-        width, height = renderer.width, renderer.height
+        width, height = self.frames.width, self.frames.height
         col, row_up = min(int(self.cursor[0] * width), width - 1), min(int(self.cursor[1] * height), height - 1)
-        if self.surface:
-            depth = float(renderer.image_depth[height - 1 - row_up, col])
-            return depth if depth < FAR else None
-        key = int(renderer.keys[col, row_up])
-        if key == EMPTY or key & 0xFFFFFFFF >= count:
-            return None
-        return float(np.array([key >> 32], np.int32).view(np.float32)[0])
+        return self.frames.depth_at(col, row_up)
 
-    def mark(self, packed: np.ndarray, renderer, view: View, count: int) -> None:
+    def mark(self, packed: np.ndarray, view: View) -> None:
         """Ring in ``packed`` what a left press would take hold of: the hand's reach (``Hand.radius_m``) around
         the water under the cursor, or around the hand while it holds the water; nothing over empty space,
         where a press does nothing."""
-        width, height = renderer.width, renderer.height
+        width, height = self.frames.width, self.frames.height
         right, up, forward = view.basis()
         focal = view.focal_px(height)
         if self.hand.holding:
@@ -483,7 +450,7 @@ class WindowViewer:
             x = 0.5 * width + focal * float(offset @ right) / depth
             y = 0.5 * height + focal * float(offset @ up) / depth
         else:
-            depth = self.cursor_depth(renderer, count)
+            depth = self.cursor_depth()
             if depth is None or depth <= 0.0:
                 return
             x, y = self.cursor[0] * width, self.cursor[1] * height

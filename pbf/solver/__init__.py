@@ -6,7 +6,7 @@ from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import Control, Model, Push, allocation
-from pbf.solver.simulation import STAGES, Neighbourhood, Readout, Simulation, StageHook
+from pbf.solver.simulation import STAGES, Neighbourhood, Readout, Simulation, Solids, StageHook
 from pbf.solver.state import Snapshot
 
 __all__ = [
@@ -23,6 +23,7 @@ __all__ = [
     "STATE_LAYOUT",
     "Simulation",
     "Snapshot",
+    "Solids",
     "StageHook",
     "allocation",
     "quaternion_matrix_np",

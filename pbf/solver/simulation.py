@@ -83,6 +83,21 @@ class Neighbourhood:
     """The lists, for a ``pbf.solver.NeighbourList`` argument (it may be replaced between steps: pass it each call)."""
 
 
+@dataclass(frozen=True)
+class Solids:
+    """The rigid bodies' shapes and poses for renderers on the device, valid until the next step."""
+
+    count: int
+    sphere: object
+    """(slots,) i32 field: 1 for a sphere, 0 for a box."""
+    half: object
+    """(slots,) vector(3, f32) field: half extents (a sphere: its radius on each), m."""
+    position: object
+    """(slots,) vector(3, f32) field: centres, m."""
+    rotation: object
+    """(slots,) matrix(3, 3, f32) field: body to world."""
+
+
 def _particle_array(name: str, values) -> np.ndarray:
     """A snapshot's per-particle array as float32, or a TypeError for what holds no real numbers."""
     try:
@@ -513,6 +528,13 @@ class Simulation:
     def body_states(self) -> np.ndarray:
         """(bodies, 19) float32 copy of the rigid bodies' state (``pbf.solver.bodies.STATE_LAYOUT``)."""
         return np.zeros((0, STATE_WIDTH), np.float32) if self.bodies is None else self.bodies.state()
+
+    def solids(self) -> Solids | None:
+        """The rigid bodies' device fields, for renderers (no copy to the host); None without bodies."""
+        bodies = self.bodies
+        if bodies is None:
+            return None
+        return Solids(bodies.count, bodies.sphere, bodies.half, bodies.position, bodies.rotation)
 
     def readout(self) -> Readout:
         """The particles' device fields, for renderers (no copy to the host)."""

@@ -27,7 +27,7 @@ frames 27-40) sheets and drops rather than sparkles:
     python -m pbf.study.frames look                 # the scenes' own size, 1280×720
     python -m pbf.study.frames look --size 640x360 --images out/look
 
-Both figures come from the renderer's normal buffer and water mask (``FluidRenderer.surface``, the
+Both figures come from the renderer's normal buffer and water mask (``SurfaceRenderer.surface``, the
 coarse passes' pixels). *Top face*: the water pixels whose normal is within 45° of vertical and whose
 surface point lies more than two spacings inside the container's side walls (the rim, where the water
 meets a wall, is left out); reported are the share of them within 5° of vertical and their median
@@ -271,7 +271,7 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
         sim.step(frame)
         draw = renderer(sim)
         save(f"{preset}_{frame}", draw.frame())
-        figures["pools"][(preset, frame)] = top_face(*draw.fluid.surface(), draw.view, sim.scene)
+        figures["pools"][(preset, frame)] = top_face(*draw.renderer.surface(), draw.view, sim.scene)
         figures["pools"][(preset, frame)]["particles"] = particles_top(sim.positions(), sim.scene)
     preset, frames = splash
     sim = Simulation(preset, quiet=True)
@@ -281,7 +281,7 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
         image = draw.frame()
         if frame == frames[0]:
             save(f"{preset}_{frame}", image)
-        normals, water, depth = draw.fluid.surface()
+        normals, water, depth = draw.renderer.surface()
         figures["splash"][frame] = speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m)
     if pour is not None and images is not None:
         sim = Simulation(pour[0], quiet=True)

@@ -1,4 +1,4 @@
-"""Surface meshes (``pbf.app.surface``, ``--export mesh``): closed, of the water's volume and shape,
+"""Surface meshes (``pbf.app.mesh``, ``--export mesh``): closed, of the water's volume and shape,
 the same on every run, and written in formats other tools read; and both surfaces where a user meets
 them: headless runs (meshes and ``--style surface`` frames) and the window's key v.
 
@@ -13,10 +13,10 @@ from command_line import run_cli
 from plyfile import PlyData
 
 from pbf import Simulation
-from pbf.app import cli, headless, loop, surface
+from pbf.app import cli, headless, loop, mesh
 from pbf.app.headless import FrameWriter
-from pbf.app.render import LIGHT_DIRECTION, fluid_renderer, unpack_rgb
-from pbf.app.surface import Mesh, reconstruct, with_wall_images, write_mesh
+from pbf.app.mesh import Mesh, reconstruct, with_wall_images, write_mesh
+from pbf.app.render import LIGHT_DIRECTION, surface_renderer, unpack_rgb
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
 from scenes import column_scene
@@ -264,11 +264,11 @@ def test_key_v_switches_the_window_between_surface_and_particles(settled):
     viewer.draw()
     # The canvas is handed the renderer's (width, height) array of packed RGBA words, y up; turned
     # back it is the headless surface frame.
-    packed = viewer.surface_renderer.packed
+    packed = viewer.frames.surface.packed
     assert window.shown.dev_alloc.alloc_id == packed.ctypes.data and list(window.shown.shape) == [160, 90]
     shown = unpack_rgb(packed)
     particles = sim.readout()
-    expected = fluid_renderer(sim, 160, 90).render(
+    expected = surface_renderer(sim, 160, 90).render(
         viewer.camera.view(), particles.positions, particles.count, LIGHT_DIRECTION, sim.neighbourhood()
     )
     assert np.array_equal(shown, expected)
@@ -330,28 +330,28 @@ def test_a_colour_value_on_the_iso_level_is_meshed_with_the_level_nudged(monkeyp
     particles = tie_particles()
     level = tie_level(particles)
     scene = open_scene(iso_level=level)
-    monkeypatch.setattr(surface, "ISO_NUDGES", (0.0,))
-    with pytest.raises(surface.SurfaceError, match=r"^splashsurf failed at .*Missing iso surface vertex"):
+    monkeypatch.setattr(mesh, "ISO_NUDGES", (0.0,))
+    with pytest.raises(mesh.SurfaceError, match=r"^splashsurf failed at .*Missing iso surface vertex"):
         reconstruct(particles, scene)
     monkeypatch.undo()
-    mesh = reconstruct(particles, scene)
-    assert_closed(mesh)
+    meshed = reconstruct(particles, scene)
+    assert_closed(meshed)
     # The nudge moves the surface by far less than a cell: the volume is that of the level just above.
     above = reconstruct(particles, open_scene(iso_level=level * (1 + 1e-5)))
-    assert mesh.enclosed_volume_m3() == pytest.approx(above.enclosed_volume_m3(), rel=1e-3)
+    assert meshed.enclosed_volume_m3() == pytest.approx(above.enclosed_volume_m3(), rel=1e-3)
 
 
 @pytest.mark.slow
 def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_before_it_whole(
     tmp_path, monkeypatch, capsys
 ):
-    real = surface.reconstruct
+    real = mesh.reconstruct
     calls = []
 
     def failing_at_frame_2(positions, scene):
         calls.append(len(calls))
         if len(calls) == 3:
-            raise surface.SurfaceError("splashsurf failed at surface.iso_level 0.5: Missing iso surface vertex")
+            raise mesh.SurfaceError("splashsurf failed at surface.iso_level 0.5: Missing iso surface vertex")
         return real(positions, scene)
 
     monkeypatch.setattr(headless, "reconstruct", failing_at_frame_2)

@@ -68,7 +68,7 @@ FILTER_SIGMA_SPACINGS = 1.5
 FILTER_ROUNDS = 1
 """Rounds of (rows, columns), each a Gaussian of σ/√rounds (together one of σ). Two rounds hid some of
 the streaks the separable filter left while its range grew with the samples it took; with a range
-that follows the surface's slope, one round leaves no more axis-aligned steps (tests/test_fluid_render.py)
+that follows the surface's slope, one round leaves no more axis-aligned steps (tests/test_surface_render.py)
 and costs a quarter less."""
 ROUND_SIGMA_SPACINGS = FILTER_SIGMA_SPACINGS / math.sqrt(FILTER_ROUNDS)
 FILTER_MAX_RADIUS_PX = 24
@@ -103,7 +103,7 @@ BODY_FLOOR = 8
 
 
 @ti.data_oriented
-class FluidRenderer:
+class SurfaceRenderer:
     """Renders particles as a water surface over a floor and under a sky, with line segments."""
 
     def __init__(
@@ -119,14 +119,14 @@ class FluidRenderer:
         horizon_rgb,
         line_rgb=(0.0, 0.0, 0.0),
         segments=None,
-        bodies=None,
+        solids=None,
         body_rgb=None,
     ):
         """The floor is the plane y = ``floor_y_m`` in square tiles of ``tile_m``; ``absorption_per_m``
         is Beer–Lambert's σ for red, green and blue; ``water_rgb`` the colour of deep water;
-        ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue). ``bodies``: a
-        simulation's rigid bodies (``pbf.solver.bodies.Bodies``), drawn as solids of ``body_rgb``
-        from its device fields as they stand at each draw."""
+        ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue). ``solids``: a
+        simulation's rigid bodies (``Simulation.solids()``), drawn as solids of ``body_rgb`` from their
+        device fields as they stand at each draw."""
         # The image size stays in the kernels' code (a view setting, the same for most runs); what
         # depends on the scene is data (``constants``, and fields sized by buckets), so that a scene of
         # another spacing, container or colours finds these kernels compiled (``pbf.solver.scene_constants``).
@@ -136,7 +136,7 @@ class FluidRenderer:
         self.radius = SPLAT_RADIUS_SPACINGS * self.spacing
         self.quantum = self.spacing / THICKNESS_STEPS_PER_SPACING
         """The thickness sum's step, m (a fixed-point unit)."""
-        self.solids = bodies if bodies is not None and bodies.count else None
+        self.solids = solids if solids is not None and solids.count else None
         self.with_solids = self.solids is not None
         """Whether the kernels draw rigid bodies: a switch that removes code, so part of the compile."""
         body_count = self.solids.count if self.with_solids else 0
@@ -807,6 +807,12 @@ class FluidRenderer:
         (``python -m pbf.study.frames look``)."""
         depth = self.smooth_depth.to_numpy()
         return self.normal.to_numpy(), depth < FAR, depth
+
+    def depth_at(self, col: int, row_up: int) -> float | None:
+        """The view depth (m) of the water drawn at pixel (col, row_up) of the last draw (row 0 at the
+        bottom), None where there is none."""
+        depth = float(self.image_depth[self.height - 1 - row_up, col])
+        return depth if depth < FAR else None
 
     def draw_packed(self, view, positions, count: int, light_direction, neighbourhood=None) -> np.ndarray:
         """Like :meth:`render`, as a (W, H) array of packed RGBA words, y up, the layout GGUI's canvas

@@ -148,7 +148,7 @@ SMOOTHING_WEIGHT_NEIGHBOURS = 3.0
 normalisation, at most 1: where the water is thinner the mesh is smoothed less, so that droplets keep
 their size. splashsurf's default, 13, is for wider kernels; with 0.8 spacings it spares so much of a
 surface that a ball of particles meshes with bumps of 0.17 spacing (its radius's standard deviation;
-0.13 at 6.7), and 3 brings them under 0.1 spacing (``tests/test_surface.py``). It scales with the
+0.13 at 6.7), and 3 brings them under 0.1 spacing (``tests/test_mesh.py``). It scales with the
 kernel's volume, like the count it normalises."""
 
 SMOOTHING_WEIGHT_LENGTH_SPACINGS = 0.8

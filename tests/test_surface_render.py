@@ -1,6 +1,6 @@
 """The screen-space fluid renderer (``--style surface``) on pixels: a still pool is flat, thickness is
 the depth of water, a ball's silhouette stays on the ball, and every run gives the same image. (Its
-use in headless runs and the window is tested in ``test_surface.py``, beside the meshes, so that one
+use in headless runs and the window is tested in ``test_mesh.py``, beside the meshes, so that one
 Simulation serves them all.)"""
 
 import math
@@ -10,8 +10,8 @@ import pytest
 import taichi as ti
 
 from pbf.app import cli
-from pbf.app.fluid_render import FAR, SPLAT_RADIUS_SPACINGS, FluidRenderer
 from pbf.app.render import LIGHT_DIRECTION, View
+from pbf.app.surface_render import FAR, SPLAT_RADIUS_SPACINGS, SurfaceRenderer
 
 SPACING = 0.025
 W, H = 320, 240
@@ -33,7 +33,7 @@ def as_field(particles):
 def render(particles, view, renderer=None):
     """Render with ``renderer`` or a new W × H one over a floor at y = 0; returns it (for its fields)
     and the image."""
-    renderer = renderer or FluidRenderer(
+    renderer = renderer or SurfaceRenderer(
         W,
         H,
         SPACING,
@@ -157,7 +157,7 @@ def test_the_gpu_backends_splat_per_pixel_draws_the_same_image():
     rng = np.random.default_rng(12)
     splash = (np.array([0.3, 0.3, 0.3]) + rng.normal(0.0, 0.08, (1500, 3))).astype(np.float32)
     per_particle, first = render(splash, view)
-    per_pixel = FluidRenderer(
+    per_pixel = SurfaceRenderer(
         W,
         H,
         SPACING,
@@ -211,7 +211,7 @@ def test_the_outline_of_the_water_is_anti_aliased():
     # x = 100 + 0.3 y (pixels) as the coarse pixels see it. Each image pixel takes the water's share
     # by how far its centre is from the outline, so the edge is a ramp, not a staircase of pure water
     # and pure background, and the share falls monotonically away from the water.
-    renderer = FluidRenderer(W, H, SPACING, SPACING**3, 0.0, 0.1, (2.0, 0.7, 0.35), (0.05, 0.3, 0.45), (0.9,) * 3)
+    renderer = SurfaceRenderer(W, H, SPACING, SPACING**3, 0.0, 0.1, (2.0, 0.7, 0.35), (0.05, 0.3, 0.45), (0.9,) * 3)
     rows, cols = np.mgrid[0 : renderer.coarse_height, 0 : renderer.coarse_width]
     inside = (cols + 0.5) * 2 < 100 + 0.3 * (rows + 0.5) * 2
     renderer.smooth_depth.from_numpy(np.where(inside, 1.0, FAR).astype(np.float32))
@@ -258,13 +258,13 @@ def test_a_splash_has_no_isolated_bright_pixels():
 def test_a_level_surface_mirrors_the_sky(monkeypatch):
     # The top of a pool mirrors the sky's glow (Fresnel's few percent at these angles): without the
     # glow it shows the same blue as the water, and reads as jelly. Compared with the glow off.
-    from pbf.app import fluid_render
+    from pbf.app import surface_render
 
     pool = lattice((16, 6, 16), lower=(-0.2, 0.0, -0.2))
     view = View(np.array([0.55, 0.45, 1.0]) * 0.9, np.array([0.0, 0.1, 0.0]), 45.0)
     renderer, lit = render(pool, view)
     top = (renderer.image_depth.to_numpy() < FAR) & (renderer.normal.to_numpy()[..., 1].repeat(2, 0).repeat(2, 1) > 0.9)
-    monkeypatch.setattr(fluid_render, "SUN_GLOW", 0.0)
+    monkeypatch.setattr(surface_render, "SUN_GLOW", 0.0)
     _, unlit = render(pool, view)  # a new renderer compiles its kernels with the glow off
     assert top.sum() > 2000
     assert (luminance(lit) - luminance(unlit))[top].mean() > 10.0
@@ -348,12 +348,12 @@ def test_a_splash_has_no_axis_aligned_blocks():
     # with rectangles of different shades: 0.31% of its water's pixels on such steps (runs of 6 coarse
     # pixels, 12 in the image), against 0.05% once the range follows the surface's slope and keeps to it
     # (0.38% and 0.08% with Taichi's advanced optimisation, another splash).
-    from pbf.app.render import View, fluid_renderer
+    from pbf.app.render import View, surface_renderer
     from pbf.solver import Simulation
 
     sim = Simulation("dam_break", quiet=True)
     sim.step(60)
-    renderer = fluid_renderer(sim, 1280, 720)
+    renderer = surface_renderer(sim, 1280, 720)
     particles = sim.readout()
     renderer.draw(View.of_scene(sim.scene), particles.positions, particles.count, LIGHT_DIRECTION, sim.neighbourhood())
     water = renderer.smooth_depth.to_numpy() < FAR
