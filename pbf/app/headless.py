@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from pbf.app.export import write_particles
 from pbf.app.mesh import SurfaceError, body_mesh, reconstruct, write_mesh
-from pbf.app.outputs import bodies_name, frame_name, particles_name, surface_name
+from pbf.app.outputs import bodies_name, diffuse_name, frame_name, particles_name, surface_name
 from pbf.app.render import SceneRenderer
 from pbf.app.writer import FrameFiles
 
@@ -114,6 +114,17 @@ class FrameWriter:
                     self.sim.velocities(),
                     self.sim.time_s,
                 )
+        white_water = self.renderer.white_water
+        if self.exports and white_water is not None:  # drawn with this frame: written beside it
+            diffuse = white_water.arrays()
+            suffix = next((name for name in self.exports if name != "mesh"), "ply")
+            write_particles(
+                self.out_dir / diffuse_name(number, suffix),
+                diffuse["positions"],
+                diffuse["velocities"],
+                self.sim.time_s,
+                {"kind": diffuse["kind"], "age_s": diffuse["age"]},
+            )
         if number == 1:
             self.progress = tqdm(
                 total=self.total,

@@ -1,7 +1,8 @@
 """Where a run writes, checked before it starts: the frame folder, the video and the files in them.
 
 A run writes ``frame_NNNNN.png`` and, when asked, ``particles_NNNNN.ply`` or ``.npz`` and
-``surface_NNNNN.ply`` or ``.obj`` (and ``bodies_NNNNN`` beside it, the rigid bodies' meshes) into one folder, and a
+``surface_NNNNN.ply`` or ``.obj`` (and ``bodies_NNNNN`` beside it, the rigid bodies' meshes; ``diffuse_NNNNN``,
+white water's particles, in the surface style) into one folder, and a
 video where ``--video`` says. Every path is
 checked before the simulation starts, so a bad one fails with one message and leaves nothing half
 written: an empty path, the filesystem root, a file where a folder is needed (or a folder where a
@@ -27,7 +28,7 @@ from pathlib import Path
 MAX_FRAMES = 99_999
 """Frame numbers have five digits (frame_00000.png …), so that the files sort in order."""
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")
-OWN_FILE = re.compile(r"(frame_\d{5}\.png|particles_\d{5}\.(ply|npz)|(surface|bodies)_\d{5}\.(ply|obj))")
+OWN_FILE = re.compile(r"(frame_\d{5}\.png|(particles|diffuse)_\d{5}\.(ply|npz)|(surface|bodies)_\d{5}\.(ply|obj))")
 """The names a run writes into its folder (``pbf.app.headless.FrameWriter``), and the only files an
 earlier run's clean-up removes."""
 
@@ -42,6 +43,11 @@ def frame_name(number: int) -> str:
 
 def particles_name(number: int, suffix: str) -> str:
     return f"particles_{number:05d}.{suffix}"
+
+
+def diffuse_name(number: int, suffix: str) -> str:
+    """White water's diffuse particles of a frame (the surface style with white water on)."""
+    return f"diffuse_{number:05d}.{suffix}"
 
 
 def surface_name(number: int, suffix: str) -> str:

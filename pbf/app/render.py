@@ -27,6 +27,7 @@ from pbf.app.legend import draw_legend
 from pbf.app.pinhole import to_pixel
 from pbf.app.splat import Footprints, per_item
 from pbf.app.surface_render import BODY_FLOOR, SEGMENT_FLOOR, SurfaceRenderer
+from pbf.app.white_water import WhiteWater
 from pbf.scene import Render, Scene
 from pbf.solver import allocation as bucket
 from pbf.solver import quaternion_matrix_np, scene_constants
@@ -526,6 +527,7 @@ def surface_renderer(sim, width_px: int, height_px: int) -> SurfaceRenderer:
         segments=scene_edges(scene),
         solids=sim.solids(),
         body_rgb=BODY_RGB,
+        exposure_s=scene.surface.shutter_frames * scene.time.frame_dt_s,
     )
 
 
@@ -620,8 +622,9 @@ class SceneRenderer:
     style draws the water's surface with the bodies as solids (``SurfaceRenderer``). Each style's renderer
     is made on first use, and again when the image size changes (``resize``)."""
 
-    def __init__(self, sim, width_px=None, height_px=None, style=None):
-        """``style`` "particles" or "surface" (default: the scene's ``render.style``)."""
+    def __init__(self, sim, width_px=None, height_px=None, style=None, white_water=None):
+        """``style`` "particles" or "surface" (default: the scene's ``render.style``); ``white_water``: whether
+        the surface style draws it (default: the scene's ``white_water.enabled``)."""
         render = sim.scene.render
         self.sim = sim
         self.view = View.of_scene(sim.scene)
@@ -634,6 +637,9 @@ class SceneRenderer:
         self.colours = None
         self.bodies = None
         """The particles' colours and the rigid bodies' points (the particle style's), made on first use."""
+        self.white_water = None
+        """Spray, foam and bubbles (``pbf.app.white_water``; the surface style's), made on first use."""
+        self.with_white_water = sim.scene.white_water.enabled if white_water is None else bool(white_water)
 
     def resize(self, width_px: int, height_px: int) -> None:
         """Draw at another size from the next frame on (a window resized)."""
@@ -647,6 +653,8 @@ class SceneRenderer:
         if self.style == "surface":
             if self.surface is None:
                 self.surface = surface_renderer(self.sim, self.width, self.height)
+            if self.white_water is None and self.with_white_water:
+                self.white_water = WhiteWater(self.sim)
             return self.surface
         if self.spheres is None:
             render = self.sim.scene.render
@@ -666,15 +674,27 @@ class SceneRenderer:
             positions, colours, count = self.bodies.combine(positions, colours, count)
         return positions, colours, count, particles.radius_m
 
+    def _surface(self) -> tuple:
+        """The surface renderer's arguments after the view: the particles, the light, the neighbour lists,
+        the velocities and the white water, brought to the simulation's frame."""
+        particles = self.sim.readout()
+        if self.white_water is not None:
+            self.white_water.sync()
+        return (
+            particles.positions,
+            particles.count,
+            LIGHT_DIRECTION,
+            self.sim.neighbourhood(),
+            particles.velocities,
+            self.white_water,
+        )
+
     def draw(self, view: View) -> np.ndarray:
         """The current state seen through ``view`` as (W, H) packed RGBA words, y up: the layout GGUI's
         canvas shows as it is (the renderer's own array, valid until the next draw)."""
         renderer = self.renderer
         if renderer is self.surface:
-            particles = self.sim.readout()
-            return renderer.draw_packed(
-                view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
-            )
+            return renderer.draw_packed(view, *self._surface())
         return renderer.draw(view, *self._spheres())
 
     def frame(self) -> np.ndarray:
@@ -682,10 +702,7 @@ class SceneRenderer:
         (copied from the device once), with the colour legend where the style has one."""
         renderer = self.renderer
         if renderer is self.surface:
-            particles = self.sim.readout()
-            return renderer.render(
-                self.view, particles.positions, particles.count, LIGHT_DIRECTION, self.sim.neighbourhood()
-            )
+            return renderer.render(self.view, *self._surface())
         image = renderer.render(self.view, *self._spheres())
         return draw_legend(image, self.sim.scene.render) if self.sim.scene.render.legend else image
 

@@ -27,30 +27,25 @@ def per_item() -> bool:
 
 
 @ti.data_oriented
-class Footprints:
-    """Screen rectangles of up to ``capacity`` particles and the prefix sum of their areas."""
+class PrefixSum:
+    """Exclusive prefix sums of up to ``capacity`` integers (Hillis & Steele: log₂ n passes, each a parallel
+    loop). Integer sums are exact, so the result never depends on the order threads run in."""
 
     def __init__(self, capacity: int):
         self.capacity = max(int(capacity), 1)
-        self.corner = ti.Vector.field(2, ti.i32, shape=self.capacity)
-        """(first column, first row) of each particle's rectangle."""
-        self.width = ti.field(ti.i32, shape=self.capacity)
         self.sums = [ti.field(ti.i32, shape=self.capacity + 1) for _ in range(2)]
-        """Ping-pong buffers of the scan: the areas, then their inclusive sums."""
+        """Ping-pong buffers: the values (shifted by one), then their inclusive sums."""
         self.passes = max(1, math.ceil(math.log2(self.capacity)))
 
     @ti.func
-    def set(self, k, c0, c1, r0, r1):
-        """Particle k covers columns [c0, c1) and rows [r0, r1) (empty when either is)."""
-        width, height = ti.max(c1 - c0, 0), ti.max(r1 - r0, 0)
-        self.corner[k] = ti.Vector([c0, r0])
-        self.width[k] = width
-        self.sums[0][k + 1] = width * height
+    def put(self, k, value):
+        """Entry k's value, before :meth:`scan`."""
+        self.sums[0][k + 1] = value
 
     @ti.func
     def scan(self, count):
-        """starts[k] = Σ_{l<k} area[l] for k ≤ count (Hillis & Steele: log₂ n passes, each parallel);
-        called at a kernel's top level after :meth:`set` of particles 0 … count − 1."""
+        """start(k) = Σ_{l<k} value[l] for k ≤ count; called at a kernel's top level after :meth:`put` of
+        entries 0 … count − 1."""
         self.sums[0][0] = 0
         for p in ti.static(range(self.passes)):
             source, target = ti.static(self.sums[p % 2], self.sums[(p + 1) % 2])
@@ -61,14 +56,44 @@ class Footprints:
                 target[k] = value
 
     @ti.func
+    def start(self, k):
+        """The sum of the values before entry k (k ≤ count), after :meth:`scan`."""
+        return self.sums[self.passes % 2][k]
+
+
+@ti.data_oriented
+class Footprints:
+    """Screen rectangles of up to ``capacity`` particles and the prefix sum of their areas."""
+
+    def __init__(self, capacity: int):
+        self.capacity = max(int(capacity), 1)
+        self.corner = ti.Vector.field(2, ti.i32, shape=self.capacity)
+        """(first column, first row) of each particle's rectangle."""
+        self.width = ti.field(ti.i32, shape=self.capacity)
+        self.areas = PrefixSum(self.capacity)
+
+    @ti.func
+    def set(self, k, c0, c1, r0, r1):
+        """Particle k covers columns [c0, c1) and rows [r0, r1) (empty when either is)."""
+        width, height = ti.max(c1 - c0, 0), ti.max(r1 - r0, 0)
+        self.corner[k] = ti.Vector([c0, r0])
+        self.width[k] = width
+        self.areas.put(k, width * height)
+
+    @ti.func
+    def scan(self, count):
+        """The areas' prefix sums, called at a kernel's top level after :meth:`set` of particles 0 … count − 1."""
+        self.areas.scan(count)
+
+    @ti.func
     def total(self, count):
         """Work items of particles 0 … count − 1, after :meth:`scan`."""
-        return self.sums[self.passes % 2][count]
+        return self.areas.start(count)
 
     @ti.func
     def item(self, w, count):
         """The particle slot k of work item w and its pixel (column, row)."""
-        starts = ti.static(self.sums[self.passes % 2])
+        starts = ti.static(self.areas.sums[self.areas.passes % 2])
         low, high = 0, count  # the last k with starts[k] ≤ w: its area is not empty
         while high - low > 1:
             middle = (low + high) // 2
@@ -289,9 +314,10 @@ class Ellipsoids:
             self.reach[i] = reach
             self.chord[i] = chord
 
-    def update(self, positions, count: int, neighbourhood=None) -> None:
+    def update(self, positions, count: int, neighbourhood=None, velocities=None, exposure_s: float = 0.0) -> None:
         """The splats of the ``count`` particles at ``positions``: anisotropic from ``neighbourhood``
-        (a ``pbf.solver.Neighbourhood`` of these positions), spheres without."""
+        (a ``pbf.solver.Neighbourhood`` of these positions), spheres without; with ``velocities``, each
+        drop stretched along its velocity over ``exposure_s`` (motion blur)."""
         if not count:
             return
         if neighbourhood is None:
@@ -300,6 +326,24 @@ class Ellipsoids:
             self.anisotropic(
                 neighbourhood.grid, positions, neighbourhood.entries, count, float(neighbourhood.support_m)
             )
+            if velocities is not None and exposure_s > 0.0:
+                self.blurred(velocities, count, exposure_s)
+
+    @ti.kernel
+    def blurred(self, v: ti.template(), count: ti.i32, exposure: ti.f32):
+        """Each drop (a splat of the drop's radius) an ellipsoid along its velocity: semi-axes the drop's radius
+        across and that plus half the distance it moves in the exposure along, its chord scaled so that it
+        holds the same volume of water. A camera sees a moving drop as a streak, not a bead."""
+        drop = self.constants[None].drop
+        for i in range(count):
+            travel = 0.5 * exposure * v[i].norm()
+            if self.reach[i] == drop and travel > 0.05 * drop:
+                along = v[i].normalized()
+                length = drop + travel
+                projector = along.outer_product(along)
+                self.inverse[i] = (ti.Matrix.identity(ti.f32, 3) - projector) / drop + projector / length
+                self.reach[i] = length
+                self.chord[i] *= drop / length
 
     @ti.func
     def frame(self, i, eye, right, up, forward):

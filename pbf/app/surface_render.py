@@ -47,6 +47,7 @@ import taichi as ti
 
 from pbf.app.constants import colour
 from pbf.app.splat import Ellipsoids, Footprints, per_item
+from pbf.app.white_water import Sprites
 from pbf.solver import allocation as bucket
 from pbf.solver import scene_constants
 
@@ -121,12 +122,14 @@ class SurfaceRenderer:
         segments=None,
         solids=None,
         body_rgb=None,
+        exposure_s=0.0,
     ):
         """The floor is the plane y = ``floor_y_m`` in square tiles of ``tile_m``; ``absorption_per_m``
         is Beer–Lambert's σ for red, green and blue; ``water_rgb`` the colour of deep water;
         ``horizon_rgb`` the sky's colour at the horizon (the zenith is blue). ``solids``: a
         simulation's rigid bodies (``Simulation.solids()``), drawn as solids of ``body_rgb`` from their
-        device fields as they stand at each draw."""
+        device fields as they stand at each draw. ``exposure_s``: how long a frame's exposure lasts (motion
+        blur of drops and white water), s."""
         # The image size stays in the kernels' code (a view setting, the same for most runs); what
         # depends on the scene is data (``constants``, and fields sized by buckets), so that a scene of
         # another spacing, container or colours finds these kernels compiled (``pbf.solver.scene_constants``).
@@ -194,6 +197,9 @@ class SurfaceRenderer:
         launch but up only where a kernel reads it, return every pixel)."""
         self.per_item = per_item()
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
+        self.exposure = float(exposure_s)
+        self.sprites = Sprites(self.width, self.height, self.spacing, self.per_item)
+        """White water's sprites (``pbf.app.white_water``), drawn where a draw is given white water."""
         self.footprints = None
         self.splats = None
         """The particles' splats (``pbf.app.splat.Ellipsoids``), allocated on first use for the positions'
@@ -814,26 +820,33 @@ class SurfaceRenderer:
         depth = float(self.image_depth[self.height - 1 - row_up, col])
         return depth if depth < FAR else None
 
-    def draw_packed(self, view, positions, count: int, light_direction, neighbourhood=None) -> np.ndarray:
+    def draw_packed(
+        self, view, positions, count: int, light_direction, neighbourhood=None, velocities=None, white_water=None
+    ) -> np.ndarray:
         """Like :meth:`render`, as a (W, H) array of packed RGBA words, y up, the layout GGUI's canvas
         shows without a conversion pass (the window's surface mode)."""
-        self.draw(view, positions, count, light_direction, neighbourhood)
+        self.draw(view, positions, count, light_direction, neighbourhood, velocities, white_water)
         if self.packed is None:
             self.packed = np.zeros((self.width, self.height), np.uint32)
         self._pack(self.packed)
         return self.packed
 
-    def render(self, view, positions, count: int, light_direction, neighbourhood=None) -> np.ndarray:
+    def render(
+        self, view, positions, count: int, light_direction, neighbourhood=None, velocities=None, white_water=None
+    ) -> np.ndarray:
         """(H, W, 3) uint8 image of the ``count`` particles at ``positions`` (a Taichi vector field, m)
         seen through ``view`` (a ``pbf.app.render.View``), lit from unit ``light_direction``: each particle
         an ellipsoid from ``neighbourhood`` (``Simulation.neighbourhood()`` of these positions), or a sphere
-        without it."""
-        self.draw(view, positions, count, light_direction, neighbourhood)
+        without it; a drop stretched along its velocity over the exposure where ``velocities`` are given;
+        with the diffuse particles of ``white_water`` (``pbf.app.white_water.WhiteWater``) over the water."""
+        self.draw(view, positions, count, light_direction, neighbourhood, velocities, white_water)
         rgb = np.empty((self.height, self.width, 3), np.uint8)
         self._rgb(rgb)
         return rgb
 
-    def draw(self, view, positions, count: int, light_direction, neighbourhood=None) -> None:
+    def draw(
+        self, view, positions, count: int, light_direction, neighbourhood=None, velocities=None, white_water=None
+    ) -> None:
         """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
@@ -852,7 +865,7 @@ class SurfaceRenderer:
             if self.splats is None or self.splats.capacity < positions.shape[0]:
                 self.splats = Ellipsoids(positions.shape[0], self.radius, self.spacing)
                 self.splat_rows = ti.Vector.field(2, ti.i32, shape=self.splats.capacity)
-            self.splats.update(positions, count, neighbourhood)
+            self.splats.update(positions, count, neighbourhood, velocities, self.exposure)
         if count and self.per_item:
             if self.footprints is None or self.footprints.capacity < positions.shape[0]:
                 self.footprints = Footprints(positions.shape[0])
@@ -898,5 +911,7 @@ class SurfaceRenderer:
         self._normals(eye, right, up, forward, coarse_focal)
         self._shade(eye, right, up, forward, coarse_focal, light)
         self._compose(eye, right, up, forward, focal, light)
+        if white_water is not None:
+            self.sprites.draw(white_water, self.image, self.image_depth, view, self.exposure)
         if len(self.segment_points):
             self._lines()

@@ -44,7 +44,7 @@ from pbf.scene.root import MAX_OBSTACLES, Scene
 from pbf.scene.schema import FLOAT32_SAFE, SceneError, Vec3, echo
 from pbf.scene.solver import CHEBYSHEV_RHO, MAX_ITERATIONS, MIN_ITERATIONS, Expert, Solver, Viscosity, Vorticity
 from pbf.scene.timestep import Time
-from pbf.scene.view import CAMERA_REACH_DIAGONALS, Camera, Render, Surface, default_look_at_m
+from pbf.scene.view import CAMERA_REACH_DIAGONALS, Camera, Render, Surface, WhiteWater, default_look_at_m
 from pbf.scene.wave_maker import WaveMaker
 
 __all__ = [
@@ -76,6 +76,7 @@ __all__ = [
     "SceneError",
     "Solver",
     "Surface",
+    "WhiteWater",
     "Time",
     "Vec3",
     "Viscosity",

@@ -13,7 +13,7 @@ from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_contai
 from pbf.scene.schema import SceneError, Vec3, _at_most_tables, _line, _show, _table_values, key
 from pbf.scene.solver import Solver, Viscosity, Vorticity, _check_solver
 from pbf.scene.timestep import Time, _check_settle, _check_time, travel_spacings
-from pbf.scene.view import Camera, Render, Surface, _check_camera
+from pbf.scene.view import Camera, Render, Surface, WhiteWater, _check_camera
 from pbf.scene.wave_maker import WaveMaker, _check_wave_maker
 
 MAX_OBSTACLES = 100
@@ -46,6 +46,7 @@ class Scene:
     camera: Camera = key(Camera())
     render: Render = key(Render())
     surface: Surface = key(Surface())
+    white_water: WhiteWater = key(WhiteWater())
 
     def __post_init__(self):
         # Every value converted to its annotated type and checked, nested tables included, so a

@@ -102,6 +102,38 @@ class Surface:
     water_rgb: Vec3 = key(
         (0.03, 0.25, 0.4), _vec_between(0.0, 1.0), "colour of deep water (the light it absorbs is replaced by this)"
     )
+    shutter_frames: float = key(
+        0.5,
+        _between(0.0, 2.0),
+        "motion blur: how long a frame's exposure lasts, in frame times (0.5: a film camera's 180° shutter; 0: "
+        "none); drops and white water are drawn stretched along their velocity over it",
+    )
+
+
+MAX_WHITE_WATER = 2**24
+"""Most diffuse particles a budget may ask for (about 80 bytes each on the device)."""
+
+
+@dataclass(frozen=True)
+class WhiteWater:
+    """Spray, foam and air bubbles (Ihmsen et al. 2012): diffuse particles emitted where the water traps air,
+    at wave crests and where it moves fast, drawn in ``render.style = "surface"`` and written by ``--export``.
+    A post-process of the fluid's particles: the simulation never sees them. Its thresholds are in units of
+    the scene's kernel radius h and gravity, so every scene gets white water without tuning."""
+
+    enabled: bool = key(
+        True, doc="emit and draw white water in the surface style (and write it with --export in that style)"
+    )
+    budget: int = key(
+        0,
+        _between(0, MAX_WHITE_WATER),
+        "most diffuse particles at once, allocated at the start (0: twice the fluid's particle capacity); "
+        "when it is full, emission waits",
+    )
+    lifetime_s: float = key(2.0, _between(0.01, 600.0), "mean life of foam on the surface, s")
+    amount: float = key(
+        1.0, _between(0.0, 100.0), "emission rate, relative to the default (0: only what is alive stays)"
+    )
 
 
 def default_look_at_m(scene) -> Vec3:

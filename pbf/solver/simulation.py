@@ -176,6 +176,9 @@ class Simulation:
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
+        self.restarts = -1
+        """Restores so far (a reset is one; the start is the first): post-processes that follow the particles
+        from frame to frame, such as the renderer's white water, start again when it changes."""
         self.reset()
 
     @property
@@ -382,6 +385,7 @@ class Simulation:
 
     def _after_restore(self) -> None:
         """What a restore resets besides the particles: the piston, the frame's counters, the lists."""
+        self.restarts += 1
         self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
