@@ -92,6 +92,10 @@ SUN_GLOW_POWER = 24.0
 """Sharpness of the glow: it falls to half about 14° from the sun."""
 SPECULAR_EXPONENT = 256.0
 """Blinn-Phong exponent of the sun's highlight on a smooth surface (lowered where the surface is rough)."""
+THROUGH_BLUR = 0.3
+"""How much what is seen through water blurs, per metre of water per metre of distance (an angle per the
+path's share of the ray): through a block half a metre thick, the floor's tiles blend; through a film, no
+blur."""
 FLOOR_RGB = ((0.80, 0.80, 0.78), (0.62, 0.64, 0.66))
 """The two colours of the floor's tiles."""
 BODY_AMBIENT = 0.35
@@ -614,7 +618,13 @@ class SurfaceRenderer:
                 k = 1.0 - eta * eta * (1.0 - cosine * cosine)
                 refracted = (eta * direction + (eta * cosine - ti.sqrt(ti.max(k, 0.0))) * normal).normalized()
                 path = self.thickness[row, col]
-                behind = self._environment(point, refracted, spread, travelled)
+                # The water as a slab of the path's thickness: the ray leaves it parallel to the way it came
+                # in, shifted by the path it took inside (a ray followed down to the floor inside the water
+                # would squeeze the floor's tiles into horizontal bands across a block).
+                # Deep water blurs what lies behind it (scattering, and the normals' error over a long path):
+                # the view through it is averaged over a footprint that widens with the path.
+                through = spread + THROUGH_BLUR * path / (travelled + path)
+                behind = self._environment(point + path * refracted, direction, through, travelled + path)
                 if ti.static(self.with_solids):  # a body under the surface, seen through the water
                     hit, hit_normal = self._hit_solid(point, refracted)
                     if hit < FAR:

@@ -361,10 +361,12 @@ class WhiteWater:
             grid.for_each_neighbour(i, entries, self._lopsided, acc)
             self.normal[i] = ti.Vector([acc.x, acc.y, acc.z, acc.norm()])
         for i in range(count):
-            acc = ti.Vector([0.0, 0.0])
-            grid.for_each_neighbour(i, entries, self._potential_pair, acc)
             u = self.sorted_v[i]
             speed = u.norm()
+            acc = ti.Vector([0.0, 0.0])
+            # Without the kinetic energy's lowest threshold a particle emits nothing (Eq. 8): no walk.
+            if 0.5 * speed * speed * c.inverse_speed * c.inverse_speed > KINETIC[0]:
+                grid.for_each_neighbour(i, entries, self._potential_pair, acc)
             normal = self.normal[i]
             crest = 0.0
             outward = ti.Vector([normal[0], normal[1], normal[2]])
@@ -444,16 +446,23 @@ class WhiteWater:
         row[slot, 8] = ti.cast(kind, ti.f32)
 
 
-SPRITE_RADIUS_SPACINGS = (0.22, 0.3, 0.18)
+COARSE = 2
+"""The sprites' opacities add up at 1/COARSE of the frame's width and height."""
+SPRITE_RADIUS_SPACINGS = (0.15, 0.2, 0.12)
 """A sprite's radius (its Gaussian's σ) for spray, foam and bubbles, in spacings: white water is finer
 than the fluid's particles."""
-BRIGHTNESS = (0.9, 0.45, 0.2)
+BRIGHTNESS = (1.2, 0.8, 0.45)
 """A sprite's peak opacity (before overlap) for spray, foam and bubbles: foam gathers into sheets, bubbles
 are seen through water."""
 MIN_SIGMA_PX = 0.7
 """No sprite is narrower than this on screen (pixels): a smaller one keeps its total brightness, spread."""
 SEEN_THROUGH_SPACINGS = 3.0
 """Behind the water's surface a sprite fades by e every this many spacings of water in front of it."""
+REACH_SIGMAS = 2.0
+"""A sprite reaches this many σ from its streak (its bump (1 − d²/R²)² has about σ's width)."""
+HIDDEN_SEEN_THROUGH = 5.0
+"""A sprite whose centre lies deeper behind the surface than this many SEEN_THROUGH_SPACINGS (it would show
+at under e⁻⁵ of its brightness) is not drawn."""
 OPACITY_STEPS = 4096
 """Fixed-point steps of opacity in the sprites' sum (integer atomics: the same image on every run)."""
 WHITE_RGB = (0.96, 0.98, 1.0)
@@ -464,11 +473,14 @@ class Sprites:
     """White water drawn into a surface frame: each diffuse particle a soft white sprite (a Gaussian of its
     kind's radius) stretched along its screen velocity over the exposure (motion blur: a streak keeps the
     sprite's total brightness), depth-tested against the water's surface and seen through it dimmed by
-    the water in front. The opacities add up as integers per pixel, then a pixel takes white by
-    1 − exp(−Σ), so dense foam saturates to white and a lone drop stays faint."""
+    the water in front. The opacities add up as integers per pixel of an image ``COARSE`` times smaller each
+    way (the sprites are soft: a quarter of the pixels costs a quarter), then each pixel of the frame takes
+    white by 1 − exp(−Σ), Σ interpolated bilinearly, so dense foam saturates to white and a lone drop stays
+    faint."""
 
     def __init__(self, width_px: int, height_px: int, spacing_m: float, per_item: bool):
-        self.width, self.height = int(width_px), int(height_px)
+        self.full_width, self.full_height = int(width_px), int(height_px)
+        self.width, self.height = max(self.full_width // COARSE, 2), max(self.full_height // COARSE, 2)
         self.opacity = ti.field(ti.i32, shape=(self.height, self.width))
         self.per_item = per_item
         self.footprints = None
@@ -485,9 +497,10 @@ class Sprites:
         )
 
     @ti.func
-    def _sprite(self, ww: ti.template(), p, eye, right, up, forward, focal, exposure):
+    def _sprite(self, ww: ti.template(), surface: ti.template(), p, eye, right, up, forward, focal, exposure):
         """Diffuse particle p on screen: its streak's ends (column, row, depth), σ in pixels and peak opacity;
-        σ = 0 where it is not drawn (behind the eye)."""
+        σ = 0 where it is not drawn (behind the eye, or so deep behind the water's surface, ``surface``'s
+        depth at its centre, that it would add nothing)."""
         kind = ww.kind[p]
         half = 0.5 * exposure * ww.velocity[p]
         a = self._project(ww.position[p] - half, eye, right, up, forward, focal)
@@ -505,11 +518,24 @@ class Sprites:
             length = (ti.Vector([b[0] - a[0], b[1] - a[1]])).norm()
             # The same total over the sprite's area however it is stretched or widened.
             peak = brightness * (true_px / sigma) ** 2 / (1.0 + length / (2.5 * sigma))
+            col = ti.min(ti.max(ti.cast(0.5 * (a[0] + b[0]), ti.i32), 0), self.width - 1)
+            row = ti.min(ti.max(ti.cast(0.5 * (a[1] + b[1]), ti.i32), 0), self.height - 1)
+            hidden = HIDDEN_SEEN_THROUGH * SEEN_THROUGH_SPACINGS * self.constants[None].spacing
+            if ti.min(a[2], b[2]) > self._surface_at(surface, row, col) + hidden:
+                sigma = 0.0
         return a, b, sigma, peak
 
     @ti.func
+    def _surface_at(self, surface: ti.template(), row, col):
+        """The water's view depth at the centre of coarse pixel (row, col), from the frame's depth."""
+        return surface[
+            ti.min(row * COARSE + COARSE // 2, self.full_height - 1),
+            ti.min(col * COARSE + COARSE // 2, self.full_width - 1),
+        ]
+
+    @ti.func
     def _bounds(self, a, b, sigma):
-        reach = 3.0 * sigma + 1.0
+        reach = REACH_SIGMAS * sigma + 1.0
         c0 = ti.max(ti.cast(ti.floor(ti.min(a[0], b[0]) - reach), ti.i32), 0)
         c1 = ti.min(ti.cast(ti.floor(ti.max(a[0], b[0]) + reach), ti.i32) + 1, self.width)
         r0 = ti.max(ti.cast(ti.floor(ti.min(a[1], b[1]) - reach), ti.i32), 0)
@@ -518,17 +544,18 @@ class Sprites:
 
     @ti.func
     def _add(self, a, b, sigma, peak, row, col, surface: ti.template()):
-        """The sprite's opacity at pixel (row, col), added to the pixel's sum."""
+        """The sprite's opacity at pixel (row, col), added to the pixel's sum: a bump (1 − d²/R²)² of the
+        distance d to the streak, R = REACH_SIGMAS σ (close to a Gaussian of σ, without an exponential)."""
         centre = ti.Vector([col + 0.5, row + 0.5])
         start, along = ti.Vector([a[0], a[1]]), ti.Vector([b[0] - a[0], b[1] - a[1]])
         t = 0.0
         if along.norm_sqr() > 0.0:
             t = ti.min(ti.max((centre - start).dot(along) / along.norm_sqr(), 0.0), 1.0)
-        distance_sqr = (start + t * along - centre).norm_sqr()
-        if distance_sqr < 9.0 * sigma * sigma:
-            value = peak * ti.exp(-0.5 * distance_sqr / (sigma * sigma))
+        falloff = 1.0 - (start + t * along - centre).norm_sqr() / (REACH_SIGMAS * REACH_SIGMAS * sigma * sigma)
+        if falloff > 0.0:
+            value = peak * falloff * falloff
             depth = a[2] + t * (b[2] - a[2])
-            in_front = surface[row, col]
+            in_front = self._surface_at(surface, row, col)
             if depth > in_front:
                 value *= ti.exp(-(depth - in_front) / (SEEN_THROUGH_SPACINGS * self.constants[None].spacing))
             steps = ti.cast(value * OPACITY_STEPS + 0.5, ti.i32)
@@ -547,63 +574,83 @@ class Sprites:
         focal: ti.f32,
         exposure: ti.f32,
     ):
-        """The CPU: a thread per sprite walks its rectangle."""
-        for p in range(ww.live[None]):
-            a, b, sigma, peak = self._sprite(ww, p, eye, right, up, forward, focal, exposure)
-            if sigma > 0.0:
-                c0, c1, r0, r1 = self._bounds(a, b, sigma)
-                for row in range(r0, r1):
-                    for col in range(c0, c1):
-                        self._add(a, b, sigma, peak, row, col, surface)
-
-    @ti.kernel
-    def _splat_items(
-        self,
-        ww: ti.template(),
-        surface: ti.template(),
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
-        exposure: ti.f32,
-    ):
-        """A GPU: a thread per (sprite, pixel) of the sprites' rectangles (``pbf.app.splat.Footprints``)."""
+        """Every sprite's opacity into the sums. On the CPU a thread per sprite walks its rows, each over the
+        columns its streak can reach there (a diagonal streak's rectangle is mostly empty); on a GPU a thread
+        per (sprite, pixel) of the sprites' rectangles (``pbf.app.splat.Footprints``)."""
         live = ww.live[None]
-        for p in range(live):
-            a, b, sigma, peak = self._sprite(ww, p, eye, right, up, forward, focal, exposure)
-            c0, c1, r0, r1 = 0, 0, 0, 0
-            if sigma > 0.0:
-                c0, c1, r0, r1 = self._bounds(a, b, sigma)
-            self.footprints.set(p, c0, c1, r0, r1)
-        self.footprints.scan(live)
-        for w in range(self.footprints.total(live)):
-            p, col, row = self.footprints.item(w, live)
-            a, b, sigma, peak = self._sprite(ww, p, eye, right, up, forward, focal, exposure)
-            self._add(a, b, sigma, peak, row, col, surface)
+        if ti.static(self.per_item):
+            for p in range(live):
+                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                c0, c1, r0, r1 = 0, 0, 0, 0
+                if sigma > 0.0:
+                    c0, c1, r0, r1 = self._bounds(a, b, sigma)
+                self.footprints.set(p, c0, c1, r0, r1)
+            self.footprints.scan(live)
+            for w in range(self.footprints.total(live)):
+                p, col, row = self.footprints.item(w, live)
+                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                self._add(a, b, sigma, peak, row, col, surface)
+        else:
+            for p in range(live):
+                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                if sigma > 0.0:
+                    c0, c1, r0, r1 = self._bounds(a, b, sigma)
+                    reach = REACH_SIGMAS * sigma + 1.0
+                    for row in range(r0, r1):
+                        # The streak's points within reach of this row: t in [low, high], their columns ± reach.
+                        low, high = 0.0, 1.0
+                        rise = b[1] - a[1]
+                        if ti.abs(rise) > 1e-6:
+                            t0 = (row + 0.5 - reach - a[1]) / rise
+                            t1 = (row + 0.5 + reach - a[1]) / rise
+                            low, high = ti.max(ti.min(t0, t1), 0.0), ti.min(ti.max(t0, t1), 1.0)
+                        x0, x1 = a[0] + low * (b[0] - a[0]), a[0] + high * (b[0] - a[0])
+                        first = ti.max(ti.cast(ti.floor(ti.min(x0, x1) - reach), ti.i32), c0)
+                        last = ti.min(ti.cast(ti.floor(ti.max(x0, x1) + reach), ti.i32) + 1, c1)
+                        for col in range(first, last):
+                            self._add(a, b, sigma, peak, row, col, surface)
 
     @ti.kernel
     def _blend(self, image: ti.template()):
-        """Each pixel whitened by 1 − exp(−its opacity), and the sum cleared for the next frame."""
+        """Each pixel of the frame whitened by 1 − exp(−its opacity, interpolated from the coarse sums), then
+        the sums cleared for the next frame."""
+        if ti.static(self.per_item):  # a GPU backend: a thread per pixel
+            for row, col in image:
+                self._blend_pixel(image, row, col)
+        else:  # the CPU: a thread per row, along it in order
+            for row in range(self.full_height):
+                for col in range(self.full_width):
+                    self._blend_pixel(image, row, col)
         for row, col in self.opacity:
-            steps = self.opacity[row, col]
-            if steps > 0:
-                share = 1.0 - ti.exp(-ti.cast(steps, ti.f32) / OPACITY_STEPS)
-                colour = ti.cast(image[row, col], ti.f32) / 255.0
-                blended = colour + share * (ti.Vector(WHITE_RGB) - colour)
-                image[row, col] = ti.cast(ti.min(blended, 1.0) * 255.0 + 0.5, ti.u8)
-                self.opacity[row, col] = 0
+            self.opacity[row, col] = 0
+
+    @ti.func
+    def _blend_pixel(self, image: ti.template(), row, col):
+        y = (row + 0.5) / COARSE - 0.5
+        x = (col + 0.5) / COARSE - 0.5
+        r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.height - 2)
+        c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.width - 2)
+        corners = ti.Vector(
+            [self.opacity[r0, c0], self.opacity[r0, c0 + 1], self.opacity[r0 + 1, c0], self.opacity[r0 + 1, c0 + 1]]
+        )
+        if corners.max() > 0:  # most pixels: no white water near
+            fy = ti.min(ti.max(y - r0, 0.0), 1.0)
+            fx = ti.min(ti.max(x - c0, 0.0), 1.0)
+            steps = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * (
+                (1.0 - fx) * corners[2] + fx * corners[3]
+            )
+            share = 1.0 - ti.exp(-steps / OPACITY_STEPS)
+            colour = ti.cast(image[row, col], ti.f32) / 255.0
+            blended = colour + share * (ti.Vector(WHITE_RGB) - colour)
+            image[row, col] = ti.cast(ti.min(blended, 1.0) * 255.0 + 0.5, ti.u8)
 
     def draw(self, white_water: WhiteWater, image, surface_depth, view, exposure_s: float) -> None:
         """The live diffuse particles of ``white_water`` into ``image`` ((H, W) u8 RGB field) over the water
         whose view depth per pixel is ``surface_depth`` ((H, W) f32 field), seen through ``view``."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
-        focal = view.focal_px(self.height)
-        if self.per_item:
-            if self.footprints is None or self.footprints.capacity < white_water.position.shape[0]:
-                self.footprints = Footprints(white_water.position.shape[0])
-            self._splat_items(white_water, surface_depth, eye, right, up, forward, focal, exposure_s)
-        else:
-            self._splat(white_water, surface_depth, eye, right, up, forward, focal, exposure_s)
+        focal = view.focal_px(self.height)  # of the coarse image
+        if self.per_item and (self.footprints is None or self.footprints.capacity < white_water.position.shape[0]):
+            self.footprints = Footprints(white_water.position.shape[0])
+        self._splat(white_water, surface_depth, eye, right, up, forward, focal, exposure_s)
         self._blend(image)

@@ -350,14 +350,26 @@ def main(argv=None) -> int:
         return look(argv[1:])
     args = parser.parse_args(argv)
 
+    import taichi as ti
+
     from pbf.app.render import SceneRenderer
     from pbf.solver import Simulation, start_backend
 
     backend = start_backend(args.arch)
     sim = Simulation(args.scene, quiet=True)
-    sim.step(args.at_frame)
     width, height = args.size or (sim.scene.render.width_px, sim.scene.render.height_px)
     renderers = {style: SceneRenderer(sim, width, height, style=style) for style in STYLES}
+    # The surface style's white water follows the run from its start (the last frames' updates timed).
+    renderers["surface"].frame()
+    white_water = renderers["surface"].white_water
+    updates = []
+    for _ in range(args.at_frame):
+        sim.step()
+        if white_water is not None:
+            start = time.perf_counter()
+            white_water.sync()
+            ti.sync()
+            updates.append(time.perf_counter() - start)
     images = {style: renderer.frame() for style, renderer in renderers.items()}  # compiles
     timed_frames(renderers, 2)  # and warms the caches
     times = timed_frames(renderers, args.repeats)
@@ -395,7 +407,15 @@ def main(argv=None) -> int:
                     )
                 )
     print()
+    if white_water is not None:
+        live, _waiting = white_water.counts()
+        update = statistics.median(updates[-10:]) if updates else 0.0
+        print(row("white water's update (last 10 frames)", update, update, f"{live:,} diffuse particles"))
+    print()
     print(f"The surface takes {medians['surface'] / medians['particles']:.2f}× the particles' time to draw.")
+    if white_water is not None:
+        total = (medians["surface"] + update) / medians["particles"]
+        print(f"With white water's update, {total:.2f}× ({live:,} diffuse particles).")
     if args.whole:
         with tempfile.TemporaryDirectory() as folder:
             times = whole_frames(sim, renderers[args.style], args.whole, args.rounds, Path(folder))
