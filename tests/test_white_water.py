@@ -192,3 +192,5 @@ def test_export_writes_the_diffuse_particles_beside_the_frames(tmp_path):
     again = tmp_path / "again"
     assert cli.main([str(scene), "--headless", "--frames", str(frames), "--export", "ply", "--out", str(again)]) == 0
     assert hashlib.sha256((again / names[-1]).read_bytes()).hexdigest() == digest
+    for frame in (f"frame_{frames // 2:05d}.png", f"frame_{frames:05d}.png"):  # the frames too, bit for bit
+        assert (again / frame).read_bytes() == (out / frame).read_bytes()
