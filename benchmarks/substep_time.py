@@ -24,7 +24,6 @@ this process does): the device time of each task of 10 substeps, in the order th
 import argparse
 import statistics
 import time
-from collections import defaultdict
 
 import taichi as ti
 
@@ -65,8 +64,8 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
 
 
 def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
-    """(task, launches per substep, µs each) of ``substeps`` substeps, in the order the tasks first ran."""
-    from pbf.solver.launch import profiled_tasks
+    """(task, launches per substep, µs each) of ``substeps`` substeps, the most device time first."""
+    from benchmarks.instruments import profiled_tasks
 
     sim = Simulation(dam_break(particles, 4), quiet=True)
     sim.step(WARMUP_FRAMES)
@@ -76,11 +75,7 @@ def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
     for _ in range(substeps):
         sim.substep(dt)
     ti.sync()
-    totals: dict[str, list] = defaultdict(lambda: [0, 0.0])
-    for task, ms in profiled_tasks():
-        totals[task][0] += 1
-        totals[task][1] += ms
-    return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in totals.items()]
+    return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in profiled_tasks().items()]
 
 
 def preset_rate(preset: str, overrides=(), frames: int = 30) -> dict:

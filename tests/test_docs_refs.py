@@ -181,7 +181,7 @@ def test_the_documents_are_found():
     ("line", "found"),
     [
         ("see `pbf.solver.grid.NeighbourGrid`.", ["pbf.solver.grid.NeighbourGrid"]),
-        ("`python -m pbf.study.bench sizes`", ["pbf.study.bench"]),
+        ("`python -m pbf.study.sweep --flow`", ["pbf.study.sweep"]),
         ("pip install pbf-fluids; pbf_buckets.txt; the pbf command.", []),
     ],
 )
@@ -193,7 +193,7 @@ def test_dotted_names_are_found_in_text(line, found):
     ("name", "as_module", "stale"),
     [
         ("pbf.solver.grid.NeighbourGrid", False, False),
-        ("pbf.study.bench", True, False),
+        ("pbf.study.sweep", True, False),
         ("pbf.Simulation", False, False),
         ("pbf.solver.grid.NoSuchGrid", False, True),
         ("pbf.solver.no_such_module", False, True),

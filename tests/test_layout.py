@@ -43,7 +43,7 @@ def wing(name: str) -> str:
 
 
 def test_every_module_is_seen():
-    assert {"pbf.scene", "pbf.scene.root", "pbf.solver.simulation", "pbf.app.cli", "pbf.study.bench"} <= set(MODULES)
+    assert {"pbf.scene", "pbf.scene.root", "pbf.solver.simulation", "pbf.app.cli", "pbf.study.sweep"} <= set(MODULES)
 
 
 def test_no_import_cycle():

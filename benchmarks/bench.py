@@ -1,43 +1,24 @@
-"""Benchmarks: speed, the speed/error trade-off and what each term costs, printed as tables.
+"""The lab's benchmarks of the substep, the presets and the start, printed as tables.
 
-    python -m pbf.study.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
-    python -m pbf.study.bench sweep   (see pbf.study.sweep: iterations × substeps × sizes, CSV and plot)
-    python -m pbf.study.bench terms   [--sizes 8000] [--iterations 4]
-    python -m pbf.study.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
-    python -m pbf.study.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
-    python -m pbf.study.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
-    python -m pbf.study.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (see pbf.study.start)
-    python -m pbf.study.bench traffic [--sizes 8000] [--iterations 4] [--particles 1000000]   (bytes moved)
-    python -m pbf.study.bench frames  [options of python -m pbf.study.frames]   (the renderers and writer alone)
+    python -m benchmarks.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
+    python -m benchmarks.bench terms   [--sizes 8000] [--iterations 4] [--rounds 25]
+    python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
+    python -m benchmarks.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
+    python -m benchmarks.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
+    python -m benchmarks.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (benchmarks.start)
+    python -m benchmarks.bench frames  [options of python -m benchmarks.frames]   (the renderers and writer alone)
 
 ``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
-up (JIT and the first impact), then times whole frames with a device sync: median ms per substep,
-particle-substeps per second, the mean and max density error over the timed frames, a per-stage
-breakdown of the substeps that follow, and, over ten frames more, the kernel launches and the
-device-to-host reads per substep (``pbf.study.common.TransferCounter`` says what counts as a read).
-One backend per run: ``--arch`` (or $PBF_ARCH), named in the first line with its device. ``terms``
-times one substep of the same state, stage by stage, with each optional term (vorticity confinement,
-XSPH, s_corr, wall density) switched off in turn, in interleaved rounds, and reports what each
-costs. Stages are timed by a hook inside the step (``pbf.study.common.StageTimer``). Medians
-throughout: the machines are shared and noisy.
-
-``counts`` runs substeps of the seed scene at a fixed iteration count, on the host's decisions and on
-the device's (as GPU backends take them), and of the shipped preset with its error target (or, with
-``--presets``, those presets as shipped), under Taichi's kernel profiler, and prints the Python
-kernel calls and the offloaded tasks per substep (``pbf.study.launches``); with ``--gpu-blocks`` the
-sums take a GPU backend's blocks of 32, whose extra levels are launches of their own on a GPU (the
-float sums as Vulkan and Metal add them up; CUDA takes one or two launches a sum). ``start`` times
-cold and warm starts of every preset in fresh processes (``pbf.study.start``). ``traffic`` measures
-the neighbour and candidate counts of the seed scene in its splash and prints the bytes a substep
-moves per particle by stage, with neighbour lists and without (``pbf.study.traffic``), scaled to
-``--particles``.
-
-``presets`` runs every preset from its start on this backend and prints the means of its statistics
-over the second half of the frames, with reads and launches per substep; ``compare`` reads such
-tables from several runs (backends, or the CPU with ``--fast-compile``, ``--device-decisions`` or
-``--perturb``, which differ from it only as roundings do; ``--threads`` does not: the sums are trees
-in a fixed order, so every thread count gives the same bits) and says, per preset and statistic, whether
-each non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
+up, then times whole frames with a device sync: median ms per substep, the mean and max density error
+over the timed frames, a per-stage breakdown of the substeps that follow, and, over ten frames more,
+the kernel launches and device-to-host reads per substep (``benchmarks.instruments``). ``terms`` times
+one substep of the same state, stage by stage, with each optional term switched off in turn, in
+interleaved rounds. ``counts`` counts the Python kernel calls and offloaded tasks of a substep under
+Taichi's kernel profiler, on the host's decisions and on the device's (``--gpu-blocks``: the sums in a
+GPU backend's blocks of 32). ``presets`` runs every preset from its start and prints the means of its
+statistics over the second half of the frames; ``compare`` reads such tables from several runs and
+says, per preset and statistic, whether each non-CPU run lies within the CPU runs' own spread, widened
+by as much again on either side. Medians throughout: the machines are shared and noisy.
 """
 
 import argparse
@@ -51,11 +32,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from benchmarks.instruments import StageTimer, TransferCounter, count_substeps, counts_table, start_profiled
 from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import decisions_on_device, describe, running_device
-from pbf.study import sweep as speed_error
-from pbf.study.common import StageTimer, TransferCounter, dam_break, run_command, timed
+from pbf.study.common import dam_break, run_command, timed
 
 COUNTED_FRAMES = 10
 """``sizes``: frames whose launches and reads are counted, after the timed ones."""
@@ -390,9 +371,8 @@ def compare(paths: list[Path]) -> list[dict]:
 
 
 def counts(args) -> list:
-    """``counts``: kernel calls and offloaded tasks per substep (``pbf.study.launches``)."""
-    from pbf.solver.backend import decisions_on_device, in_gpu_blocks
-    from pbf.study import launches
+    """``counts``: kernel calls and offloaded tasks per substep (``benchmarks.instruments``)."""
+    from pbf.solver.backend import in_gpu_blocks
 
     rows = []
     for name in args.presets or ():  # the presets as shipped, on each path
@@ -401,7 +381,7 @@ def counts(args) -> list:
             with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
                 sim = Simulation(scene, arch=args.backend, quiet=True)
             sim.step(3)  # past the compile of every kernel variant the counted substeps use
-            rows.append((label, launches.count_substeps(sim, COUNTED_FRAMES)))
+            rows.append((label, count_substeps(sim, COUNTED_FRAMES)))
     for particles in (args.sizes or [8000]) if not args.presets else ():
         fixed = dam_break(particles, args.iterations, ["solver.target_density_error=0", *args.set])
         for name, scene, on_device in (
@@ -413,23 +393,9 @@ def counts(args) -> list:
             with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
                 sim = Simulation(scene, arch=args.backend, quiet=True)
             sim.step(2)  # past the compile of every kernel variant the counted substeps use
-            rows.append((name, launches.count_substeps(sim, COUNTED_FRAMES)))
-    print(launches.table(rows))
+            rows.append((name, count_substeps(sim, COUNTED_FRAMES)))
+    print(counts_table(rows))
     return rows
-
-
-def traffic(args) -> str:
-    """``traffic``: the bytes-moved model (``pbf.study.traffic``) at the seed scene's counts in its splash."""
-    from pbf.study import traffic as model
-
-    particles = (args.sizes or [8000])[0]
-    sim = Simulation(dam_break(particles, args.iterations, args.set), arch=args.backend, quiet=True)
-    sim.step(args.warmup)  # into the splash: more neighbours at the walls and in the pile than at rest
-    neighbours, candidates, cells = model.measured_counts(sim)
-    print(f"counts of the {particles:,}-particle seed scene at frame {sim.frame}")
-    text = model.table(args.particles, args.iterations, round(neighbours, 1), round(candidates, 1), round(cells, 2))
-    print(text)
-    return text
 
 
 def _overrides(scene) -> list[str]:
@@ -440,280 +406,86 @@ def _overrides(scene) -> list[str]:
     ]
 
 
-def sweep(args):
-    if args.from_csv:
-        points = speed_error.read_csv(args.from_csv)
-    else:
-        points = speed_error.sweep(
-            args.sizes,
-            args.iterations,
-            args.substeps,
-            args.target,
-            args.frames,
-            args.rest_settle,
-            args.rest_frames,
-            args.set,
-            args.flow,
-        )
-        speed_error.write_csv(points, args.csv)
-    speed_error.print_table(points)
-    # Re-plotted, the points are the CSV's machine's, not this one's (--frames says how long they ran).
-    made = (
-        f"the points of {args.from_csv.name}"
-        if args.from_csv
-        else f"{platform.processor() or platform.machine()}, {args.backend} backend"
-    )
-    speed_error.plot(points, args.plot, f"PBF dam break, {args.frames} frames from rest ({made})")
-    print(f"wrote {args.plot}" if args.from_csv else f"wrote {args.csv} and {args.plot}")
-    return points
-
-
 def _thread_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
+    value = int(text) if text.isdigit() else 0
     if not 1 <= value <= 256:
         raise argparse.ArgumentTypeError(f"expected a whole number of threads from 1 to 256, got {text!r}")
     return value
 
 
-MODES = ("sizes", "sweep", "terms", "presets", "compare", "counts", "start", "traffic")
-"""The modes of ``main`` (``frames`` aside: it hands its arguments to ``pbf.study.frames``)."""
-BACKEND_MODES = ("sizes", "sweep", "terms", "presets", "counts", "traffic")
-"""The modes that start a backend in this process (``main``'s ``start_backend``, which takes ``--arch``,
-``--threads`` and ``--fast-compile``): all but ``compare``, which only reads tables, and ``start``, whose
-starts are processes of their own that are handed ``--arch`` alone."""
-OPTION_MODES: dict[str, tuple[str, ...]] = {
-    "tables": ("compare",),
-    "--presets": ("presets", "start", "counts"),
-    "--no-shared": ("start",),
-    "--first-calls": ("start",),
-    # Only where a Simulation is built inside ``decisions_on_device``: terms, traffic and sweep build theirs
-    # on the backend's own path (the device's only on a GPU, with or without the option).
-    "--device-decisions": ("sizes", "presets", "counts"),
-    "--gpu-blocks": ("counts",),
-    "--fast-compile": BACKEND_MODES,
-    "--perturb": ("presets",),
-    "--perturb-each-frame": ("presets",),
-    "--sizes": ("sizes", "sweep", "terms", "counts", "traffic"),  # traffic: the first count only
-    "--iterations": ("sizes", "sweep", "terms", "counts", "traffic"),
-    "--substeps": ("sweep",),
-    "--target": ("sweep",),
-    "--frames": ("sizes", "sweep", "presets"),  # terms times substeps in --rounds; counts, a fixed number
-    "--particles": ("traffic",),
-    "--warmup": ("sizes", "terms", "traffic"),
-    "--rest-settle": ("sweep",),
-    "--rest-frames": ("sweep",),
-    "--flow": ("sweep",),
-    "--rounds": ("terms",),
-    "--set": BACKEND_MODES,  # start's processes run the presets as shipped
-    "--arch": ("sizes", "sweep", "terms", "presets", "counts", "start", "traffic"),
-    "--csv": ("sizes", "sweep", "presets", "start"),  # sweep writes it unless --from-csv
-    "--threads": BACKEND_MODES,
-    "--from-csv": ("sweep",),
-    "--plot": ("sweep",),
-}
-"""Every option of ``main`` (``tables`` for the positional tables), and the modes that read it, found by
-reading each mode's code down through the helpers it calls: ``main`` refuses an option given to any
-other mode, which would run as if it had not been given. A mode that reads an option only in some of
-its runs (sweep's ``--sizes`` not with ``--from-csv``) is listed: the option is not refused there.
-tests/test_bench_options.py checks that every option of the parser is here."""
-
-SWEEP_RUN_OPTIONS = (
-    "--sizes",
-    "--iterations",
-    "--substeps",
-    "--target",
-    "--rest-settle",
-    "--rest-frames",
-    "--flow",
-    "--set",
-    "--csv",
-    "--threads",
-    "--fast-compile",
-)
-"""The options a sweep reads only when it runs its points, not when it re-plots them ``--from-csv``."""
-
-_NOT_GIVEN = object()
-
-
-def given_options(parser: argparse.ArgumentParser, argv: list[str]) -> set[str]:
-    """The options ``argv`` gives, by their option string (``tables`` where it names any).
-
-    argparse itself says, not a comparison with the defaults, which would miss an option given at its
-    default's value (``--frames 60``), nor a scan of argv's tokens, which would miss argparse's own
-    spellings (``--frame 3``, ``--frames=3``) and take an option's value for another option: argparse
-    sets a default only on a namespace that lacks the attribute, so each option's attribute set first
-    to a marker keeps the marker unless the option was given. ``--set`` appends to what is there, so
-    it starts from an empty list instead; the tables, a positional, are given when there are any."""
-    namespace = argparse.Namespace()
-    for action in parser._actions:
-        if action.option_strings and action.dest != "help":
-            setattr(namespace, action.dest, [] if isinstance(action, argparse._AppendAction) else _NOT_GIVEN)
-    parser.parse_args(argv, namespace=namespace)
-    given = {"tables"} if namespace.tables else set()
-    for action in parser._actions:
-        value = getattr(namespace, action.dest, _NOT_GIVEN) if action.option_strings else _NOT_GIVEN
-        if value is not _NOT_GIVEN and value != []:
-            given.add(action.option_strings[0])
-    return given
-
-
 def build_parser() -> argparse.ArgumentParser:
-    """``main``'s parser: it runs nothing (the tests read its options)."""
+    """``main``'s parser, a sub-command a mode, each with the options it reads."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", nargs="?", choices=MODES, default="sizes")
-    parser.add_argument("tables", nargs="*", type=Path, help="compare: the CSV tables of presets runs")
-    parser.add_argument(
-        "--presets",
-        nargs="+",
-        default=None,
-        help="presets, start: which (default: all); counts: these presets as shipped, instead of the seed at --sizes",
-    )
-    parser.add_argument("--no-shared", action="store_true", help="start: leave out the starts in one shared cache")
-    parser.add_argument(
-        "--first-calls", action="store_true", help="start: each kernel's first call (its compile) instead, per preset"
-    )
-    parser.add_argument(
-        "--device-decisions",
-        action="store_true",
-        help="keep the substep's decisions on the device, as GPU backends do, on any backend",
-    )
-    parser.add_argument(
-        "--gpu-blocks",
-        action="store_true",
-        help="lay the prefix sums and tree sums out in a GPU backend's blocks on any backend: a GPU's launches "
-        "(the float sums as on Vulkan and Metal; CUDA adds them up in shared memory, in 1-2 launches)",
-    )
-    parser.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
-    parser.add_argument(
-        "--perturb",
-        type=int,
-        default=None,
-        metavar="SEED",
-        help="presets: start from positions moved by 1e-7 m (rounding-sized noise) drawn from SEED, "
-        "gravity off by 2e-7 × SEED",
-    )
-    parser.add_argument(
-        "--perturb-each-frame",
-        action="store_true",
-        help="presets, with --perturb: the positions moved by such noise again after every frame, "
-        "as a backend that rounds differently departs all along",
-    )
-    parser.add_argument(
-        "--sizes", type=int, nargs="+", default=None, help="particle counts (default: 8000 64000; terms: 8000)"
-    )
-    parser.add_argument(
-        "--iterations", type=int, nargs="+", default=None, help="solver iterations (default: 4; sweep: 1 2 3 4 6 8 12)"
-    )
-    parser.add_argument(
-        "--substeps", type=int, nargs="+", default=None, help="sweep: substeps per frame (default: 1 2 4)"
-    )
-    parser.add_argument(
-        "--target",
-        type=float,
-        default=0.005,
-        help="sweep: also stop iterating under this mean density error (0: no such points)",
-    )
-    parser.add_argument("--frames", type=int, default=60, help="timed frames per size, sweep point or preset")
-    parser.add_argument(
-        "--particles", type=int, default=1_000_000, help="traffic: the particle count the bytes are scaled to"
-    )
-    parser.add_argument("--warmup", type=int, default=30, help="untimed frames first (sizes, terms, traffic)")
-    parser.add_argument("--rest-settle", type=int, default=20, help="sweep: frames the rest tank settles")
-    parser.add_argument("--rest-frames", type=int, default=40, help="sweep: frames of energy drift at rest")
-    parser.add_argument(
-        "--flow",
-        action="store_true",
-        help="sweep: also run each setting on the flow cases "
-        "(SPHERIC Test 2, the wave tank, the standing wave; pbf.study.sweep.flow_measures)",
-    )
-    parser.add_argument("--rounds", type=int, default=25, help="terms: interleaved timing rounds")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scene key of the benchmark scenes, e.g. solver.kernel_ratio=2.0 (repeatable)",
-    )
-    parser.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
-    parser.add_argument(
-        "--csv", type=Path, default=None, help="write the table as CSV (sweep default: docs/speed_vs_error.csv)"
-    )
-    parser.add_argument(
-        "--threads",
-        type=_thread_count,
-        metavar="N",
-        default=None,
-        help="the CPU backend's threads (default: one per core)",
-    )
-    parser.add_argument("--from-csv", type=Path, default=None, help="sweep: re-plot this CSV instead of running")
-    parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"), help="sweep: the plot")
+    modes = parser.add_subparsers(dest="mode")
+    common = {
+        "--arch": dict(choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)"),
+        "--threads": dict(type=_thread_count, default=None, metavar="N", help="the CPU backend's threads"),
+        "--fast-compile": dict(action="store_true", help="Taichi without its advanced optimisation"),
+        "--set": dict(action="append", default=[], metavar="KEY=VALUE", help="a scene key (repeatable)"),
+    }
+    for mode in ("sizes", "terms", "presets", "counts"):
+        sub = modes.add_parser(mode)
+        for option, settings in common.items():
+            sub.add_argument(option, **settings)
+        if mode != "presets":
+            sub.add_argument("--sizes", type=int, nargs="+", default=None, help="particle counts")
+            sub.add_argument("--iterations", type=int, default=4, help="solver iterations a substep")
+        if mode in ("sizes", "presets", "counts"):
+            sub.add_argument("--device-decisions", action="store_true", help="a GPU's decisions on any backend")
+        if mode in ("sizes", "presets"):
+            sub.add_argument("--frames", type=int, default=60 if mode == "sizes" else 30, help="timed frames")
+            sub.add_argument("--csv", type=Path, default=None, help="write the table as CSV")
+        if mode in ("sizes", "terms"):
+            sub.add_argument("--warmup", type=int, default=30, help="untimed frames first")
+        if mode in ("presets", "counts"):
+            sub.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    modes.choices["terms"].add_argument("--rounds", type=int, default=25, help="interleaved timing rounds")
+    modes.choices["counts"].add_argument("--gpu-blocks", action="store_true", help="the sums in a GPU's blocks")
+    presets_mode = modes.choices["presets"]
+    presets_mode.add_argument("--perturb", type=int, default=None, metavar="SEED", help="rounding-sized noise")
+    presets_mode.add_argument("--perturb-each-frame", action="store_true", help="the noise again every frame")
+    modes.add_parser("compare").add_argument("tables", nargs="+", type=Path, help="CSV tables of presets runs")
+    start = modes.add_parser("start")
+    start.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    start.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
+    start.add_argument("--csv", type=Path, default=None, help="write the table as CSV")
+    start.add_argument("--no-shared", action="store_true", help="leave out the starts in one shared cache")
+    start.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
     return parser
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["frames"]:  # the headless frames' own study, with its own options
-        from pbf.study import frames
+    if argv[:1] == ["frames"]:  # the headless frames' own benchmark, with its own options
+        from benchmarks import frames
 
         return frames.main(argv[1:])
     parser = build_parser()
-    args = parser.parse_args(argv)
-    given = given_options(parser, argv)
-    for option, modes in OPTION_MODES.items():  # before anything starts: no backend, no process
-        if option in given and args.mode not in modes:
-            names = [mode for mode in MODES if mode in modes]
-            listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
-            parser.error(
-                f"{option}: applies to the {listed} mode{'s' if len(names) > 1 else ''} only, not to {args.mode}"
-            )
-    # A sweep from --from-csv re-plots the points the CSV holds and runs nothing.
-    for option in SWEEP_RUN_OPTIONS:
-        if args.from_csv is not None and option in given:
-            parser.error(f"{option}: applies to a sweep that runs, not to one re-plotted --from-csv")
-    if args.first_calls and (args.no_shared or args.csv is not None):  # the starts' options, not this table's
-        parser.error(
-            f"{'--no-shared' if args.no_shared else '--csv'}: applies to the starts' table, not to --first-calls"
-        )
-    if args.perturb_each_frame and args.perturb is None:
-        parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
-    if args.mode == "counts" and args.presets and {"--sizes", "--iterations"} & given:
-        option = "--sizes" if "--sizes" in given else "--iterations"
-        parser.error(f"{option}: counts the seed scene scaled; with --presets each preset runs as shipped")
-    if args.mode != "sweep" and len(args.iterations or [4]) > 1:
-        parser.error(f"--iterations: {args.mode} takes one count (several are for sweep)")
-    for name in args.presets or ():  # every scene read before any runs (each start reads its own again)
+    sized = not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help"))  # sizes, the default mode
+    args = parser.parse_args(["sizes", *argv] if sized else argv)
+    unread = {"presets": None, "device_decisions": False, "perturb": None, "perturb_each_frame": False}
+    for name, value in unread.items():
+        vars(args).setdefault(name, value)  # what a mode without the option reads
+    for name in args.presets or ():  # every scene read before any runs
         try:
             load_scene(name)
         except SceneError as error:
             parser.error(f"--presets: {error}")
     if args.mode == "compare":
-        for table in args.tables:  # each table read before any is judged
-            needed = {"preset", "backend", *PRESET_STATISTICS}
-            try:
-                with table.open(newline="") as file:
-                    missing = needed - set(next(csv.reader(file), []))
-            except (OSError, UnicodeDecodeError) as error:
-                parser.error(f"tables: {table}: cannot be read ({error.__class__.__name__}: {error})")
-            if missing:
-                parser.error(f"tables: {table}: not a presets table (no column {', '.join(sorted(missing))})")
         return compare(args.tables)
     if args.mode == "start":  # each start a process of its own: this one starts no backend
-        from pbf.study import start
+        from benchmarks import start
 
         names = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
         if args.first_calls:
             return start.first_calls(names, args.arch)
         return start.run(names, args.arch, not args.no_shared, args.csv)
-    args.backend = start_backend(
-        args.arch,
-        quiet=True,
-        cpu_threads=args.threads,
-        fast_compile=args.fast_compile,
-        kernel_profiler=args.mode == "counts",
-    )
+    if args.mode == "counts" and args.presets and args.sizes:
+        parser.error("--sizes: counts the seed scene scaled; with --presets each preset runs as shipped")
+    if args.perturb_each_frame and args.perturb is None:
+        parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
+    start = start_profiled if args.mode == "counts" else start_backend
+    args.backend = start(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
     if args.threads is not None and args.backend != "cpu":
         parser.error(f"--threads: sets the CPU backend's threads; the backend here is {args.backend}")
     args.variant = "+".join(
@@ -727,13 +499,6 @@ def main(argv=None):
     print(
         f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} ({device})"
     )
-    if args.mode == "sweep":
-        args.sizes = args.sizes or [8000, 64000]
-        args.iterations = args.iterations or list(speed_error.ITERATIONS)
-        args.substeps = args.substeps or list(speed_error.SUBSTEPS)
-        args.csv = args.csv or Path("docs/speed_vs_error.csv")
-        return sweep(args)
-    args.iterations = (args.iterations or [4])[0]
     if args.mode == "terms":
         args.sizes = args.sizes or [8000]
         return terms(args)
@@ -741,8 +506,6 @@ def main(argv=None):
         return presets(args)
     if args.mode == "counts":
         return counts(args)
-    if args.mode == "traffic":
-        return traffic(args)
     args.sizes = args.sizes or [8000, 64000]
     return sizes(args)
 
