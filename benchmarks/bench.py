@@ -1,24 +1,17 @@
-"""The lab's benchmarks of the substep, the presets and the start, printed as tables.
+"""The lab's tables of the presets, the launches and the start.
 
-    python -m benchmarks.bench [sizes] [--sizes 8000 64000] [--iterations 4] [--frames 60] [--csv F]
-    python -m benchmarks.bench terms   [--sizes 8000] [--iterations 4] [--rounds 25]
     python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
     python -m benchmarks.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
     python -m benchmarks.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
     python -m benchmarks.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (benchmarks.start)
     python -m benchmarks.bench frames  [options of python -m benchmarks.frames]   (the renderers and writer alone)
 
-``sizes`` runs the ``dam_break`` preset with the spacing scaled to reach each particle count, warms
-up, then times whole frames with a device sync: median ms per substep, the mean and max density error
-over the timed frames, a per-stage breakdown of the substeps that follow, and, over ten frames more,
-the kernel launches and device-to-host reads per substep (``benchmarks.instruments``). ``terms`` times
-one substep of the same state, stage by stage, with each optional term switched off in turn, in
-interleaved rounds. ``counts`` counts the Python kernel calls and offloaded tasks of a substep under
-Taichi's kernel profiler, on the host's decisions and on the device's (``--gpu-blocks``: the sums in a
-GPU backend's blocks of 32). ``presets`` runs every preset from its start and prints the means of its
-statistics over the second half of the frames; ``compare`` reads such tables from several runs and
-says, per preset and statistic, whether each non-CPU run lies within the CPU runs' own spread, widened
-by as much again on either side. Medians throughout: the machines are shared and noisy.
+``counts`` counts the Python kernel calls and offloaded tasks of a substep under Taichi's kernel
+profiler (``benchmarks.instruments``), on the host's decisions and on the device's (``--gpu-blocks``:
+the sums in a GPU backend's blocks of 32). ``presets`` runs every preset from its start and prints the
+means of its statistics over the second half of the frames, with reads and launches a substep;
+``compare`` reads such tables from several runs and says, per preset and statistic, whether each
+non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
 """
 
 import argparse
@@ -32,214 +25,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks.instruments import StageTimer, TransferCounter, count_substeps, counts_table, start_profiled
+from benchmarks.instruments import TransferCounter, count_substeps, counts_table, start_profiled
 from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import decisions_on_device, describe, running_device
 from pbf.study.common import dam_break, run_command, timed
 
 COUNTED_FRAMES = 10
-"""``sizes``: frames whose launches and reads are counted, after the timed ones."""
-STAGE_SUBSTEPS = 9
-"""``sizes``: substeps of one stage-breakdown round, all from the state the timed frames end in."""
-STAGE_ROUNDS = 5
-"""``sizes``: rounds of the stage breakdown, each the same substeps timed whole and then stage by stage."""
-
-
-def stage_pass(sim: Simulation, substeps: int, rounds: int, bar=None) -> dict:
-    """The stage breakdown beside the same substeps untimed, so that the two can be compared.
-
-    Each round restores the state it started from and runs ``substeps`` substeps at the last Δt twice:
-    first whole, with the device synchronised once before and once after (``untimed``: what the
-    substeps cost), then with ``StageTimer``, which synchronises the device around every stage and
-    times each. Rounds alternate the two, so noise falls on both alike. Returns medians over the rounds
-    of each stage's ms per substep (``stages``), of their sum (``stages_sum``) and of the untimed ms
-    per substep (``untimed``). The sum gains the synchronisations' cost (little on the CPU; on a GPU,
-    where launches are queued, no stage overlaps the next any more) and lacks the host's work between
-    stages, which no stage encloses: it may come out larger or smaller than the untimed figure."""
-    start, dt, previous = sim.snapshot(), sim.dt_s, sim.hook
-    per_stage: dict[str, list[float]] = {}
-    sums, untimed = [], []
-    try:
-        for _ in range(rounds):
-            sim.restore(start)
-            untimed.append(timed(lambda: [sim.substep(dt) for _ in range(substeps)]) * 1e3 / substeps)
-            sim.restore(start)
-            sim.hook = timer = StageTimer()
-            for _ in range(substeps):
-                sim.substep(dt)
-            sim.hook = previous
-            means = {name: sum(timer.ms[name]) / substeps for name in timer.medians()}
-            for name, ms in means.items():
-                per_stage.setdefault(name, []).append(ms)
-            sums.append(sum(means.values()))
-            if bar is not None:
-                bar.update()
-    finally:
-        sim.hook = previous
-        sim.restore(start)
-    return {
-        "stages": {name: statistics.median(ms) for name, ms in per_stage.items()},
-        "stages_sum": statistics.median(sums),
-        "untimed": statistics.median(untimed),
-    }
-
-
-def run_size(
-    particles: int, iterations: int, frames: int, warmup_frames: int, overrides=(), device_decisions: bool = False
-) -> dict:
-    substep_ms, mean_errors, max_errors = [], [], []
-    dt_ms = []
-    counted = min(frames, COUNTED_FRAMES)
-    # On stderr, so that the table on stdout stays clean. Every part of a size is on the bar (building
-    # and settling the scene compiles the kernels: seconds with nothing else to show).
-    total = 1 + warmup_frames + frames + STAGE_ROUNDS + counted
-    with tqdm(total=total, desc=f"{particles:,} particles", unit="part") as bar:
-        bar.set_postfix_str("compiling")
-        with decisions_on_device(device_decisions):
-            sim = Simulation(dam_break(particles, iterations, overrides), quiet=True)
-        bar.update()
-        bar.set_postfix_str("warm-up frames")
-        for _ in range(warmup_frames):
-            sim.step()
-            bar.update()
-        bar.set_postfix_str("timed frames")
-        for _ in range(frames):
-            # Whole frames, so the CFL limit may add substeps as in a real run; per substep = frame / substeps.
-            frame_ms = timed(sim.step) * 1e3
-            substep_ms.append(frame_ms / sim.frame_substeps)
-            dt_ms.append(sim.dt_s * 1e3)
-            stats = sim.stats()
-            mean_errors.append(stats["mean_density_error"])
-            max_errors.append(stats["max_density_error"])
-            bar.update()
-        bar.set_postfix_str("stage breakdown")
-        stages = stage_pass(sim, STAGE_SUBSTEPS, STAGE_ROUNDS, bar)
-        bar.set_postfix_str("counting launches and reads")
-        substeps = 0
-        with TransferCounter() as counter:
-            for _ in range(counted):
-                sim.step()
-                substeps += sim.frame_substeps
-                bar.update()
-    median_ms = statistics.median(substep_ms)
-    return {
-        "particles": sim.particle_count,
-        "iterations": iterations,
-        "dt_ms": statistics.median(dt_ms),
-        "median_ms_per_substep": median_ms,
-        "particle_substeps_per_s": sim.particle_count / (median_ms / 1e3),
-        "mean_density_error": statistics.fmean(mean_errors),
-        "max_density_error": max(max_errors),
-        "reads_per_substep": counter.reads / substeps,
-        "launches_per_substep": counter.launches / substeps,
-        "stages_ms": stages,
-        "backend": sim.backend,
-    }
-
-
-def sizes(args) -> list[dict]:
-    rows = [run_size(n, args.iterations, args.frames, args.warmup, args.set, args.device_decisions) for n in args.sizes]
-    print(
-        f"{'backend':>7} {'particles':>10} {'iters':>5} {'dt ms':>6} {'ms/substep':>11} {'particle-substeps/s':>20} "
-        f"{'mean err':>9} {'max err':>8} {'reads/substep':>13} {'launches/substep':>16}"
-    )
-    for r in rows:
-        print(
-            f"{r['backend']:>7} {r['particles']:>10,} {r['iterations']:>5} {r['dt_ms']:>6.2f} "
-            f"{r['median_ms_per_substep']:>11.2f} {r['particle_substeps_per_s']:>20,.0f} "
-            f"{r['mean_density_error']:>9.3%} {r['max_density_error']:>8.2%} {r['reads_per_substep']:>13.2f} "
-            f"{r['launches_per_substep']:>16.1f}"
-        )
-    print(
-        f"\nstage breakdown, ms per substep: {STAGE_SUBSTEPS} substeps from the state the timed frames end in, "
-        f"medians of {STAGE_ROUNDS} rounds that time them whole (untimed: one device sync at each end) and "
-        f"stage by stage (each stage between two device syncs):"
-    )
-    for r in rows:
-        parts = r["stages_ms"]
-        print(
-            f"  {r['particles']:,}: "
-            + ", ".join(f"{k} {v:.2f}" for k, v in parts["stages"].items())
-            + f"; sum {parts['stages_sum']:.2f}, the same substeps untimed {parts['untimed']:.2f}"
-        )
-    print(
-        "  The sum differs from the untimed substeps by the syncs around each stage (on a GPU no stage's "
-        "launches overlap the next's then) and the host's work between stages; the table's ms/substep is "
-        "over the timed frames before this state, with each frame's CFL check, so it is near the untimed "
-        "figure, not equal to it."
-    )
-    if args.csv:
-        args.csv.parent.mkdir(parents=True, exist_ok=True)
-        with args.csv.open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "stages_ms"])
-            writer.writeheader()
-            writer.writerows({k: v for k, v in r.items() if k != "stages_ms"} for r in rows)
-    return rows
-
-
-TERMS = {
-    "all terms (preset)": [],
-    "no vorticity confinement": ["vorticity.epsilon=0"],
-    "no XSPH viscosity": ["viscosity.xsph=0"],
-    "no s_corr": ["solver.scorr_k=0"],
-    "no wall density": ["solver.expert.wall_density=false"],
-    "none of the four": [
-        "vorticity.epsilon=0",
-        "viscosity.xsph=0",
-        "solver.scorr_k=0",
-        "solver.expert.wall_density=false",
-    ],
-}
-
-
-def terms(args) -> list[dict]:
-    """Per-substep cost of each optional term: every variant restored to the same mid-splash state and
-    timed stage by stage, variants interleaved round by round so that machine noise hits all alike."""
-    rows = []
-    for particles in args.sizes:
-        base = dam_break(particles, args.iterations, args.set)
-        variants = {
-            name: Simulation(load_scene("dam_break", _overrides(base) + args.set + extra), quiet=True)
-            for name, extra in TERMS.items()
-        }
-        reference = next(iter(variants.values()))
-        reference.step(args.warmup)
-        snapshot, dt = reference.snapshot(), reference.dt_s
-        for sim in variants.values():
-            sim.hook = StageTimer()
-        for _ in tqdm(range(args.rounds), desc=f"{reference.particle_count:,} particles: rounds", unit="round"):
-            for sim in variants.values():
-                sim.restore(snapshot)
-                sim.substep(dt)
-        medians = {name: sim.hook.medians() for name, sim in variants.items()}
-        full = sum(medians["all terms (preset)"].values())
-        for name, stages in medians.items():
-            total = sum(stages.values())
-            rows.append(
-                {
-                    "particles": reference.particle_count,
-                    "variant": name,
-                    "ms_per_substep": total,
-                    "solver_ms": stages["solver iterations"],
-                    "velocity_ms": stages["velocity, vorticity, XSPH, x = x*"],
-                    "saving_ms": full - total,
-                    "ratio_to_all": total / full,
-                    "mean_density_error": variants[name].stats()["mean_density_error"],
-                }
-            )
-    print(
-        f"{'particles':>9}  {'variant':<26} {'ms/substep':>10} {'solver':>7} {'velocity':>8} {'saves ms':>9} "
-        f"{'ratio':>6} {'mean err':>9}"
-    )
-    for r in rows:
-        print(
-            f"{r['particles']:>9,}  {r['variant']:<26} {r['ms_per_substep']:>10.2f} {r['solver_ms']:>7.2f} "
-            f"{r['velocity_ms']:>8.2f} {r['saving_ms']:>9.2f} {r['ratio_to_all']:>6.2f} {r['mean_density_error']:>9.3%}"
-        )
-    return rows
-
-
+"""``counts``: substeps counted."""
 PERTURBATION_M = 1e-7
 """``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
 PERTURBATION_G = 2e-7
@@ -398,14 +191,6 @@ def counts(args) -> list:
     return rows
 
 
-def _overrides(scene) -> list[str]:
-    return [
-        f"fluid.spacing_m={scene.fluid.spacing_m!r}",
-        f"solver.iterations={scene.solver.iterations}",
-        f"time.substeps={scene.time.substeps}",
-    ]
-
-
 def _thread_count(text: str) -> int:
     value = int(text) if text.isdigit() else 0
     if not 1 <= value <= 256:
@@ -416,32 +201,25 @@ def _thread_count(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """``main``'s parser, a sub-command a mode, each with the options it reads."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    modes = parser.add_subparsers(dest="mode")
+    modes = parser.add_subparsers(dest="mode", required=True)
     common = {
         "--arch": dict(choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)"),
         "--threads": dict(type=_thread_count, default=None, metavar="N", help="the CPU backend's threads"),
         "--fast-compile": dict(action="store_true", help="Taichi without its advanced optimisation"),
         "--set": dict(action="append", default=[], metavar="KEY=VALUE", help="a scene key (repeatable)"),
     }
-    for mode in ("sizes", "terms", "presets", "counts"):
+    for mode in ("presets", "counts"):
         sub = modes.add_parser(mode)
         for option, settings in common.items():
             sub.add_argument(option, **settings)
-        if mode != "presets":
-            sub.add_argument("--sizes", type=int, nargs="+", default=None, help="particle counts")
-            sub.add_argument("--iterations", type=int, default=4, help="solver iterations a substep")
-        if mode in ("sizes", "presets", "counts"):
-            sub.add_argument("--device-decisions", action="store_true", help="a GPU's decisions on any backend")
-        if mode in ("sizes", "presets"):
-            sub.add_argument("--frames", type=int, default=60 if mode == "sizes" else 30, help="timed frames")
-            sub.add_argument("--csv", type=Path, default=None, help="write the table as CSV")
-        if mode in ("sizes", "terms"):
-            sub.add_argument("--warmup", type=int, default=30, help="untimed frames first")
-        if mode in ("presets", "counts"):
-            sub.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
-    modes.choices["terms"].add_argument("--rounds", type=int, default=25, help="interleaved timing rounds")
-    modes.choices["counts"].add_argument("--gpu-blocks", action="store_true", help="the sums in a GPU's blocks")
-    presets_mode = modes.choices["presets"]
+        sub.add_argument("--device-decisions", action="store_true", help="a GPU's decisions on any backend")
+        sub.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    counts_mode, presets_mode = modes.choices["counts"], modes.choices["presets"]
+    counts_mode.add_argument("--sizes", type=int, nargs="+", default=None, help="particle counts (default 8000)")
+    counts_mode.add_argument("--iterations", type=int, default=4, help="solver iterations a substep")
+    counts_mode.add_argument("--gpu-blocks", action="store_true", help="the sums in a GPU's blocks")
+    presets_mode.add_argument("--frames", type=int, default=30, help="frames each preset runs")
+    presets_mode.add_argument("--csv", type=Path, default=None, help="write the table as CSV")
     presets_mode.add_argument("--perturb", type=int, default=None, metavar="SEED", help="rounding-sized noise")
     presets_mode.add_argument("--perturb-each-frame", action="store_true", help="the noise again every frame")
     modes.add_parser("compare").add_argument("tables", nargs="+", type=Path, help="CSV tables of presets runs")
@@ -461,8 +239,7 @@ def main(argv=None):
 
         return frames.main(argv[1:])
     parser = build_parser()
-    sized = not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help"))  # sizes, the default mode
-    args = parser.parse_args(["sizes", *argv] if sized else argv)
+    args = parser.parse_args(argv)
     unread = {"presets": None, "device_decisions": False, "perturb": None, "perturb_each_frame": False}
     for name, value in unread.items():
         vars(args).setdefault(name, value)  # what a mode without the option reads
@@ -499,15 +276,7 @@ def main(argv=None):
     print(
         f"machine: {platform.processor() or platform.machine()}, {platform.system()}, backend {args.backend} ({device})"
     )
-    if args.mode == "terms":
-        args.sizes = args.sizes or [8000]
-        return terms(args)
-    if args.mode == "presets":
-        return presets(args)
-    if args.mode == "counts":
-        return counts(args)
-    args.sizes = args.sizes or [8000, 64000]
-    return sizes(args)
+    return presets(args) if args.mode == "presets" else counts(args)
 
 
 if __name__ == "__main__":

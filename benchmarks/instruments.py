@@ -1,6 +1,5 @@
 """The lab's instruments, in one module that nothing in ``pbf`` imports: what Taichi launches, reads and
-compiles (:func:`watching`, :class:`TransferCounter`), the stages of a substep timed through
-``Simulation.hook`` (:class:`StageTimer`), and the tasks Taichi's kernel profiler timed
+compiles (:func:`watching`, :class:`TransferCounter`), and the tasks Taichi's kernel profiler timed
 (:func:`start_profiled`, :func:`profiled_tasks`, :func:`count_substeps`).
 
 The profiler is read through Taichi's public ``ti.profiler`` (its ``count`` table). Watching launches
@@ -19,15 +18,14 @@ from __future__ import annotations
 import contextlib
 import io
 import re
-import statistics
 import time
-from collections import Counter, defaultdict
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
 
-from pbf.solver import STAGES, Simulation, launch, start_backend
+from pbf.solver import launch, start_backend
 
 
 class Observer:
@@ -174,39 +172,6 @@ class TransferCounter(Observer):
     def __exit__(self, *exc):
         self._stack.close()
         return False
-
-
-class StageTimer:
-    """A stage hook for ``Simulation.hook``: times every stage of every substep it sees, with the device
-    synchronised around each (so stages add up to a little more than an untimed substep)."""
-
-    def __init__(self):
-        self.ms: dict[str, list[float]] = defaultdict(list)
-        """Milliseconds of each call, by stage name."""
-
-    @contextlib.contextmanager
-    def stage(self, name: str):
-        ti.sync()
-        start = time.perf_counter()
-        yield
-        ti.sync()
-        self.ms[name].append((time.perf_counter() - start) * 1e3)
-
-    def medians(self) -> dict[str, float]:
-        """Median ms of each stage, in the order of the substep."""
-        return {name: statistics.median(self.ms[name]) for name in STAGES if self.ms[name]}
-
-
-def stage_breakdown(sim: Simulation, substeps: int) -> dict[str, float]:
-    """Median ms of each stage over ``substeps`` substeps of the running simulation, at its last Δt."""
-    timer, previous = StageTimer(), sim.hook
-    sim.hook = timer
-    try:
-        for _ in range(substeps):
-            sim.substep(sim.dt_s)
-    finally:
-        sim.hook = previous
-    return timer.medians()
 
 
 def start_profiled(arch: str | None = "cpu", **options):

@@ -31,8 +31,8 @@ def test_a_sweep_replotted_from_its_csv_names_the_csv_not_this_machine(monkeypat
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--threads", "0"], "--threads: expected a whole number of threads from 1 to 256, got '0'"),
-        (["sizes", "--perturb", "1"], "unrecognized arguments: --perturb 1"),
+        (["counts", "--threads", "0"], "--threads: expected a whole number of threads from 1 to 256, got '0'"),
+        (["counts", "--perturb", "1"], "unrecognized arguments: --perturb 1"),
         (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
         (["start", "--presets", "dam_brake"], "--presets: dam_brake: no such scene file; did you mean dam_break?"),
     ],

@@ -1,6 +1,6 @@
-"""What the studies share: scaled scenes, timing (a stage hook and a synchronised timer) and
-measurements of the free surface. Benchmarks, the sweep, the validation and the tests import it;
-it imports no study module."""
+"""What the studies share: scaled scenes, a synchronised timer, the command's exit, and measurements
+of the free surface. The sweep, the validation, the lab's benchmarks and the tests import it; it
+imports no study module."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def dam_break(particles: int, iterations: int, overrides=()) -> Scene:
 def run_command(main) -> None:
     """Run a study's ``main()`` as its command and exit with its status (an int; anything else, such as
     the rows a study returns to its Python callers, is success); a reader that stops early
-    (``python -m pbf.study.bench --help | head -1``) ends it quietly, with 0. The same recipe as
+    (``python -m pbf.study.sweep --help | head -1``) ends it quietly, with 0. The same recipe as
     ``pbf.app.cli``'s, kept here because a study imports the application only where it studies it."""
     try:
         status = main()
