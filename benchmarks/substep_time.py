@@ -23,7 +23,9 @@ this process does): the device time of each task of 10 substeps, in the order th
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import taichi as ti
 
@@ -33,6 +35,8 @@ from pbf.solver import start_backend
 from pbf.study.common import dam_break
 
 WARMUP_FRAMES = 5
+if __package__ in (None, ""):  # run as a script: the checkout last on the path, for benchmarks.instruments
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
 
 
 def substep_times(particles: int, substeps: int, rounds: int) -> dict:
@@ -134,7 +138,12 @@ def main(argv=None) -> None:
             load_scene(args.preset, args.set)
         except SceneError as error:
             parser.error(str(error))
-    backend = start_backend(args.arch, quiet=True, kernel_profiler=args.profile)
+    if args.profile:  # the profiler is chosen when Taichi starts
+        from benchmarks.instruments import start_profiled
+
+        backend = start_profiled(args.arch, quiet=True)
+    else:
+        backend = start_backend(args.arch, quiet=True)
     if args.profile:
         for particles in args.sizes:
             print(f"{particles:,} particles, {backend}: device time per task of a substep (Taichi's profiler)")
