@@ -1,6 +1,6 @@
-"""The docs name only what exists: every dotted ``pbf.`` name in docs/*.md, README.md and CONTRIBUTING.md
-resolves (its module imports and each attribute after it exists; after ``python -m`` it is a module),
-and every repo-relative path they mention (``benchmarks/ab.py``, ``docs/VALIDATION.md``,
+"""The docs name only what exists: every dotted ``pbf.`` or ``benchmarks.`` name in docs/*.md, README.md
+and CONTRIBUTING.md resolves (its module imports and each attribute after it exists; after
+``python -m`` it is a module), and every repo-relative path they mention (``benchmarks/ab.py``, ``docs/VALIDATION.md``,
 ``pbf/solver/grid.py``, ``tests/test_x.py::test_name``, a Markdown link) exists. A renamed module, a
 removed function or a moved file fails here with the file and line of each stale reference.
 
@@ -33,7 +33,7 @@ NOT_FILES = {
 }
 """Paths that legitimately name no file of the checkout, by prefix, and why."""
 
-DOTTED = re.compile(r"(?<![\w./-])(python -m )?(pbf(?:\.[A-Za-z_]\w*)+)")
+DOTTED = re.compile(r"(?<![\w./-])(python -m )?((?:pbf|benchmarks)(?:\.[A-Za-z_]\w*)+)")
 PATH = re.compile(r"(?<![\w./~$<>:-])((?:" + "|".join(re.escape(r) for r in ROOTS) + r")/[\w./*<>-]*[\w*/])(::\w+)?")
 LINK = re.compile(r"\]\(([^)\s#]+)(?:#([^)]*))?\)")
 SECTION = re.compile(r"([\w/]*\b[A-Z][A-Z_]+\.md)`?\)?,? \"([^\"]+)\"")
