@@ -17,7 +17,7 @@ distances from 0.2 to 1 particle radius and for the distance that shrinks from r
 With ``compile``: the cold start (``run.py SCENE --stats-only --frames 1``'s "kernels ready in", a fresh
 process and a fresh Taichi offline cache each) of dam_break and floating_boxes, runs alternated,
 medians; with another checkout's root, its floating_boxes too (``git worktree add`` an earlier commit).
-Each kernel's first call (its compile): ``python -m pbf.study.bench start --first-calls --presets floating_boxes``.
+Each kernel's first call (its compile): ``python -m benchmarks.bench start --first-calls --presets floating_boxes``.
 """
 
 import os
@@ -252,7 +252,7 @@ if __name__ == "__main__":
     elif sys.argv[1:] and not sys.argv[1].isdigit():
         sys.exit(
             f"bodies.py: {sys.argv[1]!r}: expected a number of frames or one of momentum, archimedes, collision, "
-            "compile (each kernel's first call: python -m pbf.study.bench start --first-calls)"
+            "compile (each kernel's first call: python -m benchmarks.bench start --first-calls)"
         )
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)

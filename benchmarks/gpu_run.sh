@@ -81,5 +81,5 @@ else
 fi
 step large 60 $PY benchmarks/substep_time.py --arch "$ARCH" --preset "$LARGE"
 step ten_million 60 $PY benchmarks/substep_time.py --arch "$ARCH" --sizes $BIG --rounds 3
-step counts 45 $PY -m pbf.study.bench counts --arch "$ARCH" --sizes 8000
+step counts 45 $PY -m benchmarks.bench counts --arch "$ARCH" --sizes 8000
 echo "total $(($(date +%s) - T0)) s" | tee -a "$S"

@@ -1,6 +1,6 @@
 """Our PBF against SPlisHSPlasH 2.19's DFSPH and PBF on the seed dam break: cost and density error.
 
-    python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --match            # all of it
+    python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash                    # the default rows
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --sloshing         # the standing wave's decay
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --methods dfsph \\
         --param maxError=0.01 --param "maxError=0.1,maxIterations=50" \\
@@ -36,8 +36,7 @@ Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8
   the exported positions with its own kernel (its ``Simulation.W``, sampled and checked), fluid volumes
   and boundary particles with their volumes, read from SPlisHSPlasH itself through its Python module,
   and prints both. For ours ``Simulation.stats()`` after each frame: the density of the positions we
-  output. ``--match`` compares against the exported figures and says whether the match also holds
-  against the recomputed ones.
+  output. The rows compare the exported figures; the recomputed ones are printed beside them.
 * Ours: each ``--ours`` spec is a comma-separated list of ``--set`` overrides of the ``dam_break``
   preset, with short names ``substeps`` (time.substeps), ``iterations`` and ``max_iterations``
   (solver.iterations: the most, with a target), ``target`` (solver.target_density_error, a fraction:
@@ -50,13 +49,6 @@ Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8
   substeps to the steps asked (at substeps = 4 both simulators take the same 240 steps); the steps
   actually taken are printed. Time is ``step()`` alone per frame, synchronised, the statistics taken
   outside the timer.
-* ``--match``: for each SPlisHSPlasH row, the cheapest of a small grid of our settings (substeps ×
-  iterations, and substeps × error target) with equal or lower mean error and a max error no worse,
-  and the ratio of SPlisHSPlasH's compute seconds per simulated second to ours. At each substep count
-  the iterations (targets) are tried from the fewest (the loosest) up, until a run meets every row:
-  more would only cost more. The settings found are then run again at ``--match-same-at`` kernel
-  supports (2.0 spacings, SPlisHSPlasH's 4 particle radii) to show how much the support alone moves
-  the ratio; ``--match-kernel-ratios`` runs the whole search at other supports.
 * ``--sloshing``: instead of the dam break, the standing wave of ``pbf.study.damping`` in each
   ``--methods`` and in ours: the ``sloshing`` preset's tank and water (1,950 particles), settled for
   a second (velocities × 0.9 after each step, as ours settles), then given its first sloshing mode's
@@ -528,21 +520,19 @@ def our_overrides(spec: str) -> list[str]:
     return overrides
 
 
-def our_scene(spec: str, kernel_ratio: float | None = None):
+def our_scene(spec: str):
     """The preset with the spec's overrides, vorticity off and the CFL limit at its most. A spec runs
     fixed iterations unless it sets a target; ``preset`` keeps the preset's solver settings."""
     pinned = [] if spec.strip() == "preset" else ["solver.target_density_error=0"]
     overrides = ["vorticity.epsilon=0", *pinned, *our_overrides("" if spec.strip() == "preset" else spec)]
-    if kernel_ratio is not None:
-        overrides.append(f"solver.kernel_ratio={kernel_ratio!r}")
     ratio = load_scene(PRESET, overrides).solver.kernel_ratio
     if not any(o.startswith("time.max_cfl=") for o in overrides):
         overrides.append(f"time.max_cfl={min(ratio, 4.0)!r}")
     return load_scene(PRESET, overrides)
 
 
-def run_ours(spec: str, seconds: float, kernel_ratio: float | None = None, label: str | None = None) -> Row:
-    scene = our_scene(spec, kernel_ratio)
+def run_ours(spec: str, seconds: float, label: str | None = None) -> Row:
+    scene = our_scene(spec)
     counter = IterationCount()
     sim = Simulation(scene, quiet=True, hook=counter)
     counter.sim = sim
@@ -593,51 +583,6 @@ def medians(runs: list[Row]) -> Row:
     first.max_error = max(r.max_error for r in runs)
     first.label += f" (median of {len(runs)})"
     return first
-
-
-# ----------------------------------------------------------------------------- the search
-
-
-def meets(ours: Row, theirs: Row, recomputed: bool = False) -> bool:
-    mean, worst = (
-        (theirs.recomputed_mean, theirs.recomputed_max) if recomputed else (theirs.mean_error, theirs.max_error)
-    )
-    return ours.mean_error <= mean and ours.max_error <= worst
-
-
-def match(
-    theirs: list[Row],
-    seconds: float,
-    kernel_ratio: float,
-    substeps: list[int],
-    iterations: list[int],
-    targets: list[float],
-    target_cap: int,
-    log,
-) -> tuple[dict[int, Row | None], list[Row]]:
-    """The cheapest of our grid meeting each of ``theirs`` (index → row, None if none does)."""
-    best: dict[int, Row | None] = {k: None for k in range(len(theirs))}
-    tried: list[Row] = []
-    ladders = [[f"substeps={s},iterations={i}" for i in iterations] for s in substeps]
-    ladders += [
-        [f"substeps={s},target={t!r},max_iterations={target_cap}" for t in sorted(targets, reverse=True)]
-        for s in substeps
-        if targets
-    ]
-    for ladder in ladders:
-        for spec in ladder:
-            run = run_ours(spec, seconds, kernel_ratio)
-            run.label = f"grid {run.settings}"
-            tried.append(run)
-            log(run)
-            for k, t in enumerate(theirs):
-                if meets(run, t) and (best[k] is None or run.compute_s_per_s < best[k].compute_s_per_s):
-                    best[k] = run
-            # Every row met: more iterations (a stricter target) at this substep count only cost more. The
-            # errors decide, not the times, which a busy machine can swing.
-            if all(meets(run, t) for t in theirs):
-                break
-    return best, tried
 
 
 # ----------------------------------------------------------------------------- the standing wave
@@ -804,31 +749,14 @@ def line(r: Row) -> str:
     )
 
 
-def verdict(theirs: Row, ours: Row | None, was: Row | None = None) -> str:
-    """One line of the --match summary."""
-    if ours is None:
-        return f"  {theirs.label}: none of the grid meets {theirs.mean_error:.3%} / {theirs.max_error:.2%}"
-    head = (
-        f"  {theirs.label} ({theirs.mean_error:.3%} / {theirs.max_error:.2%}, {theirs.compute_s_per_s:.2f} s/s): "
-        f"ours {ours.settings}, {ours.mean_error:.3%} / {ours.max_error:.2%}, {ours.compute_s_per_s:.2f} s/s "
-        f"-> SPlisHSPlasH / ours = {theirs.compute_s_per_s / ours.compute_s_per_s:.2f}x"
-    )
-    if was is not None:
-        return head + (
-            f" (was {theirs.compute_s_per_s / was.compute_s_per_s:.2f}x; meets its error: "
-            f"{'yes' if meets(ours, theirs) else 'no'})"
-        )
-    return head + f" (also meets its recomputed density: {'yes' if meets(ours, theirs, recomputed=True) else 'no'})"
-
-
 CANNOT_BE_EQUAL = """\
 What the comparison cannot make equal:
 * Kernels and support. SPlisHSPlasH's support radius is 4 particle radii, 2.0 spacings; its DFSPH uses
   the cubic spline (tabulated), and its PBF Poly6 for the density and Spiky for the gradient (it sets
   these whenever simulationMethod is 2, whatever the scene says): its PBF solves and stops on the Poly6
   density, yet the density it exports is the cubic spline's (the lines above). Ours is the cubic spline
-  at 2.2 spacings by default (solver.kernel_ratio); --match runs the settings it finds again at
-  h = 2.0 s to show how much the support alone moves the ratio.
+  at 2.2 spacings by default (solver.kernel_ratio; ``kernel_ratio=2.0`` in an --ours spec runs it at
+  SPlisHSPlasH's support).
 * Walls. SPlisHSPlasH: Akinci et al. 2012 boundary particles, one layer on the box's surface (the
   count is printed above); its fluid keeps about one spacing from them, so the water has about half a
   spacing less room at each wall, and at the start the layer next to the wall particles stands above
@@ -909,46 +837,13 @@ def main(argv=None):
         "--repeats",
         type=int,
         default=1,
-        help="runs of each SPlisHSPlasH and --ours row, alternating; "
-        "medians are reported (default 1; the --match grid runs once)",
+        help="runs of each SPlisHSPlasH and --ours row, alternating; medians are reported (default 1)",
     )
-    parser.add_argument("--match", action="store_true", help="find our cheapest grid setting at equal or lower error")
     parser.add_argument(
         "--sloshing",
         action="store_true",
         help="instead: the standing wave's decay per period in --methods and ours (pbf.study.damping)",
     )
-    parser.add_argument(
-        "--match-kernel-ratios",
-        type=float,
-        nargs="+",
-        default=[load_scene(PRESET).solver.kernel_ratio],
-        help="kernel supports h/s to run the whole search at (default: the preset's, 2.2)",
-    )
-    parser.add_argument(
-        "--match-same-at",
-        type=float,
-        nargs="*",
-        default=[2.0],
-        help="kernel supports to run the settings found at again (default 2.0, SPlisHSPlasH's 4 "
-        "particle radii): how much the support alone moves the ratio",
-    )
-    parser.add_argument(
-        "--match-substeps",
-        type=int,
-        nargs="+",
-        default=[2, 4],
-        help="substep counts of the grid (default 2 4; at 1, Δt = 16.7 ms, the dam break blows up)",
-    )
-    parser.add_argument("--match-iterations", type=int, nargs="+", default=[2, 3, 4, 6, 8, 12, 16, 24, 32])
-    parser.add_argument(
-        "--match-targets",
-        type=float,
-        nargs="*",
-        default=[0.002, 0.001, 0.0005],
-        help="error targets (fractions) tried at each substep count, with --match-target-cap iterations at most",
-    )
-    parser.add_argument("--match-target-cap", type=int, default=30)
     args = parser.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)  # progress shows as it comes when written to a file
     if not args.splash.exists():
@@ -1014,35 +909,6 @@ def main(argv=None):
         for note in r.notes:
             print(f"  {note}")
 
-    if args.match and theirs:
-        for ratio in args.match_kernel_ratios:
-            print(f"\n--match at h = {ratio:g} s: our grid, cheapest first per substep count")
-            print(HEADER)
-            best, _ = match(
-                theirs,
-                args.seconds,
-                ratio,
-                args.match_substeps,
-                args.match_iterations,
-                args.match_targets,
-                args.match_target_cap,
-                lambda run: print(line(run), flush=True),
-            )
-            print(f"\nCheapest of ours at equal or lower mean error and no worse max error (h = {ratio:g} s):")
-            for k, t in enumerate(theirs):
-                print(verdict(t, best[k]))
-            found = {ours.spec: ours for ours in best.values() if ours is not None}
-            for other in args.match_same_at if ratio == args.match_kernel_ratios[0] else []:
-                print(f"\nThe same settings at h = {other:g} s:")
-                print(HEADER)
-                again = {}
-                for spec in found:
-                    again[spec] = run_ours(spec, args.seconds, other)
-                    again[spec].label = f"same {again[spec].settings}"
-                    print(line(again[spec]))
-                for k, t in enumerate(theirs):
-                    if best[k] is not None:
-                        print(verdict(t, again[best[k].spec], was=best[k]))
     print()
     print(CANNOT_BE_EQUAL)
     print(f"\n(total wall time {time.perf_counter() - started:.0f} s)")

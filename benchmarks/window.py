@@ -1,10 +1,10 @@
 """Where a frame of the interactive window goes: the simulation's step, our renderer's draw, the
 panel and GGUI's show (the canvas image, the panel's drawing, the present), each in wall-clock and
-CPU milliseconds, for the window's renderer and the levers tried on it (docs/BENCHMARKS.md, "The
-window"). Needs a display and Vulkan; on a machine without either:
+CPU milliseconds, for the window as ``python run.py`` opens it and a few variants of it
+(docs/BENCHMARKS.md, "The window"). Needs a display and Vulkan; on a machine without either:
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
-        [--variants window,before,...] [--scene dam_break] [--warmup 30]
+        [--variants window,paused,...] [--scene dam_break] [--warmup 30]
 
 (Debian/Ubuntu: ``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives a virtual display and
 Mesa's software Vulkan, lavapipe.)
@@ -15,10 +15,7 @@ the rounds of a round's median over its frames, after ``--warmup`` frames (JIT, 
 ``fps`` is the frames over the wall time they took. The frames are those of ``python run.py``: the
 seed scene from rest at 1280 × 720, the same camera, no input. ``cpu`` is the CPU time of the
 window's process per frame (every thread: Taichi's, the Vulkan driver's), ``X`` that of the X server
-(Xvfb) when there is one to read, and for "sim-in-second-process" (the solver a frame ahead in a
-process of its own; "sim" is then the wait for it, "sim in its process" its own step) ``sim process
-cpu`` that of the other process: on a 2-core machine the frame rate cannot exceed 2000 / (their sum),
-whatever overlaps.
+(Xvfb) when there is one to read: on a 2-core machine the frame rate cannot exceed 2000 / (their sum).
 
 ``--offscreen`` runs the same loop without a display: GGUI draws into an offscreen image
 (``ti.ui.Window(..., show_window=False)``; Vulkan, but no X server), and a frame's ``show`` is
@@ -38,7 +35,6 @@ a second start: every kernel, the window's and the renderers' included, came fro
 """
 
 import argparse
-import gc
 import json
 import os
 import statistics
@@ -48,40 +44,23 @@ import tempfile
 import time
 from pathlib import Path
 
-BEFORE = {"draw": "ggui", "env": {"LP_PERF": ""}, "stats_interval_s": 0.0}
-"""The window as it was before these changes: GGUI's own particles and lines, lavapipe's default
-(bilinear) sampling, statistics every frame."""
-# What each variant changes against "window" (the window as python run.py opens it).
+# What each variant changes against "window" (the window as python run.py opens it). The levers tried
+# on it before (GGUI's own particles, the simulation in a second process, ...) are in
+# docs/HISTORY_BENCHMARKS.md, "The window: the levers".
 VARIANTS = {
     "window": {},
-    "before": BEFORE,
-    "before-uniform-colour": {**BEFORE, "colour": False},
-    "before-no-lines": {**BEFORE, "lines": False},
     "paused": {"paused": True},
-    "paused-before": {"paused": True, **BEFORE},
-    "empty-canvas": {"draw": "none"},
     "surface": {"surface": True},
-    "set-image": {"draw": "set_image"},
-    "unsorted-splat": {"front_to_back": False},
     "lavapipe-bilinear": {"env": {"LP_PERF": ""}},
-    "paused-lavapipe-no-texturing": {"paused": True, "env": {"LP_PERF": "no_linear,no_tex"}},
     "stats-every-frame": {"stats_interval_s": 0.0},
-    "no-panel": {"panel": False},
     "no-vsync": {"vsync": False},
     "taichi-1-thread": {"cpu_threads": 1},
     "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
-    "lavapipe-0-threads": {"env": {"LP_NUM_THREADS": "0"}},
-    "gc-freeze": {"gc": "freeze"},
-    "malloc-keeps-memory": {
-        "env": {"GLIBC_TUNABLES": "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=268435456"}
-    },
-    "sim-in-second-process": {"sim_process": True},
-    "sim-in-second-process-renderer-1-thread": {"sim_process": True, "cpu_threads": 1},
 }
-DEFAULT_VARIANTS = ("window", "before", "paused", "empty-canvas", "sim-in-second-process")
+DEFAULT_VARIANTS = ("window", "paused")
 WARMUP_FRAMES = 30
 """Frames before the measured ones by default: the kernels compile and the block reaches the floor."""
-PHASES = ("frame", "sim", "sim_own", "draw", "panel", "show")
+PHASES = ("frame", "sim", "draw", "panel", "show")
 
 
 def process_cpu_s(pid: int) -> float:
@@ -164,27 +143,10 @@ def measure(
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
     window.STATS_INTERVAL_S = settings.get("stats_interval_s", window.STATS_INTERVAL_S)
-    draw = settings.get("draw", "ours")
-    if draw == "ggui":
-        viewer.draw = lambda: draw_ggui_particles(viewer, settings.get("colour", True), settings.get("lines", True))
-    elif draw == "none":
-        viewer.draw = lambda: viewer.window.get_canvas().set_background_color(tuple(viewer.render.background_rgb))
-    elif draw == "set_image":
-        viewer.draw = lambda: draw_through_set_image(viewer)
-    if not settings.get("front_to_back", True):
-        viewer.draw()  # makes the renderer
-        viewer.frames.spheres.front_to_back = False
-    if not settings.get("panel", True):
-        viewer.panel = lambda stats: None
-
-    other = SimulationProcess(sim, scene) if settings.get("sim_process") else None
 
     def step():
-        if other:
-            other.step()
-        else:
-            sim.step()
-            ti.sync()
+        sim.step()
+        ti.sync()
 
     clock = Clock()
     viewer.draw = clock.timed("draw", viewer.draw)
@@ -195,12 +157,8 @@ def measure(
     viewer.show()
     for frame in range(warmup + frames):
         if frame == warmup:
-            if settings.get("gc") == "freeze":
-                gc.collect()
-                gc.freeze()
             x_start = None if offscreen else x_server_cpu_s()
             cpu_start, wall_start = time.process_time(), time.perf_counter()
-            other_start = process_cpu_s(other.process.pid) if other else None
         clock.spent = {}
         wall, cpu = time.perf_counter(), time.process_time()
         if viewer.advance():
@@ -211,137 +169,18 @@ def measure(
             rows.append(dict(clock.spent))
     elapsed = time.perf_counter() - wall_start
     x_end = None if offscreen else x_server_cpu_s()
-    other_end = process_cpu_s(other.process.pid) if other else None
-    if other:
-        for row, step_ms in zip(rows, other.step_ms[-len(rows) :]):
-            row["sim_own"] = (step_ms, 0.0)
-        other.close()
     result = {
         "variant": name,
         "fps": frames / elapsed,
         "load": os.getloadavg()[0],
         "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
         "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
-        "sim_process_cpu": None if other_end is None else 1e3 * (other_end - other_start) / frames,
     }
     for phase in PHASES:
         present = any(phase in row for row in rows)
         result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows) if present else None
         result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows) if present else None
     return result
-
-
-class SimulationProcess:
-    """The one lever that can overlap the simulation with the rendering, as a prototype: the solver in a
-    process of its own, a frame ahead (in one process they cannot overlap: a Taichi kernel launch and
-    GGUI's show both hold Python's GIL from start to end). ``step`` takes the frame the other process
-    finished (positions and velocities through a pipe, into the fields of this process's Simulation,
-    which the renderer reads) and starts it on the next, so the two run side by side; the step phase
-    then measures the wait, and ``step_ms`` keeps the other process's own time per frame."""
-
-    def __init__(self, sim, scene: str):
-        import multiprocessing
-
-        self.sim = sim
-        self.step_ms = []
-        context = multiprocessing.get_context("spawn")  # a fresh interpreter: Taichi does not survive fork
-        self.connection, child = context.Pipe()
-        self.process = context.Process(target=simulate, args=(scene, child), daemon=True)
-        self.process.start()
-        self.connection.recv()  # built and compiled
-        self.connection.send("step")
-
-    def step(self):
-        positions, velocities, step_ms = self.connection.recv()
-        self.connection.send("step")
-        self.sim.state.x.from_numpy(positions)  # the fields Simulation.readout() hands the renderer
-        self.sim.state.v.from_numpy(velocities)
-        self.step_ms.append(step_ms)
-
-    def close(self):
-        self.connection.send("stop")
-        self.process.join(timeout=10)
-
-
-def simulate(scene: str, connection) -> None:
-    """The other process of ``SimulationProcess``: steps a frame whenever asked and sends its particles."""
-    import taichi as ti
-
-    from pbf.solver import Simulation, start_backend
-
-    start_backend(quiet=True)
-    sim = Simulation(scene, quiet=True)
-    sim.step()
-    connection.send("ready")
-    while connection.recv() == "step":
-        started = time.perf_counter()
-        sim.step()
-        ti.sync()
-        step_ms = 1e3 * (time.perf_counter() - started)
-        connection.send((sim.state.x.to_numpy(), sim.state.v.to_numpy(), step_ms))
-
-
-def draw_ggui_particles(viewer, per_vertex_colour: bool, lines: bool) -> None:
-    """The window's drawing before our renderer took over: GGUI's own particles (a sphere impostor per
-    particle whose fragment shader writes depth) and lines."""
-    import taichi as ti
-
-    from pbf.app.render import LIGHT_DIRECTION, scene_edges
-
-    if not hasattr(viewer, "ggui_edges"):
-        edges = scene_edges(viewer.sim.scene)
-        viewer.ggui_edges = ti.Vector.field(3, ti.f32, shape=len(edges))
-        viewer.ggui_edges.from_numpy(edges)
-        viewer.ggui_camera = ti.ui.Camera()
-    view = viewer.camera.view()
-    camera = viewer.ggui_camera
-    camera.position(*view.eye)
-    camera.lookat(*view.target)
-    camera.up(0.0, 1.0, 0.0)
-    camera.fov(view.fov_deg)
-    scene = viewer.window.get_scene()
-    scene.set_camera(camera)
-    scene.ambient_light((0.35, 0.35, 0.35))
-    scene.point_light(pos=tuple(view.eye + 10.0 * LIGHT_DIRECTION), color=(0.9, 0.9, 0.9))
-    width, height = viewer.window.get_window_shape()
-    particles = viewer.sim.readout()
-    colour = {"per_vertex_color": viewer.frames.colours.update()} if per_vertex_colour else {"color": (0.3, 0.5, 0.9)}
-    scene.particles(
-        particles.positions, radius=particles.radius_m * height / width, index_count=particles.count, **colour
-    )
-    if lines:
-        scene.lines(viewer.ggui_edges, width=1.5, color=tuple(viewer.render.container_rgb))
-    canvas = viewer.window.get_canvas()
-    canvas.set_background_color(tuple(viewer.render.background_rgb))
-    canvas.scene(scene)
-
-
-def draw_through_set_image(viewer) -> None:
-    """Our renderer's frame handed over as the window did before ``show_packed``: copied into a (W, H)
-    field of RGB bytes (y up) and given to GGUI's public ``Canvas.set_image``, which converts it into
-    packed words with a pass of its own."""
-    import taichi as ti
-
-    from pbf.app import window
-
-    @ti.kernel
-    def to_field(packed: ti.types.ndarray(dtype=ti.u32, ndim=2), rgb: ti.template()):
-        for x, y in rgb:
-            word = packed[x, y]
-            rgb[x, y] = ti.Vector([word & 0xFF, (word >> 8) & 0xFF, (word >> 16) & 0xFF], ti.u8)
-
-    def set_image(canvas, packed):
-        if getattr(viewer, "rgb_field", None) is None or viewer.rgb_field.shape != packed.shape:
-            viewer.rgb_field = ti.Vector.field(3, ti.u8, shape=packed.shape)
-        to_field(packed, viewer.rgb_field)
-        canvas.set_image(viewer.rgb_field)
-
-    show_packed = window.show_packed
-    window.show_packed = set_image
-    try:
-        window.WindowViewer.draw(viewer)
-    finally:
-        window.show_packed = show_packed
 
 
 def backend_name(arch: str | None) -> str:
@@ -357,16 +196,14 @@ def table(results: dict[str, list[dict]]) -> str:
         return f"{statistics.median(values):.1f}" if values else "-"
 
     header = (
-        "| variant | fps | frame ms | sim ms | sim in its process ms | draw ms | panel ms | show ms | "
-        "cpu ms/frame | sim process cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |"
+        "| variant | fps | frame ms | sim ms | draw ms | panel ms | show ms | "
+        "cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |"
     )
     lines = [header, "|---|" + "---:|" * (header.count("|") - 2)]
     for name, rows in results.items():
         lines.append(
             f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
-            f"{cell(rows, 'sim_own')} | "
             f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
-            f"{cell(rows, 'sim_process_cpu')} | "
             f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
             f"{cell(rows, 'show_cpu')} | {cell(rows, 'load')} |"
         )

@@ -9,10 +9,10 @@ import hashlib
 import numpy as np
 import pytest
 
+from benchmarks.instruments import TransferCounter
 from pbf import Simulation
 from pbf.solver.backend import decisions_on_device
 from pbf.solver.grid import SLOTS
-from pbf.study.common import TransferCounter
 from scenes import small_dam_break
 
 

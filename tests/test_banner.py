@@ -56,7 +56,7 @@ def test_help_list_and_errors_print_no_taichi_banner(tmp_path, user_env, argv):
 
 
 def test_a_module_entry_point_prints_no_taichi_banner(user_env):
-    # python -m pbf.study.bench and friends: the package is imported before the module, and with it the switch.
+    # python -m pbf.study.sweep and friends: the package is imported before the module, and with it the switch.
     code = "import pbf.study.common, taichi; from pbf.solver import start_backend; start_backend('cpu')"
     result = subprocess.run([sys.executable, "-c", code], env=user_env, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr

@@ -135,7 +135,7 @@ def test_window_benchmark_runs_offscreen_without_a_display():
 
 @pytest.mark.slow
 def test_frames_study_prints_its_table(capsys):
-    from pbf.study import frames
+    from benchmarks import frames
 
     argv = ["--at-frame", "1", "--repeats", "2", "--size", "64x36", "--arch", "cpu", "--whole", "1", "--rounds", "1"]
     assert frames.main(argv) == 0
@@ -188,53 +188,9 @@ def test_every_preset_has_a_moment_in_the_gallery():
     assert set(script("gallery").MOMENTS) == {p.stem for p in (BENCHMARKS.parent / "scenes").glob("*.toml")}
 
 
-def test_bench_refuses_a_thread_count_it_cannot_use(capsys):
-    from pbf.study import bench
-
-    with pytest.raises(SystemExit) as exit_:
-        bench.main(["--threads", "0"])
-    assert exit_.value.code == 2 and "--threads: expected a whole number of threads from 1 to 256, got '0'" in (
-        capsys.readouterr().err
-    )
-
-
-@pytest.mark.parametrize(
-    "argv, message",
-    [
-        (["sizes", "--perturb", "1"], "--perturb: applies to the presets mode only, not to sizes"),
-        (["sizes", "--presets", "pour"], "--presets: applies to the presets, counts and start modes only"),
-        (["presets", "table.csv"], "tables: applies to the compare mode only, not to presets"),
-        (["presets", "--perturb-each-frame"], "--perturb-each-frame: needs --perturb SEED"),
-        (["sizes", "--first-calls"], "--first-calls: applies to the start mode only, not to sizes"),
-        (["start", "--first-calls", "--no-shared"], "--no-shared: applies to the starts' table, not to --first-calls"),
-        (["start", "--first-calls", "--csv", "t.csv"], "--csv: applies to the starts' table, not to --first-calls"),
-        (["start", "--presets", "dam_brake"], "--presets: dam_brake: no such scene file; did you mean dam_break?"),
-        (["compare", "no-such-table.csv"], "tables: no-such-table.csv: cannot be read (FileNotFoundError"),
-        (["compare", str(BENCHMARKS.parent / "README.md")], "README.md: not a presets table (no column backend,"),
-    ],
-)
-def test_bench_refuses_an_option_its_mode_would_ignore(argv, message, capsys):
-    from pbf.study import bench
-
-    with pytest.raises(SystemExit) as exit_:
-        bench.main(argv)
-    assert exit_.value.code == 2 and message in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_kernel_arguments_ndarrays_compile_once_for_every_size(capsys):
-    """The premise of sizes and constants as data: a kernel whose arrays are ndarrays and whose
-    constants are a struct compiles once for every particle count and spacing, one on fields with
-    baked constants for each (Taichi's offline cache key, pinned Taichi 1.7.4)."""
-    compiled = script("kernel_arguments").cache_check("cpu")
-    assert compiled["fields"][0] > 0 and compiled["fields"][1] > 0, compiled
-    assert compiled["ndarrays"][0] > 0 and compiled["ndarrays"][1] == 0, compiled
-    assert compiled["arguments"][1] == 0, compiled
-
-
 @pytest.mark.slow
 def test_bench_start_counts_the_kernels_a_start_compiles(tmp_path):
-    from pbf.study import start
+    from benchmarks import start
 
     cold = start.one_start("dam_break", tmp_path, "cpu", [])
     warm = start.one_start("dam_break", tmp_path, "cpu", [])
@@ -250,7 +206,7 @@ def test_bench_presets_writes_its_table(tmp_path):
     table = tmp_path / "cpu.csv"
     argv = ["presets", "--presets", "martin_moyce", "--frames", "2", "--arch", "cpu", "--csv", str(table)]
     run = subprocess.run(
-        [sys.executable, "-m", "pbf.study.bench", *argv],
+        [sys.executable, "-m", "benchmarks.bench", *argv],
         capture_output=True,
         text=True,
         timeout=600,
@@ -265,7 +221,7 @@ def test_bench_presets_writes_its_table(tmp_path):
 def test_bench_start_first_calls_names_the_kernels_a_cold_start_compiles(capsys):
     """``--first-calls``: a fresh process with an empty cache builds the preset and steps it once, and
     the table names the solver's kernels with positive times, the longest first."""
-    from pbf.study import start
+    from benchmarks import start
 
     start.first_calls(["dam_break"], "cpu")
     lines = capsys.readouterr().out.strip().splitlines()
@@ -276,25 +232,6 @@ def test_bench_start_first_calls_names_the_kernels_a_cold_start_compiles(capsys)
     assert len(rows) == start.FIRST_CALLS_SHOWN and all(t > 0 for t in seconds), lines
     assert seconds == sorted(seconds, reverse=True), lines
     assert "SubstepKernels._find_neighbours_kernel" in names and "SubstepKernels._iterations_kernel" in names, lines
-
-
-def test_traffic_model_counts_a_lattice():
-    """The bytes model's counts on the seed block before it falls: a cubic lattice at h = 2 spacings
-    has 32 sites within h of an interior particle (fewer at the block's faces) and the 5 × 5 × 5 cells
-    a particle visits hold at most 125; without lists a substep streams less and gathers more."""
-    from pbf import Simulation
-    from pbf.study import traffic
-
-    sim = Simulation("dam_break", arch="cpu", quiet=True)
-    neighbours, candidates, cells = traffic.measured_counts(sim)
-    assert 20.0 < neighbours < 32.0, neighbours
-    assert neighbours < candidates <= 125.0, candidates
-    assert cells == sim.model.grid.cell_count / sim.particle_count
-    lists = traffic.by_stage(traffic.passes("lists", neighbours, candidates, cells), 4)
-    walk = traffic.by_stage(traffic.passes("cells", neighbours, candidates, cells), 4)
-    assert "neighbour lists" not in walk
-    assert sum(s for s, _ in lists.values()) > sum(s for s, _ in walk.values())
-    assert sum(g for _, g in lists.values()) < sum(g for _, g in walk.values())
 
 
 @pytest.mark.slow
@@ -323,47 +260,6 @@ def test_substep_time_refuses_an_override_it_cannot_apply(argv, message, capsys)
     with pytest.raises(SystemExit) as stop:
         script("substep_time").main(argv)
     assert stop.value.code == 2 and message in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_frame_budget_prints_a_row_a_setting(capsys):
-    script("frame_budget").main(
-        [
-            "--preset",
-            "dam_break",
-            "--frames",
-            "3",
-            "--window",
-            "2",
-            "3",
-            "--setting",
-            "",
-            "--setting",
-            "solver.iterations=4",
-        ]
-    )
-    rows = [line for line in capsys.readouterr().out.splitlines() if line.endswith(("(as shipped)", "iterations=4"))]
-    assert len(rows) == 2 and all(" | yes | " in row for row in rows)  # every particle inside the box
-
-
-@pytest.mark.parametrize(
-    "argv, message",
-    [
-        (["--window", "5", "4"], "--window: expected 1 <= FIRST <= LAST"),
-        (["--setting", "solver.iterations=0"], "key 'solver.iterations'"),
-    ],
-)
-def test_frame_budget_refuses_before_it_runs(argv, message, capsys):
-    with pytest.raises(SystemExit) as stop:
-        script("frame_budget").main(["--preset", "dam_break", "--frames", "8", *argv])
-    assert stop.value.code == 2 and message in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_speed_cap_prints_its_table(capsys):
-    script("speed_cap").main(["--particles", "8000", "--frames", "3", "--factors", "0", "2", "--divisor", "0"])
-    out = capsys.readouterr().out
-    assert "none" in out and "2 √(2gy)" in out
 
 
 @pytest.mark.parametrize(

@@ -19,7 +19,7 @@ COMMANDS = {
     "pbf --keys": [str(PBF), "--keys"],
     **{
         f"python -m pbf.study.{study} --help": [sys.executable, "-m", f"pbf.study.{study}", "--help"]
-        for study in ("bench", "damping", "frames", "headline", "validate")
+        for study in ("sweep", "damping", "headline", "validate")
     },
 }
 

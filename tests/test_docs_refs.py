@@ -1,6 +1,6 @@
-"""The docs name only what exists: every dotted ``pbf.`` name in docs/*.md, README.md and CONTRIBUTING.md
-resolves (its module imports and each attribute after it exists; after ``python -m`` it is a module),
-and every repo-relative path they mention (``benchmarks/ab.py``, ``docs/VALIDATION.md``,
+"""The docs name only what exists: every dotted ``pbf.`` or ``benchmarks.`` name in docs/*.md, README.md
+and CONTRIBUTING.md resolves (its module imports and each attribute after it exists; after
+``python -m`` it is a module), and every repo-relative path they mention (``benchmarks/ab.py``, ``docs/VALIDATION.md``,
 ``pbf/solver/grid.py``, ``tests/test_x.py::test_name``, a Markdown link) exists. A renamed module, a
 removed function or a moved file fails here with the file and line of each stale reference.
 
@@ -33,7 +33,7 @@ NOT_FILES = {
 }
 """Paths that legitimately name no file of the checkout, by prefix, and why."""
 
-DOTTED = re.compile(r"(?<![\w./-])(python -m )?(pbf(?:\.[A-Za-z_]\w*)+)")
+DOTTED = re.compile(r"(?<![\w./-])(python -m )?((?:pbf|benchmarks)(?:\.[A-Za-z_]\w*)+)")
 PATH = re.compile(r"(?<![\w./~$<>:-])((?:" + "|".join(re.escape(r) for r in ROOTS) + r")/[\w./*<>-]*[\w*/])(::\w+)?")
 LINK = re.compile(r"\]\(([^)\s#]+)(?:#([^)]*))?\)")
 SECTION = re.compile(r"([\w/]*\b[A-Z][A-Z_]+\.md)`?\)?,? \"([^\"]+)\"")
@@ -181,7 +181,7 @@ def test_the_documents_are_found():
     ("line", "found"),
     [
         ("see `pbf.solver.grid.NeighbourGrid`.", ["pbf.solver.grid.NeighbourGrid"]),
-        ("`python -m pbf.study.bench sizes`", ["pbf.study.bench"]),
+        ("`python -m pbf.study.sweep --flow`", ["pbf.study.sweep"]),
         ("pip install pbf-fluids; pbf_buckets.txt; the pbf command.", []),
     ],
 )
@@ -193,7 +193,7 @@ def test_dotted_names_are_found_in_text(line, found):
     ("name", "as_module", "stale"),
     [
         ("pbf.solver.grid.NeighbourGrid", False, False),
-        ("pbf.study.bench", True, False),
+        ("pbf.study.sweep", True, False),
         ("pbf.Simulation", False, False),
         ("pbf.solver.grid.NoSuchGrid", False, True),
         ("pbf.solver.no_such_module", False, True),

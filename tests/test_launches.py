@@ -1,4 +1,4 @@
-"""The launches of a substep, counted by Taichi's kernel profiler (``python -m pbf.study.bench counts``).
+"""The launches of a substep, counted by Taichi's kernel profiler (``python -m benchmarks.bench counts``).
 
 On a GPU every offloaded task is a launch of its own, so at small particle counts the count sets the
 cost of a substep; a change that adds kernels or one-thread tasks fails here. The ceilings are the
@@ -9,6 +9,7 @@ fused, never raise them without a measurement that says why.
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -26,10 +27,11 @@ def bench_counts(*options) -> dict:
     """The table of ``bench counts`` by case, from a process of its own (the profiler is chosen at
     ``ti.init``, and this suite's runtime runs without it)."""
     done = subprocess.run(
-        [sys.executable, "-m", "pbf.study.bench", "counts", "--arch", "cpu", "--threads", "1", *options],
+        [sys.executable, "-m", "benchmarks.bench", "counts", "--arch", "cpu", "--threads", "1", *options],
         capture_output=True,
         text=True,
         timeout=600,
+        cwd=Path(__file__).resolve().parent.parent,  # the checkout: the lab runs from it
     )
     assert done.returncode == 0, done.stderr
     rows = {}
@@ -76,7 +78,7 @@ def test_the_iterations_repeat_per_iteration(counts):
 @pytest.mark.slow
 def test_the_counts_see_every_kernel_call(counts):
     """The calls a substep makes at 4 iterations, counted through Taichi's call and the Launcher's direct
-    launches alike (``pbf.study.common.TransferCounter``): with the CPU's choices lines 1-7, one call an
+    launches alike (``benchmarks.instruments.TransferCounter``): with the CPU's choices lines 1-7, one call an
     iteration, the last with lines 20-23; with a GPU's lines 1-7, iterations 1-2, and iterations 3-4
     with lines 20-23."""
     assert counts["8,000, 4 iterations"][0] == 5

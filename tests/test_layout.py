@@ -43,7 +43,7 @@ def wing(name: str) -> str:
 
 
 def test_every_module_is_seen():
-    assert {"pbf.scene", "pbf.scene.root", "pbf.solver.simulation", "pbf.app.cli", "pbf.study.bench"} <= set(MODULES)
+    assert {"pbf.scene", "pbf.scene.root", "pbf.solver.simulation", "pbf.app.cli", "pbf.study.sweep"} <= set(MODULES)
 
 
 def test_no_import_cycle():
@@ -87,3 +87,15 @@ def test_app_uses_the_solver_face_only(name):
     inner = {m for m in GRAPH[name] if wing(m) == "solver" and m != "pbf.solver"}
     assert not inner, f"{name} reaches into {sorted(inner)}; use pbf.solver's public face"
     assert not {m for m in GRAPH[name] if wing(m) == "study"}, f"{name} imports the study wing"
+
+
+def test_the_product_imports_nothing_of_the_lab():
+    # benchmarks/ is the lab, run from a checkout; the wheel ships pbf alone.
+    lab = {name: sorted(m for m in imports(name) if m.split(".")[0] == "benchmarks") for name in MODULES}
+    assert not {name: found for name, found in lab.items() if found}
+
+
+def test_the_study_wing_holds_what_a_user_runs_to_report_and_validate():
+    # The sweep, the validations and the headline table, with their helpers; the rest is the lab's.
+    study = {name.removeprefix("pbf.study.") for name in MODULES if wing(name) == "study" and name != "pbf.study"}
+    assert study == {"common", "damping", "headline", "spheric", "sweep", "validate"}

@@ -1,4 +1,4 @@
-"""How the surface style reads (``python -m pbf.study.frames look``): each particle's splat is an
+"""How the surface style reads (``python -m benchmarks.frames look``): each particle's splat is an
 ellipsoid from its neighbours (flat at a surface, a sphere in the bulk, a drop alone), a settled pool is
 one flat surface and a splash is not speckled. The figures are the study's own measures, on small
 scenes; the renderer of spheres before the anisotropic splats failed both (docs/RENDERING.md)."""
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import taichi as ti
 
+from benchmarks.frames import particles_top, speckle, top_face
 from pbf.app.render import SceneRenderer
 from pbf.app.splat import DROP_RADIUS_SPACINGS, Ellipsoids, symmetric_eigen
 from pbf.app.surface_render import SPLAT_RADIUS_SPACINGS
 from pbf.solver import Simulation
-from pbf.study.frames import particles_top, speckle, top_face
 from scenes import column_scene, small_dam_break
 
 SIZE = (480, 270)

@@ -39,8 +39,8 @@ def test_the_floating_box_in_the_wave_tank_survives_rounding_noise(seed):
     # frame (as another backend's rounding departs) once made it roll about the tank's axis and squeeze
     # the water in the gaps: with the bodies' collision at 0.2 r throughout, seeds 1 and 4 blew up at
     # frame 19 (7-9 m/s, then 81). The piston starts the water at 0.5 m/s.
+    from benchmarks.bench import jiggle, jiggle_in_place, perturbed
     from pbf.scene import load_scene
-    from pbf.study.bench import jiggle, jiggle_in_place, perturbed
 
     sim = Simulation(perturbed(load_scene("wave_tank_float"), seed), quiet=True)
     jiggle(sim, np.random.default_rng(seed))

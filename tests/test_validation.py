@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import pytest
 
-from pbf.study import bench, sweep, validate
+from pbf.study import sweep, validate
 
 
 def test_martin_moyce_surge_front_follows_the_experiment():
@@ -62,9 +62,8 @@ def test_pareto_front_keeps_the_points_nothing_beats():
 @pytest.mark.slow
 def test_sweep_writes_its_table_and_plot(tmp_path):
     csv_path, plot_path = tmp_path / "sweep.csv", tmp_path / "sweep.png"
-    points = bench.main(
+    points = sweep.main(
         [
-            "sweep",
             "--sizes",
             "1000",
             "--iterations",

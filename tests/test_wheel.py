@@ -1,7 +1,7 @@
-"""A built wheel ships the presets (the checkout's top-level ``scenes/``, inside the package as
-``pbf/scenes/``): it installs into a fresh virtual environment, and from a folder outside the source
-tree its ``pbf`` command runs a preset by name, finding the scene inside the installed package rather
-than in this checkout."""
+"""A built wheel ships the package, not the lab (``benchmarks/``), and the presets (the checkout's
+top-level ``scenes/``, inside the package as ``pbf/scenes/``): it installs into a fresh virtual
+environment, and from a folder outside the source tree its ``pbf`` command runs a preset by name,
+finding the scene inside the installed package rather than in this checkout."""
 
 import os
 import shutil
@@ -38,7 +38,12 @@ def test_a_wheel_ships_the_presets_and_runs_one_by_name(tmp_path):
     presets = sorted(path.stem for path in (ROOT / "scenes").glob("*.toml"))
     with zipfile.ZipFile(wheel) as archive:  # the top-level scenes/ inside the package, as package data
         shipped = sorted(Path(name).stem for name in archive.namelist() if name.startswith("pbf/scenes/"))
+        study = sorted(Path(name).stem for name in archive.namelist() if name.startswith("pbf/study/"))
+        tops = {name.split("/")[0] for name in archive.namelist() if not name.startswith("pbf_fluids-")}
     assert shipped == presets, (shipped, presets)
+    # Of the studies, what a user runs to report speed against error and to validate; the lab stays out.
+    assert study == ["__init__", "common", "damping", "headline", "spheric", "sweep", "validate"], study
+    assert tops == {"pbf"}, tops
 
     # The fresh environment borrows this one's dependencies (Taichi is 80 MB) through a path file: a
     # folder added that way is not a site folder, so the editable install's own path file there is not

@@ -197,7 +197,8 @@ def seed_simulation(perturb: int | None = None):
 
 
 def seed_task(out: dict, perturb: int | None = None) -> None:
-    from pbf.study.common import TransferCounter
+    sys.path.append(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # the checkout, for the lab
+    from benchmarks.instruments import TransferCounter
 
     sim = seed_simulation(perturb)
     rows, reads, launches, substeps = [], 0, 0, 0

@@ -555,7 +555,7 @@ class SurfaceRenderer:
         one-sided difference that changes depth less and lies on water (van der Laan et al. 2009, §4).
         Picking the smaller one-sided difference everywhere flipped between the two sides from pixel to
         pixel wherever the smoothed surface curved a little, and the normals had the grain of single
-        pixels (speckle, ``python -m pbf.study.frames look``)."""
+        pixels (speckle, ``python -m benchmarks.frames look``)."""
         here = self._position(row, col, eye, right, up, forward, focal)
         z = self.smooth_depth[row, col]
         mu = THRESHOLD_SPACINGS * self.constants[None].spacing
@@ -820,7 +820,7 @@ class SurfaceRenderer:
         """The last draw's surface at the coarse passes' resolution (``coarse_height`` × ``coarse_width``,
         row 0 at the top): world-space unit normals (h, w, 3), the water mask (h, w) and the smoothed view
         depth (h, w, m; FAR where no water), for measures of how the surface reads
-        (``python -m pbf.study.frames look``)."""
+        (``python -m benchmarks.frames look``)."""
         depth = self.smooth_depth.to_numpy()
         return self.normal.to_numpy(), depth < FAR, depth
 

@@ -1,6 +1,7 @@
 """Taichi's internals in one module (``tests/test_private_taichi.py``), used only on the Taichi
 ``WRITTEN_FOR`` unless ``PBF_PUBLIC_LAUNCH`` is set: :class:`Launcher` (the same launch without Taichi's
-per-call Python) and :func:`watching` (launches, element accesses and compiles, for the studies).
+per-call Python). It keeps no state of its own: the lab's instruments (``benchmarks/instruments.py``)
+watch a direct launch at ``Launcher._launch``.
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ import inspect
 import io
 import os
 import sys
-import time
 
 import numpy as np
 import taichi as ti
@@ -21,7 +21,6 @@ try:  # the internals this module reads, in the Taichi it was written for
     from taichi.lang.exception import handle_exception_from_cpp
     from taichi.lang.kernel_impl import Kernel
     from taichi.lang.util import cook_dtype
-    from taichi.profiler.kernel_profiler import get_default_kernel_profiler
     from taichi.types import primitive_types
     from taichi.types.annotations import template as template_type
     from taichi.types.ndarray_type import NdarrayType
@@ -66,118 +65,6 @@ def start_taichi(**options) -> None:
     finally:
         rest = [line for line in printed.getvalue().splitlines(keepends=True) if not line.startswith(TAICHI_START_LINE)]
         sys.stdout.write("".join(rest))
-
-
-class Observer:
-    """What a study is told while it watches; only the methods a subclass overrides are watched for."""
-
-    def launched(self, kernel: str, waits: bool) -> None:
-        """A kernel launch (Taichi's own included); ``waits``: the host waits for a result."""
-
-    def accessed(self, read: bool) -> None:
-        """An element of a field or ndarray read (``read``) or written from Python (``field[None]``)."""
-
-    def compiled(self, kernel: str, seconds: float) -> None:
-        """A kernel call that compiled a new variant: its wall time (front end, compile, one synchronised run)."""
-
-
-_observers: list[Observer] = []
-_wrapped: list[tuple[type, str, object]] = []  # (class, attribute, Taichi's own) of each wrapper in place
-_depth = 0  # element accesses under way (what one launches inside is part of it)
-
-
-def _overrides(observer: Observer, name: str) -> bool:
-    return getattr(type(observer), name) is not getattr(Observer, name)
-
-
-def _tell(name: str, *args) -> None:
-    for observer in list(_observers):
-        getattr(observer, name)(*args)
-
-
-def _wrap_launch(original):
-    def launch_kernel(kernel, compiled, *args):
-        waits = _depth == 0 and (kernel.return_type is not None or any(isinstance(a, np.ndarray) for a in args))
-        _tell("launched", kernel.func.__qualname__, waits)
-        return original(kernel, compiled, *args)
-
-    return launch_kernel
-
-
-def _wrap_access(original, read: bool):
-    def access(obj, *args):
-        global _depth
-        if _depth == 0:
-            _tell("accessed", read)
-        _depth += 1
-        try:
-            return original(obj, *args)
-        finally:
-            _depth -= 1
-
-    return access
-
-
-def _wrap_call(original):
-    def call(kernel, *args, **kwargs):
-        variants = len(kernel.compiled_kernels)
-        began = time.perf_counter()
-        result = original(kernel, *args, **kwargs)
-        if len(kernel.compiled_kernels) > variants:
-            ti.sync()
-            _tell("compiled", kernel.func.__qualname__, time.perf_counter() - began)
-        return result
-
-    return call
-
-
-def _rewrap() -> None:
-    """Taichi's classes wrapped for what the observers now watching want, and only for that."""
-    for cls, name, original in reversed(_wrapped):
-        setattr(cls, name, original)
-    _wrapped.clear()
-    targets = []
-    if any(_overrides(o, "launched") for o in _observers):
-        targets.append((Kernel, "launch_kernel", _wrap_launch))
-    if any(_overrides(o, "accessed") for o in _observers):
-        for cls in (ti.ScalarField, ti.MatrixField, ti.ScalarNdarray, ti.VectorNdarray, ti.MatrixNdarray):
-            targets.append((cls, "__getitem__", lambda f: _wrap_access(f, True)))
-            targets.append((cls, "__setitem__", lambda f: _wrap_access(f, False)))
-    if any(_overrides(o, "compiled") for o in _observers):
-        targets.append((Kernel, "__call__", _wrap_call))
-    for cls, name, wrap in targets:
-        original = cls.__dict__[name]
-        _wrapped.append((cls, name, original))
-        setattr(cls, name, wrap(original))
-
-
-def _require(what: str) -> None:
-    if not knows_taichi():
-        raise RuntimeError(
-            f"{what} reads Taichi {'.'.join(map(str, WRITTEN_FOR))}'s internals; "
-            f"this is Taichi {'.'.join(map(str, ti.__version__))}"
-        )
-
-
-@contextlib.contextmanager
-def watching(observer: Observer):
-    """``observer`` told of what Taichi does while inside; observers nest. RuntimeError on another Taichi."""
-    _require("watching Taichi's launches")
-    _observers.append(observer)
-    _rewrap()
-    try:
-        yield observer
-    finally:
-        _observers.remove(observer)
-        _rewrap()
-
-
-def profiled_tasks() -> list[tuple[str, float]]:
-    """(task, milliseconds) of every task the kernel profiler recorded since last cleared, in order."""
-    _require("reading the kernel profiler's records")
-    profiler = get_default_kernel_profiler()
-    profiler._update_records()
-    return [(record.name, record.kernel_time) for record in profiler._traced_records]
 
 
 MOST_VARIANTS = 64  # variants a Launcher keeps; past them the ordinary call (a NaN template adds one a call)
@@ -290,14 +177,16 @@ class Launcher:
             context = self._context(entry[0], args)
             if context is None:  # an argument Taichi refuses (its call says how)
                 return self._bound(*args)
-            if _observers:  # Taichi's launch_kernel, which observers see, is not on this path
-                _tell("launched", self._name, False)
-            try:
-                impl.get_runtime().prog.launch_kernel(entry[2], context)
-            except Exception as error:  # Taichi's exceptions for its C++ ones, as its launch raises them
-                raise handle_exception_from_cpp(error) from None
+            self._launch(entry[2], context)
             return None
         return self._primal.launch_kernel(entry[0], self._owner, *args)
+
+    def _launch(self, data, context) -> None:
+        """The direct launch: past Taichi's ``launch_kernel`` (the one seam where a watcher sees it)."""
+        try:
+            impl.get_runtime().prog.launch_kernel(data, context)
+        except Exception as error:  # Taichi's exceptions for its C++ ones, as its launch raises them
+            raise handle_exception_from_cpp(error) from None
 
     def _context(self, compiled, args):
         """The launch context with every argument set; None for one Taichi refuses or an ndarray with a gradient."""

@@ -42,7 +42,7 @@ SETTLE_FINISH_S = 0.25
 
 
 class StageHook(Protocol):
-    """Told about each stage of a substep as it runs (a profiler, say; ``pbf.study.common.StageTimer``)."""
+    """Told about each stage of a substep as it runs (a profiler, say)."""
 
     def stage(self, name: str) -> ContextManager:
         """A context that encloses the stage ``name`` (one of STAGES)."""

@@ -1,2 +1,3 @@
-"""The study wing: benchmarks (``bench``), the speed-against-error sweep (``sweep``) and validation
-against experiment and theory (``validate``), with their shared helpers in ``common``."""
+"""What a user runs to report speed against error and to validate: the sweep (``sweep``), the validation
+against experiment and theory (``validate``, with ``spheric`` and ``damping``), the README's headline
+table (``headline``), and their shared helpers (``common``). The lab's other tools live in ``benchmarks/``."""

@@ -1,22 +1,18 @@
-"""What the studies share: scaled scenes, timing (a stage hook and a synchronised timer) and
-measurements of the free surface. Benchmarks, the sweep, the validation and the tests import it;
-it imports no study module."""
+"""What the studies share: scaled scenes, a synchronised timer, the command's exit, and measurements
+of the free surface. The sweep, the validation, the lab's benchmarks and the tests import it; it
+imports no study module."""
 
 from __future__ import annotations
 
-import contextlib
 import os
-import statistics
 import sys
 import time
-from collections import defaultdict
 
 import numpy as np
 import taichi as ti
 
 from pbf.scene import Scene, load_scene
-from pbf.solver import STAGES, Simulation
-from pbf.solver.launch import Observer, watching
+from pbf.solver import Simulation
 from pbf.solver.sph import kernel_np
 
 
@@ -46,7 +42,7 @@ def dam_break(particles: int, iterations: int, overrides=()) -> Scene:
 def run_command(main) -> None:
     """Run a study's ``main()`` as its command and exit with its status (an int; anything else, such as
     the rows a study returns to its Python callers, is success); a reader that stops early
-    (``python -m pbf.study.bench --help | head -1``) ends it quietly, with 0. The same recipe as
+    (``python -m pbf.study.sweep --help | head -1``) ends it quietly, with 0. The same recipe as
     ``pbf.app.cli``'s, kept here because a study imports the application only where it studies it."""
     try:
         status = main()
@@ -65,76 +61,6 @@ def timed(function, *args):
     function(*args)
     ti.sync()
     return time.perf_counter() - start
-
-
-class TransferCounter(Observer):
-    """Counts Taichi's kernel launches and device-to-host reads while active (a context manager).
-
-    A device-to-host read is anything that makes the host wait for a result from the device:
-    - a kernel launch that returns a value (``-> ti.i32``, a tuple, ...);
-    - a kernel launch given a NumPy array (Taichi copies the array to the device and, on GPU backends,
-      the whole of it back after the launch; ``to_numpy`` and ``from_numpy`` are such launches);
-    - reading an element of a field or ndarray from Python (``field[None]``, ``field[i]``).
-    A launch is every call of a ``@ti.kernel``, Taichi's own (``to_numpy``, ``fill``...) included;
-    writing an element from Python (``field[None] = v``) launches a small writer kernel and is counted
-    with the launches, not with the reads. ``ti.sync()`` is neither. What Taichi does is seen through
-    ``pbf.solver.launch.watching``, the one place that reads Taichi's internals."""
-
-    def __init__(self):
-        self.launches = 0
-        self.reads = 0
-        self._watching = None
-
-    def launched(self, kernel: str, waits: bool) -> None:
-        self.launches += 1
-        self.reads += waits
-
-    def accessed(self, read: bool) -> None:
-        self.launches += 1
-        self.reads += read
-
-    def __enter__(self):
-        self._watching = watching(self)
-        self._watching.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        self._watching.__exit__(*exc)
-        self._watching = None
-        return False
-
-
-class StageTimer:
-    """A stage hook for ``Simulation.hook``: times every stage of every substep it sees, with the device
-    synchronised around each (so stages add up to a little more than an untimed substep)."""
-
-    def __init__(self):
-        self.ms: dict[str, list[float]] = defaultdict(list)
-        """Milliseconds of each call, by stage name."""
-
-    @contextlib.contextmanager
-    def stage(self, name: str):
-        ti.sync()
-        start = time.perf_counter()
-        yield
-        ti.sync()
-        self.ms[name].append((time.perf_counter() - start) * 1e3)
-
-    def medians(self) -> dict[str, float]:
-        """Median ms of each stage, in the order of the substep."""
-        return {name: statistics.median(self.ms[name]) for name in STAGES if self.ms[name]}
-
-
-def stage_breakdown(sim: Simulation, substeps: int) -> dict[str, float]:
-    """Median ms of each stage over ``substeps`` substeps of the running simulation, at its last Δt."""
-    timer, previous = StageTimer(), sim.hook
-    sim.hook = timer
-    try:
-        for _ in range(substeps):
-            sim.substep(sim.dt_s)
-    finally:
-        sim.hook = previous
-    return timer.medians()
 
 
 def fill_height_m(sim: Simulation) -> float:

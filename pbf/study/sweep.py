@@ -1,8 +1,9 @@
 """Speed against error: the solver settings that trade one for the other, swept and plotted.
 
-    python -m pbf.study.bench sweep [--sizes 8000 64000] [--iterations 1 2 3 4 6 8 12] [--substeps 1 2 4]
+    python -m pbf.study.sweep [--sizes 8000 64000] [--iterations 1 2 3 4 6 8 12] [--substeps 1 2 4]
                               [--target 0.005] [--frames 60] [--flow] [--csv docs/speed_vs_error.csv]
-                              [--plot docs/speed_vs_error.png]
+                              [--plot docs/speed_vs_error.png] [--arch cpu] [--threads N] [--set KEY=VALUE]
+    python -m pbf.study.sweep --from-csv docs/speed_vs_error.csv     # re-plot the points a CSV holds
 
 Each point is a dam break (the seed preset, spacing scaled to the particle count) run for ``frames``
 frames from rest with one setting of iterations and substeps per frame. It reports the median ms per
@@ -21,15 +22,18 @@ the standing wave's decay per period (``pbf.study.damping``). The plot then gain
 against the same time per frame, so that a setting is chosen on its flow as well as its density.
 """
 
+import argparse
 import math
+import platform
 import statistics
 from dataclasses import asdict, dataclass, fields
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from pbf.solver import Simulation
-from pbf.study.common import scaled, timed
+from pbf.solver import ARCHES, Simulation, start_backend
+from pbf.study.common import run_command, scaled, timed
 
 ITERATIONS = (1, 2, 3, 4, 6, 8, 12)
 SUBSTEPS = (1, 2, 4)
@@ -372,3 +376,61 @@ def plot_flow(ax, points: list[Point]) -> None:
     ax.set_title("Flow: SPHERIC Test 2, the wave tank and the standing wave at each setting", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
+
+
+RUN_OPTIONS = ("sizes", "iterations", "substeps", "rest_settle", "rest_frames", "flow", "set", "csv", "threads")
+"""What only a sweep that runs reads, not one re-plotted ``--from-csv``."""
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=None, help="particle counts (default: 8000 64000)")
+    parser.add_argument("--iterations", type=int, nargs="+", default=None, help="default: 1 2 3 4 6 8 12")
+    parser.add_argument("--substeps", type=int, nargs="+", default=None, help="substeps a frame (default: 1 2 4)")
+    parser.add_argument("--target", type=float, default=0.005, help="also stop under this mean error (0: none)")
+    parser.add_argument("--frames", type=int, default=60, help="frames a point runs")
+    parser.add_argument("--rest-settle", type=int, default=None, help="frames the rest tank settles (20)")
+    parser.add_argument("--rest-frames", type=int, default=None, help="frames of energy drift at rest (40)")
+    parser.add_argument("--flow", action="store_true", help="also the flow cases (flow_measures)")
+    parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE", help="a scene key (repeatable)")
+    parser.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
+    parser.add_argument("--threads", type=int, default=None, metavar="N", help="the CPU backend's threads")
+    parser.add_argument("--csv", type=Path, default=None, help="default: docs/speed_vs_error.csv")
+    parser.add_argument("--plot", type=Path, default=Path("docs/speed_vs_error.png"))
+    parser.add_argument("--from-csv", type=Path, default=None, help="re-plot this CSV instead of running")
+    args = parser.parse_args(argv)
+    given = [name for name in RUN_OPTIONS if getattr(args, name) not in (None, False)]
+    if args.from_csv is not None and given:
+        parser.error(f"--{given[0].replace('_', '-')}: applies to a sweep that runs, not to one re-plotted --from-csv")
+    return args
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if args.from_csv:
+        points, made = read_csv(args.from_csv), f"the points of {args.from_csv.name}"
+    else:
+        backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads)
+        made = f"{platform.processor() or platform.machine()}, {backend} backend"
+        points = sweep(
+            args.sizes or [8000, 64000],
+            args.iterations or list(ITERATIONS),
+            args.substeps or list(SUBSTEPS),
+            args.target,
+            args.frames,
+            args.rest_settle or 20,
+            args.rest_frames or 40,
+            args.set or [],
+            args.flow,
+        )
+        args.csv = args.csv or Path("docs/speed_vs_error.csv")
+        write_csv(points, args.csv)
+    print_table(points)
+    # Re-plotted, the points are the CSV's machine's, not this one's (--frames says how long they ran).
+    plot(points, args.plot, f"PBF dam break, {args.frames} frames from rest ({made})")
+    print(f"wrote {args.plot}" if args.from_csv else f"wrote {args.csv} and {args.plot}")
+    return points
+
+
+if __name__ == "__main__":
+    run_command(main)

@@ -1,6 +1,6 @@
 """How long a user waits before the first frame: cold and warm starts of every preset, each a fresh process.
 
-    python -m pbf.study.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
+    python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
 
 A start is what a user runs: ``pbf PRESET --stats-only --frames 1`` in a new process, timed from the
 process's launch to its exit (``wall``) and by the program's own "kernels ready in" line (``ready``:
@@ -23,7 +23,7 @@ With ``--first-calls``, where a cold start's compile goes instead: per preset, i
 an empty offline cache, the Simulation built with settling off and one substep, and the first call of
 each kernel timed (Taichi's Python front end, the compile and one run), the longest first:
 
-    python -m pbf.study.bench start --first-calls [--presets hydrostatic ...]
+    python -m benchmarks.bench start --first-calls [--presets hydrostatic ...]
 """
 
 from __future__ import annotations
@@ -85,8 +85,10 @@ def first_calls(presets: list[str], arch: str | None) -> None:
     """For each preset, :func:`first_calls_here` in a fresh process with an empty offline cache."""
     for preset in presets:
         with tempfile.TemporaryDirectory(prefix="pbf-first-calls-") as folder:
-            code = f"from pbf.study.start import first_calls_here; first_calls_here({preset!r}, {arch!r})"
-            env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder)
+            code = f"from benchmarks.start import first_calls_here; first_calls_here({preset!r}, {arch!r})"
+            root = str(Path(__file__).resolve().parent.parent)  # the checkout, where ``benchmarks`` is
+            path = os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), root]))
+            env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder, PYTHONPATH=path)
             try:
                 done = subprocess.run(
                     [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
@@ -106,9 +108,9 @@ def first_calls_here(preset: str, arch: str | None) -> None:
     variant timed in wall seconds; prints the total and the FIRST_CALLS_SHOWN longest."""
     import taichi as ti
 
+    from benchmarks.instruments import Observer, watching
     from pbf.scene import load_scene
     from pbf.solver import Simulation, start_backend
-    from pbf.solver.launch import Observer, watching
 
     start_backend(arch or "cpu", quiet=True)
     seconds: dict[str, float] = {}

@@ -1,8 +1,8 @@
 """The headless frame's cost without the simulation: the renderer and the PNG writer alone on a fixed
 state, both styles, as frames a second and CPU milliseconds a frame.
 
-    python -m pbf.study.frames                      # the seed scene at t = 1 s, 1280×720
-    python -m pbf.study.frames --size 1920x1080 --arch cuda
+    python -m benchmarks.frames                      # the seed scene at t = 1 s, 1280×720
+    python -m benchmarks.frames --size 1920x1080 --arch cuda
 
 The scene is stepped to ``--at-frame`` once; then the two styles are drawn alternately, frame after
 frame (so that a busy machine slows both alike), and the medians are reported. Drawing counts until
@@ -18,14 +18,14 @@ same state, N frames stepped and written each way (simulation only; the frame dr
 Pillow's PNG on the main thread, as before; with our PNG on the main thread; with the threaded
 writer), the ways alternating round by round (``--rounds``), medians:
 
-    python -m pbf.study.frames --whole 15 --rounds 5
+    python -m benchmarks.frames --whole 15 --rounds 5
 
 ``look`` measures how the surface style reads rather than what it costs: a settled pool (``hydrostatic``
 at t = 1 s, the seed scene at t = 3 s) should be one flat surface, and a splash (the seed scene's
 frames 27-40) sheets and drops rather than sparkles:
 
-    python -m pbf.study.frames look                 # the scenes' own size, 1280×720
-    python -m pbf.study.frames look --size 640x360 --images out/look
+    python -m benchmarks.frames look                 # the scenes' own size, 1280×720
+    python -m benchmarks.frames look --size 640x360 --images out/look
 
 Both figures come from the renderer's normal buffer and water mask (``SurfaceRenderer.surface``, the
 coarse passes' pixels). *Top face*: the water pixels whose normal is within 45° of vertical and whose
@@ -292,7 +292,7 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
 
 def look(argv=None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m pbf.study.frames look", description="how the surface style reads: settled pools, a splash"
+        prog="python -m benchmarks.frames look", description="how the surface style reads: settled pools, a splash"
     )
     parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scenes')")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")

@@ -1,0 +1,1 @@
+"""The lab: benchmarks, comparisons and instruments run from a checkout (``python -m benchmarks.NAME``)."""
