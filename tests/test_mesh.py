@@ -83,7 +83,7 @@ def test_resting_water_gives_a_closed_mesh_of_its_volume(settled):
 def test_particles_near_a_wall_are_mirrored_across_it():
     lower, upper = (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
     middle, corner = [0.5, 0.5, 0.5], [0.01, 0.98, 0.5]  # the corner's within reach of x = 0 and y = 1
-    points = with_wall_images(np.array([middle, corner], np.float32), lower, upper, 0.05)
+    points, _ = with_wall_images(np.array([middle, corner], np.float32), lower, upper, 0.05)
     expected = [middle, corner, [-0.01, 0.98, 0.5], [0.01, 1.02, 0.5], [-0.01, 1.02, 0.5]]
     assert np.allclose(points, expected)
 
