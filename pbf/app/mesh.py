@@ -8,14 +8,19 @@ Laplacian smoothing for surface reconstruction of particle-based fluids"). The p
 the scene's ``[surface]`` table in particle spacings. The mesh is written as binary PLY or as OBJ
 (text: the format has no binary form) for Blender, Houdini or ParaView.
 
-Why the kernel is narrow (0.8 spacings, support 1.6) and the walls are mirrored: the colour field is
+Why the kernel is narrow (0.8 spacings, support 1.6) and the walls have images: the colour field is
 normalised per particle (m_j/ρ_j), so every particle counts as inside however few neighbours it has,
 and the iso surface wraps each one at the kernel's reach. A wide kernel wraps a splash's rough
 surface, its one-particle sheets and its spray in an envelope well above the water's volume
 (docs/BENCHMARKS.md, "Surfaces"); a narrow one follows the particles. It also reaches less far past
-water against a wall, where clamping used to hide what smoothing takes, so the particles within a
-kernel's reach of a wall are mirrored across it (as the solver's wall mirror does): the field is that
-of water continuing through the wall, and the mesh meets the wall flat once clamped.
+water against a wall, where clamping used to hide what smoothing takes, so each particle within a
+kernel's reach of a wall has an image on the wall's plane: the field stays high up to the wall, and
+the mesh meets the wall flat once clamped. On the plane, not mirrored across it: beyond the wall every
+particle and image then lies behind, so the field falls monotonically outward and the surface there is
+a height field over the wall, which clamping lays on the wall as one layer. Mirrored images continue
+the water's shape through the wall, overhangs included, and clamping folded those onto the wall in
+several layers facing both ways (Cycles renders such coincident faces as black patches; Blender's
+"Recalculate Outside" flips them), with triangles seen edge-on left of no area.
 """
 
 from __future__ import annotations
@@ -120,7 +125,7 @@ def reconstruct(positions: np.ndarray, scene: Scene, velocities: np.ndarray | No
         raise SurfaceError(f"splashsurf failed at surface.iso_level {tried}: {reasons[0]}")
     vertices = surface.mesh.vertices
     # The water's wall images carry the surface through the walls. Clamping moves the vertices beyond
-    # a wall onto it and keeps every triangle (those wholly outside become slivers on the wall), so
+    # a wall onto it and keeps every triangle (those wholly outside become the cap on the wall), so
     # the mesh stays closed and meets the wall flat; ``clean`` then removes what clamping flattens to
     # nothing.
     vertices = np.clip(vertices, lower, upper).astype(np.float32)
@@ -142,7 +147,7 @@ wholly onto a wall."""
 
 def clean(mesh: Mesh, lower, upper, wall_faces: bool = True) -> Mesh:
     """``mesh`` (its vertices clamped into the box ``lower``–``upper``) without what clamping leaves
-    behind: the triangles of water mirrored beyond a wall fall onto the wall plane, where those seen
+    behind: the triangles of water imaged beyond a wall fall onto the wall plane, where those seen
     edge-on become triangles of no area and where vertices clamped to the same point stay unmerged,
     and the images of drops that never reach the wall become flat pieces of no volume. Cleaned: the
     vertices at one position are merged (the first's velocity kept), the triangles left with a repeated
@@ -351,20 +356,20 @@ def smoothing_weight_normalization(smoothing_length_spacings: float) -> float:
 
 
 def with_wall_images(positions: np.ndarray, lower, upper, reach_m: float, velocities: np.ndarray | None = None):
-    """``positions`` followed by their mirror images across each container wall they are within
-    ``reach_m`` of (one axis after the other, so that a particle in a corner has its images across
-    both walls and the corner itself): the colour field inside the container is then that of water
-    continuing through the walls. Deterministic: the images follow in a fixed order. Returns the
-    points and their velocities (the component across the wall reversed, as a mirror image moves),
-    or None without ``velocities``."""
+    """``positions`` followed by their images on each container wall they are within ``reach_m`` of
+    (the point on the wall's plane nearest to them; one axis after the other, so that a particle in a
+    corner has images on both walls and in the corner itself): the colour field stays high up to the
+    walls and falls monotonically beyond them (module docstring). Deterministic: the images follow in
+    a fixed order. Returns the points and their velocities (the component across the wall reversed,
+    as a mirror image moves), or None without ``velocities``."""
     points, moving = positions, velocities
     for axis in range(3):
         images, speeds = [points], [moving]
         for wall, inward in ((lower[axis], 1.0), (upper[axis], -1.0)):
             near = inward * (points[:, axis] - wall) < reach_m
-            mirrored = points[near].copy()
-            mirrored[:, axis] = 2.0 * wall - mirrored[:, axis]
-            images.append(mirrored)
+            image = points[near].copy()
+            image[:, axis] = wall
+            images.append(image)
             if moving is not None:
                 reflected = moving[near].copy()
                 reflected[:, axis] = -reflected[:, axis]
