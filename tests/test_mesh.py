@@ -114,8 +114,9 @@ def test_water_against_the_walls_meshes_clean_and_without_folds():
     scene = open_scene()
     mesh = reconstruct(particles, scene, np.tile(np.float32([0.0, 0.0, 1.0]), (len(particles), 1)))
     assert_closed(mesh)
-    found = mesh_defects(mesh)
-    assert (found["zero_area_triangles"], found["duplicate_vertex_groups"], found["flat_pieces"]) == (0, 0, 0)
+    found = mesh_defects(mesh, SPACING)
+    for measure in ("zero_area_triangles", "duplicate_vertex_groups", "flat_pieces", "specks", "edges_shared"):
+        assert found[measure] == 0, measure
     assert wall_faces_facing_in(mesh, scene.container.min_m, scene.container.max_m) == 0
     assert mesh.vertices[:, 1].min() == 0.0 and mesh.vertices[:, 0].min() == 0.0  # it meets floor and wall
     # a uniform velocity along the walls comes out uniform at every vertex (normalised interpolation; the
@@ -397,11 +398,11 @@ def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_be
     real = mesh.reconstruct
     calls = []
 
-    def failing_at_frame_2(positions, scene):
+    def failing_at_frame_2(positions, scene, velocities=None):
         calls.append(len(calls))
         if len(calls) == 3:
             raise mesh.SurfaceError("splashsurf failed at surface.iso_level 0.5: Missing iso surface vertex")
-        return real(positions, scene)
+        return real(positions, scene, velocities)
 
     monkeypatch.setattr(headless, "reconstruct", failing_at_frame_2)
     argv = ["--headless", "--frames", "4", "--out", str(tmp_path / "run"), "--export", "mesh", "--export", "npz"]

@@ -133,7 +133,7 @@ def reconstruct(positions: np.ndarray, scene: Scene, velocities: np.ndarray | No
     if velocities is not None:
         interpolated = np.asarray(surface.point_attributes["velocity"], dtype=np.float32).reshape(-1, 3)
     raw = Mesh(vertices, surface.mesh.triangles.astype(np.int32), interpolated)
-    return clean(raw, lower, upper, wall_faces=scene.export.wall_faces)
+    return clean(raw, lower, upper, wall_faces=scene.export.wall_faces, spacing_m=scene.fluid.spacing_m)
 
 
 SLIVER_HEIGHT = 1e-6
@@ -144,16 +144,22 @@ FLAT_VOLUME = 1e-6
 """A piece of the mesh that encloses less than this fraction of (its area)^(3/2) is flat: clamped
 wholly onto a wall."""
 
+SPECK_AREA_SPACINGS2 = 0.01
+"""A piece of the mesh smaller than this, in square spacings, is a speck: marching cubes and smoothing
+collapsed to a point (micrometres across, where a particle's images meet in a corner), not water. A
+drop of one particle meshes with an area of about 3 square spacings."""
 
-def clean(mesh: Mesh, lower, upper, wall_faces: bool = True) -> Mesh:
+
+def clean(mesh: Mesh, lower, upper, wall_faces: bool = True, spacing_m: float = 0.0) -> Mesh:
     """``mesh`` (its vertices clamped into the box ``lower``–``upper``) without what clamping leaves
     behind: the triangles of water imaged beyond a wall fall onto the wall plane, where those seen
     edge-on become triangles of no area and where vertices clamped to the same point stay unmerged,
     and the images of drops that never reach the wall become flat pieces of no volume. Cleaned: the
     vertices at one position are merged (the first's velocity kept), the triangles left with a repeated
     vertex dropped (their neighbours meet), the slivers removed by splitting the neighbour across their
-    longest edge at the vertex lying on it (the surface stays closed), and the flat pieces dropped. With
-    ``wall_faces`` false, the triangles lying on a wall are dropped first: the mesh is open there."""
+    longest edge at the vertex lying on it (the surface stays closed), and the flat pieces and the
+    specks (``SPECK_AREA_SPACINGS2`` of ``spacing_m``) dropped. With ``wall_faces`` false, the
+    triangles lying on a wall are dropped first: the mesh is open there."""
     vertices, triangles = mesh.vertices, mesh.triangles.astype(np.int64)
     if not wall_faces:
         on_wall = np.zeros(len(triangles), bool)
@@ -171,7 +177,7 @@ def clean(mesh: Mesh, lower, upper, wall_faces: bool = True) -> Mesh:
         & (triangles[:, 2] != triangles[:, 0])
     ]
     triangles = _split_slivers(vertices, triangles)
-    triangles = _without_flat_pieces(vertices, triangles)
+    triangles = _without_flat_pieces(vertices, triangles, SPECK_AREA_SPACINGS2 * spacing_m**2)
     used = np.unique(triangles)
     index = np.full(len(vertices), -1, np.int64)
     index[used] = np.arange(len(used))
@@ -276,30 +282,41 @@ def _piece_measures(vertices: np.ndarray, triangles: np.ndarray):
     return piece, np.bincount(piece, weights=area), np.bincount(piece, weights=volume)
 
 
-def _without_flat_pieces(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+def _without_flat_pieces(vertices: np.ndarray, triangles: np.ndarray, speck_area_m2: float) -> np.ndarray:
     if not len(triangles):
         return triangles
     piece, area, volume = _piece_measures(vertices, triangles)
-    flat = np.abs(volume) <= FLAT_VOLUME * area**1.5
+    flat = (np.abs(volume) <= FLAT_VOLUME * area**1.5) | (area < speck_area_m2)
     return triangles[~flat[piece]]
 
 
-def defects(mesh: Mesh) -> dict:
+def defects(mesh: Mesh, spacing_m: float = 0.0) -> dict:
     """What ``clean`` removes, counted: triangles of no area (``SLIVER_HEIGHT``), groups of vertices at
-    one position, and pieces of no volume (``FLAT_VOLUME``); with the vertex, triangle and piece counts."""
+    one position, pieces of no volume (``FLAT_VOLUME``) and specks (``SPECK_AREA_SPACINGS2`` of
+    ``spacing_m``); and, counted on the vertices merged, the directed edges that two triangles share
+    (not manifold) and those whose reverse no triangle has (a hole); with the vertex, triangle and piece
+    counts."""
     triangles = mesh.triangles.astype(np.int64)
-    _, inverse, counts = np.unique(mesh.vertices, axis=0, return_inverse=True, return_counts=True)
+    _, first, inverse, counts = np.unique(
+        mesh.vertices, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
     welded = inverse.reshape(-1)[triangles]
     result = {"vertices": len(mesh.vertices), "triangles": len(triangles)}
     result["zero_area_triangles"] = int(sliver_mask(mesh.vertices, triangles).sum()) if len(triangles) else 0
     result["duplicate_vertex_groups"] = int((counts > 1).sum())
+    result["pieces"] = result["flat_pieces"] = result["specks"] = 0
+    result["edges_shared"] = result["edges_open"] = 0
     if len(triangles):
-        points = mesh.vertices[np.unique(mesh.vertices, axis=0, return_index=True)[1]]
-        piece, area, volume = _piece_measures(points, welded)
+        piece, area, volume = _piece_measures(mesh.vertices[first], welded)
         result["pieces"] = len(area)
         result["flat_pieces"] = int((np.abs(volume) <= FLAT_VOLUME * area**1.5).sum())
-    else:
-        result["pieces"] = result["flat_pieces"] = 0
+        result["specks"] = int((area < SPECK_AREA_SPACINGS2 * spacing_m**2).sum())
+        n = len(counts)
+        edges = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
+        keys = edges[:, 0] * n + edges[:, 1]
+        unique, uses = np.unique(keys, return_counts=True)
+        result["edges_shared"] = int((uses > 1).sum())
+        result["edges_open"] = int((~np.isin(edges[:, 1] * n + edges[:, 0], unique)).sum())
     return result
 
 
