@@ -412,12 +412,15 @@ def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_be
     assert err[-1].startswith("error: frame 2 (t = 0.033 s): the surface mesh could not be made (splashsurf"), err
     assert f"frames 0-1 are complete in {tmp_path / 'run'}/" in err[-1]
     assert not any("Traceback" in line for line in err)
-    # Frames 0 and 1 with all their files; nothing of frame 2.
-    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [
-        f"{kind}_{k:05d}.{suffix}"
-        for kind, suffix in (("frame", "png"), ("particles", "npz"), ("surface", "ply"))
-        for k in range(2)
-    ]
+    # Frames 0 and 1 with all their files (and run.json, what the run is); nothing of frame 2.
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == sorted(
+        [
+            f"{kind}_{k:05d}.{suffix}"
+            for kind, suffix in (("frame", "png"), ("particles", "npz"), ("surface", "ply"))
+            for k in range(2)
+        ]
+        + ["run.json"]
+    )
 
 
 @pytest.mark.slow
