@@ -149,6 +149,10 @@ SPECK_AREA_SPACINGS2 = 0.01
 collapsed to a point (micrometres across, where a particle's images meet in a corner), not water. A
 drop of one particle meshes with an area of about 3 square spacings."""
 
+SPECK_VOLUME_SPACINGS3 = 1e-3
+"""A piece enclosing less than this, in cubic spacings (either way round: a bubble's surface faces
+in), is a speck too; a drop of one particle holds about half a cubic spacing."""
+
 
 def clean(mesh: Mesh, lower, upper, wall_faces: bool = True, spacing_m: float = 0.0) -> Mesh:
     """``mesh`` (its vertices clamped into the box ``lower``–``upper``) without what clamping leaves
@@ -158,8 +162,8 @@ def clean(mesh: Mesh, lower, upper, wall_faces: bool = True, spacing_m: float = 
     vertices at one position are merged (the first's velocity kept), the triangles left with a repeated
     vertex dropped (their neighbours meet), the slivers removed by splitting the neighbour across their
     longest edge at the vertex lying on it (the surface stays closed), and the flat pieces and the
-    specks (``SPECK_AREA_SPACINGS2`` of ``spacing_m``) dropped. With ``wall_faces`` false, the
-    triangles lying on a wall are dropped first: the mesh is open there."""
+    specks (``SPECK_AREA_SPACINGS2``, ``SPECK_VOLUME_SPACINGS3`` of ``spacing_m``) dropped. With
+    ``wall_faces`` false, the triangles lying on a wall are dropped first: the mesh is open there."""
     vertices, triangles = mesh.vertices, mesh.triangles.astype(np.int64)
     if not wall_faces:
         on_wall = np.zeros(len(triangles), bool)
@@ -177,7 +181,7 @@ def clean(mesh: Mesh, lower, upper, wall_faces: bool = True, spacing_m: float = 
         & (triangles[:, 2] != triangles[:, 0])
     ]
     triangles = _split_slivers(vertices, triangles)
-    triangles = _without_flat_pieces(vertices, triangles, SPECK_AREA_SPACINGS2 * spacing_m**2)
+    triangles = _without_flat_pieces(vertices, triangles, spacing_m)
     used = np.unique(triangles)
     index = np.full(len(vertices), -1, np.int64)
     index[used] = np.arange(len(used))
@@ -282,20 +286,27 @@ def _piece_measures(vertices: np.ndarray, triangles: np.ndarray):
     return piece, np.bincount(piece, weights=area), np.bincount(piece, weights=volume)
 
 
-def _without_flat_pieces(vertices: np.ndarray, triangles: np.ndarray, speck_area_m2: float) -> np.ndarray:
+def _specks(area: np.ndarray, volume: np.ndarray, spacing_m: float) -> np.ndarray:
+    """Which pieces are flat (``FLAT_VOLUME``) or specks (``SPECK_AREA_SPACINGS2``, ``SPECK_VOLUME_SPACINGS3``)."""
+    flat = np.abs(volume) <= FLAT_VOLUME * area**1.5
+    return (
+        flat | (area < SPECK_AREA_SPACINGS2 * spacing_m**2) | (np.abs(volume) < SPECK_VOLUME_SPACINGS3 * spacing_m**3)
+    )
+
+
+def _without_flat_pieces(vertices: np.ndarray, triangles: np.ndarray, spacing_m: float) -> np.ndarray:
     if not len(triangles):
         return triangles
     piece, area, volume = _piece_measures(vertices, triangles)
-    flat = (np.abs(volume) <= FLAT_VOLUME * area**1.5) | (area < speck_area_m2)
-    return triangles[~flat[piece]]
+    return triangles[~_specks(area, volume, spacing_m)[piece]]
 
 
 def defects(mesh: Mesh, spacing_m: float = 0.0) -> dict:
     """What ``clean`` removes, counted: triangles of no area (``SLIVER_HEIGHT``), groups of vertices at
-    one position, pieces of no volume (``FLAT_VOLUME``) and specks (``SPECK_AREA_SPACINGS2`` of
-    ``spacing_m``); and, counted on the vertices merged, the directed edges that two triangles share
-    (not manifold) and those whose reverse no triangle has (a hole); with the vertex, triangle and piece
-    counts."""
+    one position, pieces of no volume (``FLAT_VOLUME``) and other specks (``SPECK_AREA_SPACINGS2``,
+    ``SPECK_VOLUME_SPACINGS3`` of ``spacing_m``); and, counted on the vertices merged, the directed
+    edges that two triangles share (not manifold) and those whose reverse no triangle has (a hole);
+    with the vertex, triangle and piece counts."""
     triangles = mesh.triangles.astype(np.int64)
     _, first, inverse, counts = np.unique(
         mesh.vertices, axis=0, return_index=True, return_inverse=True, return_counts=True
@@ -310,7 +321,8 @@ def defects(mesh: Mesh, spacing_m: float = 0.0) -> dict:
         piece, area, volume = _piece_measures(mesh.vertices[first], welded)
         result["pieces"] = len(area)
         result["flat_pieces"] = int((np.abs(volume) <= FLAT_VOLUME * area**1.5).sum())
-        result["specks"] = int((area < SPECK_AREA_SPACINGS2 * spacing_m**2).sum())
+        flat = np.abs(volume) <= FLAT_VOLUME * area**1.5
+        result["specks"] = int((_specks(area, volume, spacing_m) & ~flat).sum())
         n = len(counts)
         edges = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
         keys = edges[:, 0] * n + edges[:, 1]
