@@ -206,54 +206,63 @@ def _split_slivers(vertices: np.ndarray, triangles: np.ndarray, passes: int = 8)
     """Triangles (i, j, k) of no area, k on the edge i–j: the neighbour (j, i, d) becomes (j, k, d)
     and (k, i, d), which take the sliver's edges j→k and k→i, and the sliver goes; the directed edges
     still pair up. Splits can make slivers of their own (d on the line too): a few passes. A sliver
-    whose split would join k and d twice stays (rare): dropping it would open the surface."""
-    triangles = [tuple(t) for t in triangles.tolist()]
+    whose split would join k and d twice stays (rare): dropping it would open the surface. Only the
+    triangles that touch a sliver's vertices are looked at (its neighbours, and any edge k–d, are
+    among them)."""
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    points = vertices.astype(np.float64)
     for _ in range(passes):
-        bad = np.flatnonzero(sliver_mask(vertices, np.array(triangles, np.int64).reshape(-1, 3)))
+        bad = np.flatnonzero(sliver_mask(vertices, triangles))
         if not len(bad):
             break
+        near = np.flatnonzero(np.isin(triangles, np.unique(triangles[bad])).any(axis=1))
+        rows = {int(f): tuple(triangles[f].tolist()) for f in near}
         owner = {}
-        for f, (a, b, c) in enumerate(triangles):
+        for f, (a, b, c) in rows.items():
             owner[(a, b)] = owner[(b, c)] = owner[(c, a)] = f
-        alive = [True] * len(triangles)
-        points = vertices.astype(np.float64)
+        dead, added = set(), []
         for f in bad.tolist():
-            if not alive[f]:
+            if f in dead:
                 continue
-            a, b, c = triangles[f]
+            a, b, c = rows[f]
             # the longest edge i→j, with k opposite it
-            lengths = [
-                np.sum((points[b] - points[a]) ** 2),
-                np.sum((points[c] - points[b]) ** 2),
-                np.sum((points[a] - points[c]) ** 2),
-            ]
+            lengths = [np.sum((points[b] - points[a]) ** 2), np.sum((points[c] - points[b]) ** 2)]
+            lengths.append(np.sum((points[a] - points[c]) ** 2))
             i, j, k = ((a, b, c), (b, c, a), (c, a, b))[int(np.argmax(lengths))]
             g = owner.get((j, i))
-            alive[f] = False
-            for edge in ((i, j), (j, k), (k, i)):
-                if owner.get(edge) == f:
-                    del owner[edge]
-            if g is None or not alive[g]:
-                continue  # an open edge (walls left open): the sliver just goes
-            d = next(v for v in triangles[g] if v not in (i, j))
+            if g is None or g in dead:  # an open edge (walls left open): the sliver just goes
+                dead.add(f)
+                for edge in ((i, j), (j, k), (k, i)):
+                    if owner.get(edge) == f:
+                        del owner[edge]
+                continue
+            d = next(v for v in rows[g] if v not in (i, j))
             if d == k:  # the sliver's twin, the same three vertices the other way round: both go
-                alive[g] = False
-                for edge in ((j, i), (i, k), (k, j)):
-                    if owner.get(edge) == g:
+                dead.update((f, g))
+                for edge, who in (((i, j), f), ((j, k), f), ((k, i), f), ((j, i), g), ((i, k), g), ((k, j), g)):
+                    if owner.get(edge) == who:
                         del owner[edge]
                 continue
             if (k, d) in owner or (d, k) in owner:  # k and d already joined: a split would double that edge
-                alive[f] = True
-                owner[(i, j)] = owner[(j, k)] = owner[(k, i)] = f
                 continue
-            triangles[g] = (j, k, d)
-            triangles.append((k, i, d))
-            alive.append(True)
+            dead.add(f)
+            for edge in ((i, j), (j, k), (k, i)):
+                if owner.get(edge) == f:
+                    del owner[edge]
+            new = len(triangles) + len(added)
+            rows[g], rows[new] = (j, k, d), (k, i, d)
+            added.append(new)
             owner.pop((j, i), None)
             owner[(j, k)] = owner[(k, d)] = owner[(d, j)] = g
-            owner[(k, i)] = owner[(i, d)] = owner[(d, k)] = len(triangles) - 1
-        triangles = [t for t, keep in zip(triangles, alive) if keep]
-    return np.array(triangles, np.int64).reshape(-1, 3)
+            owner[(k, i)] = owner[(i, d)] = owner[(d, k)] = new
+        extra = np.array([rows[n] for n in added], np.int64).reshape(-1, 3)
+        triangles = np.concatenate([triangles, extra])
+        for f in near.tolist():
+            triangles[f] = rows[f]
+        keep = np.ones(len(triangles), bool)
+        keep[list(dead)] = False
+        triangles = triangles[keep]
+    return triangles
 
 
 def pieces(vertex_count: int, triangles: np.ndarray) -> np.ndarray:
