@@ -63,6 +63,19 @@ def test_the_blender_script_refuses_a_folder_without_a_run(tmp_path):
         blender_load.Run(tmp_path / "nowhere")
 
 
+def test_the_blender_script_loads_the_frames_whose_files_are_there(tmp_path):
+    (tmp_path / "run.json").write_text("[1]")
+    with pytest.raises(blender_load.LoadError, match="lacks frames, frame_rate_hz, camera, container"):
+        blender_load.Run(tmp_path)
+    info = {"frames": 5, "frame_rate_hz": 60.0, "camera": {}, "container": {}, "surface": "ply", "particles": None}
+    (tmp_path / "run.json").write_text(json.dumps(info))
+    mesh = Mesh(np.eye(3, dtype=np.float32), np.array([[0, 1, 2]], np.int32))
+    for frame in range(2):  # a run cut short after two of its five frames
+        write_mesh(tmp_path / f"surface_{frame:05d}.ply", mesh, 0.0)
+    run = blender_load.Run(tmp_path)
+    assert (run.frames, run.surface, run.particles) == (2, True, False)
+
+
 def test_outside_blender_the_script_prints_its_path():
     done = subprocess.run([sys.executable, "-m", "pbf.app.blender_load"], capture_output=True, text=True, check=True)
     assert Path(done.stdout.strip()) == Path(blender_load.__file__).resolve()

@@ -96,7 +96,14 @@ class Run:
             self.info = json.loads(info_path.read_text())
         except ValueError as error:
             raise LoadError(f"{info_path}: not JSON ({error})") from None
-        self.frames = int(self.info["frames"])
+        keys = self.info if isinstance(self.info, dict) else {}
+        missing = [key for key in ("frames", "frame_rate_hz", "camera", "container") if key not in keys]
+        if missing:
+            raise LoadError(f"{info_path}: lacks {', '.join(missing)}; write it again with the run")
+        try:
+            planned = int(self.info["frames"])
+        except (TypeError, ValueError):
+            raise LoadError(f"{info_path}: 'frames' is not a frame count; write it again with the run") from None
         self.surface = self.info.get("surface") == "ply" and (folder / "surface_00000.ply").is_file()
         self.particles = self.info.get("particles") == "ply" and (folder / "particles_00000.ply").is_file()
         if not (self.surface or self.particles):
@@ -104,6 +111,11 @@ class Run:
                 f"{folder}: no surface_00000.ply or particles_00000.ply; export PLY files "
                 "(--export mesh with surface.mesh_format = ply, or --export ply)"
             )
+        # The frames whose files are all there (a run cut short wrote fewer than run.json plans).
+        kinds = [kind for kind, present in (("surface", self.surface), ("particles", self.particles)) if present]
+        self.frames = 0
+        while self.frames < planned and all((folder / f"{k}_{self.frames:05d}.ply").is_file() for k in kinds):
+            self.frames += 1
 
     def path(self, kind: str, frame: int) -> Path:
         return self.folder / f"{kind}_{min(max(frame, 0), self.frames - 1):05d}.ply"
@@ -202,8 +214,14 @@ def build(bpy, run: Run):
 
     def load_frame(scene_now, *args):
         for kind, (obj, material) in loaded.items():
+            path = run.path(kind, scene_now.frame_current)
+            try:
+                ply = read_ply(path)
+            except (LoadError, OSError) as error:  # the previous frame stays; one line, no traceback
+                print(f"error: frame {scene_now.frame_current}: {error}", file=sys.stderr)
+                continue
             old = obj.data
-            obj.data = frame_mesh(bpy, f"pbf {kind}", read_ply(run.path(kind, scene_now.frame_current)), material)
+            obj.data = frame_mesh(bpy, f"pbf {kind}", ply, material)
             bpy.data.meshes.remove(old)
 
     load_frame.pbf = True
