@@ -16,6 +16,7 @@ from pbf import Simulation
 from pbf.app import cli, headless, loop, mesh
 from pbf.app.headless import FrameWriter
 from pbf.app.mesh import Mesh, reconstruct, with_wall_images, write_mesh
+from pbf.app.mesh import defects as mesh_defects
 from pbf.app.render import LIGHT_DIRECTION, surface_renderer, unpack_rgb
 from pbf.app.window import WindowViewer
 from pbf.scene import from_dict
@@ -35,15 +36,17 @@ def settled():
     return sim, sim.snapshot()
 
 
+def scene_dict(**surface) -> dict:
+    return {
+        "container": {"min_m": [0, 0, 0], "max_m": [1, 1, 1]},
+        "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.1, 0.1, 0.1]}]},
+        "surface": surface,
+    }
+
+
 def open_scene(**surface):
     """A 1 m box with no fluid of interest: the scene only carries the spacing and [surface]."""
-    return from_dict(
-        {
-            "container": {"min_m": [0, 0, 0], "max_m": [1, 1, 1]},
-            "fluid": {"spacing_m": SPACING, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.1, 0.1, 0.1]}]},
-            "surface": surface,
-        }
-    )
+    return from_dict(scene_dict(**surface))
 
 
 def assert_closed(mesh: Mesh):
@@ -80,12 +83,59 @@ def test_resting_water_gives_a_closed_mesh_of_its_volume(settled):
     assert abs(mesh.vertices[:, 1].max() - top) < SPACING
 
 
-def test_particles_near_a_wall_are_mirrored_across_it():
+def test_particles_near_a_wall_have_images_on_it():
     lower, upper = (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)
     middle, corner = [0.5, 0.5, 0.5], [0.01, 0.98, 0.5]  # the corner's within reach of x = 0 and y = 1
-    points = with_wall_images(np.array([middle, corner], np.float32), lower, upper, 0.05)
-    expected = [middle, corner, [-0.01, 0.98, 0.5], [0.01, 1.02, 0.5], [-0.01, 1.02, 0.5]]
+    points, velocities = with_wall_images(
+        np.array([middle, corner], np.float32), lower, upper, 0.05, np.array([[0, 0, 0], [1, 2, 3]], np.float32)
+    )
+    expected = [middle, corner, [0.0, 0.98, 0.5], [0.01, 1.0, 0.5], [0.0, 1.0, 0.5]]
     assert np.allclose(points, expected)
+    # an image's velocity is the particle's, its component across the wall reversed
+    assert np.allclose(velocities, [[0, 0, 0], [1, 2, 3], [-1, 2, 3], [1, -2, 3], [-1, -2, 3]])
+
+
+def wall_faces_facing_in(mesh: Mesh, lower, upper) -> int:
+    """Triangles lying on a wall whose normal points into the container: a fold of the surface."""
+    a, b, c = (mesh.vertices[mesh.triangles[:, k]].astype(np.float64) for k in range(3))
+    normal = np.cross(b - a, c - a)
+    count = 0
+    for axis in range(3):
+        for wall, outward in ((lower[axis], -1.0), (upper[axis], 1.0)):
+            flat = (mesh.vertices[:, axis] == np.float32(wall))[mesh.triangles].all(axis=1)
+            count += int((flat & (outward * normal[:, axis] < 0)).sum())
+    return count
+
+
+def test_water_against_the_walls_meshes_clean_and_without_folds():
+    # A ball that overlaps the floor and the x = 0 wall, and a drop a spacing off the floor beside it:
+    # what clamping the water's images onto the walls used to turn into slivers, flat pieces and folds.
+    particles = np.concatenate([ball(5.0, (3 * SPACING, 3 * SPACING, 0.5)), ball(2.0, (0.5, 2.5 * SPACING, 0.5))])
+    scene = open_scene()
+    mesh = reconstruct(particles, scene, np.tile(np.float32([0.0, 0.0, 1.0]), (len(particles), 1)))
+    assert_closed(mesh)
+    found = mesh_defects(mesh, SPACING)
+    for measure in ("zero_area_triangles", "duplicate_vertex_groups", "flat_pieces", "specks", "edges_shared"):
+        assert found[measure] == 0, measure
+    assert wall_faces_facing_in(mesh, scene.container.min_m, scene.container.max_m) == 0
+    assert mesh.vertices[:, 1].min() == 0.0 and mesh.vertices[:, 0].min() == 0.0  # it meets floor and wall
+    # a uniform velocity along the walls comes out uniform at every vertex (normalised interpolation; the
+    # images reverse only the component across their wall)
+    assert np.allclose(mesh.velocities, [0.0, 0.0, 1.0], atol=1e-5)
+
+
+def test_walls_left_open():
+    particles = ball(5.0, (3 * SPACING, 3 * SPACING, 0.5))
+    scene = open_scene()
+    walls_open = from_dict({**scene_dict(), "export": {"wall_faces": False}})
+    closed, opened = reconstruct(particles, scene), reconstruct(particles, walls_open)
+    lower, upper = scene.container.min_m, scene.container.max_m
+    on_wall = np.zeros(len(opened.triangles), bool)
+    for axis in range(3):
+        for wall in (lower[axis], upper[axis]):
+            on_wall |= (opened.vertices[:, axis] == np.float32(wall))[opened.triangles].all(axis=1)
+    assert not on_wall.any() and len(opened.triangles) < len(closed.triangles)
+    assert not opened.is_closed()
 
 
 def test_a_ball_of_particles_gives_a_sphere_of_its_radius():
@@ -348,11 +398,11 @@ def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_be
     real = mesh.reconstruct
     calls = []
 
-    def failing_at_frame_2(positions, scene):
+    def failing_at_frame_2(positions, scene, velocities=None):
         calls.append(len(calls))
         if len(calls) == 3:
             raise mesh.SurfaceError("splashsurf failed at surface.iso_level 0.5: Missing iso surface vertex")
-        return real(positions, scene)
+        return real(positions, scene, velocities)
 
     monkeypatch.setattr(headless, "reconstruct", failing_at_frame_2)
     argv = ["--headless", "--frames", "4", "--out", str(tmp_path / "run"), "--export", "mesh", "--export", "npz"]
@@ -362,12 +412,15 @@ def test_a_frame_whose_surface_fails_ends_the_run_in_one_line_with_the_frames_be
     assert err[-1].startswith("error: frame 2 (t = 0.033 s): the surface mesh could not be made (splashsurf"), err
     assert f"frames 0-1 are complete in {tmp_path / 'run'}/" in err[-1]
     assert not any("Traceback" in line for line in err)
-    # Frames 0 and 1 with all their files; nothing of frame 2.
-    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == [
-        f"{kind}_{k:05d}.{suffix}"
-        for kind, suffix in (("frame", "png"), ("particles", "npz"), ("surface", "ply"))
-        for k in range(2)
-    ]
+    # Frames 0 and 1 with all their files (and run.json, what the run is); nothing of frame 2.
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == sorted(
+        [
+            f"{kind}_{k:05d}.{suffix}"
+            for kind, suffix in (("frame", "png"), ("particles", "npz"), ("surface", "ply"))
+            for k in range(2)
+        ]
+        + ["run.json"]
+    )
 
 
 @pytest.mark.slow

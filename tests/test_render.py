@@ -128,7 +128,8 @@ def test_headless_run_writes_frames_video_and_particles(tmp_path, capsys):
     )
     ply = PlyData.read(str(out / "particles_00003.ply"))
     assert ply["vertex"].count == load_scene("dam_break", ["fluid.spacing_m=0.05"]).particle_count
-    assert np.isfinite(ply["vertex"]["vy"]).all() and ply["vertex"]["vy"].min() < -0.1  # falling
+    # falling: down is −z in the files (export.up_axis = "z", the default)
+    assert np.isfinite(ply["vertex"]["vz"]).all() and ply["vertex"]["vz"].min() < -0.1
 
 
 def test_no_png_writes_the_video_alone(tmp_path, monkeypatch, capsys):

@@ -10,10 +10,10 @@ from pathlib import Path
 import imageio.v2 as imageio
 from tqdm import tqdm
 
-from pbf.app.export import write_particles
+from pbf.app.export import run_info, write_particles, write_run_info
 from pbf.app.mesh import SurfaceError, body_mesh, reconstruct, write_mesh
 from pbf.app.outputs import bodies_name, diffuse_name, frame_name, particles_name, surface_name
-from pbf.app.render import SceneRenderer
+from pbf.app.render import SceneRenderer, View
 from pbf.app.writer import FrameFiles
 
 
@@ -79,7 +79,9 @@ class FrameWriter:
         if "mesh" in self.exports:
             fmt = self.sim.scene.surface.mesh_format
             try:
-                meshes[surface_name(number, fmt)] = reconstruct(self.sim.positions(), self.sim.scene)
+                meshes[surface_name(number, fmt)] = reconstruct(
+                    self.sim.positions(), self.sim.scene, self.sim.velocities()
+                )
             except SurfaceError as error:
                 kept = (
                     f"frames 0-{number - 1} are complete in {self.out_dir}/"
@@ -103,16 +105,30 @@ class FrameWriter:
         if path is not None:
             self.paths.append(path)
         self.shown += 1
+        up_axis = self.sim.scene.export.up_axis
+        if number == 0 and self.exports:
+            view = View.of_scene(self.sim.scene)
+            info = run_info(
+                self.sim.scene,
+                view.eye,
+                view.target,
+                view.fov_deg,
+                self.total - 1,
+                self.exports,
+                self.sim.scene.surface.mesh_format,
+            )
+            write_run_info(self.out_dir, info)
         for name in self.exports:
             if name == "mesh":
                 for file_name, mesh in meshes.items():
-                    write_mesh(self.out_dir / file_name, mesh, self.sim.time_s)
+                    write_mesh(self.out_dir / file_name, mesh, self.sim.time_s, up_axis)
             else:
                 write_particles(
                     self.out_dir / particles_name(number, name),
                     self.sim.positions(),
                     self.sim.velocities(),
                     self.sim.time_s,
+                    up_axis,
                 )
         white_water = self.renderer.white_water
         if self.exports and white_water is not None:  # drawn with this frame: written beside it
@@ -123,6 +139,7 @@ class FrameWriter:
                 diffuse["positions"],
                 diffuse["velocities"],
                 self.sim.time_s,
+                up_axis,
                 {"kind": diffuse["kind"], "age_s": diffuse["age"]},
             )
         if number == 1:

@@ -8,14 +8,19 @@ Laplacian smoothing for surface reconstruction of particle-based fluids"). The p
 the scene's ``[surface]`` table in particle spacings. The mesh is written as binary PLY or as OBJ
 (text: the format has no binary form) for Blender, Houdini or ParaView.
 
-Why the kernel is narrow (0.8 spacings, support 1.6) and the walls are mirrored: the colour field is
+Why the kernel is narrow (0.8 spacings, support 1.6) and the walls have images: the colour field is
 normalised per particle (m_j/ρ_j), so every particle counts as inside however few neighbours it has,
 and the iso surface wraps each one at the kernel's reach. A wide kernel wraps a splash's rough
 surface, its one-particle sheets and its spray in an envelope well above the water's volume
 (docs/BENCHMARKS.md, "Surfaces"); a narrow one follows the particles. It also reaches less far past
-water against a wall, where clamping used to hide what smoothing takes, so the particles within a
-kernel's reach of a wall are mirrored across it (as the solver's wall mirror does): the field is that
-of water continuing through the wall, and the mesh meets the wall flat once clamped.
+water against a wall, where clamping used to hide what smoothing takes, so each particle within a
+kernel's reach of a wall has an image on the wall's plane: the field stays high up to the wall, and
+the mesh meets the wall flat once clamped. On the plane, not mirrored across it: beyond the wall every
+particle and image then lies behind, so the field falls monotonically outward and the surface there is
+a height field over the wall, which clamping lays on the wall as one layer. Mirrored images continue
+the water's shape through the wall, overhangs included, and clamping folded those onto the wall in
+several layers facing both ways (Cycles renders such coincident faces as black patches; Blender's
+"Recalculate Outside" flips them), with triangles seen edge-on left of no area.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import numpy as np
 import pysplashsurf
 from plyfile import PlyData, PlyElement
 
+from pbf.app.export import to_export_axes
 from pbf.scene import Scene
 from pbf.solver import quaternion_matrix_np
 
@@ -42,6 +48,13 @@ class Mesh:
     """(n, 3) float32, m."""
     triangles: np.ndarray
     """(m, 3) int32 indices into ``vertices``."""
+    velocities: np.ndarray | None = None
+    """(n, 3) float32, m/s: the particles' velocity interpolated at each vertex (splashsurf's SPH
+    interpolation, normalised), or None when the mesh was made without it."""
+
+    def speeds(self) -> np.ndarray | None:
+        """|velocity| at each vertex, m/s (float32), or None."""
+        return None if self.velocities is None else np.linalg.norm(self.velocities, axis=1).astype(np.float32)
 
     def is_closed(self) -> bool:
         """Closed and consistently oriented: every directed edge appears once, and its reverse once
@@ -77,26 +90,33 @@ field changes by about 1 across a spacing) and is itself deterministic. splashsu
 both places."""
 
 
-def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
+def reconstruct(positions: np.ndarray, scene: Scene, velocities: np.ndarray | None = None) -> Mesh:
     """The surface of the particles at ``positions`` ((n, 3) m) with the scene's ``[surface]``
-    settings, its vertices clamped into the container. No particle gives an empty mesh; a single
-    particle gives a small closed droplet. SurfaceError when splashsurf fails at every level of
-    ``ISO_NUDGES``."""
+    settings, its vertices clamped into the container and the mesh cleaned (``clean``: no zero-area
+    triangles, no duplicate vertices, no flat pieces; the faces on the walls left open where
+    ``export.wall_faces`` is false). With ``velocities`` ((n, 3) m/s) the mesh carries them
+    interpolated at its vertices. No particle gives an empty mesh; a single particle gives a small
+    closed droplet. SurfaceError when splashsurf fails at every level of ``ISO_NUDGES``."""
     positions = np.ascontiguousarray(positions, dtype=np.float32)
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions: expected an (n, 3) array, got shape {positions.shape}")
+    if velocities is not None:
+        velocities = np.ascontiguousarray(velocities, dtype=np.float32)
+        if velocities.shape != positions.shape:
+            raise ValueError(f"velocities: expected shape {positions.shape} like the positions, got {velocities.shape}")
     if len(positions) == 0:
-        return Mesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32))
+        empty = np.zeros((0, 3), np.float32)
+        return Mesh(empty, np.zeros((0, 3), np.int32), None if velocities is None else empty)
     if not np.isfinite(positions).all():
         raise ValueError("positions: some particle positions are not finite; the simulation has blown up")
     settings = scene.surface
     support_m = 2.0 * settings.smoothing_length_spacings * scene.fluid.spacing_m
     lower, upper = scene.container.min_m, scene.container.max_m
-    particles = with_wall_images(positions, lower, upper, support_m)
+    particles, images = with_wall_images(positions, lower, upper, support_m, velocities)
     reasons = []
     for nudge in ISO_NUDGES:
         try:
-            surface = _splashsurf(particles, scene, settings.iso_level * (1.0 + nudge))
+            surface = _splashsurf(particles, scene, settings.iso_level * (1.0 + nudge), images)
             break
         except Exception as error:  # pysplashsurf raises RuntimeError with its Rust error chain
             reasons.append(_reason(error))
@@ -105,19 +125,232 @@ def reconstruct(positions: np.ndarray, scene: Scene) -> Mesh:
         raise SurfaceError(f"splashsurf failed at surface.iso_level {tried}: {reasons[0]}")
     vertices = surface.mesh.vertices
     # The water's wall images carry the surface through the walls. Clamping moves the vertices beyond
-    # a wall onto it and keeps every triangle (those wholly outside become slivers on the wall), so
-    # the mesh stays closed and meets the wall flat.
+    # a wall onto it and keeps every triangle (those wholly outside become the cap on the wall), so
+    # the mesh stays closed and meets the wall flat; ``clean`` then removes what clamping flattens to
+    # nothing.
     vertices = np.clip(vertices, lower, upper).astype(np.float32)
-    return Mesh(vertices, surface.mesh.triangles.astype(np.int32))
+    interpolated = None
+    if velocities is not None:
+        interpolated = np.asarray(surface.point_attributes["velocity"], dtype=np.float32).reshape(-1, 3)
+    raw = Mesh(vertices, surface.mesh.triangles.astype(np.int32), interpolated)
+    return clean(raw, lower, upper, wall_faces=scene.export.wall_faces, spacing_m=scene.fluid.spacing_m)
 
 
-def _splashsurf(particles: np.ndarray, scene: Scene, iso_level: float):
+SLIVER_HEIGHT = 1e-6
+"""A triangle whose height over its longest edge is below this fraction of that edge has no area to
+speak of (float32 rounding of a flat triangle): ``clean`` removes it."""
+
+FLAT_VOLUME = 1e-6
+"""A piece of the mesh that encloses less than this fraction of (its area)^(3/2) is flat: clamped
+wholly onto a wall."""
+
+SPECK_AREA_SPACINGS2 = 0.01
+"""A piece of the mesh smaller than this, in square spacings, is a speck: marching cubes and smoothing
+collapsed to a point (micrometres across, where a particle's images meet in a corner), not water. A
+drop of one particle meshes with an area of about 3 square spacings."""
+
+SPECK_VOLUME_SPACINGS3 = 1e-3
+"""A piece enclosing less than this, in cubic spacings (either way round: a bubble's surface faces
+in), is a speck too; a drop of one particle holds about half a cubic spacing."""
+
+
+def clean(mesh: Mesh, lower, upper, wall_faces: bool = True, spacing_m: float = 0.0) -> Mesh:
+    """``mesh`` (its vertices clamped into the box ``lower``–``upper``) without what clamping leaves
+    behind: the triangles of water imaged beyond a wall fall onto the wall plane, where those seen
+    edge-on become triangles of no area and where vertices clamped to the same point stay unmerged,
+    and the images of drops that never reach the wall become flat pieces of no volume. Cleaned: the
+    vertices at one position are merged (the first's velocity kept), the triangles left with a repeated
+    vertex dropped (their neighbours meet), the slivers removed by splitting the neighbour across their
+    longest edge at the vertex lying on it (the surface stays closed), and the flat pieces and the
+    specks (``SPECK_AREA_SPACINGS2``, ``SPECK_VOLUME_SPACINGS3`` of ``spacing_m``) dropped. With
+    ``wall_faces`` false, the triangles lying on a wall are dropped first: the mesh is open there."""
+    vertices, triangles = mesh.vertices, mesh.triangles.astype(np.int64)
+    if not wall_faces:
+        on_wall = np.zeros(len(triangles), bool)
+        for axis in range(3):
+            for wall in (lower[axis], upper[axis]):
+                on_wall |= (vertices[:, axis] == np.float32(wall))[triangles].all(axis=1)
+        triangles = triangles[~on_wall]
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    triangles = inverse.reshape(-1)[triangles]
+    vertices = vertices[first]
+    velocities = None if mesh.velocities is None else mesh.velocities[first]
+    triangles = triangles[
+        (triangles[:, 0] != triangles[:, 1])
+        & (triangles[:, 1] != triangles[:, 2])
+        & (triangles[:, 2] != triangles[:, 0])
+    ]
+    triangles = _split_slivers(vertices, triangles)
+    triangles = _without_flat_pieces(vertices, triangles, spacing_m)
+    used = np.unique(triangles)
+    index = np.full(len(vertices), -1, np.int64)
+    index[used] = np.arange(len(used))
+    return Mesh(
+        vertices[used],
+        index[triangles].astype(np.int32).reshape(-1, 3),
+        None if velocities is None else velocities[used],
+    )
+
+
+def sliver_mask(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Which triangles have no area to speak of (``SLIVER_HEIGHT``)."""
+    a, b, c = (vertices[triangles[:, k]].astype(np.float64) for k in range(3))
+    twice_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    longest = np.max(
+        [np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1), np.linalg.norm(a - c, axis=1)], axis=0
+    )
+    return twice_area <= SLIVER_HEIGHT * longest**2
+
+
+def _split_slivers(vertices: np.ndarray, triangles: np.ndarray, passes: int = 8) -> np.ndarray:
+    """Triangles (i, j, k) of no area, k on the edge i–j: the neighbour (j, i, d) becomes (j, k, d)
+    and (k, i, d), which take the sliver's edges j→k and k→i, and the sliver goes; the directed edges
+    still pair up. Splits can make slivers of their own (d on the line too): a few passes. A sliver
+    whose split would join k and d twice stays (rare): dropping it would open the surface. Only the
+    triangles that touch a sliver's vertices are looked at (its neighbours, and any edge k–d, are
+    among them)."""
+    triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
+    points = vertices.astype(np.float64)
+    for _ in range(passes):
+        bad = np.flatnonzero(sliver_mask(vertices, triangles))
+        if not len(bad):
+            break
+        near = np.flatnonzero(np.isin(triangles, np.unique(triangles[bad])).any(axis=1))
+        rows = {int(f): tuple(triangles[f].tolist()) for f in near}
+        owner = {}
+        for f, (a, b, c) in rows.items():
+            owner[(a, b)] = owner[(b, c)] = owner[(c, a)] = f
+        dead, added = set(), []
+        for f in bad.tolist():
+            if f in dead:
+                continue
+            a, b, c = rows[f]
+            # the longest edge i→j, with k opposite it
+            lengths = [np.sum((points[b] - points[a]) ** 2), np.sum((points[c] - points[b]) ** 2)]
+            lengths.append(np.sum((points[a] - points[c]) ** 2))
+            i, j, k = ((a, b, c), (b, c, a), (c, a, b))[int(np.argmax(lengths))]
+            g = owner.get((j, i))
+            if g is None or g in dead:  # an open edge (walls left open): the sliver just goes
+                dead.add(f)
+                for edge in ((i, j), (j, k), (k, i)):
+                    if owner.get(edge) == f:
+                        del owner[edge]
+                continue
+            d = next(v for v in rows[g] if v not in (i, j))
+            if d == k:  # the sliver's twin, the same three vertices the other way round: both go
+                dead.update((f, g))
+                for edge, who in (((i, j), f), ((j, k), f), ((k, i), f), ((j, i), g), ((i, k), g), ((k, j), g)):
+                    if owner.get(edge) == who:
+                        del owner[edge]
+                continue
+            if (k, d) in owner or (d, k) in owner:  # k and d already joined: a split would double that edge
+                continue
+            dead.add(f)
+            for edge in ((i, j), (j, k), (k, i)):
+                if owner.get(edge) == f:
+                    del owner[edge]
+            new = len(triangles) + len(added)
+            rows[g], rows[new] = (j, k, d), (k, i, d)
+            added.append(new)
+            owner.pop((j, i), None)
+            owner[(j, k)] = owner[(k, d)] = owner[(d, j)] = g
+            owner[(k, i)] = owner[(i, d)] = owner[(d, k)] = new
+        extra = np.array([rows[n] for n in added], np.int64).reshape(-1, 3)
+        triangles = np.concatenate([triangles, extra])
+        for f in near.tolist():
+            triangles[f] = rows[f]
+        keep = np.ones(len(triangles), bool)
+        keep[list(dead)] = False
+        triangles = triangles[keep]
+    return triangles
+
+
+def pieces(vertex_count: int, triangles: np.ndarray) -> np.ndarray:
+    """The connected piece of each vertex (its lowest vertex index), by the triangles' edges."""
+    label = np.arange(vertex_count)
+    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]]])
+    while True:
+        a, b = label[edges[:, 0]], label[edges[:, 1]]
+        joined = label.copy()
+        np.minimum.at(joined, a, np.minimum(a, b))
+        np.minimum.at(joined, b, np.minimum(a, b))
+        while True:  # pointer jumping: each label to its label's label until none moves
+            jumped = joined[joined]
+            if (jumped == joined).all():
+                break
+            joined = jumped
+        if (joined == label).all():
+            return label
+        label = joined
+
+
+def _piece_measures(vertices: np.ndarray, triangles: np.ndarray):
+    """Each triangle's piece (0, 1, …), and each piece's area and enclosed volume."""
+    label = pieces(len(vertices), triangles)
+    _, piece = np.unique(label[triangles[:, 0]], return_inverse=True)
+    piece = piece.reshape(-1)
+    a, b, c = (vertices[triangles[:, k]].astype(np.float64) for k in range(3))
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    volume = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    return piece, np.bincount(piece, weights=area), np.bincount(piece, weights=volume)
+
+
+def _specks(area: np.ndarray, volume: np.ndarray, spacing_m: float) -> np.ndarray:
+    """Which pieces are flat (``FLAT_VOLUME``) or specks (``SPECK_AREA_SPACINGS2``, ``SPECK_VOLUME_SPACINGS3``)."""
+    flat = np.abs(volume) <= FLAT_VOLUME * area**1.5
+    return (
+        flat | (area < SPECK_AREA_SPACINGS2 * spacing_m**2) | (np.abs(volume) < SPECK_VOLUME_SPACINGS3 * spacing_m**3)
+    )
+
+
+def _without_flat_pieces(vertices: np.ndarray, triangles: np.ndarray, spacing_m: float) -> np.ndarray:
+    if not len(triangles):
+        return triangles
+    piece, area, volume = _piece_measures(vertices, triangles)
+    return triangles[~_specks(area, volume, spacing_m)[piece]]
+
+
+def defects(mesh: Mesh, spacing_m: float = 0.0) -> dict:
+    """What ``clean`` removes, counted: triangles of no area (``SLIVER_HEIGHT``), groups of vertices at
+    one position, pieces of no volume (``FLAT_VOLUME``) and other specks (``SPECK_AREA_SPACINGS2``,
+    ``SPECK_VOLUME_SPACINGS3`` of ``spacing_m``); and, counted on the vertices merged, the directed
+    edges that two triangles share (not manifold) and those whose reverse no triangle has (a hole);
+    with the vertex, triangle and piece counts."""
+    triangles = mesh.triangles.astype(np.int64)
+    _, first, inverse, counts = np.unique(
+        mesh.vertices, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    welded = inverse.reshape(-1)[triangles]
+    result = {"vertices": len(mesh.vertices), "triangles": len(triangles)}
+    result["zero_area_triangles"] = int(sliver_mask(mesh.vertices, triangles).sum()) if len(triangles) else 0
+    result["duplicate_vertex_groups"] = int((counts > 1).sum())
+    result["pieces"] = result["flat_pieces"] = result["specks"] = 0
+    result["edges_shared"] = result["edges_open"] = 0
+    if len(triangles):
+        piece, area, volume = _piece_measures(mesh.vertices[first], welded)
+        result["pieces"] = len(area)
+        result["flat_pieces"] = int((np.abs(volume) <= FLAT_VOLUME * area**1.5).sum())
+        flat = np.abs(volume) <= FLAT_VOLUME * area**1.5
+        result["specks"] = int((_specks(area, volume, spacing_m) & ~flat).sum())
+        n = len(counts)
+        edges = np.concatenate([welded[:, [0, 1]], welded[:, [1, 2]], welded[:, [2, 0]]])
+        keys = edges[:, 0] * n + edges[:, 1]
+        unique, uses = np.unique(keys, return_counts=True)
+        result["edges_shared"] = int((uses > 1).sum())
+        result["edges_open"] = int((~np.isin(edges[:, 1] * n + edges[:, 0], unique)).sum())
+    return result
+
+
+def _splashsurf(particles: np.ndarray, scene: Scene, iso_level: float, velocities: np.ndarray | None):
     settings = scene.surface
     # pysplashsurf takes lengths in multiples of the particle radius it is given. The colour field
     # does not depend on the particles' mass (m_j/ρ_j = 1/Σ_k W_jk), so passing the spacing as the
     # "radius" makes the table's values in spacings the arguments as they stand.
     surface, _ = pysplashsurf.reconstruction_pipeline(
         particles,
+        # splashsurf's SPH interpolation at the vertices, normalised (Shepard): a uniform field comes out
+        # as it went in.
+        attributes_to_interpolate=None if velocities is None else {"velocity": velocities},
         particle_radius=scene.fluid.spacing_m,
         rest_density=scene.fluid.rest_density_kg_m3,
         smoothing_length=settings.smoothing_length_spacings,
@@ -160,21 +393,29 @@ def smoothing_weight_normalization(smoothing_length_spacings: float) -> float:
     return SMOOTHING_WEIGHT_NEIGHBOURS * (smoothing_length_spacings / SMOOTHING_WEIGHT_LENGTH_SPACINGS) ** 3
 
 
-def with_wall_images(positions: np.ndarray, lower, upper, reach_m: float) -> np.ndarray:
-    """``positions`` followed by their mirror images across each container wall they are within
-    ``reach_m`` of (one axis after the other, so that a particle in a corner has its images across
-    both walls and the corner itself): the colour field inside the container is then that of water
-    continuing through the walls. Deterministic: the images follow in a fixed order."""
-    points = positions
+def with_wall_images(positions: np.ndarray, lower, upper, reach_m: float, velocities: np.ndarray | None = None):
+    """``positions`` followed by their images on each container wall they are within ``reach_m`` of
+    (the point on the wall's plane nearest to them; one axis after the other, so that a particle in a
+    corner has images on both walls and in the corner itself): the colour field stays high up to the
+    walls and falls monotonically beyond them (module docstring). Deterministic: the images follow in
+    a fixed order. Returns the points and their velocities (the component across the wall reversed,
+    as a mirror image moves), or None without ``velocities``."""
+    points, moving = positions, velocities
     for axis in range(3):
-        images = [points]
+        images, speeds = [points], [moving]
         for wall, inward in ((lower[axis], 1.0), (upper[axis], -1.0)):
-            near = points[inward * (points[:, axis] - wall) < reach_m]
-            mirrored = near.copy()
-            mirrored[:, axis] = 2.0 * wall - near[:, axis]
-            images.append(mirrored)
+            near = inward * (points[:, axis] - wall) < reach_m
+            image = points[near].copy()
+            image[:, axis] = wall
+            images.append(image)
+            if moving is not None:
+                reflected = moving[near].copy()
+                reflected[:, axis] = -reflected[:, axis]
+                speeds.append(reflected)
         points = np.concatenate(images)
-    return np.ascontiguousarray(points, dtype=np.float32)
+        moving = None if moving is None else np.concatenate(speeds)
+    points = np.ascontiguousarray(points, dtype=np.float32)
+    return points, None if moving is None else np.ascontiguousarray(moving, dtype=np.float32)
 
 
 BODY_SPHERE_RINGS = 12
@@ -244,13 +485,22 @@ def _sphere_mesh(radius: float):
     return points, np.array(faces, np.int32)
 
 
-def write_mesh(path: Path, mesh: Mesh, time_s: float) -> Path:
-    """Write ``mesh`` to ``path`` as binary PLY (``.ply``) or OBJ (``.obj``); returns the path."""
-    comment = f"pbf fluid surface at t = {time_s:.6f} s; units m"
+def write_mesh(path: Path, mesh: Mesh, time_s: float, up_axis: str = "y") -> Path:
+    """Write ``mesh`` to ``path`` as binary PLY (``.ply``) or OBJ (``.obj``) in the axes of
+    ``up_axis`` (``pbf.app.export.to_export_axes``); returns the path. A PLY carries the vertices'
+    velocity (vx, vy, vz) and speed when the mesh has them; OBJ has no place for them."""
+    comment = f"pbf fluid surface at t = {time_s:.6f} s; units m and m/s; {up_axis} up"
+    points = to_export_axes(mesh.vertices, up_axis)
     if path.suffix == ".ply":
-        vertices = np.empty(len(mesh.vertices), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+        names = ("x", "y", "z") + (() if mesh.velocities is None else ("vx", "vy", "vz", "speed"))
+        vertices = np.empty(len(points), dtype=[(name, "<f4") for name in names])
         for k, axis in enumerate("xyz"):
-            vertices[axis] = mesh.vertices[:, k]
+            vertices[axis] = points[:, k]
+        if mesh.velocities is not None:
+            velocities = to_export_axes(mesh.velocities, up_axis)
+            for k, axis in enumerate("xyz"):
+                vertices["v" + axis] = velocities[:, k]
+            vertices["speed"] = mesh.speeds()
         faces = np.empty(len(mesh.triangles), dtype=[("vertex_indices", "<i4", (3,))])
         faces["vertex_indices"] = mesh.triangles
         elements = [PlyElement.describe(vertices, "vertex"), PlyElement.describe(faces, "face")]
@@ -258,7 +508,7 @@ def write_mesh(path: Path, mesh: Mesh, time_s: float) -> Path:
     elif path.suffix == ".obj":
         with open(path, "w") as obj:
             obj.write(f"# {comment}\n")
-            np.savetxt(obj, mesh.vertices, fmt="v %.6f %.6f %.6f")
+            np.savetxt(obj, points, fmt="v %.6f %.6f %.6f")
             np.savetxt(obj, mesh.triangles + 1, fmt="f %d %d %d")  # OBJ counts vertices from 1
     else:
         raise ValueError(f"{path}: unknown mesh format; allowed: {', '.join(MESH_FORMATS)}")

@@ -10,7 +10,7 @@ line's ``--set`` or ``<dict>``), the key and what is allowed.
 One module per table, each holding its dataclass beside the checks of its keys: ``geometry``
 (container, blocks, obstacles), ``fluid``, ``emitters``, ``timestep``, ``solver`` (with XSPH and
 vorticity), ``wave_maker``, ``bodies`` (rigid boxes and spheres), ``view`` (camera, render, surface: the
-application's). ``schema`` is the
+application's), ``export`` (the exported files' up axis and walls). ``schema`` is the
 machinery they share, ``root`` the whole scene, ``files`` the TOML files and overrides, ``reference``
 the key reference generated from the keys' own docs (``pbf --keys``, docs/KEYS.md).
 
@@ -20,6 +20,7 @@ derives from a scene (particle mass, grid, the memory and index checks) are ``pb
 
 from pbf.scene.bodies import BODY_MAX_CFL, MAX_BODIES, MIN_BODY_SPACINGS, Body
 from pbf.scene.emitters import Emitter
+from pbf.scene.export import UP_AXES, Export
 from pbf.scene.files import (
     MAX_SCENE_BYTES,
     SCENES_DIR,
@@ -69,6 +70,7 @@ __all__ = [
     "Container",
     "Emitter",
     "Expert",
+    "Export",
     "Fluid",
     "Obstacle",
     "Render",
@@ -78,6 +80,7 @@ __all__ = [
     "Surface",
     "WhiteWater",
     "Time",
+    "UP_AXES",
     "Vec3",
     "Viscosity",
     "Vorticity",

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 from pbf.scene.bodies import MAX_BODIES, Body, _check_bodies
 from pbf.scene.emitters import Emitter, _check_emitter_room, _check_emitters
+from pbf.scene.export import Export
 from pbf.scene.fluid import Fluid
 from pbf.scene.geometry import Container, Obstacle, _check_blocks, _check_container, _check_obstacles, block_counts
 from pbf.scene.schema import SceneError, Vec3, _at_most_tables, _line, _show, _table_values, key
@@ -47,6 +48,7 @@ class Scene:
     render: Render = key(Render())
     surface: Surface = key(Surface())
     white_water: WhiteWater = key(WhiteWater())
+    export: Export = key(Export())
 
     def __post_init__(self):
         # Every value converted to its annotated type and checked, nested tables included, so a
