@@ -186,7 +186,7 @@ def test_export_writes_the_diffuse_particles_beside_the_frames(tmp_path):
     names = sorted(p.name for p in out.glob("diffuse_*.ply"))
     assert names == [f"diffuse_{k:05d}.ply" for k in range(frames + 1)]
     last = PlyData.read(str(out / names[-1]))["vertex"]
-    assert {p.name for p in last.properties} == {"x", "y", "z", "vx", "vy", "vz", "kind", "age_s"}
+    assert {p.name for p in last.properties} == {"x", "y", "z", "vx", "vy", "vz", "speed", "kind", "age_s"}
     assert last.count > 0
     digest = hashlib.sha256((out / names[-1]).read_bytes()).hexdigest()
     again = tmp_path / "again"
