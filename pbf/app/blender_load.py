@@ -1,9 +1,10 @@
 """A run's exports in Blender: ``blender -b -P pbf/app/blender_load.py -- OUTPUT_FOLDER [options]``.
 
 Run inside Blender (3.4 or later; it needs nothing but Blender's own Python, not even NumPy). It reads
-``run.json`` and the ``surface_NNNNN.ply`` and ``particles_NNNNN.ply`` files that ``run.py --headless
---export mesh --export ply`` wrote, and builds a scene: the water's surface as ONE object and the
-particles as another, each replaced a frame at a time by a frame-change handler (one frame in
+``run.json`` and the ``surface_NNNNN.ply``, ``particles_NNNNN.ply`` and ``diffuse_NNNNN.ply`` (white
+water, in the surface style) files that ``run.py --headless --export mesh --export ply`` wrote, and builds
+a scene: the water's surface as ONE object, the particles as another and white water as small white
+spheres, each replaced a frame at a time by a frame-change handler (one frame in
 memory, however long the run), with the vertex attributes ``velocity`` (m/s, a vector) and ``speed``
 (m/s); a glass-like water material absorbing light as the scene's ``surface.absorption_per_m`` says; a
 floor just under the container; a sun and a sky; the run's camera, frame range and frame rate. Then it
@@ -106,13 +107,18 @@ class Run:
             raise LoadError(f"{info_path}: 'frames' is not a frame count; write it again with the run") from None
         self.surface = self.info.get("surface") == "ply" and (folder / "surface_00000.ply").is_file()
         self.particles = self.info.get("particles") == "ply" and (folder / "particles_00000.ply").is_file()
+        self.diffuse = self.info.get("diffuse") == "ply" and (folder / "diffuse_00000.ply").is_file()
         if not (self.surface or self.particles):
             raise LoadError(
                 f"{folder}: no surface_00000.ply or particles_00000.ply; export PLY files "
                 "(--export mesh with surface.mesh_format = ply, or --export ply)"
             )
         # The frames whose files are all there (a run cut short wrote fewer than run.json plans).
-        kinds = [kind for kind, present in (("surface", self.surface), ("particles", self.particles)) if present]
+        kinds = [
+            kind
+            for kind, present in (("surface", self.surface), ("particles", self.particles), ("diffuse", self.diffuse))
+            if present
+        ]
         self.frames = 0
         while self.frames < planned and all((folder / f"{k}_{self.frames:05d}.ply").is_file() for k in kinds):
             self.frames += 1
@@ -186,6 +192,41 @@ def diffuse_material(bpy, name: str, rgb):
     return material
 
 
+WHITE_WATER_RADIUS_SPACINGS = 0.15
+"""The radius of white water's points in the render, in the run's particle spacings."""
+
+
+def as_points(bpy, obj, radius_m: float, material) -> None:
+    """Render ``obj``'s vertices as spheres of ``radius_m`` (a geometry-nodes Mesh to Points modifier: Cycles
+    draws points, not bare vertices)."""
+    group = bpy.data.node_groups.new("pbf points", "GeometryNodeTree")
+    if hasattr(group, "interface"):  # Blender 4
+        group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+        group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    else:
+        group.inputs.new("NodeSocketGeometry", "Geometry")
+        group.outputs.new("NodeSocketGeometry", "Geometry")
+    nodes, links = group.nodes, group.links
+    given, result = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    points = nodes.new("GeometryNodeMeshToPoints")
+    points.inputs["Radius"].default_value = radius_m
+    shade = nodes.new("GeometryNodeSetMaterial")
+    shade.inputs["Material"].default_value = material
+    links.new(given.outputs[0], points.inputs["Mesh"])
+    links.new(points.outputs["Points"], shade.inputs["Geometry"])
+    links.new(shade.outputs["Geometry"], result.inputs[0])
+    obj.modifiers.new("pbf points", "NODES").node_group = group
+
+
+def white_water_material(bpy):
+    material = bpy.data.materials.new("pbf white water")
+    material.use_nodes = True
+    bsdf = material.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.95, 0.97, 1.0, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.6
+    return material
+
+
 def build(bpy, run: Run):
     """The scene: objects, handler, materials, floor, light, camera, frames and rate."""
     from mathutils import Euler, Vector
@@ -211,6 +252,15 @@ def build(bpy, run: Run):
         loaded[kind] = (obj, material)
     if "surface" in loaded and "particles" in loaded:
         loaded["particles"][0].hide_render = True  # bare vertices do not render; the surface does
+    if run.diffuse:  # white water: spray, foam and bubbles, drawn as small white spheres
+        material = white_water_material(bpy)
+        obj = bpy.data.objects.new(
+            "pbf white water", frame_mesh(bpy, "pbf diffuse", read_ply(run.path("diffuse", 0)), None)
+        )
+        obj.rotation_euler = rotation
+        scene.collection.objects.link(obj)
+        as_points(bpy, obj, WHITE_WATER_RADIUS_SPACINGS * float(info.get("spacing_m", 0.025)), material)
+        loaded["diffuse"] = (obj, None)
 
     def load_frame(scene_now, *args):
         for kind, (obj, material) in loaded.items():

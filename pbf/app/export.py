@@ -80,9 +80,12 @@ def write_particles(
     return path
 
 
-def run_info(scene, eye_m, look_at_m, fov_deg: float, frames: int, exports, mesh_format: str) -> dict:
+def run_info(
+    scene, eye_m, look_at_m, fov_deg: float, frames: int, exports, mesh_format: str, diffuse: str | None = None
+) -> dict:
     """What the Blender script needs to know of a run, in the exported files' axes: the frame rate
-    and count, the camera, the container, the up axis and which files there are."""
+    and count, the camera, the container, the up axis and which files there are (``diffuse``: the
+    format of white water's files, None without them)."""
     up = scene.export.up_axis
     corners = to_export_axes(np.array([scene.container.min_m, scene.container.max_m]), up)
 
@@ -105,6 +108,8 @@ def run_info(scene, eye_m, look_at_m, fov_deg: float, frames: int, exports, mesh
         "wall_faces": scene.export.wall_faces,
         "particles": next((name for name in exports if name in FORMATS), None),
         "surface": mesh_format if "mesh" in exports else None,
+        "diffuse": diffuse,
+        "spacing_m": scene.fluid.spacing_m,
         "absorption_per_m": listed(scene.surface.absorption_per_m),
         "water_rgb": listed(scene.surface.water_rgb),
     }

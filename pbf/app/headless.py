@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import imageio.v2 as imageio
+import numpy as np
 from tqdm import tqdm
 
 from pbf.app.export import run_info, write_particles, write_run_info
@@ -116,6 +117,7 @@ class FrameWriter:
                 self.total - 1,
                 self.exports,
                 self.sim.scene.surface.mesh_format,
+                self._diffuse_format() if self.renderer.white_water is not None else None,
             )
             write_run_info(self.out_dir, info)
         for name in self.exports:
@@ -133,14 +135,13 @@ class FrameWriter:
         white_water = self.renderer.white_water
         if self.exports and white_water is not None:  # drawn with this frame: written beside it
             diffuse = white_water.arrays()
-            suffix = next((name for name in self.exports if name != "mesh"), "ply")
             write_particles(
-                self.out_dir / diffuse_name(number, suffix),
+                self.out_dir / diffuse_name(number, self._diffuse_format()),
                 diffuse["positions"],
                 diffuse["velocities"],
                 self.sim.time_s,
                 up_axis,
-                {"kind": diffuse["kind"], "age_s": diffuse["age"]},
+                {"kind": diffuse["kind"].astype(np.float32), "age_s": diffuse["age"]},
             )
         if number == 1:
             self.progress = tqdm(
@@ -152,6 +153,10 @@ class FrameWriter:
             )
         if self.progress is not None:
             self.progress.update()
+
+    def _diffuse_format(self) -> str:
+        """White water's file format: the particles' (``--export ply|npz``), PLY beside meshes alone."""
+        return next((name for name in self.exports if name != "mesh"), "ply")
 
     def close(self) -> None:
         """Write the frames still queued (also when the run was interrupted or failed: they are drawn),
