@@ -233,7 +233,7 @@ class Bodies:
 
     def speed_limit_m_s(self) -> float:
         """The fastest any point of a body moves, |v| + |ω| r_bound, for the CFL limit (a read from the device;
-        ``Diagnostics.frame_speeds`` brings it with the water's)."""
+        ``Diagnostics.frame_read`` brings it with the water's)."""
         return float(self.fastest[None]) if self.count else 0.0
 
     @ti.func

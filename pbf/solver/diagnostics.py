@@ -2,7 +2,7 @@
 
 import taichi as ti
 
-from pbf.solver.grid import NeighbourList
+from pbf.solver.grid import MOST_ENTRIES, TRUNCATED, NeighbourList
 from pbf.solver.scan import TreeSum
 
 
@@ -49,22 +49,21 @@ class Diagnostics:
         return self.density_ratio
 
     @ti.kernel
-    def _max_speed(self, bodies: ti.template()) -> tuple[ti.f32, ti.i32, ti.i32, ti.f32]:
+    def _frame_read(self, bodies: ti.template()) -> tuple[ti.f32, ti.i32, ti.i32, ti.f32]:
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 self.speed[i] = self.state.v[i].norm()
         self.sums.maximum(self.speed, 4, self.state.active)
-        status = self.grid.take_status()
         solids = 0.0
         if ti.static(hasattr(bodies, "fastest")):  # None when the scene has no bodies
             solids = bodies.fastest[None]
-        return self.sums.high[4], status[0], status[1], solids
+        return self.sums.high[4], self.grid.status[MOST_ENTRIES], self.grid.status[TRUNCATED], solids
 
-    def frame_speeds(self, bodies=None) -> tuple[float, float]:
-        """The fastest particle and body point (m/s) for the CFL limit, and the grid's record: a frame's one read."""
-        speed, most_entries, truncated, solids = self._max_speed(bodies)
-        self.grid.settle_frame(most_entries, bool(truncated))
-        return float(speed), float(solids)
+    def frame_read(self, bodies=None) -> tuple[float, float, int, bool]:
+        """A frame's one read: the fastest particle and body point (m/s) for the CFL limit, and the grid's
+        record since its lists last grew (``NeighbourGrid.settle_frame``'s arguments)."""
+        speed, most_entries, truncated, solids = self._frame_read(bodies)
+        return float(speed), float(solids), int(most_entries), bool(truncated)
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""

@@ -265,9 +265,6 @@ class Features:
     """An error target is set: the iterations' error sums and the stopping rule."""
     divergence_iterations: int
     vorticity: bool
-    wave_maker: bool
-    bodies: bool
-    wall_mirror: bool
 
     @classmethod
     def of(cls, model: Model, control: Control, in_place: bool = False) -> Features:
@@ -276,9 +273,6 @@ class Features:
             control.target_density_error > 0.0,
             0 if in_place else control.divergence_iterations,
             control.vorticity > 0.0,
-            model.boundary.piston_stroke_m > 0.0,
-            bool(model.scene.bodies),
-            model.density.wall_mirror,
         )
 
 

@@ -172,7 +172,9 @@ class Simulation:
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.kernels = SubstepKernels(self)  # the stages composed into three kernels
+        self.kernels = SubstepKernels(  # the stages composed into three kernels
+            self.state, self.integrator, self.grid, self.divergence, self.density, self.iterations, self.postprocess
+        )
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
@@ -413,11 +415,12 @@ class Simulation:
         """Δt of the last substep, s (less than frame_dt_s / substeps when the CFL limit added some)."""
         return self.last_dt_s
 
-    def substeps_needed(self) -> int:
+    def substeps_needed(self, speeds: tuple[float, float] | None = None) -> int:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
-        ``Scene.travel_per_substep_m`` in one (docs/METHOD.md, "Time steps")."""
+        ``Scene.travel_per_substep_m`` in one (docs/METHOD.md, "Time steps"). ``speeds``: the fastest
+        particle's and body point's (``Diagnostics.frame_read``), else read here."""
         t = self.scene.time
-        fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
+        fastest, bodies = speeds or self.diagnostics.frame_read(self.bodies)[:2]
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
             fastest = min(fastest, t.max_speed_m_s)
         walls = self.boundaries.speed_limit_m_s(bodies)
@@ -499,7 +502,9 @@ class Simulation:
         if frames < 0:
             raise ValueError(f"step: frames: expected 0 or more, got {_show(frames)}")
         for _ in range(frames):
-            self.frame_substeps = self.substeps_needed()
+            fastest, bodies, most_entries, truncated = self.diagnostics.frame_read(self.bodies)  # one read
+            self.grid.settle_frame(most_entries, truncated)  # the lists grown ahead of need
+            self.frame_substeps = self.substeps_needed((fastest, bodies))
             self.pressure_substeps = 0  # pressures(): this frame's mean
             dt = self.scene.time.frame_dt_s / self.frame_substeps
             for _ in range(self.frame_substeps):

@@ -130,20 +130,13 @@ class State:
         """The bound of a loop over the live particles (:attr:`loop_bound`); the loop still skips ``i ≥ active``."""
         return read_count(self.loop_bound, 1)
 
-    @ti.func
-    def gather(self, slot, i):
-        """Particle i's carried arrays into ``slot`` of their scratch (the sort), until :meth:`take_gathered`."""
-        for k in ti.static(range(len(self._carried))):
-            self._carried[k][1][slot] = self._carried[k][0][i]
-
-    @ti.func
-    def take_gathered(self, slot):
-        """``slot`` of every carried array from its scratch, after :meth:`gather`."""
-        for k in ti.static(range(len(self._carried))):
-            self._carried[k][0][slot] = self._carried[k][1][slot]
+    @property
+    def carried(self) -> tuple:
+        """(field, scratch) of every array the sort carries (``NeighbourGrid.order_loops``), the state's first."""
+        return tuple(self._carried)
 
     def scratch_of(self, values):
-        """The scratch :meth:`gather` fills for the carried array ``values``."""
+        """The scratch the sort gathers the carried array ``values`` into."""
         return next(scratch for field, scratch in self._carried if field is values)
 
     @ti.func

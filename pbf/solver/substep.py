@@ -9,12 +9,11 @@ from pbf.solver.launch import Launcher
 
 @ti.data_oriented
 class SubstepKernels:
-    """The kernels that run the stages of ``stages``, the Simulation."""
+    """The kernels that run the stages given, each a ``pbf.solver`` stage object."""
 
-    def __init__(self, stages):
-        self.state, self.integrator, self.grid = stages.state, stages.integrator, stages.grid
-        self.density, self.divergence = stages.density, stages.divergence
-        self.iterations, self.postprocess = stages.iterations, stages.postprocess
+    def __init__(self, state, integrator, grid, divergence, density, iterations, postprocess):
+        self.state, self.integrator, self.grid = state, integrator, grid
+        self.density, self.divergence, self.iterations, self.postprocess = density, divergence, iterations, postprocess
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
 
@@ -87,8 +86,8 @@ class SubstepKernels:
                 gravity = ti.Vector([gx, gy, gz])
                 x_i = self.integrator.advance_particle(dt, gravity, i)  # lines 1-4: v += Δt g, x* = x + Δt v
                 grid.count_in_cell(x_i, i)  # lines 5-6: a counting sort by the cell of x*,
-        grid.order_loops(state.index, state)  # the state and x* gathered in sorted order
-        grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, state)  # line 7
+        grid.order_loops(state.index, ti.static(state.carried))  # the state and x* gathered in sorted order
+        grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, ti.static(state.carried))  # line 7
         if ti.static(features.divergence_iterations > 0):  # ours: v made divergence-free at x,
             self.divergence.correct(state.x, entries, dt, features.divergence_iterations)
             for i in range(state.live_bound()):  # then x* = x + Δt v again
