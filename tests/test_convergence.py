@@ -8,6 +8,7 @@ import pytest
 
 from pbf import Simulation
 from pbf.solver.acceleration import REVERSAL, chebyshev_weights, stable_weights
+from pbf.solver.density import pressure_scales
 from pbf.solver.iterations import DONE, FRACTION, IN_SECOND, STEPPING_BACK
 from pbf.solver.model import Features
 from pbf.study.common import colour_surface_height, fill_height_m
@@ -209,8 +210,7 @@ def test_divergence_pressure_carries_the_hydrostatic_load():
     for _ in range(60):
         sim.step()
         x = sim.positions()
-        carried = sim.state.in_creation_order(sim.state.multiplier) * np.float32(sim.dt_s**2)
-        carried *= sim.density.pressure_scale(sim.dt_s) * 1000.0
+        carried = sim.state.in_creation_order(sim.state.multiplier) * pressure_scales(1000.0, h, sim.dt_s)[1]
         depth = fill_height_m(sim) - x[:, 1]
         inner = (depth > h) & (x[:, 1] > h) & np.all((x[:, [0, 2]] > h) & (x[:, [0, 2]] < 0.3 - h), axis=1)
         total_slopes.append(np.polyfit(depth[inner], sim.pressures()[inner], 1)[0])

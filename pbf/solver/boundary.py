@@ -454,6 +454,11 @@ class Boundaries:
         return density, gradient
 
     @ti.func
+    def mirror_walls(self, p):
+        """The walls whose ghost is the fluid's mirror image near p (``Container.mirror_walls``)."""
+        return self.container.mirror_walls(p)
+
+    @ti.func
     def velocity(self, p):
         """Velocity of the ghost fluid p sees (m/s): the sum of the boundaries' (at most one moves near p)."""
         v = ti.Vector([0.0, 0.0, 0.0])

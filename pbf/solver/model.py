@@ -8,7 +8,7 @@ import difflib
 import functools
 import math
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -212,6 +212,14 @@ class Push:
         bounds, meaning = (0.0, FLOAT32_SAFE), "radius of the hand, m"
         radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, meaning, above_lowest=True)
         object.__setattr__(self, "radius_m", radius)
+
+    def capped(self, speed_limit_m_s: float) -> Push:
+        """This push with its velocity capped at ``speed_limit_m_s``, for the water and the bodies alike."""
+        velocity = np.asarray(self.velocity_m_s, np.float64)
+        speed = float(np.linalg.norm(velocity))
+        if speed > speed_limit_m_s:
+            velocity *= speed_limit_m_s / speed
+        return replace(self, velocity_m_s=tuple(velocity.tolist()))
 
 
 @dataclass

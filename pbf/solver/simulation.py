@@ -19,7 +19,7 @@ from pbf.solver import buckets, settled
 from pbf.solver.backend import keeps_decisions_on_device, on_gpu, start_backend
 from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
-from pbf.solver.density import DensityConstraint
+from pbf.solver.density import DensityConstraint, pressure_scales
 from pbf.solver.diagnostics import Diagnostics
 from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.emit import Emitters
@@ -442,10 +442,10 @@ class Simulation:
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
-            hand_limit_m_s = self.scene.travel_per_substep_m(control.iterations) / dt
-            self.integrator.push(control.push, hand_limit_m_s)
+            hand = control.push.capped(self.scene.travel_per_substep_m(control.iterations) / dt)
+            self.integrator.push(hand)
             if self.bodies is not None:
-                self.bodies.grab(control.push, hand_limit_m_s)
+                self.bodies.grab(hand)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
@@ -468,15 +468,15 @@ class Simulation:
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
-            pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
-            first = self.pressure_substeps == 0
             kernels.iterate_and_finish(
                 last,
                 dt,
                 features,
                 control,
-                pressure_per_impulse=pressure,
-                first_of_frame=first,
+                pressure_scales=pressure_scales(
+                    self.scene.fluid.rest_density_kg_m3, self.model.grid.kernel_radius_m, dt
+                ),
+                first_of_frame=self.pressure_substeps == 0,
                 max_speed=self.scene.time.max_speed_m_s,
             )
         if self.bodies is not None:  # the water's reaction on the bodies

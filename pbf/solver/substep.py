@@ -36,25 +36,35 @@ class SubstepKernels:
         dt: float,
         features,
         control,
-        pressure_per_impulse: float,
+        pressure_scales: tuple[float, float],
         first_of_frame: bool,
         max_speed: float,
     ) -> None:
         """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
-        and the pressure (``pressure_per_impulse`` Pa a unit of multiplier, restarted ``first_of_frame``)."""
+        and the pressure (Pa a unit of L and of Λ: ``pbf.solver.density.pressure_scales``; restarted
+        ``first_of_frame``)."""
         self._call(
             features,
             control,
             start,
             finish=True,
             dt=dt,
-            pressure_per_impulse=pressure_per_impulse,
+            pressure_scales=pressure_scales,
             first_of_frame=first_of_frame,
             max_speed=max_speed,
         )
 
     def _call(
-        self, features, control, start, *, finish, dt=0.0, pressure_per_impulse=0.0, first_of_frame=False, max_speed=0.0
+        self,
+        features,
+        control,
+        start,
+        *,
+        finish,
+        dt=0.0,
+        pressure_scales=(0.0, 0.0),
+        first_of_frame=False,
+        max_speed=0.0,
     ):
         self._iterations(
             entries=self.grid.neighbours,
@@ -68,7 +78,8 @@ class SubstepKernels:
             dt=dt,
             epsilon=control.vorticity,
             xsph_c=control.xsph,
-            pressure_per_impulse=pressure_per_impulse,
+            pressure_per_impulse=pressure_scales[0],
+            pressure_per_multiplier=pressure_scales[1],
             first_of_frame=int(first_of_frame),
             max_speed=max_speed,
         )
@@ -112,6 +123,7 @@ class SubstepKernels:
         epsilon: ti.f32,
         xsph_c: ti.f32,
         pressure_per_impulse: ti.f32,
+        pressure_per_multiplier: ti.f32,
         first_of_frame: ti.i32,
         max_speed: ti.f32,
     ):
@@ -129,6 +141,7 @@ class SubstepKernels:
                 epsilon=epsilon,
                 xsph_c=xsph_c,
                 pressure_per_impulse=pressure_per_impulse,
+                pressure_per_multiplier=pressure_per_multiplier,
                 first_of_frame=first_of_frame,
                 max_speed=max_speed,
             )
