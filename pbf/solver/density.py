@@ -18,6 +18,7 @@ outgrows", "Artificial pressure", "Walls and obstacles", "The free surface").
 
 import taichi as ti
 
+from pbf.solver.backend import Choices
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import named
 from pbf.solver.model import SCORR_N, DensityParams
@@ -62,7 +63,7 @@ class DensityConstraint:
     """The constraint's passes (``@ti.func``, composed into kernels by ``pbf.solver.substep``) and scratch:
     λ̂ per particle, its sum over a substep, the error sum."""
 
-    def __init__(self, params: DensityParams, boundaries, grid):
+    def __init__(self, params: DensityParams, boundaries, grid, choices: Choices):
         particle_count = params.particle_count
         self.h = params.kernel_radius_m
         self.boundaries = boundaries
@@ -93,7 +94,7 @@ class DensityConstraint:
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
         """The held-still ghost's gradient at x_i (1/m), from the λ pass for the Δx pass (:meth:`walls`)."""
         self.error = ti.field(ti.f32, shape=particle_count)  # max(C_i, 0) of the last λ pass
-        self.error_sum = TreeSum(particle_count)
+        self.error_sum = TreeSum(particle_count, shared=choices.shared_memory, gpu=choices.gpu_blocks)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
         """L_i, the multiplier of the substep's whole correction (the pressure impulse, :func:`pressure`):

@@ -2,6 +2,7 @@
 
 import taichi as ti
 
+from pbf.solver.backend import Choices
 from pbf.solver.grid import MOST_ENTRIES, TRUNCATED, NeighbourList
 from pbf.solver.scan import TreeSum
 
@@ -10,14 +11,15 @@ from pbf.solver.scan import TreeSum
 class Diagnostics:
     """Reductions over the state, and the per-particle density ratio renderers colour by."""
 
-    def __init__(self, state, density, grid, particle_mass_kg: float):
+    def __init__(self, state, density, grid, particle_mass_kg: float, choices: Choices):
         self.state = state
         self.density = density
         self.grid = grid
         self.mass = particle_mass_kg
         self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]  # max(ρ/ρ0 − 1, 0), |v|², neighbours
         self.speed = ti.field(ti.f32, shape=state.capacity)  # |v|, for the maximum
-        self.sums = TreeSum(state.capacity, 6)  # the terms' sums (slots 0-2), the maxima (3-5)
+        # The terms' sums (slots 0-2), the maxima (3-5).
+        self.sums = TreeSum(state.capacity, 6, shared=choices.shared_memory, gpu=choices.gpu_blocks)
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 

@@ -20,6 +20,7 @@ import warnings
 import numpy as np
 import taichi as ti
 
+from pbf.solver.backend import Choices
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan, read_count
@@ -49,10 +50,10 @@ def _named_type(names: tuple[str, ...]):
 
 @ti.data_oriented
 class NeighbourGrid:
-    """The uniform grid and exact neighbour lists of the module docstring; ``slot_major`` and
-    ``loop_bound`` are the backend's, chosen by the Simulation."""
+    """The uniform grid and exact neighbour lists of the module docstring; ``choices`` (``slot_major``,
+    ``gpu_blocks``) and ``loop_bound`` are the backend's, chosen by the Simulation."""
 
-    def __init__(self, params: GridParams, active, slot_major: bool, loop_bound):
+    def __init__(self, params: GridParams, active, choices: Choices, loop_bound):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         allocated = params.allocated_particles or particle_count
         self.particle_count = particle_count
@@ -73,7 +74,7 @@ class NeighbourGrid:
         particle_count = allocated
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
         self.cell_start = ti.field(ti.i32, shape=cell_count + 1)
-        self.cell_scan = ExclusiveScan(cell_count)
+        self.cell_scan = ExclusiveScan(cell_count, gpu=choices.gpu_blocks)
         self.particle_cell = ti.field(ti.i32, shape=particle_count)
         self.rank_in_cell = ti.field(ti.i32, shape=particle_count)
         self.cell_members = ti.field(ti.i32, shape=particle_count)
@@ -90,10 +91,10 @@ class NeighbourGrid:
         """What the builds saw since the list last grew (:meth:`settle_frame`)."""
         self.loop_bound = loop_bound
         """What loops over the live particles run to (``State.loop_bound``); the first ``active[None]`` are live."""
-        self.slot_major = slot_major
+        self.slot_major = choices.slot_major
         """The one-visit list's layout: on a GPU slot-major (entry i + k·n: a warp walking its lists in step
         reads one contiguous run per k), on the CPU particle-major (entry i·SLOTS + k: one stretch a thread)."""
-        self.neighbour_scan = ExclusiveScan(particle_count)
+        self.neighbour_scan = ExclusiveScan(particle_count, gpu=choices.gpu_blocks)
         self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
         """Flat neighbour list: the neighbours of sorted particle i, itself excluded, are the
         ``neighbour_listed[i]`` entries of :meth:`listed` and :meth:`neighbour`."""

@@ -15,8 +15,6 @@ import math
 
 import taichi as ti
 
-from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
-
 Template = ti.template()
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level but the top."""
@@ -37,10 +35,10 @@ CPU_SCAN_BLOCKS = 256
 """The prefix sum's CPU_BLOCKS: few enough that each block of the pass down adds the sums before its own."""
 
 
-def block_sizes(length: int, blocks: int = CPU_BLOCKS) -> tuple[int, int]:
-    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), on a GPU
-    blocks of 32 (a long block idles thousands of threads)."""
-    if gpu_blocks():
+def block_sizes(length: int, blocks: int = CPU_BLOCKS, gpu: bool = False) -> tuple[int, int]:
+    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), in a GPU's
+    blocks (``gpu``, ``pbf.solver.backend.Choices.gpu_blocks``) 32 (a long block idles thousands of threads)."""
+    if gpu:
         return GPU_BLOCK, GPU_BLOCK
     return max(64, math.ceil(length / blocks)), blocks
 
@@ -49,10 +47,10 @@ class Tree:
     """The static shape of a block tree over ``length`` entries (block sizes, each level's length and
     offset in one scratch field): it never depends on the live count, so a result depends on the values."""
 
-    def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS, top: int = 0):
+    def __init__(self, length: int, block: int | None, cpu_blocks: int, top: int, gpu: bool):
         """``top``: the most entries the top level may hold as one block (:data:`GPU_SCAN_TOP`)."""
         self.length = max(int(length), 1)
-        first, above = block_sizes(self.length, cpu_blocks) if block is None else (block, block)
+        first, above = block_sizes(self.length, cpu_blocks, gpu) if block is None else (block, block)
         self.blocks = [first]
         self.lengths = [self.length]
         while self.lengths[-1] > (first if len(self.lengths) == 1 else max(above, top)):
@@ -126,9 +124,10 @@ def _nothing(total, count, context: ti.template()):
 class ExclusiveScan:
     """starts[k] = Σ_{l<k} values[l] of int32 values (a counting sort's cell starts)."""
 
-    def __init__(self, length: int, block: int | None = None):
+    def __init__(self, length: int, block: int | None = None, gpu: bool = False):
+        """``gpu``: in a GPU's blocks (``pbf.solver.backend.Choices.gpu_blocks``)."""
         self.length = length
-        self.tree = Tree(length, block, CPU_SCAN_BLOCKS, GPU_SCAN_TOP if block is None and gpu_blocks() else 0)
+        self.tree = Tree(length, block, CPU_SCAN_BLOCKS, GPU_SCAN_TOP if block is None and gpu else 0, gpu)
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
 
@@ -209,12 +208,12 @@ class TreeSum:
     """Compensated sums and maxima of float32 values: ``sums`` results, each the same bits on any thread
     count, kept on the device (:attr:`high` + :attr:`low`) for kernels to use or the host to read."""
 
-    def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool | None = None):
+    def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool = False, gpu: bool = False):
+        """``gpu`` and ``shared``: in a GPU's blocks, added up in shared memory (``pbf.solver.backend.Choices``)."""
         self.length = length
-        self.tree = Tree(length, block)
-        self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
-        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`): on CUDA unless ``shared``
-        says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        self.tree = Tree(length, block, CPU_BLOCKS, 0, gpu)
+        self.in_shared_memory = block is None and shared
+        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`)."""
         self._reduce = self._reduce_in_blocks if self.in_shared_memory else self._reduce_in_tree
         threads = GPU_SUM_THREADS
         if length <= GPU_SUM_ONE_BLOCK:

@@ -16,7 +16,8 @@ import numpy as np
 from pbf import scene as schema
 from pbf.scene.schema import _show
 from pbf.solver import buckets, settled
-from pbf.solver.backend import keeps_decisions_on_device, on_gpu, start_backend
+from pbf.solver.backend import Choices, start_backend
+from pbf.solver.backend import choices as backend_choices
 from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
 from pbf.solver.density import DensityConstraint, pressure_scales
@@ -138,26 +139,30 @@ class Simulation:
         overrides=(),
         quiet: bool = False,
         hook: StageHook | None = None,
+        choices: Choices | None = None,
     ):
+        """``choices``: the backend's (``pbf.solver.backend.choices()``, made here by default), or a GPU's
+        asked for on the CPU (the same results: tests, launch counts)."""
         scene = schema.load_scene(scene, overrides)
         self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
+        self.choices = choices or backend_choices()
+        """What differs by backend, chosen once (docs/METHOD.md, "One substep on every backend")."""
         self.model = Model.from_scene(scene, buckets.compiled(), buckets.REUSE_LIMIT_BYTES)
         buckets.record(self.model.allocated, self.model.grid.allocated_cells)
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
         # The arrays every scene has first, in one order, then those of features a scene may lack: the
-        # offline cache keys a kernel by its fields' shapes and places (docs/ARCHITECTURE.md). The
-        # backend's choices are made here (docs/METHOD.md, "One substep on every backend").
-        on_device = keeps_decisions_on_device()
-        self.state = State(model.allocated)
+        # offline cache keys a kernel by its fields' shapes and places (docs/ARCHITECTURE.md).
+        on_device = self.choices.decisions_on_device
+        self.state = State(model.allocated, on_device)
         self.boundaries = Boundaries(model.boundary, solids=False)
-        self.grid = NeighbourGrid(model.grid, self.state.active, slot_major=on_gpu(), loop_bound=self.state.loop_bound)
+        self.grid = NeighbourGrid(model.grid, self.state.active, self.choices, self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
-        self.density = DensityConstraint(model.density, self.boundaries, self.grid)
+        self.density = DensityConstraint(model.density, self.boundaries, self.grid, self.choices)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
-        self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
+        self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg, self.choices)
         self.iterations = JacobiIterations(
             self.density,
             weights=model.iteration_weights,
@@ -195,14 +200,14 @@ class Simulation:
         if self._start is not None:
             self.restore(self._start)
             return
-        settled_start = settled.load(self.scene) if self.scene.time.settle_s > 0.0 else None
+        settled_start = settled.load(self.scene, self.choices) if self.scene.time.settle_s > 0.0 else None
         if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
             self.restore(settled_start)
         else:
             self.restore(Snapshot(*self.model.initial_particles(), 0.0, 0))
             if self.scene.time.settle_s > 0.0:
                 self._settle(self.scene.time.settle_s)
-                settled.store(self.scene, self.snapshot())
+                settled.store(self.scene, self.snapshot(), self.choices)
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
