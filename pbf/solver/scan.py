@@ -114,12 +114,6 @@ def _accumulate(high, low, value_high, value_low, is_max: ti.template(), zero):
     return high, low
 
 
-@ti.func
-def _nothing(total, count, context: ti.template()):
-    """A sum's ``then`` when nothing waits on it."""
-    pass
-
-
 @ti.data_oriented
 class ExclusiveScan:
     """starts[k] = Σ_{l<k} values[l] of int32 values (a counting sort's cell starts)."""
@@ -236,23 +230,20 @@ class TreeSum:
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] + low[slot] = Σ_{k < count} values[k] (``count``: an int or a 0-D field), at a kernel's
         top level."""
-        self._reduce(values, slot, count, False, _nothing, 0.0)
+        self._reduce(values, slot, count, False)
 
     @ti.func
-    def sum_then(self, values: Template, slot: Template, count: Template, then: Template, context: Template):
-        """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``; ``context`` a tuple of the
-        kernel's arguments) by the thread that holds the total: a decision on the sum costs no task."""
-        self._reduce(values, slot, count, False, then, context)
+    def total(self, slot: ti.template()):
+        """Sum ``slot`` as one float32, for the kernel's statements after :meth:`sum`."""
+        return self.high[slot] + self.low[slot]
 
     @ti.func
     def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
-        self._reduce(values, slot, count, True, _nothing, 0.0)
+        self._reduce(values, slot, count, True)
 
     @ti.func
-    def _reduce_in_blocks(
-        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
-    ):
+    def _reduce_in_blocks(self, values: Template, slot: Template, count: Template, is_max: Template):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
         # entries), then the block halves its partial sums in shared memory: an order fixed by the length.
         threads = ti.static(GPU_SUM_THREADS)
@@ -295,15 +286,12 @@ class TreeSum:
                     if ti.static(top):
                         self.high[slot] = shared_high[0]
                         self.low[slot] = shared_low[0]
-                        then(shared_high[0] + shared_low[0], read_count(count, 1), context)
                     else:
                         self.scratch_high[g] = shared_high[0]
                         self.scratch_low[g] = shared_low[0]
 
     @ti.func
-    def _reduce_in_tree(
-        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
-    ):
+    def _reduce_in_tree(self, values: Template, slot: Template, count: Template, is_max: Template):
         # Every level loops over all of its blocks and skips those past the live entries (as in
         # ExclusiveScan.scan); the top block always runs, so that it writes 0 when there is nothing to add.
         for level in ti.static(range(self.tree.top + 1)):
@@ -326,7 +314,6 @@ class TreeSum:
                     if ti.static(level == self.tree.top):
                         self.high[slot] = high
                         self.low[slot] = low
-                        then(high + low, read_count(count, 1), context)
                     else:
                         self.scratch_high[self.tree.offsets[level + 1] + b] = high
                         self.scratch_low[self.tree.offsets[level + 1] + b] = low

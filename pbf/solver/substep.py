@@ -24,11 +24,16 @@ class SubstepKernels:
         self._find_neighbours(entries=self.grid.neighbours, dt=dt, gx=gx, gy=gy, gz=gz, features=features)
 
     def iterate(self, features, control) -> int:
-        """Every call of the substep's iterations but the last; returns the first iteration of the last
-        call, which :meth:`iterate_and_finish` runs."""
-        return self.iterations.calls(
-            control.iterations, features.measure, lambda start: self._call(features, control, start, finish=False)
-        )
+        """The substep's iterations, ``per_call`` a call, while not done and short of the most: every call
+        but the last; returns the first iteration of the last call, which :meth:`iterate_and_finish` runs."""
+        iterations, per_call = control.iterations, self.iterations.per_call
+        self.iterations.begin(iterations, features.measure)
+        it, done = 0, False
+        while not done and it + per_call < iterations:
+            self._call(features, control, it, finish=False)
+            it += per_call
+            done = self.iterations.done()  # the device's decision, read where the backend reads it
+        return it
 
     def iterate_and_finish(
         self,
