@@ -18,8 +18,7 @@ class Diagnostics:
         self.mass = particle_mass_kg
         self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]  # max(ρ/ρ0 − 1, 0), |v|², neighbours
         self.speed = ti.field(ti.f32, shape=state.capacity)  # |v|, for the maximum
-        # The terms' sums (slots 0-2), the maxima (3-5).
-        self.sums = TreeSum(state.capacity, 6, shared=choices.shared_memory, gpu=choices.gpu_blocks)
+        self.sums = TreeSum(state.capacity, 6, shared=choices.shared_memory, gpu=choices.gpu_blocks)  # sums, maxima
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 

@@ -39,13 +39,9 @@ class JacobiIterations:
         """Iterations the last substep ran (with a target one read, so only when asked)."""
         return int(self.flags[USED]) if self._measured else self._count
 
-    @used.setter
-    def used(self, count: int) -> None:
-        self.flags[USED] = count
-        self._count, self._measured = count, False
-
     def begin(self, iterations: int, measure: bool) -> None:
-        """A substep's iterations begin: ``iterations`` of them, fewer by :meth:`decide` when ``measure``."""
+        """A substep's iterations begin (none after a restore): ``iterations``, fewer by :meth:`decide` when
+        ``measure``."""
         self._count, self._measured = iterations, measure
 
     def done(self) -> bool:

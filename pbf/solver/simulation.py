@@ -392,7 +392,7 @@ class Simulation:
         self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
-        self.iterations_used = 0
+        self.iterations.begin(0, False)
         self.pressure_substeps = 0  # summed in State.pressure_sum since the frame began
         self._find_neighbours_in_place()
 
@@ -410,10 +410,6 @@ class Simulation:
     def iterations_used(self) -> int:
         """Jacobi iterations the last substep ran (read from the device)."""
         return self.iterations.used
-
-    @iterations_used.setter
-    def iterations_used(self, count: int) -> None:
-        self.iterations.used = count
 
     @property
     def dt_s(self) -> float:
@@ -473,17 +469,9 @@ class Simulation:
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
-            kernels.iterate_and_finish(
-                last,
-                dt,
-                features,
-                control,
-                pressure_scales=pressure_scales(
-                    self.scene.fluid.rest_density_kg_m3, self.model.grid.kernel_radius_m, dt
-                ),
-                first_of_frame=self.pressure_substeps == 0,
-                max_speed=self.scene.time.max_speed_m_s,
-            )
+            scales = pressure_scales(self.scene.fluid.rest_density_kg_m3, self.model.grid.kernel_radius_m, dt)
+            first, cap = self.pressure_substeps == 0, self.scene.time.max_speed_m_s
+            kernels.iterate_and_finish(last, dt, features, control, scales, first, cap)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1

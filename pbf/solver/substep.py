@@ -30,47 +30,18 @@ class SubstepKernels:
         self.iterations.begin(iterations, features.measure)
         it, done = 0, False
         while not done and it + per_call < iterations:
-            self._call(features, control, it, finish=False)
+            self._call(features, control, it, False)
             it += per_call
             done = self.iterations.done()  # the device's decision, read where the backend reads it
         return it
 
-    def iterate_and_finish(
-        self,
-        start: int,
-        dt: float,
-        features,
-        control,
-        pressure_scales: tuple[float, float],
-        first_of_frame: bool,
-        max_speed: float,
-    ) -> None:
+    def iterate_and_finish(self, start: int, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
         """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
-        and the pressure (Pa a unit of L and of Λ: ``pbf.solver.density.pressure_scales``; restarted
-        ``first_of_frame``)."""
-        self._call(
-            features,
-            control,
-            start,
-            finish=True,
-            dt=dt,
-            pressure_scales=pressure_scales,
-            first_of_frame=first_of_frame,
-            max_speed=max_speed,
-        )
+        and the pressure (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``;
+        restarted ``first_of_frame``)."""
+        self._call(features, control, start, True, dt, scales, first_of_frame, max_speed)
 
-    def _call(
-        self,
-        features,
-        control,
-        start,
-        *,
-        finish,
-        dt=0.0,
-        pressure_scales=(0.0, 0.0),
-        first_of_frame=False,
-        max_speed=0.0,
-    ):
+    def _call(self, features, control, start, finish, dt=0.0, scales=(0.0, 0.0), first_of_frame=False, max_speed=0.0):
         self._iterations(
             entries=self.grid.neighbours,
             features=features,
@@ -83,8 +54,8 @@ class SubstepKernels:
             dt=dt,
             epsilon=control.vorticity,
             xsph_c=control.xsph,
-            pressure_per_impulse=pressure_scales[0],
-            pressure_per_multiplier=pressure_scales[1],
+            pressure_per_impulse=scales[0],
+            pressure_per_multiplier=scales[1],
             first_of_frame=int(first_of_frame),
             max_speed=max_speed,
         )
