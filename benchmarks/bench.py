@@ -28,7 +28,7 @@ from tqdm import tqdm
 from benchmarks.instruments import TransferCounter, count_substeps, counts_table, start_profiled
 from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
-from pbf.solver.backend import decisions_on_device, describe, running_device
+from pbf.solver.backend import choices, describe, running_device
 from pbf.study.common import dam_break, run_command, timed
 
 COUNTED_FRAMES = 10
@@ -79,8 +79,8 @@ def presets(args) -> list[dict]:
     rows = []
     for name in args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml")):
         scene = load_scene(name, args.set)
-        with decisions_on_device(args.device_decisions):
-            sim = Simulation(scene if args.perturb is None else perturbed(scene, args.perturb), quiet=True)
+        path = choices(decisions_on_device=True if args.device_decisions else None)
+        sim = Simulation(scene if args.perturb is None else perturbed(scene, args.perturb), quiet=True, choices=path)
         if args.perturb is not None:  # and the start's positions (the settled ones, where it settles)
             jiggle(sim, np.random.default_rng(args.perturb))
         rng = np.random.default_rng([args.perturb or 0, 1])
@@ -165,14 +165,16 @@ def compare(paths: list[Path]) -> list[dict]:
 
 def counts(args) -> list:
     """``counts``: kernel calls and offloaded tasks per substep (``benchmarks.instruments``)."""
-    from pbf.solver.backend import in_gpu_blocks
+
+    def path(on_device):  # main started the backend: its choices, a GPU's where asked
+        device = True if on_device or args.device_decisions else None
+        return choices(decisions_on_device=device, gpu_blocks=True if args.gpu_blocks else None)
 
     rows = []
     for name in args.presets or ():  # the presets as shipped, on each path
         scene = load_scene(name, args.set)
         for label, on_device in ((name, False), (f"{name}, device decisions", True)):
-            with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
-                sim = Simulation(scene, arch=args.backend, quiet=True)
+            sim = Simulation(scene, arch=args.backend, quiet=True, choices=path(on_device))
             sim.step(3)  # past the compile of every kernel variant the counted substeps use
             rows.append((label, count_substeps(sim, COUNTED_FRAMES)))
     for particles in (args.sizes or [8000]) if not args.presets else ():
@@ -183,8 +185,7 @@ def counts(args) -> list:
             (f"{particles:,}, the preset's error target", dam_break(particles, 10, args.set), False),
             (f"{particles:,}, preset's target, device", dam_break(particles, 10, args.set), True),
         ):
-            with decisions_on_device(on_device or args.device_decisions), in_gpu_blocks(args.gpu_blocks):
-                sim = Simulation(scene, arch=args.backend, quiet=True)
+            sim = Simulation(scene, arch=args.backend, quiet=True, choices=path(on_device))
             sim.step(2)  # past the compile of every kernel variant the counted substeps use
             rows.append((name, count_substeps(sim, COUNTED_FRAMES)))
     print(counts_table(rows))

@@ -1,5 +1,5 @@
 """One substep on every backend; what differs is chosen when the Simulation is built: on a GPU backend
-(here the CPU told to act as one, ``pbf.solver.backend.decisions_on_device``) two iterations a call,
+(here the CPU told to act as one, ``pbf.solver.backend.choices(decisions_on_device=True)``) two iterations a call,
 loops over the particles' bucket and no decision read by the host; on the CPU an iteration a call and
 the error target's decision read after each. The same kernels take the same decisions on the device:
 the two give the same bits."""
@@ -11,7 +11,7 @@ import pytest
 
 from benchmarks.instruments import TransferCounter
 from pbf import Simulation
-from pbf.solver.backend import decisions_on_device
+from pbf.solver.backend import Choices, choices
 from pbf.solver.grid import SLOTS
 from scenes import small_dam_break
 
@@ -32,8 +32,7 @@ def test_the_gpus_choices_give_the_cpus_bits(step_back):
     scene = small_dam_break(iterations=10)
     scene["solver"].update(target_density_error=0.002, expert={"step_back": step_back})
     cpu = Simulation(scene)
-    with decisions_on_device():
-        gpu = Simulation(scene)
+    gpu = Simulation(scene, choices=choices(decisions_on_device=True))
     assert (cpu.iterations.per_call, gpu.iterations.per_call) == (1, 2)
     assert cpu.iterations.reads_decisions and not gpu.iterations.reads_decisions
     cpu_used, cpu_reads, cpu_launches = frames(cpu, 8)
@@ -53,8 +52,7 @@ def test_a_fixed_iteration_count_reads_nothing_in_the_substep():
     scene = small_dam_break(iterations=3)
     scene["solver"].update(target_density_error=0.0, min_iterations=1)
     for on_device in (False, True):
-        with decisions_on_device(on_device):
-            sim = Simulation(scene)
+        sim = Simulation(scene, choices=choices(decisions_on_device=on_device))
         used, reads, _ = frames(sim, 3)
         assert used == [3, 3, 3]
         assert reads == pytest.approx(1.0 / sim.frame_substeps)  # the frame's one read: the CFL limit's speed
@@ -70,8 +68,7 @@ def test_a_pouring_nozzle_adds_no_read_to_the_substep():
     scene["emitters"] = [
         {"position_m": [0.4, 0.6, 0.2], "direction": [0, -1, 0], "radius_m": 0.07, "speed_m_s": 2.0, "end_s": 1.0}
     ]
-    with decisions_on_device():
-        sim = Simulation(scene)
+    sim = Simulation(scene, choices=choices(decisions_on_device=True))
     counts = []
     for _ in range(3):
         with TransferCounter() as counter:
@@ -82,14 +79,13 @@ def test_a_pouring_nozzle_adds_no_read_to_the_substep():
 
 
 @pytest.mark.slow  # several Simulations compiled twice: the default run's time
-def test_the_gpus_list_layout_holds_the_cpus_lists(monkeypatch):
+def test_the_gpus_list_layout_holds_the_cpus_lists():
     # The GPU's neighbour lists (slot-major, built with a branch) hold the same neighbours in the same
     # order as the CPU's rows, so every sum over them adds the same terms in the same order; the
     # compiler, under fast math, may still group the additions of the two loops differently.
     scene = small_dam_break(iterations=3)
     rows = Simulation(scene)
-    monkeypatch.setattr("pbf.solver.simulation.on_gpu", lambda: True)
-    slot_major = Simulation(scene)
+    slot_major = Simulation(scene, choices=Choices(slot_major=True))
     assert slot_major.grid.slot_major and not rows.grid.slot_major
     for a, b in zip(rows.grid.neighbour_lists(), slot_major.grid.neighbour_lists(), strict=True):
         assert np.array_equal(a, b)
@@ -119,8 +115,7 @@ def test_lists_past_their_slots_stay_exact(divergence):
         near_edge = set(np.flatnonzero(np.abs(d - h) < 1e-6 * h).tolist())
         assert expected <= set(lists[i].tolist()) <= expected | near_edge
     before = hashlib.sha256(sim.positions().tobytes()).hexdigest()
-    with decisions_on_device():
-        device = Simulation(scene)
+    device = Simulation(scene, choices=choices(decisions_on_device=True))
     for _ in range(2):
         sim.step()
         device.step()

@@ -331,7 +331,7 @@ def test_a_box_and_a_sphere_come_to_rest_on_an_obstacle_and_on_each_other():
 @pytest.mark.slow
 def test_the_frames_one_read_brings_the_bodies_fastest_point():
     """The CFL limit counts the fastest point of any body, |v| + |ω| r_bound, and reads it with the
-    water's fastest speed in the frame's one transfer (``Diagnostics.frame_speeds``): the value the
+    water's fastest speed in the frame's one transfer (``Diagnostics.frame_read``): the value the
     launches that move the bodies keep on the device must be the bodies' as they are now, after the
     start, the substeps, the hand and a restore."""
     half = (0.05, 0.06, 0.06)
@@ -346,7 +346,7 @@ def test_the_frames_one_read_brings_the_bodies_fastest_point():
         return np.linalg.norm(row[7:10]) + np.linalg.norm(row[10:13]) * np.linalg.norm(half)
 
     def read():
-        return sim.diagnostics.frame_speeds(sim.bodies)[1]
+        return sim.diagnostics.frame_read(sim.bodies)[1]
 
     assert read() == pytest.approx(expected(), rel=1e-5) and read() > 0.3  # the start: its initial spin
     start = sim.snapshot()

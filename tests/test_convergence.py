@@ -8,6 +8,7 @@ import pytest
 
 from pbf import Simulation
 from pbf.solver.acceleration import REVERSAL, chebyshev_weights, stable_weights
+from pbf.solver.density import pressure_scales
 from pbf.solver.iterations import DONE, FRACTION, IN_SECOND, STEPPING_BACK
 from pbf.solver.model import Features
 from pbf.study.common import colour_surface_height, fill_height_m
@@ -71,7 +72,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     features = Features.of(sim.model, control)
     kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features)  # a substep's lines 1-7
     for start in range(3):  # three iterations, an iteration a call: x* ends in the second buffer
-        kernels._call(features, control, start, finish=False)
+        kernels._call(features, control, start, False)
     newer, older = x_star.second.to_numpy(), x_star.first.to_numpy()
     pressure_newer, pressure_older = sim.density.lam_total.to_numpy(), sim.density.lam_before.to_numpy()
     assert np.abs(newer - older).max() > 1e-4
@@ -79,15 +80,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     flags, values = sim.iterations.flags, sim.iterations.values
     flags[DONE], flags[IN_SECOND], flags[STEPPING_BACK], values[FRACTION] = 1, 1, 1, 0.25
     control.target_density_error = 0.001
-    kernels.iterate_and_finish(
-        3,
-        sim.dt_s,
-        Features.of(sim.model, control),
-        control,
-        pressure_per_impulse=1.0,
-        first_of_frame=True,
-        max_speed=0.0,
-    )
+    kernels.iterate_and_finish(3, sim.dt_s, Features.of(sim.model, control), control, (1.0, 0.0), True, 0.0)
     n = sim.particle_count
     np.testing.assert_allclose(sim.state.x.to_numpy()[:n], (newer + 0.25 * (older - newer))[:n], atol=1e-6)
     np.testing.assert_allclose(
@@ -209,8 +202,7 @@ def test_divergence_pressure_carries_the_hydrostatic_load():
     for _ in range(60):
         sim.step()
         x = sim.positions()
-        carried = sim.state.in_creation_order(sim.state.multiplier) * np.float32(sim.dt_s**2)
-        carried *= sim.density.pressure_scale(sim.dt_s) * 1000.0
+        carried = sim.state.in_creation_order(sim.state.multiplier) * pressure_scales(1000.0, h, sim.dt_s)[1]
         depth = fill_height_m(sim) - x[:, 1]
         inner = (depth > h) & (x[:, 1] > h) & np.all((x[:, [0, 2]] > h) & (x[:, [0, 2]] < 0.3 - h), axis=1)
         total_slopes.append(np.polyfit(depth[inner], sim.pressures()[inner], 1)[0])

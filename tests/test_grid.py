@@ -5,7 +5,7 @@ import pytest
 import taichi as ti
 
 from pbf.solver import scan
-from pbf.solver.backend import in_gpu_blocks
+from pbf.solver.backend import Choices
 from pbf.solver.grid import SLOTS, NeighbourGrid
 from pbf.solver.model import GridParams
 from pbf.solver.scan import GPU_SCAN_TOP, ExclusiveScan, TreeSum
@@ -22,7 +22,8 @@ def make_grid(n, lower, upper, h, reach, slot_major=False, bucket=False):
     ``slot_major``: the GPU's layout; ``bucket``: loops over the particles' bucket, as on a GPU."""
     active = ti.field(ti.i32, shape=())
     active[None] = n
-    return NeighbourGrid(GridParams.covering(n, lower, upper, h, reach), active, slot_major, n if bucket else active)
+    params = GridParams.covering(n, lower, upper, h, reach)
+    return NeighbourGrid(params, active, Choices(slot_major=slot_major), n if bucket else active)
 
 
 def grid_neighbours(points, lower, upper, h, reach=1, checked=True, slot_major=False):
@@ -203,8 +204,7 @@ def test_a_scan_whose_caller_counted_the_blocks(block, length):
     # (add_to_block), the first pass up skipped (counted=True), the block sums cleared after
     # (clear_block); twice, so that a sum left over from the first count would show in the second.
     # "gpu": a GPU backend's tree, blocks of 32 under a top level of up to GPU_SCAN_TOP entries.
-    with in_gpu_blocks(block == "gpu"):
-        scan = ExclusiveScan(length, block=None if block == "gpu" else block)
+    scan = ExclusiveScan(length, block=None if block == "gpu" else block, gpu=block == "gpu")
     source = ti.field(ti.i32, shape=length)
     starts = ti.field(ti.i32, shape=length + 1)
 
@@ -248,9 +248,8 @@ def test_a_scan_whose_caller_counted_the_blocks(block, length):
 def test_a_gpus_prefix_sum_stops_at_a_top_level_of_a_few_hundred(length, lengths):
     # On a GPU each level above the first is a pass up, a launch: the tree stops at the first level of
     # at most GPU_SCAN_TOP block sums, which start_of reads whole. The float sums keep their blocks.
-    with in_gpu_blocks():
-        tree = ExclusiveScan(length).tree
-        assert TreeSum(length, shared=False).tree.lengths[-1] <= 32  # a float sum keeps its tree of 32s
+    tree = ExclusiveScan(length, gpu=True).tree
+    assert TreeSum(length, gpu=True).tree.lengths[-1] <= 32  # a float sum keeps its tree of 32s
     assert tree.lengths == lengths
     assert tree.blocks[:-1] == [32] * (len(lengths) - 1) and tree.blocks[-1] >= lengths[-1]
     assert lengths[-1] <= GPU_SCAN_TOP
@@ -327,9 +326,8 @@ def test_a_list_cut_short_is_reported_grown_and_exact_after():
     x.from_numpy(points)
     grid.sort(x, ti.field(ti.i32, shape=n))
 
-    @ti.kernel
-    def take() -> ti.types.vector(2, ti.i32):
-        return grid.take_status()
+    def take():
+        return tuple(int(v) for v in grid.status.to_numpy())
 
     grid.build(x)
     most_entries, truncated = take()
@@ -337,6 +335,7 @@ def test_a_list_cut_short_is_reported_grown_and_exact_after():
     with pytest.warns(RuntimeWarning, match="needed 89,700 entries"):
         grid.settle_frame(most_entries, bool(truncated))
     assert grid.neighbours.shape[0] == n * (n - 1) * 3 // 2
+    assert take() == (0, 0)  # grown: the record starts again
     grid.build(x)
     assert np.array_equal(grid.neighbour_count.to_numpy(), np.full(n, n - 1))
     assert all(len(set(entries.tolist())) == n - 1 for entries in grid.neighbour_lists())

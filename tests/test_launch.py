@@ -9,7 +9,7 @@ import taichi as ti
 
 from benchmarks.instruments import Observer, watching, watching_nothing
 from pbf.solver import Simulation, launch
-from pbf.solver.backend import decisions_on_device
+from pbf.solver.backend import choices
 from pbf.solver.launch import PUBLIC_LAUNCH_VAR, Launcher, knows_taichi
 from tests.scenes import small_dam_break
 
@@ -141,8 +141,7 @@ def launchers(sim) -> list[Launcher]:
 def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_device):
     # One Simulation run twice from its start (reset() restores it exactly): launched directly, then
     # with every Launcher calling its kernel the ordinary way. One set of kernels, not two.
-    with decisions_on_device(on_device):
-        sim = Simulation(small_dam_break(), quiet=True)
+    sim = Simulation(small_dam_break(), quiet=True, choices=choices(decisions_on_device=on_device))
     assert len(launchers(sim)) == 2
     start = sim.positions()
     sim.step(10)

@@ -7,7 +7,7 @@ import pytest
 
 from pbf.scene import load_scene
 from pbf.solver import settled
-from pbf.solver.backend import decisions_on_device
+from pbf.solver.backend import choices
 from pbf.solver.simulation import Simulation
 from tests.scenes import small_dam_break
 
@@ -44,24 +44,25 @@ def test_a_second_start_restores_the_first_settled_state_bit_for_bit(folder, mon
 
 def test_the_key_follows_the_physics_not_the_view():
     scene = load_scene(small_dam_break(), SETTLING)
-    same = settled.settled_key(scene)
-    assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "camera.position_m=[1, 1, 2]"])) == same
-    assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "solver.iterations=5"])) != same
-    assert settled.settled_key(load_scene(small_dam_break(), ["time.settle_s=0.2"])) != same
-    with decisions_on_device():  # the GPU backends' substep, run on the CPU: another path
-        assert settled.settled_key(scene) != same
+    cpu = choices(decisions_on_device=False)
+    same = settled.settled_key(scene, cpu)
+    assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "camera.position_m=[1, 1, 2]"]), cpu) == same
+    assert settled.settled_key(load_scene(small_dam_break(), [*SETTLING, "solver.iterations=5"]), cpu) != same
+    assert settled.settled_key(load_scene(small_dam_break(), ["time.settle_s=0.2"]), cpu) != same
+    # The GPU backends' substep, run on the CPU: another path.
+    assert settled.settled_key(scene, choices(decisions_on_device=True)) != same
 
 
 def test_a_file_cut_short_is_settled_again(folder):
     scene = load_scene(small_dam_break(), SETTLING)
-    (folder / f"{settled.settled_key(scene)}.npz").write_bytes(b"PK\x03\x04 cut short")
-    assert settled.load(scene) is None
+    (folder / f"{settled.settled_key(scene, choices())}.npz").write_bytes(b"PK\x03\x04 cut short")
+    assert settled.load(scene, choices()) is None
     sim = Simulation(scene)  # settles, and replaces the file
-    assert np.array_equal(settled.load(scene).positions_m, sim.positions())
+    assert np.array_equal(settled.load(scene, choices()).positions_m, sim.positions())
 
 
 def test_nothing_is_kept_without_the_offline_cache(monkeypatch):
     monkeypatch.setattr(settled, "cache_folder", lambda name: None)
     scene = load_scene(small_dam_break(), SETTLING)
-    settled.store(scene, Simulation(scene).snapshot())
-    assert settled.load(scene) is None
+    settled.store(scene, Simulation(scene).snapshot(), choices())
+    assert settled.load(scene, choices()) is None

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from pbf.solver import Simulation, buckets
-from pbf.solver.backend import decisions_on_device
+from pbf.solver.backend import choices
 from pbf.solver.model import BYTES_PER_CELL, BYTES_PER_PARTICLE, reused_allocation
 from tests.scenes import small_dam_break
 
@@ -101,11 +101,11 @@ def test_a_smaller_scene_takes_the_larger_bucket_a_start_before_compiled(tmp_pat
 )
 def test_a_scene_steps_bit_for_bit_the_same_in_a_larger_bucket(monkeypatch, on_device):
     monkeypatch.setattr(buckets, "record", lambda particles, cells: None)  # the user's cache folder untouched
-    with decisions_on_device(on_device):
-        monkeypatch.setattr(buckets, "compiled", lambda: frozenset())
-        own = Simulation(small_dam_break(), quiet=True)
-        monkeypatch.setattr(buckets, "compiled", lambda: frozenset({(32768, 131072)}))
-        larger = Simulation(small_dam_break(), quiet=True)
+    path = choices(decisions_on_device=on_device)
+    monkeypatch.setattr(buckets, "compiled", lambda: frozenset())
+    own = Simulation(small_dam_break(), quiet=True, choices=path)
+    monkeypatch.setattr(buckets, "compiled", lambda: frozenset({(32768, 131072)}))
+    larger = Simulation(small_dam_break(), quiet=True, choices=path)
     assert (own.model.allocated, own.model.grid.allocated_cells) == (16384, 65536)
     assert (larger.model.allocated, larger.model.grid.allocated_cells) == (32768, 131072)
     start = own.positions()

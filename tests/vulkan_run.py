@@ -68,7 +68,7 @@ def kernel_task(out: dict) -> None:
 def scan_task(out: dict) -> None:
     import taichi as ti
 
-    from pbf.solver.backend import GPU_ARCHES, running_device
+    from pbf.solver.backend import GPU_ARCHES, choices, running_device
     from pbf.solver.scan import ExclusiveScan, TreeSum
 
     for length in SCAN_LENGTHS:
@@ -79,7 +79,9 @@ def scan_task(out: dict) -> None:
         floats = ti.field(ti.f32, shape=length)
         source.from_numpy(counts)
         floats.from_numpy(values)
-        scan, sums = ExclusiveScan(length), TreeSum(length, 2)
+        chosen = choices()
+        scan = ExclusiveScan(length, gpu=chosen.gpu_blocks)
+        sums = TreeSum(length, 2, shared=chosen.shared_memory, gpu=chosen.gpu_blocks)
 
         @ti.kernel
         def prefix():
@@ -119,7 +121,7 @@ def scan_task(out: dict) -> None:
 def grid_task(out: dict) -> None:
     import taichi as ti
 
-    from pbf.solver.backend import on_gpu
+    from pbf.solver.backend import choices
     from pbf.solver.grid import NeighbourGrid
     from pbf.solver.model import NEIGHBOUR_REACH, GridParams
 
@@ -128,9 +130,12 @@ def grid_task(out: dict) -> None:
     active = ti.field(ti.i32, shape=())
     active[None] = n
     # The solver's choices for this backend: a GPU's slot-major lists and loops over the bucket.
-    gpu = on_gpu()
+    chosen = choices()
     grid = NeighbourGrid(
-        GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, NEIGHBOUR_REACH), active, gpu, n if gpu else active
+        GridParams.covering(n, (0, 0, 0), (1, 1, 1), h, NEIGHBOUR_REACH),
+        active,
+        chosen,
+        n if chosen.slot_major else active,
     )
     x = ti.Vector.field(3, ti.f32, shape=n)
     key = ti.field(ti.i32, shape=n)
@@ -188,7 +193,7 @@ def seed_simulation(perturb: int | None = None):
     from pbf import Simulation
 
     if "dam_break" not in SIMULATION:
-        sim = SIMULATION["dam_break"] = Simulation("dam_break", quiet=True)
+        sim = SIMULATION["dam_break"] = Simulation("dam_break", quiet=True, choices=SIMULATION["choices"])
         if perturb is not None:
             start = sim.snapshot()
             noise = np.random.default_rng(perturb).normal(0.0, PERTURBATION_M, start.positions_m.shape)
@@ -254,16 +259,16 @@ def main() -> None:
     parser.add_argument("--perturb", type=int, default=None, help="seed: start from positions moved by rounding noise")
     parser.add_argument("tasks", nargs="+", choices=TASKS)
     args = parser.parse_args()
-    from pbf.solver.backend import decisions_on_device, running_device, start_backend
+    from pbf.solver.backend import choices, running_device, start_backend
 
     start_backend(args.arch, fast_compile=args.fast_compile)
     out = {"device": np.array(running_device().name), "arch": np.array(running_device().arch)}
-    with decisions_on_device(args.device_decisions):
-        for task in args.tasks:
-            start = time.perf_counter()
-            TASKS[task](out, args.perturb) if task == "seed" else TASKS[task](out)
-            out[f"seconds_{task}"] = np.array(time.perf_counter() - start)
-            print(f"{task}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+    SIMULATION["choices"] = choices(decisions_on_device=True if args.device_decisions else None)
+    for task in args.tasks:
+        start = time.perf_counter()
+        TASKS[task](out, args.perturb) if task == "seed" else TASKS[task](out)
+        out[f"seconds_{task}"] = np.array(time.perf_counter() - start)
+        print(f"{task}: {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
     np.savez(args.out, **out)
 
 

@@ -38,10 +38,6 @@ class Device:
 _started: Device | None = None
 _options: dict = {}
 """The ``ti.init`` options of the running backend, for ``restart_backend``."""
-_decisions_on_device_on_cpu = False
-"""Tests run the GPU backends' device-resident substep on the CPU (:func:`decisions_on_device`)."""
-_gpu_blocks_on_cpu = False
-"""Counts of launches lay the sums out in a GPU's blocks on the CPU (:func:`in_gpu_blocks`)."""
 
 CPU_DEVICE = Device("cpu", "")
 SOFTWARE_VULKAN = ("llvmpipe", "lavapipe", "swiftshader")
@@ -268,14 +264,32 @@ def on_gpu() -> bool:
     return _started is not None and _started.arch in GPU_ARCHES
 
 
-def gpu_blocks() -> bool:
-    """Whether sums built now take a GPU's blocks (``pbf.solver.scan``): on a GPU, or inside :func:`in_gpu_blocks`."""
-    return on_gpu() or _gpu_blocks_on_cpu
+@dataclass(frozen=True)
+class Choices:
+    """What differs by backend, one value made when a Simulation starts (:func:`choices`) and handed to the
+    stages that build on it (docs/METHOD.md, "One substep on every backend")."""
+
+    decisions_on_device: bool = False
+    """A GPU's path: two iterations a call, no decision read by the host, loops over the capacity bucket."""
+    gpu_blocks: bool = False
+    """Prefix sums and tree sums laid out in a GPU's blocks of 32 (``pbf.solver.scan``)."""
+    shared_memory: bool = False
+    """Float sums added up in each GPU block's shared memory: CUDA only (SPIR-V fails on a second loop with
+    a shared array)."""
+    slot_major: bool = False
+    """Neighbour lists slot-major (``NeighbourGrid.slot_major``)."""
 
 
-def in_gpu_blocks(enabled: bool = True):
-    """Sums built inside take a GPU's blocks on any backend (the same results; a GPU's launches to count)."""
-    return _choosing(sys.modules[__name__], "_gpu_blocks_on_cpu", enabled)
+def choices(decisions_on_device: bool | None = None, gpu_blocks: bool | None = None) -> Choices:
+    """The running backend's choices; ``decisions_on_device`` and ``gpu_blocks`` ask for a GPU's on any
+    backend (the same results: tests, and a GPU's launches counted on the CPU)."""
+    gpu = on_gpu()
+    return Choices(
+        gpu if decisions_on_device is None else decisions_on_device,
+        gpu if gpu_blocks is None else gpu_blocks,
+        _started is not None and _started.arch == "cuda",
+        gpu,
+    )
 
 
 @contextlib.contextmanager
@@ -287,21 +301,6 @@ def _choosing(owner, name: str, value):
         yield
     finally:
         setattr(owner, name, before)
-
-
-def sums_in_shared_memory() -> bool:
-    """Whether float sums add up in shared memory: CUDA only (SPIR-V fails on a second loop with a shared array)."""
-    return _started is not None and _started.arch == "cuda"
-
-
-def keeps_decisions_on_device() -> bool:
-    """Whether a Simulation built now takes the GPU's choices: on a GPU, or inside :func:`decisions_on_device`."""
-    return on_gpu() or _decisions_on_device_on_cpu
-
-
-def decisions_on_device(enabled: bool = True):
-    """Simulations built inside take the GPU backends' device-resident path on any backend."""
-    return _choosing(sys.modules[__name__], "_decisions_on_device_on_cpu", enabled)
 
 
 def light_compile():

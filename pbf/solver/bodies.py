@@ -17,6 +17,7 @@ import taichi as ti
 
 from pbf.solver import backend
 from pbf.solver.constants import scene_constants
+from pbf.solver.density import pressure, pressure_scales
 from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
 
@@ -233,7 +234,7 @@ class Bodies:
 
     def speed_limit_m_s(self) -> float:
         """The fastest any point of a body moves, |v| + |ω| r_bound, for the CFL limit (a read from the device;
-        ``Diagnostics.frame_speeds`` brings it with the water's)."""
+        ``Diagnostics.frame_read`` brings it with the water's)."""
         return float(self.fastest[None]) if self.count else 0.0
 
     @ti.func
@@ -266,14 +267,10 @@ class Bodies:
         for _ in range(1):
             self._set_fastest()
 
-    def grab(self, push, speed_limit_m_s: float) -> None:
-        """The hand in the water (``model.Push``, its speed capped at ``speed_limit_m_s``) carries a body as
-        the water: velocity blended toward the hand's by w = (1 − (d/R)²)³, d from its surface, spin damped."""
-        velocity = np.asarray(push.velocity_m_s, np.float64)
-        speed = float(np.linalg.norm(velocity))
-        if speed > speed_limit_m_s:
-            velocity *= speed_limit_m_s / speed
-        self._grab(push.point_m, velocity.tolist(), push.radius_m)
+    def grab(self, push) -> None:
+        """The hand in the water (``model.Push``, capped by the caller) carries a body as the water: velocity
+        blended toward the hand's by w = (1 − (d/R)²)³, d from its surface, spin damped."""
+        self._grab(push.point_m, push.velocity_m_s, push.radius_m)
 
     # ------------------------------------------------------------------ the rigid step
 
@@ -770,8 +767,7 @@ class Bodies:
                     f = ti.Vector([0.0, 0.0, 0.0])
                     _density, gradient = self.ghost_of(x[i], b)
                     if gradient.norm_sqr() > 0.0:
-                        pressure = position_scale * lam_total[i] + velocity_scale * multiplier[i]
-                        f = volume * pressure * gradient
+                        f = volume * pressure(lam_total[i], multiplier[i], position_scale, velocity_scale) * gradient
                     if self.pusher[i] == b:
                         f += push_scale * self.shift[i]
                     force += f
@@ -790,5 +786,5 @@ class Bodies:
     def gather(self, x, lam_total, multiplier, active, dt: float) -> None:
         """The fluid's reaction on every body over the substep just solved (module docstring), with
         p_i = −ρ0 h² (L_i/Δt² + Λ_i); the next :meth:`advance` applies it."""
-        scale = -self.params.rest_density_kg_m3 * self.kernel_radius**2
-        self._gather(x, lam_total, multiplier, active, scale / dt**2, scale, -self.particle_mass / dt**2)
+        scales = pressure_scales(self.params.rest_density_kg_m3, self.kernel_radius, dt)
+        self._gather(x, lam_total, multiplier, active, *scales, -self.particle_mass / dt**2)

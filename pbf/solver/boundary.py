@@ -401,7 +401,7 @@ class Boundaries:
 
     def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
         """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as
-        already read from the device (``Diagnostics.frame_speeds``), instead of a read of its own."""
+        already read from the device (``Diagnostics.frame_read``), instead of a read of its own."""
         return max(
             bodies_m_s if bodies_m_s is not None and part is self.bodies else part.speed_limit_m_s()
             for part in self.parts
@@ -452,6 +452,11 @@ class Boundaries:
                 density += d
                 gradient += g
         return density, gradient
+
+    @ti.func
+    def mirror_walls(self, p):
+        """The walls whose ghost is the fluid's mirror image near p (``Container.mirror_walls``)."""
+        return self.container.mirror_walls(p)
 
     @ti.func
     def velocity(self, p):

@@ -18,6 +18,7 @@ outgrows", "Artificial pressure", "Walls and obstacles", "The free surface").
 
 import taichi as ti
 
+from pbf.solver.backend import Choices
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import named
 from pbf.solver.model import SCORR_N, DensityParams
@@ -29,6 +30,21 @@ SURFACE_RAMP = (0.25, 0.75)
 the surface ghost's smoothstep starts and ends."""
 SURFACE_SKIP = 0.002
 """ψ is left at 0, without its neighbour loop, where twice the deficit 1 − ρ/ρ0 is below this."""
+
+
+@ti.func
+def pair_terms(r, volume, h, scale):
+    """Pair (i, j) at r = x_i − x_j: ĝ_ij = V h ∇W(r), and its terms (V W_ij, ĝ_ij, |ĝ_ij|²) of ρ_i/ρ0, of
+    Σ_j ĝ_ij and of Σ_j |∂C_i/∂x_j|² (the density pass's and the divergence pass's)."""
+    w, grad_w = scaled_kernel_and_gradient(r, scale)
+    g = volume * h * grad_w
+    return g, ti.Vector([volume * w, g[0], g[1], g[2], g.norm_sqr()])
+
+
+@ti.func
+def multiplier_denominator(gradient_i, sum_sq, relaxation):
+    """The denominator of λ̂_i (Eq. 10): |∂C_i/∂x_i|² + Σ_j |∂C_i/∂x_j|² + ε̂."""
+    return gradient_i.norm_sqr() + sum_sq + relaxation
 
 
 @ti.func
@@ -47,7 +63,7 @@ class DensityConstraint:
     """The constraint's passes (``@ti.func``, composed into kernels by ``pbf.solver.substep``) and scratch:
     λ̂ per particle, its sum over a substep, the error sum."""
 
-    def __init__(self, params: DensityParams, boundaries, grid):
+    def __init__(self, params: DensityParams, boundaries, grid, choices: Choices):
         particle_count = params.particle_count
         self.h = params.kernel_radius_m
         self.boundaries = boundaries
@@ -78,10 +94,10 @@ class DensityConstraint:
         self.wall_gradient = ti.Vector.field(3, ti.f32, shape=particle_count)
         """The held-still ghost's gradient at x_i (1/m), from the λ pass for the Δx pass (:meth:`walls`)."""
         self.error = ti.field(ti.f32, shape=particle_count)  # max(C_i, 0) of the last λ pass
-        self.error_sum = TreeSum(particle_count)
+        self.error_sum = TreeSum(particle_count, shared=choices.shared_memory, gpu=choices.gpu_blocks)
         """Σ_i max(C_i, 0), compensated and summed the same way on any thread count (it decides when to stop)."""
         self.lam_total = ti.field(ti.f32, shape=particle_count)
-        """L_i, the multiplier of the substep's whole correction (the pressure impulse, pressure_scale):
+        """L_i, the multiplier of the substep's whole correction (the pressure impulse, :func:`pressure`):
         it combines as the positions do, L^{k+1} = L^{k−1} + w (L^k + λ̂^k − L^{k−1})."""
         self.lam_before = ti.field(ti.f32, shape=particle_count)  # L^{k−1} of lam_total's recurrence
         self.denominator = ti.field(ti.f32, shape=particle_count)
@@ -89,10 +105,18 @@ class DensityConstraint:
         included with mirrored walls."""
 
     @ti.func
+    def ghost(self, xi, velocity_level: ti.template()):
+        """The walls' ghost at xi, density ρ/ρ0 and gradient (1/m), chosen here for every pass (docs/METHOD.md,
+        "Walls and obstacles"): the position passes leave out the walls whose ghost is the fluid's mirror
+        image (``solver.wall_mirror``; :meth:`pair_sums` walks the images), the divergence pass at velocity
+        level (``velocity_level``) takes every wall's table ghost."""
+        return self.boundaries.ghost(xi, ti.static(not velocity_level))
+
+    @ti.func
     def walls(self, i, xi):
-        """The ghost density ρ/ρ0 of the boundaries held still at xi (mirrored walls left out); its gradient
-        is kept for the Δx pass."""
-        wall, gradient = self.boundaries.ghost(xi, True)
+        """The ghost density ρ/ρ0 of the boundaries held still at xi (:meth:`ghost`); its gradient is kept for
+        the Δx pass."""
+        wall, gradient = self.ghost(xi, False)
         self.wall_gradient[i] = gradient
         return wall
 
@@ -133,9 +157,8 @@ class DensityConstraint:
         |ĝ_ij|² into Σ_j |∂C_i/∂x_j|²."""
         xj = position(p.x, j)
         if ti.static(p.gradients):
-            w, grad_w = scaled_kernel_and_gradient(p.xi - xj, p.scale)
-            g = p.volume * p.h * grad_w
-            p.sums += ti.Vector([p.volume * w, g[0], g[1], g[2], g.norm_sqr()])
+            _g, terms = pair_terms(p.xi - xj, p.volume, p.h, p.scale)
+            p.sums += terms
         else:
             p.sums[0] += p.volume * scaled_kernel((p.xi - xj).norm_sqr(), p.scale)
 
@@ -167,7 +190,7 @@ class DensityConstraint:
             named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, gradients=gradients, sums=sums)
         )
         if ti.static(self.wall_mirror):
-            near, plane = self.boundaries.container.mirror_walls(xi)
+            near, plane = self.boundaries.mirror_walls(xi)
             if near.sum() > 0:
                 # A walk of its own for the particles at a wall: the images' code in the common walk
                 # would slow every particle's pairs, the few at a wall or not.
@@ -186,7 +209,7 @@ class DensityConstraint:
         """ρ_i/ρ0 of particle i: the fluid and the ghost fluid behind the walls."""
         xi = x[i]
         ratio, gradient_i, sum_sq, own_images = self.pair_sums((x, x, 0), xi, i, neighbours, False)
-        wall, wall_gradient = self.boundaries.ghost(xi, True)
+        wall, wall_gradient = self.ghost(xi, False)
         return ratio + wall
 
     @ti.func
@@ -199,7 +222,7 @@ class DensityConstraint:
         ratio, gradient_i, sum_sq, own_images = self.pair_sums((x, x, 0), xi, i, neighbours, True)
         # The colour gradient, the ghost fluid held still: zero inside a lattice, at a wall too.
         colour = gradient_i + own_images + h * self.wall_gradient[i]
-        self.denominator[i] = (colour + own_images).norm_sqr() + sum_sq + relaxation
+        self.denominator[i] = multiplier_denominator(colour + own_images, sum_sq, relaxation)
         self.colour_gradient[i] = colour
         self.plain_error[i] = ratio + wall - 1.0
 
@@ -304,7 +327,7 @@ class DensityConstraint:
             named(x=x, xi=xi, h=h, volume=volume, scale=scale, near=near, plane=plane, lam_i=lam_i, scorr=scorr, dx=dx)
         )
         if ti.static(self.wall_mirror):
-            near, plane = self.boundaries.container.mirror_walls(xi)
+            near, plane = self.boundaries.mirror_walls(xi)
             if near.sum() > 0:  # a walk of its own, as in pair_sums
                 w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, True)
                 dx += 2.0 * lam_i * volume * h * g_self
@@ -351,7 +374,16 @@ class DensityConstraint:
         first[i] = self.boundaries.project_recorded(newer + fraction * (older - newer), i, "between", fraction)
         self.lam_total[i] += fraction * (self.lam_before[i] - self.lam_total[i])
 
-    def pressure_scale(self, dt: float) -> float:
-        """p_i = −ρ0 h² L_i / Δt² (Pa per unit ρ0, L_i = lam_total): matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
-        with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt²."""
-        return -(self.h**2) / dt**2
+
+def pressure_scales(rest_density_kg_m3: float, h: float, dt: float) -> tuple[float, float]:
+    """Pa a unit of L_i (``lam_total``) and a unit of Λ_i (``State.multiplier``) in :func:`pressure`."""
+    scale = -rest_density_kg_m3 * h**2
+    return scale / dt**2, scale
+
+
+@ti.func
+def pressure(impulse, multiplier, per_impulse, per_multiplier):
+    """p_i = −ρ0 h² (L_i/Δt² + Λ_i) (Pa) with :func:`pressure_scales`: matching Δx_i = h Σ_j (L_i + L_j) ĝ_ij
+    with the SPH pressure acceleration −Σ_j V (p_i + p_j)/ρ0 ∇W_ij applied over Δt² (docs/METHOD.md,
+    "The pressure read-out"); the pressures read out and the bodies' reaction alike."""
+    return per_impulse * impulse + per_multiplier * multiplier

@@ -2,7 +2,8 @@
 
 import taichi as ti
 
-from pbf.solver.grid import NeighbourList
+from pbf.solver.backend import Choices
+from pbf.solver.grid import MOST_ENTRIES, TRUNCATED, NeighbourList
 from pbf.solver.scan import TreeSum
 
 
@@ -10,14 +11,14 @@ from pbf.solver.scan import TreeSum
 class Diagnostics:
     """Reductions over the state, and the per-particle density ratio renderers colour by."""
 
-    def __init__(self, state, density, grid, particle_mass_kg: float):
+    def __init__(self, state, density, grid, particle_mass_kg: float, choices: Choices):
         self.state = state
         self.density = density
         self.grid = grid
         self.mass = particle_mass_kg
         self.terms = [ti.field(ti.f32, shape=state.capacity) for _ in range(3)]  # max(ρ/ρ0 − 1, 0), |v|², neighbours
         self.speed = ti.field(ti.f32, shape=state.capacity)  # |v|, for the maximum
-        self.sums = TreeSum(state.capacity, 6)  # the terms' sums (slots 0-2), the maxima (3-5)
+        self.sums = TreeSum(state.capacity, 6, shared=choices.shared_memory, gpu=choices.gpu_blocks)  # sums, maxima
         self.density_ratio = ti.field(ti.f32, shape=state.capacity)
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
@@ -49,22 +50,21 @@ class Diagnostics:
         return self.density_ratio
 
     @ti.kernel
-    def _max_speed(self, bodies: ti.template()) -> tuple[ti.f32, ti.i32, ti.i32, ti.f32]:
+    def _frame_read(self, bodies: ti.template()) -> tuple[ti.f32, ti.i32, ti.i32, ti.f32]:
         for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 self.speed[i] = self.state.v[i].norm()
         self.sums.maximum(self.speed, 4, self.state.active)
-        status = self.grid.take_status()
         solids = 0.0
         if ti.static(hasattr(bodies, "fastest")):  # None when the scene has no bodies
             solids = bodies.fastest[None]
-        return self.sums.high[4], status[0], status[1], solids
+        return self.sums.high[4], self.grid.status[MOST_ENTRIES], self.grid.status[TRUNCATED], solids
 
-    def frame_speeds(self, bodies=None) -> tuple[float, float]:
-        """The fastest particle and body point (m/s) for the CFL limit, and the grid's record: a frame's one read."""
-        speed, most_entries, truncated, solids = self._max_speed(bodies)
-        self.grid.settle_frame(most_entries, bool(truncated))
-        return float(speed), float(solids)
+    def frame_read(self, bodies=None) -> tuple[float, float, int, bool]:
+        """A frame's one read: the fastest particle and body point (m/s) for the CFL limit, and the grid's
+        record since its lists last grew (``NeighbourGrid.settle_frame``'s arguments)."""
+        speed, most_entries, truncated, solids = self._frame_read(bodies)
+        return float(speed), float(solids), int(most_entries), bool(truncated)
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""

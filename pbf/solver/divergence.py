@@ -9,10 +9,11 @@ Eq. 10 drive c_i = ΔC_i + min(C_i, 0) to ≤ 0 at fixed x:
 
 import taichi as ti
 
+from pbf.solver.density import multiplier_denominator, pair_terms
 from pbf.solver.grid import named
 from pbf.solver.model import DensityParams
 from pbf.solver.scan import read_count
-from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_and_gradient, scaled_kernel_gradient
+from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_gradient
 
 
 @ti.data_oriented
@@ -23,7 +24,8 @@ class DivergenceCorrection:
         self.state = state
         self.boundaries = boundaries
         self.grid = grid
-        self.constants = density.constants  # h, V, ω and ε̂: the density constraint's
+        self.density = density  # its constants (h, V, ω and ε̂) and its choice of the walls' ghost
+        self.constants = density.constants
         self.denominator = ti.field(ti.f32, shape=params.particle_count)  # of δλ̂_i, at the fixed positions
         self.deficit = ti.field(ti.f32, shape=params.particle_count)  # min(C_i, 0) at x: what i may still fill
         self.increment = ti.field(ti.f32, shape=params.particle_count)  # δλ̂_i (the warm start's Λ_i first)
@@ -34,9 +36,8 @@ class DivergenceCorrection:
     def change_pair(self, i, j, p: ti.template()):
         """Pair (i, j)'s (δλ̂_i + δλ̂_j) ĝ_ij into Δv_i; at the ``start`` also its density and gradient."""
         if ti.static(p.start):
-            w, grad_w = scaled_kernel_and_gradient(p.xi - p.x[j], p.scale)
-            g = p.volume * p.h * grad_w
-            p.sums += ti.Vector([p.volume * w, g[0], g[1], g[2], g.norm_sqr()])
+            g, terms = pair_terms(p.xi - p.x[j], p.volume, p.h, p.scale)
+            p.sums += terms
             p.dv += (p.increment_i + self.increment[j]) * g
         else:
             p.dv += (
@@ -57,14 +58,13 @@ class DivergenceCorrection:
         self.grid.for_each_neighbour(i, neighbours, self.change_pair, p)
         wall_gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(start):
-            wall, at_start = self.boundaries.ghost(x[i], False)
+            wall, at_start = self.density.ghost(x[i], True)
             wall_gradient = at_start
             self.wall_gradient[i] = wall_gradient
             gradient_i = ti.Vector([sums[1], sums[2], sums[3]])
             self.deficit[i] = ti.min(sums[0] + wall - 1.0, 0.0)
-            self.denominator[i] = (
-                (gradient_i + h * wall_gradient).norm_sqr() + sums[4] + self.constants[None].relaxation
-            )
+            relaxation = self.constants[None].relaxation
+            self.denominator[i] = multiplier_denominator(gradient_i + h * wall_gradient, sums[4], relaxation)
         else:
             wall_gradient = self.wall_gradient[i]
         dv += increment_i * h * wall_gradient

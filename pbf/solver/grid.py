@@ -20,6 +20,7 @@ import warnings
 import numpy as np
 import taichi as ti
 
+from pbf.solver.backend import Choices
 from pbf.solver.constants import scene_constants
 from pbf.solver.model import GridParams
 from pbf.solver.scan import ExclusiveScan, read_count
@@ -49,10 +50,10 @@ def _named_type(names: tuple[str, ...]):
 
 @ti.data_oriented
 class NeighbourGrid:
-    """The uniform grid and exact neighbour lists of the module docstring; ``slot_major`` and
-    ``loop_bound`` are the backend's, chosen by the Simulation."""
+    """The uniform grid and exact neighbour lists of the module docstring; ``choices`` (``slot_major``,
+    ``gpu_blocks``) and ``loop_bound`` are the backend's, chosen by the Simulation."""
 
-    def __init__(self, params: GridParams, active, slot_major: bool, loop_bound):
+    def __init__(self, params: GridParams, active, choices: Choices, loop_bound):
         particle_count, resolution, reach = params.particle_count, params.resolution, params.reach
         allocated = params.allocated_particles or particle_count
         self.particle_count = particle_count
@@ -73,7 +74,7 @@ class NeighbourGrid:
         particle_count = allocated
         self.cell_particles = ti.field(ti.i32, shape=cell_count)
         self.cell_start = ti.field(ti.i32, shape=cell_count + 1)
-        self.cell_scan = ExclusiveScan(cell_count)
+        self.cell_scan = ExclusiveScan(cell_count, gpu=choices.gpu_blocks)
         self.particle_cell = ti.field(ti.i32, shape=particle_count)
         self.rank_in_cell = ti.field(ti.i32, shape=particle_count)
         self.cell_members = ti.field(ti.i32, shape=particle_count)
@@ -87,13 +88,13 @@ class NeighbourGrid:
         self.overflow = ti.field(ti.i32, shape=())
         """1 when the last visit found a particle with more than SLOTS neighbours."""
         self.status = ti.field(ti.i32, shape=2)
-        """What the builds saw since the host last asked (:meth:`take_status`)."""
+        """What the builds saw since the list last grew (:meth:`settle_frame`)."""
         self.loop_bound = loop_bound
         """What loops over the live particles run to (``State.loop_bound``); the first ``active[None]`` are live."""
-        self.slot_major = slot_major
+        self.slot_major = choices.slot_major
         """The one-visit list's layout: on a GPU slot-major (entry i + k·n: a warp walking its lists in step
         reads one contiguous run per k), on the CPU particle-major (entry i·SLOTS + k: one stretch a thread)."""
-        self.neighbour_scan = ExclusiveScan(particle_count)
+        self.neighbour_scan = ExclusiveScan(particle_count, gpu=choices.gpu_blocks)
         self.neighbours = ti.ndarray(ti.i32, shape=SLOTS * self.particle_count)
         """Flat neighbour list: the neighbours of sorted particle i, itself excluded, are the
         ``neighbour_listed[i]`` entries of :meth:`listed` and :meth:`neighbour`."""
@@ -123,16 +124,7 @@ class NeighbourGrid:
             self.clear_for_visit(i)
             if i < self.active[None]:
                 self.count_in_cell(x[i], i)
-        self.order_loops(key, self)
-
-    @ti.func
-    def gather(self, slot, i):
-        """What :meth:`sort` moves with a particle: nothing (its caller reorders its own arrays)."""
-        pass
-
-    @ti.func
-    def take_gathered(self, slot):
-        pass
+        self.order_loops(key, ())  # nothing carried: the caller reorders its own arrays
 
     @ti.func
     def clear_for_visit(self, i):
@@ -151,9 +143,10 @@ class NeighbourGrid:
         self.cell_scan.add_to_block(cell, 1)  # the scan's first pass up, done here
 
     @ti.func
-    def order_loops(self, key: ti.template(), mover: ti.template()):
+    def order_loops(self, key: ti.template(), carried: ti.template()):
         """Steps 2-3 once every particle is counted (:meth:`count_in_cell`), for the top level of a kernel:
-        :attr:`sorted_from`, and ``mover.gather(slot, i)`` of each particle into its sorted slot. The atomic
+        :attr:`sorted_from`, and each (field, scratch) pair of ``carried`` (``State.carried``) copied from
+        particle i into its sorted slot of the scratch. The atomic
         counter's ranks change from run to run, so a particle's place in its cell is its rank by ``key``
         (its slot before the sort breaks a tie): runs replay bit for bit."""
         # Over the allocated cells (their bucket, a count the kernel knows); those past the grid's are empty.
@@ -177,7 +170,8 @@ class NeighbourGrid:
                     key_other = key[other]
                     place += ti.select(key_other < key_i or (key_other == key_i and other < i), 1, 0)
                 self.sorted_from[place] = i
-                mover.gather(place, i)
+                for k in ti.static(range(len(carried))):
+                    carried[k][1][place] = carried[k][0][i]
 
     @ti.func
     def column_range(self, c, resolution, dx, dy):
@@ -277,16 +271,17 @@ class NeighbourGrid:
 
     @ti.func
     def find_neighbours(
-        self, gathered: ti.template(), x: ti.template(), neighbours: ti.template(), mover: ti.template()
+        self, gathered: ti.template(), x: ti.template(), neighbours: ti.template(), carried: ti.template()
     ):
         """Step 4 over the live particles, both visits, for the top level of a kernel whose loop before
-        cleared what they gather (:meth:`clear_for_visit`). ``gathered``: a ``mover``'s sorted positions
-        (:meth:`order_loops`), taken back by the first visit, or ``x``. The second visit runs only after
-        an overflow, each thread finding its start itself (``ExclusiveScan.start_of``); a compact list
-        longer than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
+        cleared what they gather (:meth:`clear_for_visit`). The first visit takes every field of ``carried``
+        back from its scratch (:meth:`order_loops`); ``gathered``: x's scratch there, or ``x``. The second
+        visit runs only after an overflow, each thread finding its start itself (``ExclusiveScan.start_of``);
+        a compact list longer than the array is cut at its end and ``status`` says so, for :meth:`settle_frame`."""
         for i in range(read_count(self.loop_bound, 1)):
             if i < self.active[None]:
-                mover.take_gathered(i)
+                for k in ti.static(range(len(carried))):
+                    carried[k][0][i] = carried[k][1][i]
                 self._visit_particle(gathered, neighbours, False, i)
                 self.neighbour_scan.add_to_block(i, self.neighbour_count[i])
         self.neighbour_scan.up(self.neighbour_count, self.active, self.overflow, True)
@@ -306,11 +301,11 @@ class NeighbourGrid:
     def _build(self, x: ti.template(), neighbours: NeighbourList):
         for i in range(read_count(self.loop_bound, 1)):
             self.clear_for_visit(i)
-        self.find_neighbours(x, x, neighbours, self)
+        self.find_neighbours(x, x, neighbours, ())
 
     def build(self, x) -> None:
         """Neighbour lists (|x_i − x_j| < h, i ≠ j) of positions ``x`` sorted by cell (:meth:`sort`), as the
-        substep builds them: exact unless the compact list outgrew its array (:meth:`take_status` says)."""
+        substep builds them: exact unless the compact list outgrew its array (:attr:`status` says)."""
         self._build(x, self.neighbours)
 
     def build_neighbours(self, x) -> None:
@@ -322,20 +317,14 @@ class NeighbourGrid:
             self.build(x)
         self.status.fill(0)
 
-    @ti.func
-    def take_status(self):
-        """The builds' record since the last call, (MOST_ENTRIES, TRUNCATED), cleared: for a kernel's read."""
-        status = ti.Vector([self.status[MOST_ENTRIES], self.status[TRUNCATED]])
-        for k in ti.static(range(2)):
-            self.status[k] = 0
-        return status
-
     def settle_frame(self, most_entries: int, truncated: bool) -> None:
-        """Act on the frame's record (:meth:`take_status`): a compact list over GROW_ABOVE of the array is
-        grown by half; one cut short too, with a warning (that substep missed pairs)."""
+        """Act on the record of :attr:`status` (``Diagnostics.frame_read``): a compact list over GROW_ABOVE of
+        the array is grown by half, and the record starts again; one cut short too, with a warning (that
+        substep missed pairs)."""
         most_entries = int(most_entries)
         if truncated or most_entries > GROW_ABOVE * self.neighbours.shape[0]:
             self.neighbours = ti.ndarray(ti.i32, shape=int(math.ceil(max(most_entries, 1) * 1.5)))
+            self.status.fill(0)
         if truncated:
             warnings.warn(
                 f"the neighbour list needed {most_entries:,} entries, more than the {SLOTS} per particle "

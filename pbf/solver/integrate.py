@@ -1,7 +1,6 @@
 """Time integration: external forces and prediction (Algorithm 1, lines 1-4); lines 20-23 are
 ``pbf.solver.postprocess``."""
 
-import numpy as np
 import taichi as ti
 
 
@@ -52,10 +51,6 @@ class Integrator:
                 w = (1.0 - q2) ** 3
                 self.state.v[i] += w * (velocity - self.state.v[i])
 
-    def push(self, push, speed_limit_m_s: float) -> None:
-        """Blend the velocities near the hand toward its velocity (``model.Push``), capped at ``speed_limit_m_s``."""
-        velocity = np.asarray(push.velocity_m_s, np.float64)
-        speed = float(np.linalg.norm(velocity))
-        if speed > speed_limit_m_s:
-            velocity *= speed_limit_m_s / speed
-        self._push(push.point_m, velocity.tolist(), push.radius_m)
+    def push(self, push) -> None:
+        """Blend the velocities near the hand toward its velocity (``model.Push``, capped by the caller)."""
+        self._push(push.point_m, push.velocity_m_s, push.radius_m)

@@ -1,5 +1,6 @@
-"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) and their rules, run on the device by the
-thread that finishes each error sum (docs/METHOD.md, "One substep on every backend").
+"""The Jacobi iterations of a substep (Algorithm 1, lines 8-19) as loops for ``pbf.solver.substep``'s kernels,
+and the stopping rule, decided on the device after each error sum (docs/METHOD.md, "One substep on every
+backend"); the host's loop over the calls is ``SubstepKernels.iterate``.
 """
 
 import numpy as np
@@ -38,20 +39,14 @@ class JacobiIterations:
         """Iterations the last substep ran (with a target one read, so only when asked)."""
         return int(self.flags[USED]) if self._measured else self._count
 
-    @used.setter
-    def used(self, count: int) -> None:
-        self.flags[USED] = count
-        self._count, self._measured = count, False
-
-    def calls(self, iterations: int, measure: bool, launch) -> int:
-        """Launch every call but the last (fewer once a read says the target is met); return the last's start."""
+    def begin(self, iterations: int, measure: bool) -> None:
+        """A substep's iterations begin (none after a restore): ``iterations``, fewer by :meth:`decide` when
+        ``measure``."""
         self._count, self._measured = iterations, measure
-        last = (iterations - 1) // self.per_call * self.per_call
-        for start in range(0, last, self.per_call):
-            launch(start)
-            if measure and self.reads_decisions and self.flags[DONE]:
-                return start + self.per_call
-        return last
+
+    def done(self) -> bool:
+        """The device's decision to stop (:meth:`decide`), read by the host where the backend reads it."""
+        return self._measured and self.reads_decisions and bool(self.flags[DONE])
 
     @ti.func
     def _loop_state(self, measure: ti.template(), k):
@@ -72,7 +67,7 @@ class JacobiIterations:
     def iterate(self, first: ti.template(), second: ti.template(), neighbours: ti.template(), run: ti.template()):
         """Iterations ``run.start`` … ``run.start + per_call − 1`` (over no particles once the target was
         met), for the top level of a kernel: λ̂_i (Eqs. 1, 10, lines 9-11); Δx_i (Eqs. 11-12), collided,
-        x*_i += Δx_i (lines 12-17); with a target Σ max(C_i, 0), then the rules (:meth:`received`)."""
+        x*_i += Δx_i (lines 12-17); with a target Σ max(C_i, 0), then the rules (:meth:`decide`)."""
         density = self.density
         for u in ti.static(range(self.per_call)):
             for i in range(read_count(self.loop_bound, 1)):
@@ -86,17 +81,19 @@ class JacobiIterations:
                 if k < run.iterations and i < self.active[None] * running:
                     density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
             if ti.static(run.measure):
-                context = ti.static((run.start + u, run.iterations, run.target, run.min_iterations, run.step_back))
-                density.error_sum.sum_then(density.error, 0, self.active, self.received, context)
+                density.error_sum.sum(density.error, 0, self.active)
+                for _ in range(1):  # one thread
+                    self.decide(run.start + u, density.error_sum.total(0), run)
 
     @ti.func
-    def received(self, total, count, context: ti.template()):
-        """The rules after iteration k, into the flags the next reads: the target met (after the least
-        iterations) stops, stepping back the share it did not need; a rising error restarts the weights."""
-        k, iterations, target, min_iterations, step_back = context
+    def decide(self, k, total, run: ti.template()):
+        """The stopping rule after iteration k, from the error's sum ``total``, into the flags the next
+        iteration and the host read: the target met (after the least iterations) stops, stepping back the
+        share it did not need; a rising error restarts the weights."""
+        iterations, target, min_iterations, step_back = run.iterations, run.target, run.min_iterations, run.step_back
         running, from_second, index = self._loop_state(True, k)
         if running and k < iterations:
-            error = total / ti.cast(ti.max(count, 1), ti.f32)
+            error = total / ti.cast(ti.max(self.active[None], 1), ti.f32)
             last = ti.math.inf
             if k > 0:
                 last = self.values[LAST_ERROR]

@@ -8,7 +8,7 @@ import difflib
 import functools
 import math
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -213,6 +213,14 @@ class Push:
         radius = _checked_number("control.push.radius_m", self.radius_m, float, bounds, meaning, above_lowest=True)
         object.__setattr__(self, "radius_m", radius)
 
+    def capped(self, speed_limit_m_s: float) -> Push:
+        """This push with its velocity capped at ``speed_limit_m_s``, for the water and the bodies alike."""
+        velocity = np.asarray(self.velocity_m_s, np.float64)
+        speed = float(np.linalg.norm(velocity))
+        if speed > speed_limit_m_s:
+            velocity *= speed_limit_m_s / speed
+        return replace(self, velocity_m_s=tuple(velocity.tolist()))
+
 
 @dataclass
 class Control:
@@ -265,9 +273,6 @@ class Features:
     """An error target is set: the iterations' error sums and the stopping rule."""
     divergence_iterations: int
     vorticity: bool
-    wave_maker: bool
-    bodies: bool
-    wall_mirror: bool
 
     @classmethod
     def of(cls, model: Model, control: Control, in_place: bool = False) -> Features:
@@ -276,9 +281,6 @@ class Features:
             control.target_density_error > 0.0,
             0 if in_place else control.divergence_iterations,
             control.vorticity > 0.0,
-            model.boundary.piston_stroke_m > 0.0,
-            bool(model.scene.bodies),
-            model.density.wall_mirror,
         )
 
 

@@ -17,6 +17,7 @@ from there, so it writes v and moves x to x* in the same loop: no pass of its ow
 import taichi as ti
 
 from pbf.solver.constants import scene_constants
+from pbf.solver.density import pressure
 from pbf.solver.grid import named
 from pbf.solver.model import VelocityParams
 from pbf.solver.scan import read_count
@@ -123,7 +124,6 @@ class VelocityPostprocess:
     def move(self, x_pred: ti.template(), i, impulse: ti.template(), run: ti.template()):
         """x_i = x*_i (line 23), and the substep's pressure added to particle i's sum."""
         self.state.x[i] = x_pred[i]
-        # The pressure of this substep, from the position iterations' multiplier L and the
-        # divergence pass's Λ (pbf.solver.density.DensityConstraint.pressure_scale).
-        pressure = run.pressure_per_impulse * (impulse[i] + self.state.multiplier[i] * run.dt * run.dt)
-        self.state.pressure_sum[i] = ti.select(run.first_of_frame, 0.0, self.state.pressure_sum[i]) + pressure
+        # The pressure of this substep, from the position iterations' multiplier L and the divergence pass's Λ.
+        p = pressure(impulse[i], self.state.multiplier[i], run.pressure_per_impulse, run.pressure_per_multiplier)
+        self.state.pressure_sum[i] = ti.select(run.first_of_frame, 0.0, self.state.pressure_sum[i]) + p

@@ -15,8 +15,6 @@ import math
 
 import taichi as ti
 
-from pbf.solver.backend import gpu_blocks, sums_in_shared_memory
-
 Template = ti.template()
 GPU_BLOCK = 32
 """Entries per block of a prefix sum on a GPU backend, at every level but the top."""
@@ -37,10 +35,10 @@ CPU_SCAN_BLOCKS = 256
 """The prefix sum's CPU_BLOCKS: few enough that each block of the pass down adds the sums before its own."""
 
 
-def block_sizes(length: int, blocks: int = CPU_BLOCKS) -> tuple[int, int]:
-    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), on a GPU
-    blocks of 32 (a long block idles thousands of threads)."""
-    if gpu_blocks():
+def block_sizes(length: int, blocks: int = CPU_BLOCKS, gpu: bool = False) -> tuple[int, int]:
+    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), in a GPU's
+    blocks (``gpu``, ``pbf.solver.backend.Choices.gpu_blocks``) 32 (a long block idles thousands of threads)."""
+    if gpu:
         return GPU_BLOCK, GPU_BLOCK
     return max(64, math.ceil(length / blocks)), blocks
 
@@ -49,10 +47,10 @@ class Tree:
     """The static shape of a block tree over ``length`` entries (block sizes, each level's length and
     offset in one scratch field): it never depends on the live count, so a result depends on the values."""
 
-    def __init__(self, length: int, block: int | None = None, cpu_blocks: int = CPU_BLOCKS, top: int = 0):
+    def __init__(self, length: int, block: int | None, cpu_blocks: int, top: int, gpu: bool):
         """``top``: the most entries the top level may hold as one block (:data:`GPU_SCAN_TOP`)."""
         self.length = max(int(length), 1)
-        first, above = block_sizes(self.length, cpu_blocks) if block is None else (block, block)
+        first, above = block_sizes(self.length, cpu_blocks, gpu) if block is None else (block, block)
         self.blocks = [first]
         self.lengths = [self.length]
         while self.lengths[-1] > (first if len(self.lengths) == 1 else max(above, top)):
@@ -116,19 +114,14 @@ def _accumulate(high, low, value_high, value_low, is_max: ti.template(), zero):
     return high, low
 
 
-@ti.func
-def _nothing(total, count, context: ti.template()):
-    """A sum's ``then`` when nothing waits on it."""
-    pass
-
-
 @ti.data_oriented
 class ExclusiveScan:
     """starts[k] = Σ_{l<k} values[l] of int32 values (a counting sort's cell starts)."""
 
-    def __init__(self, length: int, block: int | None = None):
+    def __init__(self, length: int, block: int | None = None, gpu: bool = False):
+        """``gpu``: in a GPU's blocks (``pbf.solver.backend.Choices.gpu_blocks``)."""
         self.length = length
-        self.tree = Tree(length, block, CPU_SCAN_BLOCKS, GPU_SCAN_TOP if block is None and gpu_blocks() else 0)
+        self.tree = Tree(length, block, CPU_SCAN_BLOCKS, GPU_SCAN_TOP if block is None and gpu else 0, gpu)
         self.sums = ti.field(ti.i32, shape=self.tree.scratch)
         """Block sums of levels 1 … top (``Tree.offsets``)."""
 
@@ -209,12 +202,12 @@ class TreeSum:
     """Compensated sums and maxima of float32 values: ``sums`` results, each the same bits on any thread
     count, kept on the device (:attr:`high` + :attr:`low`) for kernels to use or the host to read."""
 
-    def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool | None = None):
+    def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool = False, gpu: bool = False):
+        """``gpu`` and ``shared``: in a GPU's blocks, added up in shared memory (``pbf.solver.backend.Choices``)."""
         self.length = length
-        self.tree = Tree(length, block)
-        self.in_shared_memory = block is None and (sums_in_shared_memory() if shared is None else shared)
-        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`): on CUDA unless ``shared``
-        says otherwise (:func:`pbf.solver.backend.sums_in_shared_memory`)."""
+        self.tree = Tree(length, block, CPU_BLOCKS, 0, gpu)
+        self.in_shared_memory = block is None and shared
+        """Each GPU block adds up in shared memory (:meth:`_reduce_in_blocks`)."""
         self._reduce = self._reduce_in_blocks if self.in_shared_memory else self._reduce_in_tree
         threads = GPU_SUM_THREADS
         if length <= GPU_SUM_ONE_BLOCK:
@@ -237,23 +230,20 @@ class TreeSum:
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] + low[slot] = Σ_{k < count} values[k] (``count``: an int or a 0-D field), at a kernel's
         top level."""
-        self._reduce(values, slot, count, False, _nothing, 0.0)
+        self._reduce(values, slot, count, False)
 
     @ti.func
-    def sum_then(self, values: Template, slot: Template, count: Template, then: Template, context: Template):
-        """:meth:`sum`, then ``then(total, count, context)`` (a ``ti.func``; ``context`` a tuple of the
-        kernel's arguments) by the thread that holds the total: a decision on the sum costs no task."""
-        self._reduce(values, slot, count, False, then, context)
+    def total(self, slot: ti.template()):
+        """Sum ``slot`` as one float32, for the kernel's statements after :meth:`sum`."""
+        return self.high[slot] + self.low[slot]
 
     @ti.func
     def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
-        self._reduce(values, slot, count, True, _nothing, 0.0)
+        self._reduce(values, slot, count, True)
 
     @ti.func
-    def _reduce_in_blocks(
-        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
-    ):
+    def _reduce_in_blocks(self, values: Template, slot: Template, count: Template, is_max: Template):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
         # entries), then the block halves its partial sums in shared memory: an order fixed by the length.
         threads = ti.static(GPU_SUM_THREADS)
@@ -296,15 +286,12 @@ class TreeSum:
                     if ti.static(top):
                         self.high[slot] = shared_high[0]
                         self.low[slot] = shared_low[0]
-                        then(shared_high[0] + shared_low[0], read_count(count, 1), context)
                     else:
                         self.scratch_high[g] = shared_high[0]
                         self.scratch_low[g] = shared_low[0]
 
     @ti.func
-    def _reduce_in_tree(
-        self, values: Template, slot: Template, count: Template, is_max: Template, then: Template, context: Template
-    ):
+    def _reduce_in_tree(self, values: Template, slot: Template, count: Template, is_max: Template):
         # Every level loops over all of its blocks and skips those past the live entries (as in
         # ExclusiveScan.scan); the top block always runs, so that it writes 0 when there is nothing to add.
         for level in ti.static(range(self.tree.top + 1)):
@@ -327,7 +314,6 @@ class TreeSum:
                     if ti.static(level == self.tree.top):
                         self.high[slot] = high
                         self.low[slot] = low
-                        then(high + low, read_count(count, 1), context)
                     else:
                         self.scratch_high[self.tree.offsets[level + 1] + b] = high
                         self.scratch_low[self.tree.offsets[level + 1] + b] = low

@@ -36,8 +36,9 @@ def _code() -> str:
     return digest.hexdigest()
 
 
-def settled_key(scene) -> str:
-    """The hash naming ``scene``'s settled start: its physics, the code, the versions, the backend's options."""
+def settled_key(scene, choices: backend.Choices) -> str:
+    """The hash naming ``scene``'s settled start: its physics, the code, the versions, the backend's options
+    and ``choices``."""
     physics = {f.name: getattr(scene, f.name) for f in dataclasses.fields(scene) if f.name not in VIEW_KEYS}
     digest = hashlib.sha256()
     options = sorted((name, str(value)) for name, value in backend._options.items())  # str: a type's name
@@ -48,19 +49,19 @@ def settled_key(scene) -> str:
         np.__version__,  # the initial lattice is laid out in NumPy
         repr(options),
         repr(backend._started),
-        repr(backend.keeps_decisions_on_device()),  # the device path's substep rounds differently
+        repr(choices.decisions_on_device),  # the device path's substep rounds differently
     ):
         digest.update(part.encode())
         digest.update(b"\0")
     return digest.hexdigest()[:32]
 
 
-def load(scene) -> Snapshot | None:
+def load(scene, choices: backend.Choices) -> Snapshot | None:
     """``scene``'s settled start from disk, or None if none is kept (or the file cannot be read)."""
     folder = cache_folder(FOLDER)
     if folder is None:
         return None
-    path = folder / f"{settled_key(scene)}.npz"
+    path = folder / f"{settled_key(scene, choices)}.npz"
     try:
         with np.load(path, allow_pickle=False) as data:
             fields = {name[len("field_") :]: data[name] for name in data.files if name.startswith("field_")}
@@ -70,7 +71,7 @@ def load(scene) -> Snapshot | None:
         return None
 
 
-def store(scene, snapshot: Snapshot) -> None:
+def store(scene, snapshot: Snapshot, choices: backend.Choices) -> None:
     """Keep ``snapshot`` (the settled start at t = 0) as ``scene``'s; a folder that cannot be written
     is skipped (the next start settles again)."""
     folder = cache_folder(FOLDER)
@@ -89,6 +90,6 @@ def store(scene, snapshot: Snapshot) -> None:
     try:
         with os.fdopen(handle, "wb") as file:
             np.savez(file, **arrays)
-        os.replace(temporary, folder / f"{settled_key(scene)}.npz")
+        os.replace(temporary, folder / f"{settled_key(scene, choices)}.npz")
     except OSError:
         Path(temporary).unlink(missing_ok=True)

@@ -16,10 +16,11 @@ import numpy as np
 from pbf import scene as schema
 from pbf.scene.schema import _show
 from pbf.solver import buckets, settled
-from pbf.solver.backend import keeps_decisions_on_device, on_gpu, start_backend
+from pbf.solver.backend import Choices, start_backend
+from pbf.solver.backend import choices as backend_choices
 from pbf.solver.bodies import STATE_WIDTH
 from pbf.solver.boundary import Boundaries
-from pbf.solver.density import DensityConstraint
+from pbf.solver.density import DensityConstraint, pressure_scales
 from pbf.solver.diagnostics import Diagnostics
 from pbf.solver.divergence import DivergenceCorrection
 from pbf.solver.emit import Emitters
@@ -138,26 +139,30 @@ class Simulation:
         overrides=(),
         quiet: bool = False,
         hook: StageHook | None = None,
+        choices: Choices | None = None,
     ):
+        """``choices``: the backend's (``pbf.solver.backend.choices()``, made here by default), or a GPU's
+        asked for on the CPU (the same results: tests, launch counts)."""
         scene = schema.load_scene(scene, overrides)
         self.backend = start_backend(arch, quiet=quiet)  # first: the memory check reads the device's memory
+        self.choices = choices or backend_choices()
+        """What differs by backend, chosen once (docs/METHOD.md, "One substep on every backend")."""
         self.model = Model.from_scene(scene, buckets.compiled(), buckets.REUSE_LIMIT_BYTES)
         buckets.record(self.model.allocated, self.model.grid.allocated_cells)
         self.hook = hook or NoHook()
         """Told about every stage of every substep (see StageHook); assign one to profile."""
         model = self.model
         # The arrays every scene has first, in one order, then those of features a scene may lack: the
-        # offline cache keys a kernel by its fields' shapes and places (docs/ARCHITECTURE.md). The
-        # backend's choices are made here (docs/METHOD.md, "One substep on every backend").
-        on_device = keeps_decisions_on_device()
-        self.state = State(model.allocated)
+        # offline cache keys a kernel by its fields' shapes and places (docs/ARCHITECTURE.md).
+        on_device = self.choices.decisions_on_device
+        self.state = State(model.allocated, on_device)
         self.boundaries = Boundaries(model.boundary, solids=False)
-        self.grid = NeighbourGrid(model.grid, self.state.active, slot_major=on_gpu(), loop_bound=self.state.loop_bound)
+        self.grid = NeighbourGrid(model.grid, self.state.active, self.choices, self.state.loop_bound)
         self.integrator = Integrator(self.state, self.boundaries)
-        self.density = DensityConstraint(model.density, self.boundaries, self.grid)
+        self.density = DensityConstraint(model.density, self.boundaries, self.grid, self.choices)
         self.divergence = DivergenceCorrection(model.density, self.state, self.boundaries, self.grid, self.density)
         self.postprocess = VelocityPostprocess(model.velocity, self.state, self.grid)
-        self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg)
+        self.diagnostics = Diagnostics(self.state, self.density, self.grid, model.particle_mass_kg, self.choices)
         self.iterations = JacobiIterations(
             self.density,
             weights=model.iteration_weights,
@@ -172,7 +177,9 @@ class Simulation:
         if self.bodies is not None:  # the collision's record, made before the sort (Bodies.record_start)
             self.state.carry(self.bodies.shift)
             self.state.carry(self.bodies.pusher)
-        self.kernels = SubstepKernels(self)  # the stages composed into three kernels
+        self.kernels = SubstepKernels(  # the stages composed into three kernels
+            self.state, self.integrator, self.grid, self.divergence, self.density, self.iterations, self.postprocess
+        )
         self.emitters = Emitters(scene.emitters, scene.fluid.spacing_m, self.state, self.grid, model.capacity)
         self._start: Snapshot | None = None
         """The state reset() returns to, taken the first time (later resets restore it, not settle again)."""
@@ -196,14 +203,14 @@ class Simulation:
         if self._start is not None:
             self.restore(self._start)
             return
-        settled_start = settled.load(self.scene) if self.scene.time.settle_s > 0.0 else None
+        settled_start = settled.load(self.scene, self.choices) if self.scene.time.settle_s > 0.0 else None
         if settled_start is not None:  # settled by a start before: the same bits (pbf.solver.settled)
             self.restore(settled_start)
         else:
             self.restore(Snapshot(*self.model.initial_particles(), 0.0, 0))
             if self.scene.time.settle_s > 0.0:
                 self._settle(self.scene.time.settle_s)
-                settled.store(self.scene, self.snapshot())
+                settled.store(self.scene, self.snapshot(), self.choices)
         self._start = self.snapshot()
 
     def _settle(self, seconds: float) -> None:
@@ -389,7 +396,7 @@ class Simulation:
         self.boundaries.move(self.piston_time_s)
         self.frame_substeps = self.control.substeps
         self.last_dt_s = self.scene.time.frame_dt_s / self.control.substeps
-        self.iterations_used = 0
+        self.iterations.begin(0, False)
         self.pressure_substeps = 0  # summed in State.pressure_sum since the frame began
         self._find_neighbours_in_place()
 
@@ -408,20 +415,17 @@ class Simulation:
         """Jacobi iterations the last substep ran (read from the device)."""
         return self.iterations.used
 
-    @iterations_used.setter
-    def iterations_used(self, count: int) -> None:
-        self.iterations.used = count
-
     @property
     def dt_s(self) -> float:
         """Δt of the last substep, s (less than frame_dt_s / substeps when the CFL limit added some)."""
         return self.last_dt_s
 
-    def substeps_needed(self) -> int:
+    def substeps_needed(self, speeds: tuple[float, float] | None = None) -> int:
         """Substeps for the next frame: the control's, or more so that no particle travels more than
-        ``Scene.travel_per_substep_m`` in one (docs/METHOD.md, "Time steps")."""
+        ``Scene.travel_per_substep_m`` in one (docs/METHOD.md, "Time steps"). ``speeds``: the fastest
+        particle's and body point's (``Diagnostics.frame_read``), else read here."""
         t = self.scene.time
-        fastest, bodies = self.diagnostics.frame_speeds(self.bodies)  # the frame's one read
+        fastest, bodies = speeds or self.diagnostics.frame_read(self.bodies)[:2]
         if t.max_speed_m_s > 0.0:  # capped at the end of every substep
             fastest = min(fastest, t.max_speed_m_s)
         walls = self.boundaries.speed_limit_m_s(bodies)
@@ -443,10 +447,10 @@ class Simulation:
         control = self.control
         self.emitters.emit(self.time_s, control.emitters_on)
         if control.push is not None:
-            hand_limit_m_s = self.scene.travel_per_substep_m(control.iterations) / dt
-            self.integrator.push(control.push, hand_limit_m_s)
+            hand = control.push.capped(self.scene.travel_per_substep_m(control.iterations) / dt)
+            self.integrator.push(hand)
             if self.bodies is not None:
-                self.bodies.grab(control.push, hand_limit_m_s)
+                self.bodies.grab(hand)
         self.piston_time_s += dt if control.wave_maker_on else 0.0
         if self.bodies is not None:  # the rigid step, with the water's last reaction
             self.bodies.advance(dt, control.gravity_m_s2)
@@ -469,17 +473,9 @@ class Simulation:
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
             # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
             # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
-            pressure = self.density.pressure_scale(dt) * self.scene.fluid.rest_density_kg_m3
-            first = self.pressure_substeps == 0
-            kernels.iterate_and_finish(
-                last,
-                dt,
-                features,
-                control,
-                pressure_per_impulse=pressure,
-                first_of_frame=first,
-                max_speed=self.scene.time.max_speed_m_s,
-            )
+            scales = pressure_scales(self.scene.fluid.rest_density_kg_m3, self.model.grid.kernel_radius_m, dt)
+            first, cap = self.pressure_substeps == 0, self.scene.time.max_speed_m_s
+            kernels.iterate_and_finish(last, dt, features, control, scales, first, cap)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1
@@ -503,7 +499,9 @@ class Simulation:
         if frames < 0:
             raise ValueError(f"step: frames: expected 0 or more, got {_show(frames)}")
         for _ in range(frames):
-            self.frame_substeps = self.substeps_needed()
+            fastest, bodies, most_entries, truncated = self.diagnostics.frame_read(self.bodies)  # one read
+            self.grid.settle_frame(most_entries, truncated)  # the lists grown ahead of need
+            self.frame_substeps = self.substeps_needed((fastest, bodies))
             self.pressure_substeps = 0  # pressures(): this frame's mean
             dt = self.scene.time.frame_dt_s / self.frame_substeps
             for _ in range(self.frame_substeps):

@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
-from pbf.solver.backend import keeps_decisions_on_device
 from pbf.solver.scan import read_count
 
 
@@ -82,13 +81,14 @@ class Snapshot:
 class State:
     """A (capacity,) field per :data:`PARTICLE_FIELDS` entry; slots below ``active[None]`` hold the live ones."""
 
-    def __init__(self, capacity: int, fields=PARTICLE_FIELDS):
+    def __init__(self, capacity: int, on_device: bool, fields=PARTICLE_FIELDS):
         self.capacity = capacity
         self.fields = tuple(fields)
         self.active = ti.field(ti.i32, shape=())
-        self.loop_bound = capacity if keeps_decisions_on_device() else self.active
-        """What loops over the live particles run to: on a GPU the capacity (a bound read at run time is a
-        one-thread task), on the CPU the live count."""
+        self.loop_bound = capacity if on_device else self.active
+        """What loops over the live particles run to: on a GPU's path (``on_device``,
+        ``pbf.solver.backend.Choices.decisions_on_device``) the capacity (a bound read at run time is a
+        one-thread task), on the CPU's the live count."""
         self._carried = []
         """(field, scratch) of every per-particle array the sort carries, the state's own first."""
         for spec in self.fields:
@@ -130,20 +130,13 @@ class State:
         """The bound of a loop over the live particles (:attr:`loop_bound`); the loop still skips ``i ≥ active``."""
         return read_count(self.loop_bound, 1)
 
-    @ti.func
-    def gather(self, slot, i):
-        """Particle i's carried arrays into ``slot`` of their scratch (the sort), until :meth:`take_gathered`."""
-        for k in ti.static(range(len(self._carried))):
-            self._carried[k][1][slot] = self._carried[k][0][i]
-
-    @ti.func
-    def take_gathered(self, slot):
-        """``slot`` of every carried array from its scratch, after :meth:`gather`."""
-        for k in ti.static(range(len(self._carried))):
-            self._carried[k][0][slot] = self._carried[k][1][slot]
+    @property
+    def carried(self) -> tuple:
+        """(field, scratch) of every array the sort carries (``NeighbourGrid.order_loops``), the state's first."""
+        return tuple(self._carried)
 
     def scratch_of(self, values):
-        """The scratch :meth:`gather` fills for the carried array ``values``."""
+        """The scratch the sort gathers the carried array ``values`` into."""
         return next(scratch for field, scratch in self._carried if field is values)
 
     @ti.func

@@ -9,12 +9,11 @@ from pbf.solver.launch import Launcher
 
 @ti.data_oriented
 class SubstepKernels:
-    """The kernels that run the stages of ``stages``, the Simulation."""
+    """The kernels that run the stages given, each a ``pbf.solver`` stage object."""
 
-    def __init__(self, stages):
-        self.state, self.integrator, self.grid = stages.state, stages.integrator, stages.grid
-        self.density, self.divergence = stages.density, stages.divergence
-        self.iterations, self.postprocess = stages.iterations, stages.postprocess
+    def __init__(self, state, integrator, grid, divergence, density, iterations, postprocess):
+        self.state, self.integrator, self.grid = state, integrator, grid
+        self.density, self.divergence, self.iterations, self.postprocess = density, divergence, iterations, postprocess
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
 
@@ -25,38 +24,24 @@ class SubstepKernels:
         self._find_neighbours(entries=self.grid.neighbours, dt=dt, gx=gx, gy=gy, gz=gz, features=features)
 
     def iterate(self, features, control) -> int:
-        """Every call of the substep's iterations but the last; returns the first iteration of the last
-        call, which :meth:`iterate_and_finish` runs."""
-        return self.iterations.calls(
-            control.iterations, features.measure, lambda start: self._call(features, control, start, finish=False)
-        )
+        """The substep's iterations, ``per_call`` a call, while not done and short of the most: every call
+        but the last; returns the first iteration of the last call, which :meth:`iterate_and_finish` runs."""
+        iterations, per_call = control.iterations, self.iterations.per_call
+        self.iterations.begin(iterations, features.measure)
+        it, done = 0, False
+        while not done and it + per_call < iterations:
+            self._call(features, control, it, False)
+            it += per_call
+            done = self.iterations.done()  # the device's decision, read where the backend reads it
+        return it
 
-    def iterate_and_finish(
-        self,
-        start: int,
-        dt: float,
-        features,
-        control,
-        pressure_per_impulse: float,
-        first_of_frame: bool,
-        max_speed: float,
-    ) -> None:
+    def iterate_and_finish(self, start: int, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
         """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
-        and the pressure (``pressure_per_impulse`` Pa a unit of multiplier, restarted ``first_of_frame``)."""
-        self._call(
-            features,
-            control,
-            start,
-            finish=True,
-            dt=dt,
-            pressure_per_impulse=pressure_per_impulse,
-            first_of_frame=first_of_frame,
-            max_speed=max_speed,
-        )
+        and the pressure (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``;
+        restarted ``first_of_frame``)."""
+        self._call(features, control, start, True, dt, scales, first_of_frame, max_speed)
 
-    def _call(
-        self, features, control, start, *, finish, dt=0.0, pressure_per_impulse=0.0, first_of_frame=False, max_speed=0.0
-    ):
+    def _call(self, features, control, start, finish, dt=0.0, scales=(0.0, 0.0), first_of_frame=False, max_speed=0.0):
         self._iterations(
             entries=self.grid.neighbours,
             features=features,
@@ -69,7 +54,8 @@ class SubstepKernels:
             dt=dt,
             epsilon=control.vorticity,
             xsph_c=control.xsph,
-            pressure_per_impulse=pressure_per_impulse,
+            pressure_per_impulse=scales[0],
+            pressure_per_multiplier=scales[1],
             first_of_frame=int(first_of_frame),
             max_speed=max_speed,
         )
@@ -87,8 +73,8 @@ class SubstepKernels:
                 gravity = ti.Vector([gx, gy, gz])
                 x_i = self.integrator.advance_particle(dt, gravity, i)  # lines 1-4: v += Δt g, x* = x + Δt v
                 grid.count_in_cell(x_i, i)  # lines 5-6: a counting sort by the cell of x*,
-        grid.order_loops(state.index, state)  # the state and x* gathered in sorted order
-        grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, state)  # line 7
+        grid.order_loops(state.index, ti.static(state.carried))  # the state and x* gathered in sorted order
+        grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, ti.static(state.carried))  # line 7
         if ti.static(features.divergence_iterations > 0):  # ours: v made divergence-free at x,
             self.divergence.correct(state.x, entries, dt, features.divergence_iterations)
             for i in range(state.live_bound()):  # then x* = x + Δt v again
@@ -113,6 +99,7 @@ class SubstepKernels:
         epsilon: ti.f32,
         xsph_c: ti.f32,
         pressure_per_impulse: ti.f32,
+        pressure_per_multiplier: ti.f32,
         first_of_frame: ti.i32,
         max_speed: ti.f32,
     ):
@@ -130,6 +117,7 @@ class SubstepKernels:
                 epsilon=epsilon,
                 xsph_c=xsph_c,
                 pressure_per_impulse=pressure_per_impulse,
+                pressure_per_multiplier=pressure_per_multiplier,
                 first_of_frame=first_of_frame,
                 max_speed=max_speed,
             )
