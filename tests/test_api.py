@@ -20,7 +20,7 @@ def test_overrides_apply_to_a_dict_and_to_a_scene():
     again = load_scene(scene, ["solver.iterations=2"])
     assert again.solver.iterations == 2 and again.time.substeps == 3 and again.source == "<dict>"
     assert load_scene(scene) is scene
-    with pytest.raises(SceneError, match=r"command line --set solver.iterations=0: key 'solver.iterations'"):
+    with pytest.raises(SceneError, match=r"overrides solver.iterations=0: key 'solver.iterations'"):
         load_scene(table, ["solver.iterations=0"])
 
 
@@ -94,7 +94,7 @@ def test_a_scene_built_by_hand_gets_plain_types():
         (123, (), "123: expected a preset name, a TOML path, a dict or a pbf.Scene"),
         (None, (), "None: expected a preset name"),
         ("dam_break", "solver.iterations=6", "overrides: expected a list of 'KEY=VALUE' strings"),
-        ("dam_break", [6], "command line --set 6: expected a 'KEY=VALUE' string"),
+        ("dam_break", [6], "overrides 6: expected a 'KEY=VALUE' string"),
     ],
 )
 def test_wrong_types_are_scene_errors(source, overrides, message):

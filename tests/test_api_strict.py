@@ -180,7 +180,7 @@ def test_a_conflict_with_a_key_the_command_line_set_names_the_command_line():
         load_scene("dam_break", ["obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]"])
     message = str(refused.value)
     assert (
-        message.startswith("command line --set obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not agree with ")
+        message.startswith("overrides obstacles=[{min_m=[0.5,0,0],max_m=[0.6,0.2,0.2]}]: does not agree with ")
         and "key 'time.max_cfl' = 2" in message
     )
 
@@ -196,7 +196,7 @@ def test_a_list_of_tables_made_a_table_by_set_names_the_set(tmp_path, key, table
     with pytest.raises(SceneError) as refused:
         load_scene(own, [key])
     message = str(refused.value)
-    assert message.startswith(f"command line --set {key}: key '{table}': expected a list of tables"), message
+    assert message.startswith(f"overrides {key}: key '{table}': expected a list of tables"), message
     assert "scene.toml" not in message
 
 

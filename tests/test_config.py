@@ -93,7 +93,7 @@ def test_override_and_preset_load(tmp_path):
     assert load_scene("dam_break").particle_count == 8000
     with pytest.raises(
         SceneError,
-        match=r"command line --set solver.iterations=0: key 'solver.iterations': "
+        match=r"overrides solver.iterations=0: key 'solver.iterations': "
         r"expected a value in \[1, 100\]",
     ):
         load_scene("dam_break", ["solver.iterations=0"])

@@ -10,7 +10,7 @@ from command_line import assert_one_error, refused, run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pbf import SceneError, load_scene
+from pbf import SceneError, Simulation, load_scene
 from pbf.app import cli, window
 from pbf.scene import from_dict
 from scenes import small_dam_break
@@ -62,15 +62,25 @@ def test_values_are_echoed_cut_short(value):
     assert len(message_of(scene)) < 300
 
 
-def test_an_override_error_names_the_command_line_not_the_file():
+def test_a_python_callers_overrides_are_not_called_the_command_line(tmp_path):
+    # Simulation(file, overrides=[...]) from Python: the list it was given, not a --set it never typed.
+    scene = tmp_path / "my_scene.toml"
+    scene.write_text('extends = "dam_break"\n')
+    with pytest.raises(SceneError) as error:
+        Simulation(str(scene), overrides=["solver.iteratons=3"])
+    message = str(error.value)
+    assert message.startswith("overrides solver.iteratons=3: unknown key 'solver.iteratons'"), message
+    assert "command line" not in message
+
+
+def test_an_override_error_names_the_override_not_the_file():
     with pytest.raises(SceneError) as error:
         load_scene("dam_break", ["solver.iterations=0"])
-    assert str(error.value).startswith("command line --set solver.iterations=0: key 'solver.iterations'")
+    assert str(error.value).startswith("overrides solver.iterations=0: key 'solver.iterations'")
     with pytest.raises(SceneError) as error:
         load_scene("dam_break", ["fluid.blocks=[{min_m = [0, 0, 0], max_m = [2, 2, 2]}]"])
-    assert str(error.value).startswith(
-        "command line --set 'fluid.blocks=[{min_m"
-    ) and "lies outside the container" in str(error.value)
+    message = str(error.value)
+    assert message.startswith("overrides 'fluid.blocks=[{min_m") and "lies outside the container" in message
     with pytest.raises(SceneError) as error:  # the file's own mistakes still name the file
         load_scene("dam_break", ["solver.iterations=0x"])
     assert "got '0x'" in str(error.value)

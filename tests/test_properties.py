@@ -137,7 +137,7 @@ def test_random_overrides_load_or_are_refused_naming_the_command_line(dotted, te
         load_scene(tiny(), [assignment])
     except SceneError as error:
         one_line(error)
-        assert str(error).startswith("command line --set") or str(error).startswith("<dict>"), str(error)
+        assert str(error).startswith("overrides") or str(error).startswith("<dict>"), str(error)
 
 
 @pytest.mark.slow  # each new scene compiles its kernels anew: 8-18 s an example on a shared 2-core box

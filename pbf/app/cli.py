@@ -285,10 +285,10 @@ def load(args) -> schema.Scene:
     headless frames' legend (colours alone say nothing of what they measure), where the scene draws
     particles and no --set says otherwise."""
     try:
-        scene = schema.load_scene(args.scene, [*args.view, *args.set])
+        scene = schema.load_scene(args.scene, [*args.view, *args.set], schema.COMMAND_LINE)
         legend_set = any(assignment.split("=", 1)[0].strip() == "render.legend" for assignment in args.set)
         if args.colour_by is not None and scene.render.style == "particles" and not legend_set:
-            scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set])
+            scene = schema.load_scene(args.scene, [*args.view, "render.legend=true", *args.set], schema.COMMAND_LINE)
         return scene
     except schema.SceneError as error:
         if args.scene in REFERENCES and "no such scene file" in str(error):
@@ -309,7 +309,7 @@ def command_line_keys(args) -> dict[str, str]:
     view options, as they are applied), for schema.attribute."""
     labels = {assignment.split("=", 1)[0]: label for assignment, label in args.view.items()}
     for assignment in args.set:
-        labels[assignment.split("=", 1)[0].strip()] = f"command line --set {schema.echo(assignment)}"
+        labels[assignment.split("=", 1)[0].strip()] = f"{schema.COMMAND_LINE} {schema.echo(assignment)}"
     return labels
 
 

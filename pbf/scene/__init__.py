@@ -22,6 +22,7 @@ from pbf.scene.bodies import BODY_MAX_CFL, MAX_BODIES, MIN_BODY_SPACINGS, Body
 from pbf.scene.emitters import Emitter
 from pbf.scene.export import UP_AXES, Export
 from pbf.scene.files import (
+    COMMAND_LINE,
     MAX_SCENE_BYTES,
     SCENES_DIR,
     attribute,
@@ -50,6 +51,7 @@ from pbf.scene.wave_maker import WaveMaker
 
 __all__ = [
     "BODY_MAX_CFL",
+    "COMMAND_LINE",
     "MAX_BODIES",
     "MIN_BODY_SPACINGS",
     "Body",

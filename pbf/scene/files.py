@@ -147,9 +147,16 @@ def resolve_extends(table: dict, source: str, folder: Path | None = None, seen: 
     return _merged(base, {k: v for k, v in table.items() if k != "extends"})
 
 
-def parse_override(assignment: str) -> tuple[list[str], object]:
-    """Split ``solver.iterations=6`` into a key path and a TOML value (bare words are strings)."""
-    label = f"command line --set {echo(assignment) if isinstance(assignment, str) else _show(assignment)}"
+PYTHON_OVERRIDES = "overrides"
+"""Where ``load_scene``'s overrides come from unless said: a Python caller's list (the command line says
+``COMMAND_LINE``)."""
+COMMAND_LINE = "command line --set"
+
+
+def parse_override(assignment: str, given_by: str = PYTHON_OVERRIDES) -> tuple[list[str], object]:
+    """Split ``solver.iterations=6`` into a key path and a TOML value (bare words are strings); an error
+    names the override as ``given_by`` gave it."""
+    label = f"{given_by} {echo(assignment) if isinstance(assignment, str) else _show(assignment)}"
     if not isinstance(assignment, str):
         raise SceneError(f"{label}: expected a 'KEY=VALUE' string")
     if not assignment.isprintable():
@@ -203,9 +210,12 @@ def _set(table: dict, keys: list[str], value, label: str) -> None:
     target[keys[-1]] = value
 
 
-def load_scene(source: str | os.PathLike | dict | Scene, overrides: typing.Sequence[str] = ()) -> Scene:
+def load_scene(
+    source: str | os.PathLike | dict | Scene, overrides: typing.Sequence[str] = (), given_by: str = PYTHON_OVERRIDES
+) -> Scene:
     """Load and validate a preset name, a TOML path, a dict or a Scene, applying ``KEY=VALUE``
-    overrides first. An error in a key an override set names the override, not the file."""
+    overrides first. An error in a key an override set names the override, not the file, and where it
+    came from: ``given_by`` (the command line passes ``COMMAND_LINE``)."""
     if isinstance(overrides, (str, bytes)) or not isinstance(overrides, typing.Iterable):
         raise SceneError(f"overrides: expected a list of 'KEY=VALUE' strings, got {_show(overrides)}")
     if isinstance(source, Scene) and not overrides:
@@ -223,8 +233,8 @@ def load_scene(source: str | os.PathLike | dict | Scene, overrides: typing.Seque
         raise SceneError(f"{_show(source)}: expected a preset name, a TOML path, a dict or a pbf.Scene")
     overridden = {}
     for assignment in overrides:
-        keys, value = parse_override(assignment)
-        label = f"command line --set {echo(assignment)}"
+        keys, value = parse_override(assignment, given_by)
+        label = f"{given_by} {echo(assignment)}"
         _set(table, keys, value, label)
         overridden[".".join(keys)] = label
     try:
