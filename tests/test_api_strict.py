@@ -75,6 +75,9 @@ def bounds(table, name):
         ("gravity_m_s2", "down", TypeError, "control.gravity_m_s2"),
         ("push", 3, TypeError, "control.push: expected a pbf.solver.Push or None, got 3 (int)"),
         ("iteration", 3, AttributeError, "control.iteration: no such setting; did you mean control.iterations?"),
+        # Names by meaning (the README's words, the window's sliders) point to the field that holds it.
+        ("viscosity", 0.02, AttributeError, "control.viscosity: no such setting; did you mean control.xsph?"),
+        ("gravity", (0, -9.81, 0), AttributeError, "did you mean control.gravity_m_s2?"),
     ],
 )
 def test_a_bad_assignment_is_refused_at_once_naming_the_setting(control, field, value, error, words):

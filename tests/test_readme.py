@@ -59,3 +59,13 @@ def test_the_readme_is_a_front_door():
     before_usage = text[: text.index("## Three ways to use it")]
     figures = re.findall(r"\d[\d,.]*\s?(?:ms|µs|fps|frames a second)\b|H200|H100", before_usage)
     assert not figures, f"benchmark figures before the usage sections: {figures}"
+
+
+def test_the_control_fields_the_readme_names_exist():
+    # The comment that lists the live settings names fields a user will type: each must be one.
+    from pbf.solver.model import CONTROL_CHECKS
+
+    line = next(line for line in README.read_text(encoding="utf-8").splitlines() if "sim.control.iterations =" in line)
+    names = [re.sub(r"\s*\(.*\)", "", name).strip() for name in line.split("live:", 1)[1].split(",")]
+    assert len(names) >= 5, line
+    assert all(name in CONTROL_CHECKS for name in names), names

@@ -249,7 +249,8 @@ class Control:
         """Every assignment checked against its scene key's bounds (MIRRORED), or a TypeError/ValueError
         naming control.<field>; an unknown name is refused."""
         if name not in CONTROL_CHECKS:
-            closest = difflib.get_close_matches(name, list(CONTROL_CHECKS), n=1)
+            closest = [CONTROL_NAMES_SAID[name]] if name in CONTROL_NAMES_SAID else []
+            closest = closest or difflib.get_close_matches(name, list(CONTROL_CHECKS), n=1)
             hint = f"did you mean control.{closest[0]}? " if closest else ""
             raise AttributeError(f"control.{name}: no such setting; {hint}settings: {', '.join(CONTROL_CHECKS)}")
         object.__setattr__(self, name, CONTROL_CHECKS[name](self, value))
@@ -390,6 +391,18 @@ CONTROL_CHECKS = {
     "emitters_on": lambda control, value: _checked_bool("control.emitters_on", value),
     "wave_maker_on": lambda control, value: _checked_bool("control.wave_maker_on", value),
 }
+
+CONTROL_NAMES_SAID = {
+    "viscosity": "xsph",
+    "xsph_c": "xsph",
+    "epsilon": "vorticity",
+    "vorticity_epsilon": "vorticity",
+    "gravity": "gravity_m_s2",
+    "g": "gravity_m_s2",
+    "solver_iterations": "iterations",
+}
+"""What a user may call a control field by its meaning (the window's slider, the paper's symbol), for the hint
+of an unknown name: ``control.viscosity`` is the XSPH viscosity's c, ``control.xsph``."""
 
 
 def iteration_weights(expert, lowest: float) -> tuple[float, ...]:
