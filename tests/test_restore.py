@@ -221,3 +221,12 @@ def test_a_drowned_nozzle_pauses_instead_of_pushing():
     assert top > 0.07 - SPACING  # because the water had reached the nozzle
     assert stats["max_density_error"] < 0.05 and stats["max_speed_m_s"] < 2.0
     assert inside(sim)
+
+
+def test_arrays_of_two_counts_are_refused_naming_the_count_the_simulation_holds(poured):
+    sim, snapshot = poured
+    count = len(sim.positions())
+    with pytest.raises(ValueError) as refused:
+        sim.restore(changed(snapshot, positions_m=snapshot.positions_m[:10]))
+    message = str(refused.value)
+    assert f"holds {count:,} now" in message and f"got (10, 3) and ({len(snapshot.velocities_m_s)}, 3)" in message

@@ -273,8 +273,9 @@ class Simulation:
         velocities = _particle_array("velocities_m_s", snapshot.velocities_m_s)
         if positions.ndim != 2 or positions.shape[1:] != (3,) or velocities.shape != positions.shape:
             raise ValueError(
-                f"restore: expected positions_m and velocities_m_s of shape (n, 3), got "
-                f"{positions.shape} and {velocities.shape}"
+                f"restore: expected positions_m and velocities_m_s both of shape (n, 3), n the snapshot's "
+                f"particles (this simulation holds {self.state.count:,} now, at most {self.model.capacity:,}), "
+                f"got {positions.shape} and {velocities.shape}"
             )
         if not isinstance(snapshot.fields, dict):
             raise TypeError(f"restore: expected fields as a dict of name → array, got {type(snapshot.fields).__name__}")
