@@ -57,3 +57,22 @@ def test_a_reference_typed_as_a_subcommand_names_its_option(capsys, word, option
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {word}: no such scene file or preset;"), err
     assert f"printed by {option}" in err[0]
+
+
+def test_the_max_cfl_rule_with_obstacles_and_bodies_is_in_the_key_reference():
+    # A copy of the seed scene (max_cfl 2.0) with an obstacle is refused: the reference says why beforehand.
+    from pbf.scene import BODY_MAX_CFL
+    from pbf.scene.geometry import OBSTACLE_MAX_CFL
+
+    line = next(line for line in KEYS_MD.read_text(encoding="utf-8").splitlines() if "`time.max_cfl`" in line)
+    assert f"at most {OBSTACLE_MAX_CFL:g} in a scene with [[obstacles]] or [[bodies]]" in line, line
+    assert BODY_MAX_CFL == OBSTACLE_MAX_CFL
+
+
+def test_the_seed_with_an_obstacle_is_told_what_to_set():
+    from pbf.scene import SceneError, load_scene
+
+    with pytest.raises(SceneError) as refused:
+        load_scene("dam_break", ["obstacles=[{min_m=[0.6,0,0],max_m=[0.7,0.2,0.2]}]"])
+    assert "set time.max_cfl = 1.5 beside them" in str(refused.value), str(refused.value)
+    load_scene("dam_break", ["obstacles=[{min_m=[0.6,0,0],max_m=[0.7,0.2,0.2]}]", "time.max_cfl=1.5"])

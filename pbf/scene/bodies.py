@@ -156,5 +156,6 @@ def _check_bodies(scene, source: str) -> None:
     if scene.bodies and scene.time.max_cfl > BODY_MAX_CFL:
         raise SceneError(
             f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross a body "
-            f"in one substep; with [[bodies]] it must be ≤ {_num(BODY_MAX_CFL)}"
+            f"in one substep; with [[bodies]] it must be ≤ {_num(BODY_MAX_CFL)}: set time.max_cfl = "
+            f"{_num(BODY_MAX_CFL)} beside them"
         )

@@ -128,7 +128,8 @@ def _check_obstacles(scene, source: str) -> None:
     if scene.obstacles and scene.time.max_cfl > OBSTACLE_MAX_CFL:
         raise SceneError(
             f"{source}: key 'time.max_cfl' = {_num(scene.time.max_cfl)} lets particles cross an "
-            f"obstacle in one substep; with [[obstacles]] it must be ≤ {_num(OBSTACLE_MAX_CFL)}"
+            f"obstacle in one substep; with [[obstacles]] it must be ≤ {_num(OBSTACLE_MAX_CFL)}: set time.max_cfl = "
+            f"{_num(OBSTACLE_MAX_CFL)} beside them"
         )
     for i, obstacle in enumerate(scene.obstacles):
         lo, hi = obstacle.min_m, obstacle.max_m

@@ -30,7 +30,8 @@ class Time:
         _between(0.01, 4.0),
         "most particle spacings the fastest particle may travel in one "
         "substep at 4 or more solver.iterations (fewer scale it down in proportion: one iteration, a "
-        "quarter); a frame takes more substeps when it would go further",
+        "quarter); a frame takes more substeps when it would go further; at most 1.5 in a scene with "
+        "[[obstacles]] or [[bodies]], which a longer step could cross",
     )
     max_substeps: int = key(64, _between(1, 1000), "cap on the substeps one frame may take (a warning when reached)")
     max_speed_m_s: float = key(
