@@ -169,3 +169,19 @@ def test_help_and_refusals_need_no_solver(tmp_path):
     assert result.returncode == 2 and "[Taichi]" not in result.stdout
     assert_one_error(result.stderr, "--video writes files")
     assert not list(tmp_path.iterdir())
+
+
+def test_a_legend_asked_for_with_the_surface_style_is_refused_in_one_line(tmp_path, capsys):
+    # The surface's colours are the water's own: a legend the user asked for is refused, not dropped.
+    refused(
+        capsys,
+        ["dam_break", "--headless", "--frames", "1", "--style", "surface", "--set", "render.legend=true"],
+        "command line --set render.legend=true: key 'render.legend' = true",
+        'render.style = "surface" does not draw',
+        cwd=tmp_path,
+    )
+    scene = tmp_path / "surface_legend.toml"
+    scene.write_text('extends = "dam_break"\n[render]\nstyle = "surface"\nlegend = true\n')
+    refused(capsys, [str(scene), "--stats-only"], f"{scene}: key 'render.legend' = true", cwd=tmp_path)
+    # The default follows the style: the surface without a legend asked for starts.
+    assert cli.load(cli.parse_args(["dam_break", "--style", "surface"])).render.style == "surface"

@@ -39,7 +39,15 @@ MAX_SCENE_BYTES = 1 << 20
 
 def from_dict(table: dict, source: str = "<dict>") -> Scene:
     """Validate a scene given as a dict shaped like the TOML file."""
-    return Scene(source=source, **_table_values(Scene, table, source, ""))
+    scene = Scene(source=source, **_table_values(Scene, table, source, ""))
+    render = table.get("render")
+    # The key's default follows the style (no legend on the surface); one asked for is refused there.
+    if isinstance(render, dict) and render.get("legend") is True and scene.render.style == "surface":
+        raise SceneError(
+            f"{source}: key 'render.legend' = true asks for a legend that render.style = \"surface\" does not "
+            f'draw (its colours are the water\'s own); allowed: render.legend = false, or render.style = "particles"'
+        )
+    return scene
 
 
 def _presets() -> list[str]:
