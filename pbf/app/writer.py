@@ -76,6 +76,31 @@ def write_png(path: Path, image: np.ndarray, level: int = PNG_LEVEL) -> None:
         file.write(png_bytes(image, level))
 
 
+class WriteFailed(Exception):
+    """A frame could not be written: ``path`` (a PNG frame, or the video) and ``frame`` (its number, None
+    when not known), with the reason as one line (``reason``)."""
+
+    def __init__(self, path: Path | None, frame: int | None, cause: BaseException):
+        self.path, self.frame, self.cause = path, frame, cause
+        super().__init__(f"{path}: {reason(cause)}")
+
+    @property
+    def reason(self) -> str:
+        return reason(self.cause)
+
+
+def reason(error: BaseException) -> str:
+    """An error as one line: an OSError's text and number (a full disk: "No space left on device (errno
+    28)"), else its type and first line (the video encoder's StopIteration says nothing of itself)."""
+    if isinstance(error, OSError) and error.strerror:
+        return f"{error.strerror} (errno {error.errno})"
+    text = (str(error).strip().splitlines() or [""])[0][:200]
+    name = type(error).__name__
+    if isinstance(error, StopIteration | BrokenPipeError | EOFError):
+        return f"the video encoder (ffmpeg) stopped ({name}{': ' + text if text else ''})"
+    return f"{name}: {text}" if text else name
+
+
 class FrameFiles:
     """PNG frames (and optionally a video's frames) encoded in worker threads and written in order.
 
@@ -83,8 +108,16 @@ class FrameFiles:
     image must not change afterwards (the renderer hands over a fresh array each frame). Errors in a
     worker (a full disk) are raised by a later ``submit`` or by ``close``."""
 
-    def __init__(self, video=None, workers: int | None = None, depth: int | None = None, level: int = PNG_LEVEL):
-        """``video``: an imageio writer whose ``append_data`` takes the frames in order, or None."""
+    def __init__(
+        self,
+        video=None,
+        workers: int | None = None,
+        depth: int | None = None,
+        level: int = PNG_LEVEL,
+        video_path: Path | None = None,
+    ):
+        """``video``: an imageio writer whose ``append_data`` takes the frames in order, or None (its file
+        ``video_path``, named when it fails). A failure is raised as :class:`WriteFailed`."""
         self.workers = workers or default_workers()
         self.depth = depth or 2 * self.workers + 1
         """Frames queued or being encoded at most, per kind of output."""
@@ -95,7 +128,11 @@ class FrameFiles:
         self.video_pool = ThreadPoolExecutor(1, thread_name_prefix="pbf-video") if video is not None else None
         self.pending: deque[tuple[Path, Future]] = deque()
         """PNG frames not yet renamed into place, in frame order."""
+        self.video_path = video_path
         self.video_pending: deque[Future] = deque()
+        self.video_frames = 0
+        """Frames the video took."""
+        self.submitted = 0
         self.written = 0
         """Frames renamed into place."""
 
@@ -104,18 +141,30 @@ class FrameFiles:
             self.pending.append((path, self.pool.submit(write_png, temporary_path(path), image, self.level)))
         if self.video_pool is not None:
             self.video_pending.append(self.video_pool.submit(self.video.append_data, image))
+        self.submitted += 1
         # Frames already encoded go into place now; beyond the bound, wait for the oldest.
         while self.pending and (self.pending[0][1].done() or len(self.pending) > self.depth):
             self._publish_oldest()
         while self.video_pending and (self.video_pending[0].done() or len(self.video_pending) > self.depth):
-            self.video_pending.popleft().result()
+            self._video_oldest()
 
     def _publish_oldest(self) -> None:
         path, future = self.pending[0]
-        future.result()  # the worker's error, if any, here
-        os.replace(temporary_path(path), path)
+        try:
+            future.result()  # the worker's error, if any, here
+            os.replace(temporary_path(path), path)
+        except Exception as error:
+            raise WriteFailed(path, self.written, error) from error
         self.pending.popleft()
         self.written += 1
+
+    def _video_oldest(self) -> None:
+        try:
+            self.video_pending[0].result()
+        except Exception as error:
+            raise WriteFailed(self.video_path, self.video_frames, error) from error
+        self.video_pending.popleft()
+        self.video_frames += 1
 
     def close(self) -> None:
         """Write every frame submitted, in order, and stop the threads. Interrupted (a second Ctrl-C)
@@ -125,7 +174,7 @@ class FrameFiles:
             while self.pending:
                 self._publish_oldest()
             while self.video_pending:
-                self.video_pending.popleft().result()
+                self._video_oldest()
         except BaseException:
             self.abort()
             raise
