@@ -306,3 +306,16 @@ def test_the_window_says_what_it_waits_for_before_the_first_picture():
     window_module.show_waiting(window, (0.9, 0.9, 0.8), ["compiling kernels ..."])
     assert window.shown == 2 and window.texts == ["compiling kernels ..."] * 2
     assert window.background == (0.9, 0.9, 0.8)
+
+
+def test_the_window_places_itself_inside_the_screen():
+    # Xvfb's default screens (1280 × 1024, and 1280 × 720 as the README once gave it) cut a 1280 × 720
+    # window at Taichi's (100, 100); it opens nearer the corner there, at (100, 100) where there is room.
+    from pbf.app.window import WINDOW_OFFSET, window_position
+
+    assert window_position(1280, 720, (1280, 1024)) == (0, WINDOW_OFFSET)
+    assert window_position(1280, 720, (1280, 720)) == (0, 0)
+    assert window_position(1280, 720, (1920, 1080)) == (WINDOW_OFFSET, WINDOW_OFFSET)
+    assert window_position(1280, 720, (1330, 770)) == (50, 50)
+    assert window_position(1280, 720, (800, 600)) == (0, 0)  # larger than the screen: its corner shows
+    assert window_position(1280, 720, None) == (WINDOW_OFFSET, WINDOW_OFFSET)  # no X display to ask

@@ -185,6 +185,46 @@ def unreachable_display() -> str | None:
     return None
 
 
+WINDOW_OFFSET = 100
+"""Pixels from the screen's top left corner to the window's, as Taichi places it, where the screen leaves room."""
+
+
+def screen_size() -> tuple[int, int] | None:
+    """(width, height) of the default screen of the X display $DISPLAY names, or None where there is no X
+    display or library to ask (Wayland, macOS, Windows: the window system places the window itself)."""
+    on_x = os.environ.get("DISPLAY") and sys.platform.startswith("linux")
+    library = ctypes.util.find_library("X11") if on_x else None
+    if library is None:
+        return None
+    try:
+        x11 = ctypes.CDLL(library)
+    except OSError:
+        return None
+    x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
+    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    x11.XDefaultScreen.argtypes = [ctypes.c_void_p]
+    x11.XDisplayWidth.argtypes = x11.XDisplayHeight.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    with stderr_caught([]):
+        handle = x11.XOpenDisplay(None)
+    if not handle:
+        return None
+    try:
+        screen = x11.XDefaultScreen(handle)
+        return int(x11.XDisplayWidth(handle, screen)), int(x11.XDisplayHeight(handle, screen))
+    finally:
+        x11.XCloseDisplay(handle)
+
+
+def window_position(width: int, height: int, screen: tuple[int, int] | None) -> tuple[int, int]:
+    """Where a window of ``width`` × ``height`` opens: WINDOW_OFFSET from the top left corner where the
+    screen leaves room, nearer the corner where it does not, so that the whole window is on the screen
+    (Xvfb's 1280 × 720 or 1280 × 1024 screen cut a 1280 × 720 window at (100, 100)); the corner itself
+    for a window larger than the screen."""
+    if screen is None:
+        return WINDOW_OFFSET, WINDOW_OFFSET
+    return tuple(max(0, min(WINDOW_OFFSET, room - size)) for room, size in zip(screen, (width, height)))
+
+
 def open_window(title: str, width: int, height: int, vsync: bool = True, show_window: bool = True):
     """A GGUI window, or WindowUnavailable with the reason in one line. Taichi's own error lines about a
     window that cannot open are dropped (the reason replaces them); anything else it writes passes.
@@ -202,7 +242,8 @@ def open_window(title: str, width: int, height: int, vsync: bool = True, show_wi
     caught: list[str] = []
     try:
         with stderr_caught(caught):
-            return ti.ui.Window(title, (width, height), vsync=vsync, show_window=show_window)
+            position = window_position(width, height, screen_size() if show_window else None)
+            return ti.ui.Window(title, (width, height), vsync=vsync, show_window=show_window, pos=position)
     except RuntimeError as error:
         reason = str(error).strip().splitlines()[-1]
         caught = [line for line in caught if not line.startswith(TAICHI_WINDOW_NOISE)]
