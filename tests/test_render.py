@@ -152,7 +152,7 @@ def test_no_png_keeps_the_exports(tmp_path, capsys):
     argv = ["dam_break", "--headless", "--frames", "2", "--out", str(out), "--video", str(tmp_path / "v.mp4")]
     argv += ["--no-png", "--export", "npz", "--size", "64x48", "--set", "fluid.spacing_m=0.05"]
     assert cli.main(argv) == 0
-    assert sorted(p.name for p in out.iterdir()) == [f"particles_{k:05d}.npz" for k in range(3)]
+    assert sorted(p.name for p in out.iterdir()) == [f"particles_{k:05d}.npz" for k in range(3)] + ["run.json"]
     assert len(list(iio.imiter(tmp_path / "v.mp4"))) == 3
     video = cli._size((tmp_path / "v.mp4").stat().st_size)
     npz = cli._size(sum(p.stat().st_size for p in out.iterdir()))

@@ -618,13 +618,11 @@ class SurfaceRenderer:
                 k = 1.0 - eta * eta * (1.0 - cosine * cosine)
                 refracted = (eta * direction + (eta * cosine - ti.sqrt(ti.max(k, 0.0))) * normal).normalized()
                 path = self.thickness[row, col]
-                # The water as a slab of the path's thickness: the ray leaves it parallel to the way it came
-                # in, shifted by the path it took inside (a ray followed down to the floor inside the water
-                # would squeeze the floor's tiles into horizontal bands across a block).
                 # Deep water blurs what lies behind it (scattering, and the normals' error over a long path):
-                # the view through it is averaged over a footprint that widens with the path.
+                # the view through it is averaged over a footprint that widens with the path. A sharp view
+                # squeezed the floor's tiles into horizontal bands across every block of water.
                 through = spread + THROUGH_BLUR * path / (travelled + path)
-                behind = self._environment(point + path * refracted, direction, through, travelled + path)
+                behind = self._environment(point, refracted, through, travelled)
                 if ti.static(self.with_solids):  # a body under the surface, seen through the water
                     hit, hit_normal = self._hit_solid(point, refracted)
                     if hit < FAR:
