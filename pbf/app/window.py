@@ -163,12 +163,11 @@ def stderr_caught(caught: list[str]):
             caught.extend(sink.read().decode(errors="replace").splitlines(keepends=True))
 
 
-def unreachable_display() -> str | None:
-    """Why the X display that $DISPLAY names cannot be opened, or None (it can, or there is no X library to
-    ask, or no DISPLAY). GGUI's GLFW, given a display it cannot open, prints "cannot initialize GLFW" and
-    ends the process, so the display is tried first with Xlib's ``XOpenDisplay``."""
-    display = os.environ.get("DISPLAY")
-    library = ctypes.util.find_library("X11") if display and sys.platform.startswith("linux") else None
+def xlib():
+    """Xlib through ctypes, with XOpenDisplay and XCloseDisplay typed, where $DISPLAY names an X display on
+    Linux and the library is there; else None."""
+    on_x = os.environ.get("DISPLAY") and sys.platform.startswith("linux")
+    library = ctypes.util.find_library("X11") if on_x else None
     if library is None:
         return None
     try:
@@ -177,6 +176,17 @@ def unreachable_display() -> str | None:
         return None
     x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
     x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
+    return x11
+
+
+def unreachable_display() -> str | None:
+    """Why the X display that $DISPLAY names cannot be opened, or None (it can, or there is no X library to
+    ask, or no DISPLAY). GGUI's GLFW, given a display it cannot open, prints "cannot initialize GLFW" and
+    ends the process, so the display is tried first with Xlib's ``XOpenDisplay``."""
+    display = os.environ.get("DISPLAY")
+    x11 = xlib()
+    if x11 is None:
+        return None
     with stderr_caught([]):  # Xlib may say why on stderr; the reason below says it once
         handle = x11.XOpenDisplay(None)
     if not handle:
@@ -192,16 +202,9 @@ WINDOW_OFFSET = 100
 def screen_size() -> tuple[int, int] | None:
     """(width, height) of the default screen of the X display $DISPLAY names, or None where there is no X
     display or library to ask (Wayland, macOS, Windows: the window system places the window itself)."""
-    on_x = os.environ.get("DISPLAY") and sys.platform.startswith("linux")
-    library = ctypes.util.find_library("X11") if on_x else None
-    if library is None:
+    x11 = xlib()
+    if x11 is None:
         return None
-    try:
-        x11 = ctypes.CDLL(library)
-    except OSError:
-        return None
-    x11.XOpenDisplay.restype, x11.XOpenDisplay.argtypes = ctypes.c_void_p, [ctypes.c_char_p]
-    x11.XCloseDisplay.argtypes = [ctypes.c_void_p]
     x11.XDefaultScreen.argtypes = [ctypes.c_void_p]
     x11.XDisplayWidth.argtypes = x11.XDisplayHeight.argtypes = [ctypes.c_void_p, ctypes.c_int]
     with stderr_caught([]):
