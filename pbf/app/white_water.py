@@ -482,6 +482,8 @@ class Sprites:
         self.full_width, self.full_height = int(width_px), int(height_px)
         self.width, self.height = max(self.full_width // COARSE, 2), max(self.full_height // COARSE, 2)
         self.opacity = ti.field(ti.i32, shape=(self.height, self.width))
+        self.row_used = ti.field(ti.i32, shape=self.height)
+        """1 where a row of the sums holds any opacity: the blend passes over the rest in a read."""
         self.per_item = per_item
         self.footprints = None
         self.constants = scene_constants(spacing=float(spacing_m))
@@ -561,6 +563,7 @@ class Sprites:
             steps = ti.cast(value * OPACITY_STEPS + 0.5, ti.i32)
             if steps > 0:
                 ti.atomic_add(self.opacity[row, col], steps)
+                self.row_used[row] = 1
 
     @ti.kernel
     def _splat(
@@ -613,36 +616,58 @@ class Sprites:
     @ti.kernel
     def _blend(self, image: ti.template()):
         """Each pixel of the frame whitened by 1 − exp(−its opacity, interpolated from the coarse sums), then
-        the sums cleared for the next frame."""
-        if ti.static(self.per_item):  # a GPU backend: a thread per pixel
-            for row, col in image:
-                self._blend_pixel(image, row, col)
-        else:  # the CPU: a thread per row, along it in order
-            for row in range(self.full_height):
-                for col in range(self.full_width):
-                    self._blend_pixel(image, row, col)
+        the sums cleared for the next frame. A thread per cell between four coarse pixels, over the frame's
+        pixels that interpolate in it: most cells have no white water near and cost four reads."""
+        for r, c in ti.ndrange(self.height - 1, self.width - 1):
+            corners = ti.Vector([0, 0, 0, 0])
+            if self.row_used[r] or self.row_used[r + 1]:
+                corners = ti.Vector(
+                    [self.opacity[r, c], self.opacity[r, c + 1], self.opacity[r + 1, c], self.opacity[r + 1, c + 1]]
+                )
+            if corners.max() > 0:
+                rows, cols = self._span(r, self.height, self.full_height), self._span(c, self.width, self.full_width)
+                for row in range(rows[0], rows[1]):
+                    for col in range(cols[0], cols[1]):
+                        self._blend_pixel(image, corners, r, c, row, col)
         for row, col in self.opacity:
-            self.opacity[row, col] = 0
+            if self.row_used[row]:
+                self.opacity[row, col] = 0
+        for row in self.row_used:
+            self.row_used[row] = 0
 
     @ti.func
-    def _blend_pixel(self, image: ti.template(), row, col):
-        y = (row + 0.5) / COARSE - 0.5
-        x = (col + 0.5) / COARSE - 0.5
-        r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.height - 2)
-        c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.width - 2)
-        corners = ti.Vector(
-            [self.opacity[r0, c0], self.opacity[r0, c0 + 1], self.opacity[r0 + 1, c0], self.opacity[r0 + 1, c0 + 1]]
+    def _cell(self, pixel, coarse):
+        """The cell of the coarse grid (its lower corner, clamped in) a frame's pixel interpolates in, and
+        the pixel's centre in coarse pixels."""
+        y = (pixel + 0.5) / COARSE - 0.5
+        return ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), coarse - 2), y
+
+    @ti.func
+    def _span(self, cell, coarse, full):
+        """The frame's pixels [first, end) along one axis whose interpolation cell is ``cell``: those of
+        COARSE (cell + ½) − ½ ≤ pixel < COARSE (cell + 3/2) − ½, the first and last cells taking the edges."""
+        first, end = 0, full
+        if cell > 0:
+            first = ti.max(ti.cast(ti.floor(COARSE * (cell + 0.5) - 0.5), ti.i32) - 1, 0)
+            while self._cell(first, coarse)[0] < cell:
+                first += 1
+        if cell < coarse - 2:
+            end = ti.min(ti.cast(ti.floor(COARSE * (cell + 1.5) - 0.5), ti.i32) + 1, full)
+            while end > first and self._cell(end - 1, coarse)[0] > cell:
+                end -= 1
+        return ti.Vector([first, end])
+
+    @ti.func
+    def _blend_pixel(self, image: ti.template(), corners, r0, c0, row, col):
+        fy = ti.min(ti.max(self._cell(row, self.height)[1] - r0, 0.0), 1.0)
+        fx = ti.min(ti.max(self._cell(col, self.width)[1] - c0, 0.0), 1.0)
+        steps = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * (
+            (1.0 - fx) * corners[2] + fx * corners[3]
         )
-        if corners.max() > 0:  # most pixels: no white water near
-            fy = ti.min(ti.max(y - r0, 0.0), 1.0)
-            fx = ti.min(ti.max(x - c0, 0.0), 1.0)
-            steps = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * (
-                (1.0 - fx) * corners[2] + fx * corners[3]
-            )
-            share = 1.0 - ti.exp(-steps / OPACITY_STEPS)
-            colour = ti.cast(image[row, col], ti.f32) / 255.0
-            blended = colour + share * (ti.Vector(WHITE_RGB) - colour)
-            image[row, col] = ti.cast(ti.min(blended, 1.0) * 255.0 + 0.5, ti.u8)
+        share = 1.0 - ti.exp(-steps / OPACITY_STEPS)
+        colour = ti.cast(image[row, col], ti.f32) / 255.0
+        blended = colour + share * (ti.Vector(WHITE_RGB) - colour)
+        image[row, col] = ti.cast(ti.min(blended, 1.0) * 255.0 + 0.5, ti.u8)
 
     def draw(self, white_water: WhiteWater, image, surface_depth, view, exposure_s: float) -> None:
         """The live diffuse particles of ``white_water`` into ``image`` ((H, W) u8 RGB field) over the water
