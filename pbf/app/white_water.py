@@ -139,6 +139,9 @@ class WhiteWater:
         """The fluid's positions and velocities, copied: the neighbour walk's tasks read them from here."""
         self.normal = ti.Vector.field(4, ti.f32, shape=fluid)
         """Per fluid particle: Σ_j x̂_ij w(x_ij) (its outward normal, unnormalised) and |that|."""
+        self.near_fast = ti.field(ti.i32, shape=fluid)
+        """1 for a fluid particle fast enough to emit and for its neighbours: the particles whose normals
+        the wave crests read (the rest of the water is not walked for them)."""
         self.live = ti.field(ti.i32, shape=())
         self.waiting = ti.field(ti.i32, shape=())
         """Diffuse particles alive, and those the last emission could not place (the budget full)."""
@@ -313,6 +316,18 @@ class WhiteWater:
     # ------------------------------------------------------------------ emission
 
     @ti.func
+    def _fast(self, i):
+        """Whether fluid particle i is above the kinetic energy's lowest threshold: without it a particle
+        emits nothing (Eq. 8), and its potentials are not needed."""
+        c = self.constants[None]
+        speed = self.sorted_v[i].norm()
+        return 0.5 * speed * speed * c.inverse_speed * c.inverse_speed > KINETIC[0]
+
+    @ti.func
+    def _mark(self, i, j, acc: ti.template()):
+        self.near_fast[j] = 1
+
+    @ti.func
     def _lopsided(self, i, j, acc: ti.template()):
         """Neighbour j's unit offset, weighted by w = 1 − r/h, into ``acc`` (the normal's sum)."""
         d = self.sorted_x[i] - self.sorted_x[j]
@@ -356,16 +371,21 @@ class WhiteWater:
         for i in range(count):
             self.sorted_x[i] = x[i]
             self.sorted_v[i] = v[i]
+            self.near_fast[i] = 0
+        for i in range(count):
+            if self._fast(i):
+                self.near_fast[i] = 1
+                grid.for_each_neighbour(i, entries, self._mark, 0)
         for i in range(count):
             acc = ti.Vector([0.0, 0.0, 0.0])
-            grid.for_each_neighbour(i, entries, self._lopsided, acc)
+            if self.near_fast[i]:
+                grid.for_each_neighbour(i, entries, self._lopsided, acc)
             self.normal[i] = ti.Vector([acc.x, acc.y, acc.z, acc.norm()])
         for i in range(count):
             u = self.sorted_v[i]
             speed = u.norm()
             acc = ti.Vector([0.0, 0.0])
-            # Without the kinetic energy's lowest threshold a particle emits nothing (Eq. 8): no walk.
-            if 0.5 * speed * speed * c.inverse_speed * c.inverse_speed > KINETIC[0]:
+            if self._fast(i):
                 grid.for_each_neighbour(i, entries, self._potential_pair, acc)
             normal = self.normal[i]
             crest = 0.0
