@@ -280,6 +280,43 @@ class SphereRenderer:
         for i in range(count):
             self.order[i] = i
 
+    @ti.func
+    def _projected(self, centre, radius, right, up, forward, focal):
+        """(visible, column, row, extent) of the sphere at ``centre`` (from the eye): whether it lies wholly
+        in front, its image's centre, and the radius in pixels that bounds its image. Off the axis by θ
+        the sphere's image is an ellipse of semi-major axis about f r / (d cos θ) = f r |c| / d²; the
+        extent bounds it with 10% and a pixel to spare."""
+        depth = centre.dot(forward)
+        visible = depth > radius * 1.01
+        safe = ti.select(visible, depth, 2.0 * radius + 1.0)
+        col = 0.5 * self.width + focal * centre.dot(right) / safe
+        row = 0.5 * self.height - focal * centre.dot(up) / safe
+        extent = 1.1 * focal * radius * centre.norm() / ((safe - radius) * safe) + 1.0
+        return visible, col, row, extent
+
+    @ti.func
+    def _columns(self, col, extent):
+        """The columns [c0, c1) of the extent's disc."""
+        return ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
+
+    @ti.func
+    def _rows_at(self, row, extent, offset):
+        """The rows [r0, r1) of the extent's disc at a column ``offset`` pixels from its centre."""
+        half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
+        return ti.max(0, ti.cast(row - half, ti.i32)), ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
+
+    @ti.func
+    def _try_pixel(self, i, centre, radius, c, r, right, up, forward, focal):
+        """Sphere i's hit at pixel (c, r) into its key, unless the key is already nearer than any hit on
+        the sphere can be (depth − r, with a margin for rounding)."""
+        depth = centre.dot(forward)
+        nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
+        y = self.height - 1 - r
+        if self.keys[c, y] > nearest:
+            key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
+            if key < self.keys[c, y]:
+                ti.atomic_min(self.keys[c, y], key)
+
     @ti.kernel
     def _splat(
         self,
@@ -292,80 +329,38 @@ class SphereRenderer:
         forward: vec3,
         focal: ti.f32,
     ):
-        for k in range(count):
-            i = self.order[k]
-            centre = x[i] - eye
-            depth = centre.dot(forward)
-            if depth > radius * 1.01:
-                col = 0.5 * self.width + focal * centre.dot(right) / depth
-                row = 0.5 * self.height - focal * centre.dot(up) / depth
-                # Off the axis by θ the sphere's image is an ellipse of semi-major axis about
-                # f r / (d cos θ) = f r |c| / d²; bound it with 10% and a pixel to spare, and visit
-                # each column's span of that disc (a column is contiguous in ``keys``).
-                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
-                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
-                # No hit on this sphere is nearer than depth − r: a pixel whose key is already
-                # nearer than that (with a margin for rounding) cannot change.
-                nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
-                for c in range(c0, c1):
-                    offset = c + 0.5 - col
-                    half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-                    r0, r1 = (
-                        ti.max(0, ti.cast(row - half, ti.i32)),
-                        ti.min(self.height, ti.cast(row + half, ti.i32) + 1),
-                    )
-                    for r in range(r0, r1):
-                        y = self.height - 1 - r
-                        if self.keys[c, y] > nearest:
-                            key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
-                            if key < self.keys[c, y]:
-                                ti.atomic_min(self.keys[c, y], key)
-
-    @ti.kernel
-    def _splat_items(
-        self,
-        x: ti.template(),
-        count: ti.i32,
-        radius: ti.f32,
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
-    ):
-        """:meth:`_splat` with a thread per (particle, pixel) of each particle's bounding square
-        (``pbf.app.splat``): the same tests, so the same image."""
-        for k in range(count):
-            centre = x[self.order[k]] - eye
-            depth = centre.dot(forward)
-            c0, c1, r0, r1 = 0, 0, 0, 0
-            if depth > radius * 1.01:
-                col = 0.5 * self.width + focal * centre.dot(right) / depth
-                row = 0.5 * self.height - focal * centre.dot(up) / depth
-                extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
-                c0, c1 = ti.max(0, ti.cast(col - extent, ti.i32)), ti.min(self.width, ti.cast(col + extent, ti.i32) + 1)
-                r0 = ti.max(0, ti.cast(row - extent, ti.i32))
-                r1 = ti.min(self.height, ti.cast(row + extent, ti.i32) + 1)
-            self.footprints.set(k, c0, c1, r0, r1)
-        self.footprints.scan(count)
-        for w in range(self.footprints.total(count)):
-            k, c, r = self.footprints.item(w, count)
-            i = self.order[k]
-            centre = x[i] - eye
-            depth = centre.dot(forward)
-            nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
-            y = self.height - 1 - r
-            # The per-particle loops visit only the disc of the bounding square; so does this.
-            col = 0.5 * self.width + focal * centre.dot(right) / depth
-            row = 0.5 * self.height - focal * centre.dot(up) / depth
-            extent = 1.1 * focal * radius * centre.norm() / ((depth - radius) * depth) + 1.0
-            offset = c + 0.5 - col
-            half = ti.sqrt(ti.max(extent * extent - offset * offset, 0.0))
-            in_disc = ti.max(0, ti.cast(row - half, ti.i32)) <= r < ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
-            if in_disc and self.keys[c, y] > nearest:
-                key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
-                if key < self.keys[c, y]:
-                    ti.atomic_min(self.keys[c, y], key)
+        """Every sphere into the keys. On the CPU a thread per particle, over each column's span of its disc
+        (a column is contiguous in ``keys``); on a GPU a thread per (particle, pixel) of each particle's
+        bounding square (``pbf.app.splat``), with the same tests."""
+        if ti.static(self.per_item):
+            for k in range(count):
+                visible, col, row, extent = self._projected(x[self.order[k]] - eye, radius, right, up, forward, focal)
+                c0, c1, r0, r1 = 0, 0, 0, 0
+                if visible:
+                    c0, c1 = self._columns(col, extent)
+                    r0 = ti.max(0, ti.cast(row - extent, ti.i32))
+                    r1 = ti.min(self.height, ti.cast(row + extent, ti.i32) + 1)
+                self.footprints.set(k, c0, c1, r0, r1)
+            self.footprints.scan(count)
+            for w in range(self.footprints.total(count)):
+                k, c, r = self.footprints.item(w, count)
+                i = self.order[k]
+                centre = x[i] - eye
+                _, col, row, extent = self._projected(centre, radius, right, up, forward, focal)
+                r0, r1 = self._rows_at(row, extent, c + 0.5 - col)  # the disc, as the CPU visits it
+                if r0 <= r < r1:
+                    self._try_pixel(i, centre, radius, c, r, right, up, forward, focal)
+        else:
+            for k in range(count):
+                i = self.order[k]
+                centre = x[i] - eye
+                visible, col, row, extent = self._projected(centre, radius, right, up, forward, focal)
+                if visible:
+                    c0, c1 = self._columns(col, extent)
+                    for c in range(c0, c1):
+                        r0, r1 = self._rows_at(row, extent, c + 0.5 - col)
+                        for r in range(r0, r1):
+                            self._try_pixel(i, centre, radius, c, r, right, up, forward, focal)
 
     @ti.kernel
     def _shade(
@@ -479,10 +474,7 @@ class SphereRenderer:
                 self._order(positions, count, eye, forward)
             else:
                 self._identity(count)
-            if self.per_item:
-                self._splat_items(positions, count, radius_m, eye, right, up, forward, focal)
-            else:
-                self._splat(positions, count, radius_m, eye, right, up, forward, focal)
+            self._splat(positions, count, radius_m, eye, right, up, forward, focal)
         self._shade(
             positions,
             colours,
