@@ -2,7 +2,6 @@
 the sphere renderer (``--style surface`` against particles) on the seed dam break.
 
     python benchmarks/surface.py [--sizes 8000 64000] [--frames 90] [--every 10] [--rounds 5]
-    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/surface.py --window    # needs Vulkan
 
 For each size the dam break (the ``dam_break`` preset, its spacing scaled to the particle count) runs
 ``--frames`` frames from rest; every ``--every``-th frame from the 10th on (fall, impact, splash, run-up)
@@ -15,9 +14,8 @@ included, as the headless writer uses it); the ratio is the median of the per-fr
 ``--volume`` measures instead how much water the mesh holds: the tests' resting column (a 0.3 m tank
 filled 0.3 m deep, settled for 20 frames) and then the dam break's frames from rest (at 8,000 particles
 unless ``--sizes`` says otherwise), each meshed with the scene's ``[surface]`` settings, with each
-``--candidate`` (``KEY=VALUE`` overrides separated by spaces) and with the pipeline as it was before
-the splash work ("before": smoothing length 1.2 spacings, 5 smoothing passes, splashsurf's
-smoothing-weight normalisation 13, no wall images), in an order that alternates from frame to frame.
+``--candidate`` (``KEY=VALUE`` overrides separated by spaces), in an order that alternates from frame
+to frame.
 Per frame it prints the enclosed volume over the water's (particle count × particle mass / rest
 density) and ``!`` where the mesh is not closed; then, over the dam break's frames, the ratio farthest
 from 1, each variant's median ms per mesh, the median of its per-frame time over the defaults', its
@@ -25,10 +23,6 @@ median triangle count and the median share of them lying flat on a wall; last, a
 droplet over the particle's volume (spray).
 
     python benchmarks/surface.py --volume [--sizes 8000] [--candidate "surface.iso_level=0.55" ...]
-
-``--window`` opens the GGUI window at the seed scene's 1280 × 720 instead and, for ``--frames`` frames,
-steps the simulation and shows each frame twice, as particles and as the surface (key v): the frame
-rate of each is 1 / (median step + median show), the show including the panel and the present.
 """
 
 import argparse
@@ -37,7 +31,6 @@ import statistics
 import time
 
 import numpy as np
-import pysplashsurf
 
 from pbf.app.mesh import Mesh, reconstruct
 from pbf.app.render import SceneRenderer
@@ -98,27 +91,8 @@ RESTING_COLUMN = {
 """The resting column of tests/test_mesh.py: 12 × 12 × 12 particles against five walls."""
 
 
-def reconstruct_before(positions, scene) -> Mesh:
-    """The mesh as ``reconstruct`` made it before the splash work: a smoothing length of 1.2 spacings,
-    5 weighted smoothing passes at splashsurf's default normalisation and no wall images, clamped."""
-    surface, _ = pysplashsurf.reconstruction_pipeline(
-        np.ascontiguousarray(positions, dtype=np.float32),
-        particle_radius=scene.fluid.spacing_m,
-        rest_density=scene.fluid.rest_density_kg_m3,
-        smoothing_length=1.2,
-        cube_size=0.5,
-        iso_surface_threshold=0.5,
-        mesh_smoothing_iters=5,
-        mesh_smoothing_weights=True,
-        multi_threading=False,
-        subdomain_grid=False,
-    )
-    vertices = np.clip(surface.mesh.vertices, scene.container.min_m, scene.container.max_m)
-    return Mesh(vertices.astype(np.float32), surface.mesh.triangles.astype(np.int32))
-
-
 def volume_variants(candidates: list[str]) -> list[tuple[str, object]]:
-    """(name, function of (positions, scene) → Mesh) for the defaults, each candidate and "before"."""
+    """(name, function of (positions, scene) → Mesh) for the defaults and each candidate."""
     variants = [("defaults", reconstruct)]
     for number, candidate in enumerate(candidates, 1):
         overrides = candidate.split()
@@ -128,7 +102,6 @@ def volume_variants(candidates: list[str]) -> list[tuple[str, object]]:
             return reconstruct(positions, load_scene(scene, overrides))
 
         variants.append((f"candidate {number}", meshed))
-    variants.append(("before", reconstruct_before))
     return variants
 
 
@@ -198,33 +171,6 @@ def measure_volume(particles: int, frames: int, every: int, candidates: list[str
     print(f"{'drop':>6}" + "".join(f"{d:>{width}.2f} " for d in droplets))
 
 
-def measure_window(frames: int) -> None:
-    from pbf.app import window
-
-    sim = Simulation("dam_break", quiet=True)
-    viewer = window.WindowViewer(
-        sim, window.open_window("pbf benchmark", sim.scene.render.width_px, sim.scene.render.height_px)
-    )
-    shows = {False: [], True: []}
-    for surface in shows:  # compiles both renderers
-        viewer.surface = surface
-        viewer.show()
-    sim.step()  # compiles the step's kernels, so that the median step is a step
-    steps = []
-    for _ in range(frames):
-        steps.append(timed_ms(sim.step)[0])
-        for surface, times in shows.items():
-            viewer.surface = surface
-            times.append(timed_ms(viewer.show)[0])
-    step = statistics.median(steps)
-    for surface, times in shows.items():
-        show = statistics.median(times)
-        print(
-            f"window, {'surface' if surface else 'particles'}: show {show:.0f} ms + step {step:.0f} ms = "
-            f"{1e3 / (show + step):.1f} fps"
-        )
-
-
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", help="particle counts (8000 64000; --volume: 8000)")
@@ -232,7 +178,6 @@ def main(argv=None) -> None:
     parser.add_argument("--every", type=int, default=10)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--arch", default="cpu")
-    parser.add_argument("--window", action="store_true", help="the window's frame rate instead (needs a display)")
     parser.add_argument("--volume", action="store_true", help="the volume the mesh holds, per frame, instead")
     parser.add_argument(
         "--candidate",
@@ -243,9 +188,6 @@ def main(argv=None) -> None:
     )
     args = parser.parse_args(argv)
     start_backend(args.arch, quiet=False)
-    if args.window:
-        measure_window(args.frames)
-        return
     if args.volume:
         for particles in args.sizes or [SEED_PARTICLES]:
             measure_volume(particles, args.frames, args.every, args.candidate)
