@@ -1,17 +1,15 @@
-"""The lab's tables of the presets, the launches and the start.
+"""The lab's tables of the presets, the launches and the start (docs/BENCHMARKS.md).
 
-    python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
-    python -m benchmarks.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
-    python -m benchmarks.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
-    python -m benchmarks.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (benchmarks.start)
-    python -m benchmarks.bench frames  [options of python -m benchmarks.frames]   (the renderers and writer alone)
+    python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]   (statistics)
+    python -m benchmarks.bench compare CPU.csv ... OTHER.csv      (each other run against the CPU's spread)
+    python -m benchmarks.bench counts [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]  (launches)
+    python -m benchmarks.bench start [--presets dam_break ...] [--no-shared | --first-calls]    (benchmarks.start)
+    python -m benchmarks.bench frames [options of python -m benchmarks.frames]
 
-``counts`` counts the Python kernel calls and offloaded tasks of a substep under Taichi's kernel
-profiler (``benchmarks.instruments``), on the host's decisions and on the device's (``--gpu-blocks``:
-the sums in a GPU backend's blocks of 32). ``presets`` runs every preset from its start and prints the
-means of its statistics over the second half of the frames, with reads and launches a substep;
-``compare`` reads such tables from several runs and says, per preset and statistic, whether each
-non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
+``presets``: every preset from its start, the means of its statistics over the second half of the
+frames, reads and launches a substep. ``compare``: per preset and statistic, whether each non-CPU run
+lies within the CPU runs' spread widened by as much again on either side. ``counts``: kernel calls and
+offloaded tasks a substep under Taichi's profiler, on the host's decisions and the device's.
 """
 
 import argparse
