@@ -29,14 +29,11 @@ from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import choices, describe, running_device
 from pbf.study.common import dam_break, run_command, timed
 
-COUNTED_FRAMES = 10
-"""``counts``: substeps counted."""
-PERTURBATION_M = 1e-7
-"""``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
+COUNTED_FRAMES = 10  # counts: substeps counted
+PERTURBATION_M = 1e-7  # --perturb: positions moved by this much a coordinate (float32's rounding at 0.5 m)
 PERTURBATION_G = 2e-7
-"""``--perturb``: gravity scaled by 1 + this × seed, a float32 rounding or two of it: it reaches the
-scenes that settle before t = 0 (whose settled start a move of the positions after it would not
-change) and those that start empty and fill from a nozzle (with no positions to move)."""
+"""``--perturb``: gravity scaled by 1 + this × seed, a rounding or two: it reaches the scenes that settle
+before t = 0 and those that start empty and fill from a nozzle (with no positions to move)."""
 
 
 def perturbed(scene, seed: int):
@@ -93,18 +90,11 @@ def presets(args) -> list[dict]:
             if args.perturb_each_frame:
                 jiggle_in_place(sim, rng)
         rows.append(
-            {
-                "preset": name,
-                "backend": args.backend,
-                "variant": args.variant,
-                "particles": sim.particle_count,
-                "frames": args.frames,
-                "s_per_frame": seconds / args.frames,
-                "reads_per_substep": reads / substeps,
-                "launches_per_substep": launches / substeps,
-                **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS},
-            }
-        )
+            dict(preset=name, backend=args.backend, variant=args.variant, particles=sim.particle_count,
+                 frames=args.frames, s_per_frame=seconds / args.frames, reads_per_substep=reads / substeps,
+                 launches_per_substep=launches / substeps,
+                 **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS})
+        )  # fmt: skip
     print(
         f"{'preset':<20} {'particles':>9} {'s/frame':>8} {'reads/substep':>13} {'launches/substep':>16} "
         f"{'mean err':>9} {'max err':>8} {'max v':>6} {'KE J':>9} {'neighbours':>10} {'iters':>5}"
@@ -142,17 +132,8 @@ def compare(paths: list[Path]) -> list[dict]:
             for row in others:
                 value = float(row[key])
                 inside = low - spread <= value <= high + spread
-                verdicts.append(
-                    {
-                        "preset": name,
-                        "statistic": key,
-                        "backend": row["backend"],
-                        "value": value,
-                        "cpu_low": low,
-                        "cpu_high": high,
-                        "inside": inside,
-                    }
-                )
+                verdicts.append(dict(preset=name, statistic=key, backend=row["backend"], value=value, cpu_low=low,
+                                     cpu_high=high, inside=inside))  # fmt: skip
                 print(
                     f"{name:<20} {key:<20} {row['backend']:>7} {value:>12.5g}   cpu {low:>12.5g} … {high:<12.5g}"
                     f"  {'inside' if inside else 'OUTSIDE'}"

@@ -20,13 +20,12 @@ the particles' own top, a cubic fitted to each column's highest particle), and a
 from __future__ import annotations
 
 import argparse
-import statistics
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.lab import Clock, image_size
+from benchmarks.lab import Clock, image_size, medians
 from pbf.study.common import run_command
 
 STYLES = ("particles", "surface")
@@ -51,7 +50,7 @@ def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
     for _ in range(repeats):
         write_png(path, image)
         times.append(clock.lap())
-    return statistics.median(t[0] for t in times), statistics.median(t[1] for t in times), path.stat().st_size
+    return *medians(times), path.stat().st_size
 
 
 def threaded(images: list, folder: Path) -> tuple[float, float, int]:
@@ -98,24 +97,14 @@ def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
     return f"| {label} | {rate:,.1f} | {wall_s * 1e3:.1f} | {cpu_s * 1e3:.1f} | {extra} |"
 
 
-FACES_UP_DEG = 45.0
-"""A water pixel belongs to a pool's top face when its normal is within this of vertical."""
-WALL_INSET_SPACINGS = 2.0
-"""...and its surface point this far inside the container's side walls (the rim is left out)."""
-FLAT_DEG = 5.0
-"""The top face's pixels within this of vertical are flat."""
-SPECKLE_DEG = 30.0
-"""A water pixel whose normal turns more than this from its neighbours' mean is speckle."""
-SAME_SURFACE_SPACINGS = 2.0
-"""Neighbouring pixels of water whose depths differ by less than this are on one surface (twice the
-renderer's narrow range: a surface seen at a slant changes depth from pixel to pixel)."""
-POOLS = (("hydrostatic", 60), ("dam_break", 180), ("dam_break", 480))
-"""The settled pools measured: preset and frame (t = 1 s; t = 3 s, the moment the look is judged at,
-when the seed's pool still sloshes; t = 8 s, when it has come to rest)."""
-SPLASH = ("dam_break", range(27, 41))
-"""The splash measured: the seed scene's frames 27-40."""
-POUR = ("pour", 150)
-"""The pour frame ``--images`` adds (not measured)."""
+FACES_UP_DEG = 45.0  # a water pixel is on a pool's top face when its normal is within this of vertical,
+WALL_INSET_SPACINGS = 2.0  # and its surface point this far inside the side walls (the rim left out)
+FLAT_DEG = 5.0  # the top face's pixels within this of vertical are flat
+SPECKLE_DEG = 30.0  # a water pixel whose normal turns more than this from its neighbours' mean is speckle
+SAME_SURFACE_SPACINGS = 2.0  # neighbours whose depths differ by less are on one surface (twice the narrow range)
+POOLS = (("hydrostatic", 60), ("dam_break", 180), ("dam_break", 480))  # t = 1 s; the seed at 3 s and at rest, 8 s
+SPLASH = ("dam_break", range(27, 41))  # the splash measured: the seed's frames 27-40
+POUR = ("pour", 150)  # the frame --images adds (not measured)
 
 
 def surface_points(view, depth: np.ndarray) -> np.ndarray:
@@ -321,17 +310,12 @@ def main(argv=None) -> int:
 
     print(
         f"{sim.scene.name} at t = {sim.time_s:.2f} s, {sim.particle_count:,} particles, {width}×{height}, "
-        f"{backend}; medians of {args.repeats} frames, the styles alternating"
+        f"{backend}; medians of {args.repeats} frames, the styles alternating\n"
     )
-    print()
-    print("| stage | frames/s | wall ms/frame | CPU ms/frame | |")
-    print("|---|---:|---:|---:|---|")
-    medians, cpu_medians = {}, {}
+    print("| stage | frames/s | wall ms/frame | CPU ms/frame | |\n|---|---:|---:|---:|---|")
+    drawn = {style: medians(times[style]) for style in STYLES}
     for style in STYLES:
-        wall = statistics.median(t[0] for t in times[style])
-        cpu = statistics.median(t[1] for t in times[style])
-        medians[style], cpu_medians[style] = wall, cpu
-        print(row(f"draw, {style}", wall, cpu, "to a host array"))
+        print(row(f"draw, {style}", *drawn[style], "to a host array"))
     with tempfile.TemporaryDirectory() as folder:
         for style in STYLES:
             wall, cpu, size_bytes = encoded(images[style], max(3, args.repeats // 4), Path(folder))
@@ -340,19 +324,13 @@ def main(argv=None) -> int:
             wall, cpu, workers = threaded([images[style]] * args.repeats, Path(folder))
             extra = f"{workers} thread{'s' if workers > 1 else ''}, in order, level 1"
             print(row(f"writer, {style}", wall / args.repeats, cpu / args.repeats, extra))
-    print()
+    ratio = [drawn["surface"][k] / drawn["particles"][k] for k in (0, 1)]
     if white_water is not None:
-        live, _waiting = white_water.counts()
-        update = statistics.median(u[0] for u in updates[-10:]) if updates else 0.0
-        update_cpu = statistics.median(u[1] for u in updates[-10:]) if updates else 0.0
-        print(row("white water's update (last 10 frames)", update, update_cpu, f"{live:,} diffuse particles"))
-    print()
-    print(
-        f"The surface takes {medians['surface'] / medians['particles']:.2f}× the particles' time to draw "
-        f"({cpu_medians['surface'] / cpu_medians['particles']:.2f}× their CPU time)."
-    )
+        live, update = white_water.counts()[0], medians(updates[-10:] or [(0.0, 0.0)])
+        print("\n" + row("white water's update (last 10 frames)", *update, f"{live:,} diffuse particles"))
+    print(f"\nThe surface takes {ratio[0]:.2f}× the particles' time to draw ({ratio[1]:.2f}× their CPU time).")
     if white_water is not None:
-        total = (cpu_medians["surface"] + update_cpu) / cpu_medians["particles"]
+        total = (drawn["surface"][1] + update[1]) / drawn["particles"][1]
         print(f"With white water's update, {total:.2f}× their CPU time ({live:,} diffuse particles).")
     if args.whole:
         with tempfile.TemporaryDirectory() as folder:
@@ -363,15 +341,14 @@ def main(argv=None) -> int:
             f"{args.whole} frames a round, {args.rounds} rounds, the ways alternating, medians"
         )
         print()
-        print("| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |")
-        print("|---|---:|---:|---:|---:|")
-        wall = {way: statistics.median(t[0] for t in times[way]) for way in WAYS}
-        cpu = {way: statistics.median(t[1] for t in times[way]) for way in WAYS}
-        base = WAYS[0]
+        print(
+            "| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |\n|---|---:|---:|---:|---:|"
+        )
+        base = medians(times[WAYS[0]])
         for way in WAYS:
-            added = "" if way == base else f"{(wall[way] - wall[base]) * 1e3:.1f}"
-            cpu_added = "" if way == base else f"{(cpu[way] - cpu[base]) * 1e3:.1f}"
-            print(f"| {way} | {wall[way] * 1e3:.1f} | {added} | {cpu[way] * 1e3:.1f} | {cpu_added} |")
+            (wall, cpu), first = medians(times[way]), way == WAYS[0]
+            added = ("", "") if first else (f"{(wall - base[0]) * 1e3:.1f}", f"{(cpu - base[1]) * 1e3:.1f}")
+            print(f"| {way} | {wall * 1e3:.1f} | {added[0]} | {cpu * 1e3:.1f} | {added[1]} |")
     return 0
 
 

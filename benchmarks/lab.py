@@ -58,6 +58,11 @@ def spread(values, digits: int = 2) -> str:
     return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f}-{max(values):.{digits}f})"
 
 
+def medians(pairs) -> tuple[float, ...]:
+    """The median of each column of ``pairs`` (such as (wall, CPU) seconds)."""
+    return tuple(statistics.median(column) for column in zip(*pairs))
+
+
 class Clock:
     """Wall and process CPU seconds (every thread's), started when made: ``wall, cpu = clock.lap()``."""
 

@@ -27,6 +27,10 @@ import tempfile
 import time
 from pathlib import Path
 
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
+from benchmarks.lab import Clock  # noqa: E402
+
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
 # in docs/HISTORY_BENCHMARKS.md, "The window: the levers".
@@ -58,7 +62,7 @@ def x_server_cpu_s() -> float | None:
     return None
 
 
-class Clock:
+class Phases:
     """Wall and process CPU time, in ms, of the phases of one frame."""
 
     def __init__(self):
@@ -66,11 +70,11 @@ class Clock:
 
     def timed(self, phase, function):
         def run(*args, **kwargs):
-            wall, cpu = time.perf_counter(), time.process_time()
+            clock = Clock()
             try:
                 return function(*args, **kwargs)
             finally:
-                self.add(phase, time.perf_counter() - wall, time.process_time() - cpu)
+                self.add(phase, *clock.lap())
 
         return run
 
@@ -121,7 +125,7 @@ def measure(
         sim.step()
         ti.sync()
 
-    clock = Clock()
+    clock = Phases()
     viewer.draw = clock.timed("draw", viewer.draw)
     viewer.panel = clock.timed("panel", viewer.panel)
     viewer.window.show = clock.timed("show", viewer.window.show)
