@@ -3,27 +3,13 @@
     python benchmarks/ab.py HEAD 3153ce8 --arch cpu --sizes 8000 64000 --rounds 5
     python benchmarks/ab.py . ../base --arch cuda --sizes 8000 64000 1000000 --preset dam_break_large
 
-A version is a folder that holds the package (``pbf/``: a checkout, or a copy of one as a GPU machine
-gets it) or a git revision of the checkout this script lies in, exported with ``git archive`` into a
-temporary folder that is removed at the end. The first version is the base of the ratios.
-
-Each round runs every version once, each in a fresh process: this checkout's
-``benchmarks/substep_time.py`` with the version's folder first on PYTHONPATH, from a scratch working
-folder (so that neither the current folder nor an installed copy of the package is imported instead),
-in an order that rotates from round to round, so that a machine's drift (its load, its clock) touches
-every version alike. Per version and size it prints the median over the rounds of the milliseconds
-per substep (each round's figure itself the median of ``--inner`` timed stretches of ``--substeps``
-substeps), their range, and the median and range of the rounds' ratios to the base: each ratio pairs
-two runs of the same round, close in time, which a loaded machine disturbs less than it does the
-medians. The host's CPU time per substep comes beside it (the issuing thread's: what bounds a GPU's
-small scenes).
-
-``--preset`` adds the preset's frames of 1/60 s simulated per second (``substep_time.py --preset``),
-with its substeps a frame and mean density error, which say whether the versions did the same work.
-
-The versions run the same ``substep_time.py`` (this checkout's), so they must have the package
-interface it calls: ``Simulation``, ``Simulation.substep``, ``pbf.study.common.dam_break`` and
-``pbf.solver.start_backend``. A version's run that fails stops the comparison with its last words.
+A version is a folder holding ``pbf/`` or a git revision of this checkout (exported with ``git
+archive`` into a temporary folder); the first is the base of the ratios. Each round runs every version
+once, in an order that rotates from round to round: this checkout's ``substep_time.py`` in a fresh
+process, the version's folder first on PYTHONPATH, from a scratch folder. Per version and size: the
+median over the rounds of ms a substep (each round's the median of ``--inner`` stretches of
+``--substeps``), its range, the host's CPU ms, and the median and range of the rounds' paired ratios
+to the base. ``--preset`` adds its frames simulated a second, substeps a frame and mean error.
 """
 
 from __future__ import annotations
@@ -38,9 +24,11 @@ import tarfile
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-CHECKOUT = HERE.parent
-TIMER = HERE / "substep_time.py"
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
+from benchmarks.lab import CHECKOUT, export, revision, spread  # noqa: E402
+
+TIMER = Path(__file__).resolve().parent / "substep_time.py"
 RUN_TIMEOUT_S = 3600
 """One version's run of one round: a million particles on the CPU backend with a preset takes minutes."""
 
@@ -68,38 +56,6 @@ class Version:
 
 def is_package_folder(path: Path) -> bool:
     return (path / "pbf" / "__init__.py").is_file()
-
-
-def revision(given: str) -> str | None:
-    """The commit ``given`` names in this checkout, or None where git does not know it (or is absent)."""
-    try:
-        done = subprocess.run(
-            ["git", "-C", str(CHECKOUT), "rev-parse", "--verify", "--quiet", f"{given}^{{commit}}"],
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    if done.returncode != 0:
-        return None
-    return done.stdout.strip() or None
-
-
-def export(commit: str, into: Path) -> Path:
-    """The package and its data at ``commit``, written under ``into`` (``git archive``, no work tree)."""
-    archive = into / f"{commit[:12]}.tar"
-    with archive.open("wb") as out:
-        subprocess.run(["git", "-C", str(CHECKOUT), "archive", commit], stdout=out, check=True, timeout=600)
-    folder = into / commit[:12]
-    folder.mkdir()
-    with tarfile.open(archive) as tar:
-        try:
-            tar.extractall(folder, filter="data")  # the archive's own files only (Python 3.11.4 and later)
-        except TypeError:  # an older Python: git's own archive of its own commit
-            tar.extractall(folder)
-    archive.unlink()
-    return folder
 
 
 def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentParser) -> list[Version]:
@@ -179,14 +135,8 @@ def record(version: Version, output: str, sizes: list[int], preset: str | None) 
 
 
 def paired_ratio(values: list[float], base: list[float]) -> str:
-    """The median of round-by-round ratios (each round ran both, close in time), and their range: how
-    far one round's pair can stray says how much a single pair is worth on this machine."""
-    ratios = [v / b for v, b in zip(values, base)]
-    return f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
-
-
-def spread(values: list[float], digits: int) -> str:
-    return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f}-{max(values):.{digits}f})"
+    """The median and range of round-by-round ratios (each round ran both, close in time)."""
+    return spread(v / b for v, b in zip(values, base))
 
 
 def report(versions: list[Version], sizes: list[int], preset: str | None, args) -> None:

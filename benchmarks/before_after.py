@@ -4,8 +4,9 @@ side, at the same frames (docs/RENDERING.md's white-water figures).
     python benchmarks/before_after.py 0939edd --shot dam_break:0,25,35,45 --shot pour:60 --size 640x360 \\
         --out docs/white_water_before_after.png
 
-Each side runs in a process of its own on Taichi's CPU backend: the earlier commit from a temporary git
-worktree, this tree as it is. Rows are the shots' frames, the left column before, the right after."""
+Each side runs in a process of its own on Taichi's CPU backend: the earlier commit exported with ``git
+archive`` into a temporary folder, this tree as it is. Rows are the shots' frames, the left column
+before, the right after."""
 
 import argparse
 import json
@@ -17,7 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
+from benchmarks.lab import CHECKOUT as ROOT  # noqa: E402
+from benchmarks.lab import export, image_size, revision  # noqa: E402
 
 DRAW = """
 import json, sys
@@ -53,19 +57,17 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("before", help="the earlier commit")
     parser.add_argument("--shot", action="append", required=True, help="SCENE:FRAME,FRAME,… (repeatable)")
-    parser.add_argument("--size", default="640x360", help="WIDTHxHEIGHT of each frame")
+    parser.add_argument("--size", type=image_size, default="640x360", help="WIDTHxHEIGHT of each frame")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "before_after.png")
     args = parser.parse_args(argv)
-    width, height = (int(v) for v in args.size.split("x"))
+    width, height = args.size
+    commit = revision(args.before)
+    if commit is None:
+        parser.error(f"{args.before!r}: not a git revision of {ROOT}")
     shots = [(scene, [int(f) for f in frames.split(",")]) for scene, frames in (s.split(":") for s in args.shot)]
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
-        old = folder / "before"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old), args.before], check=True)
-        try:
-            before = draw(old, shots, width, height, folder)
-        finally:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True)
+        before = draw(export(commit, folder), shots, width, height, folder)
         after = draw(ROOT, shots, width, height, folder)
     rows = [np.concatenate([b, np.full((height, 8, 3), 255, np.uint8), a], axis=1) for b, a in zip(before, after)]
     grid = np.concatenate([np.concatenate([r, np.full((8, r.shape[1], 3), 255, np.uint8)]) for r in rows])[:-8]

@@ -1,17 +1,15 @@
-"""The lab's tables of the presets, the launches and the start.
+"""The lab's tables of the presets, the launches and the start (docs/BENCHMARKS.md).
 
-    python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]
-    python -m benchmarks.bench compare CPU.csv ... OTHER.csv   (presets tables of several runs)
-    python -m benchmarks.bench counts  [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]   (launches)
-    python -m benchmarks.bench start   [--presets dam_break ...] [--no-shared | --first-calls]   (benchmarks.start)
-    python -m benchmarks.bench frames  [options of python -m benchmarks.frames]   (the renderers and writer alone)
+    python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]   (statistics)
+    python -m benchmarks.bench compare CPU.csv ... OTHER.csv      (each other run against the CPU's spread)
+    python -m benchmarks.bench counts [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]  (launches)
+    python -m benchmarks.bench start [--presets dam_break ...] [--no-shared | --first-calls]    (benchmarks.start)
+    python -m benchmarks.bench frames [options of python -m benchmarks.frames]
 
-``counts`` counts the Python kernel calls and offloaded tasks of a substep under Taichi's kernel
-profiler (``benchmarks.instruments``), on the host's decisions and on the device's (``--gpu-blocks``:
-the sums in a GPU backend's blocks of 32). ``presets`` runs every preset from its start and prints the
-means of its statistics over the second half of the frames, with reads and launches a substep;
-``compare`` reads such tables from several runs and says, per preset and statistic, whether each
-non-CPU run lies within the CPU runs' own spread, widened by as much again on either side.
+``presets``: every preset from its start, the means of its statistics over the second half of the
+frames, reads and launches a substep. ``compare``: per preset and statistic, whether each non-CPU run
+lies within the CPU runs' spread widened by as much again on either side. ``counts``: kernel calls and
+offloaded tasks a substep under Taichi's profiler, on the host's decisions and the device's.
 """
 
 import argparse
@@ -31,14 +29,11 @@ from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import choices, describe, running_device
 from pbf.study.common import dam_break, run_command, timed
 
-COUNTED_FRAMES = 10
-"""``counts``: substeps counted."""
-PERTURBATION_M = 1e-7
-"""``--perturb``: positions moved by this much, per coordinate: float32's rounding at half a metre."""
+COUNTED_FRAMES = 10  # counts: substeps counted
+PERTURBATION_M = 1e-7  # --perturb: positions moved by this much a coordinate (float32's rounding at 0.5 m)
 PERTURBATION_G = 2e-7
-"""``--perturb``: gravity scaled by 1 + this × seed, a float32 rounding or two of it: it reaches the
-scenes that settle before t = 0 (whose settled start a move of the positions after it would not
-change) and those that start empty and fill from a nozzle (with no positions to move)."""
+"""``--perturb``: gravity scaled by 1 + this × seed, a rounding or two: it reaches the scenes that settle
+before t = 0 and those that start empty and fill from a nozzle (with no positions to move)."""
 
 
 def perturbed(scene, seed: int):
@@ -95,18 +90,11 @@ def presets(args) -> list[dict]:
             if args.perturb_each_frame:
                 jiggle_in_place(sim, rng)
         rows.append(
-            {
-                "preset": name,
-                "backend": args.backend,
-                "variant": args.variant,
-                "particles": sim.particle_count,
-                "frames": args.frames,
-                "s_per_frame": seconds / args.frames,
-                "reads_per_substep": reads / substeps,
-                "launches_per_substep": launches / substeps,
-                **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS},
-            }
-        )
+            dict(preset=name, backend=args.backend, variant=args.variant, particles=sim.particle_count,
+                 frames=args.frames, s_per_frame=seconds / args.frames, reads_per_substep=reads / substeps,
+                 launches_per_substep=launches / substeps,
+                 **{key: statistics.fmean(s[key] for s in samples) for key in PRESET_STATISTICS})
+        )  # fmt: skip
     print(
         f"{'preset':<20} {'particles':>9} {'s/frame':>8} {'reads/substep':>13} {'launches/substep':>16} "
         f"{'mean err':>9} {'max err':>8} {'max v':>6} {'KE J':>9} {'neighbours':>10} {'iters':>5}"
@@ -144,17 +132,8 @@ def compare(paths: list[Path]) -> list[dict]:
             for row in others:
                 value = float(row[key])
                 inside = low - spread <= value <= high + spread
-                verdicts.append(
-                    {
-                        "preset": name,
-                        "statistic": key,
-                        "backend": row["backend"],
-                        "value": value,
-                        "cpu_low": low,
-                        "cpu_high": high,
-                        "inside": inside,
-                    }
-                )
+                verdicts.append(dict(preset=name, statistic=key, backend=row["backend"], value=value, cpu_low=low,
+                                     cpu_high=high, inside=inside))  # fmt: skip
                 print(
                     f"{name:<20} {key:<20} {row['backend']:>7} {value:>12.5g}   cpu {low:>12.5g} … {high:<12.5g}"
                     f"  {'inside' if inside else 'OUTSIDE'}"

@@ -1,33 +1,17 @@
 """What rigid bodies cost: floating_boxes' frames with its four boxes against the same pool without
-them, runs interleaved frame by frame, medians; and the particles within reach of a body (those the
-reaction sums over). With ``momentum``: the momentum a box passes to water at rest, no gravity, no
-wall within reach (tests/test_bodies.py's scene). With ``archimedes``: boxes of 300-900 kg/m³ let go
-at their draft in a settled pool (the Archimedes test's scene), their drafts against the level the
-water's volume gives and against the level its pressure gives. With ``collision``: the draft of the
-500 kg/m³ box and the speed of the box the momentum scene drives into water, for fixed collision
-distances from 0.2 to 1 particle radius and for the distance that shrinks from r as the body moves
-(``pbf.solver.bodies.collision_reach``, at three rates). Prints a table.
+them, interleaved frame by frame, medians, and the particles within reach of a body (those the
+reaction sums over). ``momentum``: the momentum a box passes to water at rest, no gravity, no wall
+within reach (tests/test_bodies.py's scene). ``archimedes``: boxes of 300-900 kg/m³ let go at their
+draft in a settled pool, their drafts against the levels the water's volume and its pressure give.
 
     PYTHONPATH=$PWD python benchmarks/bodies.py [frames]
     PYTHONPATH=$PWD python benchmarks/bodies.py momentum
     PYTHONPATH=$PWD python benchmarks/bodies.py archimedes
-    PYTHONPATH=$PWD python benchmarks/bodies.py collision
-    PYTHONPATH=$PWD python benchmarks/bodies.py compile [runs] [other checkout]
-
-With ``compile``: the cold start (``run.py SCENE --stats-only --frames 1``'s "kernels ready in", a fresh
-process and a fresh Taichi offline cache each) of dam_break and floating_boxes, runs alternated,
-medians; with another checkout's root, its floating_boxes too (``git worktree add`` an earlier commit).
-Each kernel's first call (its compile): ``python -m benchmarks.bench start --first-calls --presets floating_boxes``.
 """
 
-import os
-import re
-import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -155,37 +139,6 @@ def archimedes() -> None:
         )
 
 
-def collision() -> None:
-    from pbf.solver import bodies
-
-    print(
-        "| collision distance | draft / height, 500 kg/m³ (expected 0.5) | box v_x at 0.15 s | at 0.4 s "
-        "| total P / P0, worst frame |\n|---|---|---|---|---|"
-    )
-    names = ("COLLISION_AT_REST", "COLLISION_MOVING", "COLLISION_GIVE")
-    kept = [getattr(bodies, name) for name in names]
-    variants = [(f"{f:g} r", (f, f, 0.0)) for f in (0.2, 0.5, 0.75, 1.0)] + [
-        (f"r − {give:g} u Δt, at least 0.2 r{' (shipped)' if give == kept[2] else ''}", (1.0, 0.2, give))
-        for give in (1.0, 2.0, 4.0)
-    ]
-    try:
-        for label, values in variants:
-            for name, value in zip(names, values):
-                setattr(bodies, name, value)
-            draft = _floating(500.0)["volume"]
-            sim, mass, body_mass, start = _momentum_scene()
-            speeds, worst = {}, 0.0
-            for frame in range(24):
-                sim.step()
-                water, box, flight = _momenta(sim, mass, body_mass)
-                worst = max(worst, abs(water + box + flight - start) / start)
-                speeds[frame] = box / body_mass
-            print(f"| {label} | {draft:.3f} | {speeds[8]:.3f} | {speeds[23]:.3f} | {1 + worst:.3f} |", flush=True)
-    finally:
-        for name, value in zip(names, kept):
-            setattr(bodies, name, value)
-
-
 def _momentum_scene():
     spacing = 0.025
     scene = {
@@ -214,45 +167,15 @@ def _rotation(q):
     return quaternion_matrix_np(q)
 
 
-def cold_start_s(root: Path, scene: str) -> float:
-    """``run.py scene``'s "kernels ready in" with an empty offline cache, in a fresh process."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": cache, "PYTHONPATH": str(root)}
-        command = [sys.executable, str(root / "run.py"), scene, "--stats-only", "--frames", "1", "--arch", "cpu"]
-        out = subprocess.run(command, capture_output=True, text=True, env=env, check=True).stdout
-    return float(re.search(r"kernels ready in ([0-9.]+) s", out).group(1))
-
-
-def compile_times(runs: int = 3, other: str | None = None) -> None:
-    here = Path(__file__).resolve().parents[1]
-    cases = [("dam_break", here), ("floating_boxes", here)]
-    if other:
-        cases.append(("floating_boxes", Path(other).resolve()))
-    times = {case: [] for case in cases}
-    for _ in range(runs):  # alternated, so that a busy spell of the machine falls on all of them
-        for scene, root in cases:
-            times[scene, root].append(cold_start_s(root, scene))
-    base = np.median(times[cases[0]])
-    print("| scene | code | cold start, median (s) | runs (s) | / dam_break |\n|---|---|---|---|---|")
-    for (scene, root), values in times.items():
-        runs_s = ", ".join(f"{v:.1f}" for v in values)
-        median = np.median(values)
-        print(f"| {scene} | {root} | {median:.1f} | {runs_s} | {median / base:.2f} |")
-
-
 if __name__ == "__main__":
     if sys.argv[1:2] == ["momentum"]:
         momentum()
     elif sys.argv[1:2] == ["archimedes"]:
         archimedes()
-    elif sys.argv[1:2] == ["collision"]:
-        collision()
-    elif sys.argv[1:2] == ["compile"]:
-        compile_times(int(sys.argv[2]) if len(sys.argv) > 2 else 3, sys.argv[3] if len(sys.argv) > 3 else None)
     elif sys.argv[1:] and not sys.argv[1].isdigit():
         sys.exit(
-            f"bodies.py: {sys.argv[1]!r}: expected a number of frames or one of momentum, archimedes, collision, "
-            "compile (each kernel's first call: python -m benchmarks.bench start --first-calls)"
+            f"bodies.py: {sys.argv[1]!r}: expected a number of frames, momentum or archimedes (a cold "
+            "start's compile: python -m benchmarks.bench start --first-calls)"
         )
     else:
         main(int(sys.argv[1]) if len(sys.argv) > 1 else 20)

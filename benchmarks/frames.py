@@ -1,70 +1,34 @@
 """The headless frame's cost without the simulation: the renderer and the PNG writer alone on a fixed
-state, both styles, as frames a second and CPU milliseconds a frame.
+state, both styles, as frames a second and CPU milliseconds a frame (all threads: on the CPU backend
+the kernels' too); and ``look``, how the surface style reads (docs/RENDERING.md, "Measured").
 
     python -m benchmarks.frames                      # the seed scene at t = 1 s, 1280×720
     python -m benchmarks.frames --size 1920x1080 --arch cuda
+    python -m benchmarks.frames --whole 15 --rounds 5   # and whole frames, simulation included
+    python -m benchmarks.frames look [--size 640x360] [--images out/look]
 
-The scene is stepped to ``--at-frame`` once; then the two styles are drawn alternately, frame after
-frame (so that a busy machine slows both alike), and the medians are reported. Drawing counts until
-the image is on the host (``SceneRenderer.frame``: the device synchronised by its one copy). Writing
-is PNG encoding at several zlib levels and as Pillow writes it (size and time, one thread), and the threaded writer
-(``pbf.app.writer.FrameFiles``) writing ``--repeats`` frames of each style into a temporary folder,
-its rate the throughput with its default threads. CPU milliseconds are the process's CPU time (all
-threads) over the frames: on a GPU backend they are what the host spends, on the CPU backend they
-include the kernels' threads.
-
-``--whole N`` adds the whole frame of a headless run, simulation included, in one process: from the
-same state, N frames stepped and written each way (simulation only; the frame drawn and written with
-Pillow's PNG on the main thread, as before; with our PNG on the main thread; with the threaded
-writer), the ways alternating round by round (``--rounds``), medians:
-
-    python -m benchmarks.frames --whole 15 --rounds 5
-
-``look`` measures how the surface style reads rather than what it costs: a settled pool (``hydrostatic``
-at t = 1 s, the seed scene at t = 3 s) should be one flat surface, and a splash (the seed scene's
-frames 27-40) sheets and drops rather than sparkles:
-
-    python -m benchmarks.frames look                 # the scenes' own size, 1280×720
-    python -m benchmarks.frames look --size 640x360 --images out/look
-
-Both figures come from the renderer's normal buffer and water mask (``SurfaceRenderer.surface``, the
-coarse passes' pixels). *Top face*: the water pixels whose normal is within 45° of vertical and whose
-surface point lies more than two spacings inside the container's side walls (the rim, where the water
-meets a wall, is left out); reported are the share of them within 5° of vertical and their median
-angle, and beside them the same for the particles' own top (a cubic fitted to the highest particle of
-each column: the waves a renderer should keep). *Speckle*: the share of water pixels whose normal is
-more than 30° from the mean of the normals of its eight neighbours on the same surface (water within
-two spacings of its depth; a pixel with none counts as speckle), over the splash frames.
-
-This study's subject is the application's renderer and writer, so it imports ``pbf.app`` (the other
-studies measure the solver only).
+The scene is stepped to ``--at-frame``; the two styles are then drawn alternately (a busy machine
+slows both alike) until the image is on the host, medians reported; the PNG encoder and the threaded
+writer (``pbf.app.writer``) write those images. ``--whole N``: from the same state, N frames stepped
+and written each way, the ways alternating round by round. ``look``, from the renderer's normals and
+water mask (``SurfaceRenderer.surface``): a settled pool's *top face* (water pixels facing up within
+45°, two spacings inside the side walls: the share within 5° of vertical and the median angle, beside
+the particles' own top, a cubic fitted to each column's highest particle), and a splash's *speckle*
+(water pixels whose normal is over 30° from their same-surface neighbours' mean).
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.lab import Clock, image_size, medians
 from pbf.study.common import run_command
 
 STYLES = ("particles", "surface")
-LEVELS = (1, 3, 6)
-"""zlib levels of the writer's encoder compared: its own (1), a middle one, and Pillow's default (6);
-beside them Pillow's PNG at its defaults (five filters tried per row, level 6), as frames were written
-before."""
-
-
-def size(text: str) -> tuple[int, int]:
-    width, _, height = text.partition("x")
-    try:
-        return int(width), int(height)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected WIDTHxHEIGHT, e.g. 1280x720") from None
 
 
 def timed_frames(renderers: dict, repeats: int) -> dict:
@@ -72,79 +36,59 @@ def timed_frames(renderers: dict, repeats: int) -> dict:
     times = {style: [] for style in renderers}
     for _ in range(repeats):
         for style, renderer in renderers.items():
-            wall, cpu = time.perf_counter(), time.process_time()
+            clock = Clock()
             renderer.frame()
-            times[style].append((time.perf_counter() - wall, time.process_time() - cpu))
+            times[style].append(clock.lap())
     return times
 
 
-def pillow_png(path: Path, image, level: int) -> None:
-    """Pillow's PNG at its defaults (``level`` is ignored): how frames were written before."""
-    from PIL import Image
-
-    Image.fromarray(image).save(path, format="PNG")
-
-
-def encoded(image, level: int, repeats: int, folder: Path, encoder=None) -> tuple[float, float, int]:
-    """Median wall and CPU seconds of one PNG of ``image`` at zlib ``level``, and its size in bytes."""
+def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
+    """Median wall and CPU seconds of one PNG of ``image`` (the writer's encoder), and its bytes."""
     from pbf.app.writer import write_png
 
-    encoder = encoder or write_png
-    path = folder / f"level{level}.png"
-    walls, cpus = [], []
+    path, clock, times = folder / "frame.png", Clock(), []
     for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        encoder(path, image, level)
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
-    return statistics.median(walls), statistics.median(cpus), path.stat().st_size
+        write_png(path, image)
+        times.append(clock.lap())
+    return *medians(times), path.stat().st_size
 
 
 def threaded(images: list, folder: Path) -> tuple[float, float, int]:
-    """Seconds and CPU seconds the threaded writer takes to write ``images`` (submit to close), and its
-    threads."""
+    """Seconds and CPU seconds the threaded writer takes to write ``images`` (submit to close), its threads."""
     from pbf.app.writer import FrameFiles
 
-    files = FrameFiles()
-    wall, cpu = time.perf_counter(), time.process_time()
+    files, clock = FrameFiles(), Clock()
     for number, image in enumerate(images):
         files.submit(folder / f"frame_{number:05d}.png", image.copy())
     files.close()
-    return time.perf_counter() - wall, time.process_time() - cpu, files.workers
+    return *clock.lap(), files.workers
 
 
-WAYS = ("simulation only", "Pillow's PNG on the main thread (before)", "our PNG on the main thread", "threaded writer")
+WAYS = ("simulation only", "our PNG on the main thread", "threaded writer")
 
 
 def whole_frames(sim, renderer, frames: int, rounds: int, folder: Path) -> dict:
-    """Per way of writing: (wall seconds, CPU seconds) a frame of each round, simulation included, every
-    round from the same state."""
+    """Per way of writing: (wall, CPU) seconds a frame of each round, simulation included, every round
+    from the same state."""
     import taichi as ti
 
     from pbf.app.writer import FrameFiles, write_png
 
-    start = sim.snapshot()
-    times = {way: [] for way in WAYS}
+    start, times = sim.snapshot(), {way: [] for way in WAYS}
     for _ in range(rounds):
         for way in WAYS:
             sim.restore(start)
             files = FrameFiles() if way == "threaded writer" else None
-            wall, cpu = time.perf_counter(), time.process_time()
+            clock = Clock()
             for number in range(frames):
                 sim.step()
-                if way == "simulation only":
-                    continue
-                image, path = renderer.frame(), folder / f"frame_{number:05d}.png"
-                if files is not None:
-                    files.submit(path, image)
-                elif way.startswith("Pillow"):
-                    pillow_png(path, image, 6)
-                else:
-                    write_png(path, image)
+                if way != "simulation only":
+                    image, path = renderer.frame(), folder / f"frame_{number:05d}.png"
+                    files.submit(path, image) if files is not None else write_png(path, image)
             if files is not None:
                 files.close()
             ti.sync()
-            times[way].append(((time.perf_counter() - wall) / frames, (time.process_time() - cpu) / frames))
+            times[way].append(tuple(t / frames for t in clock.lap()))
     return times
 
 
@@ -153,24 +97,14 @@ def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
     return f"| {label} | {rate:,.1f} | {wall_s * 1e3:.1f} | {cpu_s * 1e3:.1f} | {extra} |"
 
 
-FACES_UP_DEG = 45.0
-"""A water pixel belongs to a pool's top face when its normal is within this of vertical."""
-WALL_INSET_SPACINGS = 2.0
-"""...and its surface point this far inside the container's side walls (the rim is left out)."""
-FLAT_DEG = 5.0
-"""The top face's pixels within this of vertical are flat."""
-SPECKLE_DEG = 30.0
-"""A water pixel whose normal turns more than this from its neighbours' mean is speckle."""
-SAME_SURFACE_SPACINGS = 2.0
-"""Neighbouring pixels of water whose depths differ by less than this are on one surface (twice the
-renderer's narrow range: a surface seen at a slant changes depth from pixel to pixel)."""
-POOLS = (("hydrostatic", 60), ("dam_break", 180), ("dam_break", 480))
-"""The settled pools measured: preset and frame (t = 1 s; t = 3 s, the moment the look is judged at,
-when the seed's pool still sloshes; t = 8 s, when it has come to rest)."""
-SPLASH = ("dam_break", range(27, 41))
-"""The splash measured: the seed scene's frames 27-40."""
-POUR = ("pour", 150)
-"""The pour frame ``--images`` adds (not measured)."""
+FACES_UP_DEG = 45.0  # a water pixel is on a pool's top face when its normal is within this of vertical,
+WALL_INSET_SPACINGS = 2.0  # and its surface point this far inside the side walls (the rim left out)
+FLAT_DEG = 5.0  # the top face's pixels within this of vertical are flat
+SPECKLE_DEG = 30.0  # a water pixel whose normal turns more than this from its neighbours' mean is speckle
+SAME_SURFACE_SPACINGS = 2.0  # neighbours whose depths differ by less are on one surface (twice the narrow range)
+POOLS = (("hydrostatic", 60), ("dam_break", 180), ("dam_break", 480))  # t = 1 s; the seed at 3 s and at rest, 8 s
+SPLASH = ("dam_break", range(27, 41))  # the splash measured: the seed's frames 27-40
+POUR = ("pour", 150)  # the frame --images adds (not measured)
 
 
 def surface_points(view, depth: np.ndarray) -> np.ndarray:
@@ -294,7 +228,7 @@ def look(argv=None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.frames look", description="how the surface style reads: settled pools, a splash"
     )
-    parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scenes')")
+    parser.add_argument("--size", type=image_size, default=None, help="image size WIDTHxHEIGHT (default: the scenes')")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
     parser.add_argument("--images", type=Path, default=None, help="write the measured frames (and pour's) here")
     args = parser.parse_args(argv)
@@ -334,7 +268,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
     parser.add_argument("--scene", default="dam_break", help="preset or TOML file (default: dam_break)")
     parser.add_argument("--at-frame", type=int, default=60, help="frames stepped before timing (default: 60)")
-    parser.add_argument("--size", type=size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
+    parser.add_argument("--size", type=image_size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=20, help="frames timed per style (default: 20)")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
     parser.add_argument(
@@ -366,59 +300,37 @@ def main(argv=None) -> int:
     for _ in range(args.at_frame):
         sim.step()
         if white_water is not None:
-            start, start_cpu = time.perf_counter(), time.process_time()
+            clock = Clock()
             white_water.sync()
             ti.sync()
-            updates.append((time.perf_counter() - start, time.process_time() - start_cpu))
+            updates.append(clock.lap())
     images = {style: renderer.frame() for style, renderer in renderers.items()}  # compiles
     timed_frames(renderers, 2)  # and warms the caches
     times = timed_frames(renderers, args.repeats)
 
     print(
         f"{sim.scene.name} at t = {sim.time_s:.2f} s, {sim.particle_count:,} particles, {width}×{height}, "
-        f"{backend}; medians of {args.repeats} frames, the styles alternating"
+        f"{backend}; medians of {args.repeats} frames, the styles alternating\n"
     )
-    print()
-    print("| stage | frames/s | wall ms/frame | CPU ms/frame | |")
-    print("|---|---:|---:|---:|---|")
-    medians, cpu_medians = {}, {}
+    print("| stage | frames/s | wall ms/frame | CPU ms/frame | |\n|---|---:|---:|---:|---|")
+    drawn = {style: medians(times[style]) for style in STYLES}
     for style in STYLES:
-        wall = statistics.median(t[0] for t in times[style])
-        cpu = statistics.median(t[1] for t in times[style])
-        medians[style], cpu_medians[style] = wall, cpu
-        print(row(f"draw, {style}", wall, cpu, "to a host array"))
+        print(row(f"draw, {style}", *drawn[style], "to a host array"))
     with tempfile.TemporaryDirectory() as folder:
-        repeats = max(3, args.repeats // 4)
         for style in STYLES:
-            for level in LEVELS:
-                wall, cpu, size_bytes = encoded(images[style], level, repeats, Path(folder))
-                print(row(f"PNG, Sub filter, level {level}, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB"))
-            wall, cpu, size_bytes = encoded(images[style], 6, repeats, Path(folder), pillow_png)
-            print(row(f"PNG, Pillow's defaults, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB"))
+            wall, cpu, size_bytes = encoded(images[style], max(3, args.repeats // 4), Path(folder))
+            print(row(f"PNG, Sub filter, level 1, {style}", wall, cpu, f"{size_bytes / 1024:,.0f} KiB"))
         for style in STYLES:
-            with tempfile.TemporaryDirectory() as frames:
-                wall, cpu, workers = threaded([images[style]] * args.repeats, Path(frames))
-                print(
-                    row(
-                        f"writer, {style}",
-                        wall / args.repeats,
-                        cpu / args.repeats,
-                        f"{workers} thread{'s' if workers > 1 else ''}, in order, level 1",
-                    )
-                )
-    print()
+            wall, cpu, workers = threaded([images[style]] * args.repeats, Path(folder))
+            extra = f"{workers} thread{'s' if workers > 1 else ''}, in order, level 1"
+            print(row(f"writer, {style}", wall / args.repeats, cpu / args.repeats, extra))
+    ratio = [drawn["surface"][k] / drawn["particles"][k] for k in (0, 1)]
     if white_water is not None:
-        live, _waiting = white_water.counts()
-        update = statistics.median(u[0] for u in updates[-10:]) if updates else 0.0
-        update_cpu = statistics.median(u[1] for u in updates[-10:]) if updates else 0.0
-        print(row("white water's update (last 10 frames)", update, update_cpu, f"{live:,} diffuse particles"))
-    print()
-    print(
-        f"The surface takes {medians['surface'] / medians['particles']:.2f}× the particles' time to draw "
-        f"({cpu_medians['surface'] / cpu_medians['particles']:.2f}× their CPU time)."
-    )
+        live, update = white_water.counts()[0], medians(updates[-10:] or [(0.0, 0.0)])
+        print("\n" + row("white water's update (last 10 frames)", *update, f"{live:,} diffuse particles"))
+    print(f"\nThe surface takes {ratio[0]:.2f}× the particles' time to draw ({ratio[1]:.2f}× their CPU time).")
     if white_water is not None:
-        total = (cpu_medians["surface"] + update_cpu) / cpu_medians["particles"]
+        total = (drawn["surface"][1] + update[1]) / drawn["particles"][1]
         print(f"With white water's update, {total:.2f}× their CPU time ({live:,} diffuse particles).")
     if args.whole:
         with tempfile.TemporaryDirectory() as folder:
@@ -429,15 +341,14 @@ def main(argv=None) -> int:
             f"{args.whole} frames a round, {args.rounds} rounds, the ways alternating, medians"
         )
         print()
-        print("| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |")
-        print("|---|---:|---:|---:|---:|")
-        wall = {way: statistics.median(t[0] for t in times[way]) for way in WAYS}
-        cpu = {way: statistics.median(t[1] for t in times[way]) for way in WAYS}
-        base = WAYS[0]
+        print(
+            "| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |\n|---|---:|---:|---:|---:|"
+        )
+        base = medians(times[WAYS[0]])
         for way in WAYS:
-            added = "" if way == base else f"{(wall[way] - wall[base]) * 1e3:.1f}"
-            cpu_added = "" if way == base else f"{(cpu[way] - cpu[base]) * 1e3:.1f}"
-            print(f"| {way} | {wall[way] * 1e3:.1f} | {added} | {cpu[way] * 1e3:.1f} | {cpu_added} |")
+            (wall, cpu), first = medians(times[way]), way == WAYS[0]
+            added = ("", "") if first else (f"{(wall - base[0]) * 1e3:.1f}", f"{(cpu - base[1]) * 1e3:.1f}")
+            print(f"| {way} | {wall * 1e3:.1f} | {added[0]} | {cpu * 1e3:.1f} | {added[1]} |")
     return 0
 
 

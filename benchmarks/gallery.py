@@ -12,14 +12,18 @@ size; the sheet puts them in a grid, each titled with its name, particle count a
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
 import matplotlib.pyplot as plt  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from benchmarks.lab import image_size  # noqa: E402
 from pbf.app.render import SceneRenderer  # noqa: E402
 from pbf.scene import SCENES_DIR  # noqa: E402
 from pbf.solver import Simulation  # noqa: E402
@@ -39,16 +43,6 @@ MOMENTS = {
     "wave_tank_float": 2.5,
 }
 """Seconds from the start at which each preset shows what it is for (the default: 1 s)."""
-
-
-def size(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH in pixels, e.g. 480x270, got {text!r}") from None
-    if not (16 <= width <= 4096 and 16 <= height <= 4096):
-        raise argparse.ArgumentTypeError(f"each side between 16 and 4096 pixels, got {text!r}")
-    return width, height
 
 
 def frame_of(name: str, width: int, height: int):
@@ -76,7 +70,7 @@ def parse(argv=None) -> argparse.Namespace:
     where.add_argument(
         "--docs", action="store_true", help=f"replace the README's picture, {DOCS.relative_to(DOCS.parents[1])}"
     )
-    parser.add_argument("--size", type=size, default=(480, 270), help="each frame, WxH pixels (default 480x270)")
+    parser.add_argument("--size", type=image_size, default=(480, 270), help="each frame, WxH pixels (default 480x270)")
     parser.add_argument("--columns", type=int, choices=range(1, 7), default=3, metavar="1-6", help="frames per row")
     args = parser.parse_args(argv)
     if args.docs:

@@ -2,15 +2,11 @@
 compiles (:func:`watching`, :class:`TransferCounter`), and the tasks Taichi's kernel profiler timed
 (:func:`start_profiled`, :func:`profiled_tasks`, :func:`count_substeps`).
 
-The profiler is read through Taichi's public ``ti.profiler`` (its ``count`` table). Watching launches
-wraps Taichi's own classes while an observer is inside :func:`watching`, and the solver's direct launch
-(``pbf.solver.launch.Launcher._launch``): so this module, like ``pbf.solver.launch``, reads Taichi's
-internals on the Taichi that one was written for only (``tests/test_private_taichi.py``).
-
-A Python kernel call is one call of a ``@ti.kernel`` (Taichi's own ``fill`` and copies included).
-Taichi splits each kernel into offloaded tasks: every top-level loop is one, and every run of statements
-outside loops is one more, a one-thread ``serial`` task. On a GPU each task is a launch of its own, and
-the profiler lists every task on the CPU backend as on CUDA, so the counts taken here are the GPU's.
+The profiler is read through Taichi's public ``ti.profiler``. Watching wraps Taichi's own classes and
+``pbf.solver.launch.Launcher._launch`` while an observer is inside :func:`watching`: Taichi's internals,
+on the Taichi ``pbf.solver.launch`` was written for only. A kernel call is one call of a ``@ti.kernel``;
+Taichi splits it into offloaded tasks (each top-level loop, and each run of statements outside loops, a
+one-thread ``serial`` task), each a launch on a GPU; the profiler lists them on the CPU alike.
 """
 
 from __future__ import annotations

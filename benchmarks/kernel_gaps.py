@@ -4,15 +4,10 @@
         --rounds 1 --substeps 40
     python benchmarks/kernel_gaps.py substeps.nsys-rep --last-ms 150 --substeps 40
 
-On the H200, Taichi's profiler added up a million particles' tasks to about 2.1 ms a substep against
-3.1 ms timed whole (docs/BENCHMARKS.md, "On a GPU"): the rest is time the device spends between
-tasks or on work the profiler does not see (copies, allocations). This reads the device's own
-timeline (``nsys stats --report cuda_gpu_trace``, or that report already written as CSV), keeps the
-operations that began in the last ``--last-ms`` milliseconds of it (the timed substeps come last in
-``substep_time.py``), and prints: the window's length, the time some operation ran and the time none
-did; the operations by name (count, total and mean time: kernels, and the copies and fills the trace
-names ``[CUDA memcpy ...]`` and ``[CUDA memset]``); and the longest idle gaps with what ran on either
-side. With ``--substeps`` every total is also given per substep.
+Reads the device's timeline (``nsys stats --report cuda_gpu_trace``, or that report as CSV), keeps the
+operations that began in its last ``--last-ms`` (the timed substeps come last), and prints the time
+some operation ran and the time none did, the operations by name (kernels, copies, fills) and the
+longest idle gaps with what ran on either side; ``--substeps``: every total a substep too.
 """
 
 from __future__ import annotations

@@ -6,62 +6,23 @@
         --param maxError=0.01 --param "maxError=0.1,maxIterations=50" \\
         --ours "substeps=4,iterations=4" "substeps=4,target=0.001,max_iterations=30" --seconds 0.25
 
-Install SPlisHSPlasH apart from this project (it needs NumPy 1, and its bundled libGLdispatch clashes
-with the system one, so it runs as its own process, ``splash --no-gui``, with the system library
-preloaded): ``python3 -m venv /tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0
-"numpy<2"``.
+SPlisHSPlasH is installed apart (it needs NumPy 1; its bundled libGLdispatch clashes with the system's,
+so it runs as its own process with the system library preloaded): ``python3 -m venv /tmp/sphvenv &&
+/tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``.
 
-Every simulator runs the ``dam_break`` preset (8,000 particles at 25 mm in a 0.8 m box, the block
-0.1 m above the floor) for ``--seconds`` (1 s) and is measured at the same 60 frames per second.
-
-* SPlisHSPlasH: for each ``--methods`` (``dfsph``: simulationMethod 4, its flagship, which its own
-  DamBreakModel scene uses; ``pbf``: simulationMethod 2) and each ``--param`` set (by default its
-  shipped stopping rules, minIterations 2, maxIterations 100, with maxError 0.01 and 0.1; its maxError
-  is in percent; DFSPH keeps its divergence solver at its defaults, enableDivergenceSolver true,
-  maxIterationsV 100, maxErrorV 0.1), one run at a fixed step (``cflMethod`` 0, ``--dt-ms``),
-  ``--threads`` OpenMP threads, Akinci boundary particles for the box, XSPH 0.01 as ours (its
-  ``XSPH`` block; no viscosity method, no vorticity). The parameters go into the scene file's block of
-  the method ("DFSPH", "PBF"), where 2.19 reads them; the values it applied are read back from it
-  and printed. Its time is its own mean "SimStep" (which leaves out its exports), its iterations its
-  own "Average number" counters.
-* Placement: SPlisHSPlasH puts a block's first particle one diameter (2r = one spacing) inside the
-  block's ``start``, and its boundary particles sit on the box's surface, so ``start`` is the preset
-  block's corner and ``end`` one spacing past the far corner (20 × 20 × 20 particles). Its first layer
-  is then one spacing from the wall particles, as its fluid-fluid spacing; at half a spacing the block
-  explodes out of the box. The script prints the initial placement, the nearest particle to each wall
-  plane in the first exported frame (after one step) and how many particles ever leave the box.
-* Density error, the same for every simulator: the mean over the exported frames (60 per second, the
-  initial state left out) of the mean over particles of max(ρ/ρ0 − 1, 0), and the max over frames of
-  the max. For SPlisHSPlasH from the ``density`` it exports (VTK); the script also recomputes ρ from
-  the exported positions with its own kernel (its ``Simulation.W``, sampled and checked), fluid volumes
-  and boundary particles with their volumes, read from SPlisHSPlasH itself through its Python module,
-  and prints both. For ours ``Simulation.stats()`` after each frame: the density of the positions we
-  output. The rows compare the exported figures; the recomputed ones are printed beside them.
-* Ours: each ``--ours`` spec is a comma-separated list of ``--set`` overrides of the ``dam_break``
-  preset, with short names ``substeps`` (time.substeps), ``iterations`` and ``max_iterations``
-  (solver.iterations: the most, with a target), ``target`` (solver.target_density_error, a fraction:
-  0.001 = 0.1%), ``kernel_ratio`` (solver.kernel_ratio), ``xsph`` (viscosity.xsph), ``divergence``
-  (solver.divergence_iterations, our divergence pre-correction) or any dotted key; a spec without a
-  target runs a fixed count (the preset's target is set to 0), and ``preset`` keeps the preset's own
-  solver settings (its target included). Vorticity confinement is off (``vorticity.epsilon`` = 0), as in
-  SPlisHSPlasH, and ``time.max_cfl``
-  is raised to the most the scene allows (solver.kernel_ratio) so that the CFL limit does not add
-  substeps to the steps asked (at substeps = 4 both simulators take the same 240 steps); the steps
-  actually taken are printed. Time is ``step()`` alone per frame, synchronised, the statistics taken
-  outside the timer.
-* ``--sloshing``: instead of the dam break, the standing wave of ``pbf.study.damping`` in each
-  ``--methods`` and in ours: the ``sloshing`` preset's tank and water (1,950 particles), settled for
-  a second (velocities × 0.9 after each step, as ours settles), then given its first sloshing mode's
-  linear velocity field at 10 mm amplitude, and followed three periods at SPlisHSPlasH's fixed step
-  of a quarter of our frame (ours: the preset's four substeps). Its container is one spacing wider
-  in x and z, so that its boundary particles, on the walls, stand one spacing from the water as in
-  its dam break; the mode is placed on the water's own extent. Both are measured alike: the mode's
-  amplitude in the particles' velocities every frame, and its decay per period fitted to the extrema
-  (``pbf.study.damping.decay_per_period``).
-* Times on a shared machine swing several-fold (SPlisHSPlasH's most: DFSPH at maxError 0.01 took
-  26 to 264 ms per step in runs of the same day); the errors hardly do (ours repeat to the bit;
-  SPlisHSPlasH's mean errors to 1%, its max errors to a fifth, and its PBF loses 5 to 13 particles
-  out of the box, as its OpenMP sums fall). Take timings on a quiet machine.
+Both run the ``dam_break`` preset for ``--seconds``, measured at its 60 frames a second. SPlisHSPlasH:
+each ``--methods`` (dfsph: simulationMethod 4; pbf: 2) with each ``--param`` set over its shipped
+stopping rules (maxError in percent), a fixed step ``--dt-ms``, Akinci boundary particles on the box,
+XSPH as ours, no viscosity or vorticity; its block starts one spacing inside the preset's, as it places
+particles. Its time is its own mean "SimStep", its iterations its own counters. The density error of
+every run is the mean over frames of the mean over particles of max(ρ/ρ0 − 1, 0), and the max of the
+max; SPlisHSPlasH's from the density it exports, recomputed beside it from the exported positions with
+its own kernel, fluid volume and boundary particles (read through its Python module). Ours: each
+``--ours`` spec is ``--set`` overrides of the preset (short names in OUR_SHORT_KEYS; fixed iterations
+unless it sets a target; ``preset``: the preset's solver as shipped), vorticity off, the CFL limit at
+its most; its time is ``step()`` alone. ``--sloshing``: the standing wave of ``pbf.study.damping``
+(the ``sloshing`` preset's tank, settled 1 s, given its first mode at 10 mm) in each method and ours,
+the decay a period fitted alike. Times on a shared machine swing several-fold; the errors do not.
 """
 
 from __future__ import annotations
@@ -89,47 +50,25 @@ from pbf.study.common import timed
 
 SYSTEM_GLDISPATCH = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"
 PRESET = "dam_break"
-
-SPLASH_METHODS = {
-    # name: (simulationMethod, the scene file's block and log counter prefix, its defaults as shipped)
-    "dfsph": (
-        4,
-        "DFSPH",
-        {
-            "minIterations": 2,
-            "maxIterations": 100,
-            "maxError": 0.01,
-            "enableDivergenceSolver": True,
-            "maxIterationsV": 100,
-            "maxErrorV": 0.1,
-        },
-    ),
-    "pbf": (2, "PBF", {"minIterations": 2, "maxIterations": 100, "maxError": 0.01, "velocityUpdateMethod": 0}),
-}
+SPLASH_METHODS = {  # name: (simulationMethod, its scene block and log prefix, its shipped stopping rules)
+    "dfsph": (4, "DFSPH", dict(minIterations=2, maxIterations=100, maxError=0.01, enableDivergenceSolver=True,
+                               maxIterationsV=100, maxErrorV=0.1)),
+    "pbf": (2, "PBF", dict(minIterations=2, maxIterations=100, maxError=0.01, velocityUpdateMethod=0)),
+}  # fmt: skip
 SPLASH_PARAMETER_IDS = {  # the static parameter ids of its TimeStep classes, and their getters
-    "minIterations": ("MIN_ITERATIONS", "UInt"),
-    "maxIterations": ("MAX_ITERATIONS", "UInt"),
-    "maxError": ("MAX_ERROR", "Float"),
-    "maxIterationsV": ("MAX_ITERATIONS_V", "UInt"),
-    "maxErrorV": ("MAX_ERROR_V", "Float"),
-    "enableDivergenceSolver": ("USE_DIVERGENCE_SOLVER", "Bool"),
+    "minIterations": ("MIN_ITERATIONS", "UInt"), "maxIterations": ("MAX_ITERATIONS", "UInt"),
+    "maxError": ("MAX_ERROR", "Float"), "maxIterationsV": ("MAX_ITERATIONS_V", "UInt"),
+    "maxErrorV": ("MAX_ERROR_V", "Float"), "enableDivergenceSolver": ("USE_DIVERGENCE_SOLVER", "Bool"),
     "velocityUpdateMethod": ("VELOCITY_UPDATE_METHOD", "Int"),
-}
-SPLASH_KERNELS = {0: "cubic spline", 2: "Poly6 (gradients: Spiky)", 4: "cubic spline, tabulated"}
-
+}  # fmt: skip
 OUR_SHORT_KEYS = {
-    "substeps": "time.substeps",
-    "iterations": "solver.iterations",
-    "max_iterations": "solver.iterations",
-    "target": "solver.target_density_error",
-    "kernel_ratio": "solver.kernel_ratio",
-    "xsph": "viscosity.xsph",
+    "substeps": "time.substeps", "iterations": "solver.iterations", "max_iterations": "solver.iterations",
+    "target": "solver.target_density_error", "kernel_ratio": "solver.kernel_ratio", "xsph": "viscosity.xsph",
     "divergence": "solver.divergence_iterations",
-}
+}  # fmt: skip
 
-# Run inside SPlisHSPlasH's own environment on the run's scene file: builds the scene (and its
-# boundary particles) with one step, and writes what the density check needs and the parameters it
-# applied. Nothing of it is timed.
+# Run in SPlisHSPlasH's environment on the run's scene file: one step builds its boundary particles;
+# writes what the density check needs and the parameters it applied. Nothing of it is timed.
 SPLASH_PROBE = r"""
 import json, sys
 import numpy as np
@@ -141,455 +80,21 @@ base.initSimulation()
 sim = sph.Simulation.getCurrent()
 fluid = sim.getFluidModel(0)
 x0 = np.array([fluid.getPosition(i) for i in range(fluid.numActiveParticles())])
-base.runSimulation()  # one step: the boundary particles and their volumes exist from here on
+base.runSimulation()
 walls = sim.getBoundaryModel(0)
 boundary = np.array([walls.getPosition(i) for i in range(walls.numberOfParticles())])
 volumes = np.array([walls.getVolume(i) for i in range(walls.numberOfParticles())])
-h = sim.getSupportRadius()
-r = np.linspace(0.0, 1.02 * h, 2041)
-w = np.array([sim.W(np.array([ri, 0.0, 0.0])) for ri in r])
 step = sim.getTimeStep()
 applied = {name: getattr(step, "getValue" + getter)(getattr(type(step), attr))
            for name, (attr, getter) in ids.items() if hasattr(type(step), attr)}
-xsph = fluid.getXSPH()
-applied.update(
-    timeStepSize=sph.TimeManager.getCurrent().getTimeStepSize(), cflMethod=sim.getValueInt(sim.CFL_METHOD),
-    boundaryHandlingMethod=int(getattr(sim.getBoundaryHandlingMethod(), "value", sim.getBoundaryHandlingMethod())),
-    simulationMethod=int(getattr(sim.getSimulationMethod(), "value", sim.getSimulationMethod())),
-    kernel=sim.getKernel(), gradKernel=sim.getGradKernel(),
-    xsph=xsph.getValueFloat(sph.XSPH.FLUID_COEFFICIENT), xsphBoundary=xsph.getValueFloat(sph.XSPH.BOUNDARY_COEFFICIENT),
-    viscosityMethod=fluid.getValueInt(sph.FluidModel.VISCOSITY_METHOD),
-    vorticityMethod=fluid.getValueInt(sph.FluidModel.VORTICITY_METHOD))
+applied.update(kernel=sim.getKernel(), timeStepSize=sph.TimeManager.getCurrent().getTimeStepSize(),
+               xsph=fluid.getXSPH().getValueFloat(sph.XSPH.FLUID_COEFFICIENT))
 np.savez(npz, x0=x0, boundary=boundary, boundary_volume=volumes, fluid_volume=fluid.getVolume(0),
-         density0=fluid.getDensity0(), support=h, r=r, w=w, applied=json.dumps(applied))
+         density0=fluid.getDensity0(), support=sim.getSupportRadius(), applied=json.dumps(applied))
 """
 
-
-# ----------------------------------------------------------------------------- SPlisHSPlasH
-
-
-def splash_scene(method: str, params: dict, dt_s: float, seconds: float, box_obj: Path) -> dict:
-    """SPlisHSPlasH's scene file for the preset (see the module docstring for each choice)."""
-    scene = load_scene(PRESET)
-    block, spacing = scene.fluid.blocks[0], scene.fluid.spacing_m
-    lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
-    simulation_method, block_name, _ = SPLASH_METHODS[method]
-    return {
-        "Configuration": {
-            "particleRadius": spacing / 2,
-            "simulationMethod": simulation_method,
-            "gravitation": list(scene.gravity_m_s2),
-            "timeStepSize": dt_s,
-            "cflMethod": 0,
-            "boundaryHandlingMethod": 0,
-            "stopAt": seconds,
-            "enableVTKExport": True,
-            "dataExportFPS": round(1 / scene.time.frame_dt_s),
-            "particleAttributes": "density",
-            block_name: params,
-        },
-        "Materials": [
-            {
-                "id": "Fluid",
-                "density0": scene.fluid.rest_density_kg_m3,
-                "viscosityMethod": 0,
-                "vorticityMethod": 0,
-                "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0},
-            }
-        ],
-        "RigidBodies": [
-            {
-                "geometryFile": str(box_obj),
-                "translation": list((lower + upper) / 2),
-                "scale": list(upper - lower),
-                "isDynamic": False,
-                "isWall": True,
-                "mapInvert": True,
-                "mapThickness": 0.0,
-                "mapResolution": [20, 20, 20],
-            }
-        ],
-        # Its particles start one diameter (one spacing) inside `start` and fill round((end − start)/s) − 1
-        # per axis: `end` one spacing past the block gives the preset's 20 per axis.
-        "FluidBlocks": [{"denseMode": 0, "start": list(block.min_m), "end": list(np.array(block.max_m) + spacing)}],
-    }
-
-
-def read_vtk(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions (n, 3), ids (n,) and ``density`` (n,) of a legacy binary VTK file from SPlisHSPlasH."""
-    data = path.read_bytes()
-    points = re.search(rb"POINTS (\d+) float\n", data)
-    ids = re.search(rb"LOOKUP_TABLE id_table\n", data)
-    density = re.search(rb"\ndensity 1 (\d+) float\n", data)
-    if not (points and ids and density):
-        raise ValueError(f"{path}: expected float POINTS, ids and a density field")
-    n = int(points.group(1))
-    return (
-        np.frombuffer(data, ">f4", 3 * n, points.end()).reshape(n, 3).astype(np.float64),
-        np.frombuffer(data, ">u4", n, ids.end()).astype(np.int64),
-        np.frombuffer(data, ">f4", n, density.end()).astype(np.float64),
-    )
-
-
-def splash_kernel(kernel: int, support: float):
-    """SPlisHSPlasH's W(r) for its kernel id (3D), in NumPy, float64."""
-    h = support
-    if kernel in (0, 4):  # CubicKernel (4: the same, tabulated at 10,000 points)
-        k = 8.0 / (math.pi * h**3)
-
-        def cubic(r):
-            q = r / h
-            return np.where(q <= 0.5, k * (6 * q**3 - 6 * q**2 + 1), np.where(q <= 1.0, 2 * k * (1 - q) ** 3, 0.0))
-
-        return cubic
-    if kernel == 2:  # Poly6Kernel
-        k = 315.0 / (64.0 * math.pi * h**9)
-        return lambda r: np.where(r <= h, k * np.clip(h * h - r * r, 0.0, None) ** 3, 0.0)
-    raise ValueError(f"SPlisHSPlasH kernel {kernel} is not implemented here")
-
-
-def neighbour_pairs(points: np.ndarray, sources: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
-    """Every pair (i of points, j of sources) within h, with its distance, by a grid of h-wide cells."""
-    lower = np.minimum(points.min(0), sources.min(0)) - 2 * h
-    source_cells = np.floor((sources - lower) / h).astype(np.int64)
-    point_cells = np.floor((points - lower) / h).astype(np.int64)
-    dims = np.maximum(source_cells.max(0), point_cells.max(0)) + 3
-
-    def key(cells):
-        return (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
-
-    source_keys = key(source_cells)
-    order = np.argsort(source_keys, kind="stable")
-    source_keys = source_keys[order]
-    found = []
-    for offset in itertools.product((-1, 0, 1), repeat=3):
-        wanted = key(point_cells + np.array(offset))
-        first = np.searchsorted(source_keys, wanted, "left")
-        count = np.searchsorted(source_keys, wanted, "right") - first
-        i = np.repeat(np.arange(len(points)), count)
-        j = order[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
-        r = np.linalg.norm(points[i] - sources[j], axis=1)
-        near = r <= h
-        found.append((i[near], j[near], r[near]))
-    return tuple(np.concatenate(parts) for parts in zip(*found))
-
-
-def kernel_sum(pairs: tuple[np.ndarray, ...], weights: np.ndarray, kernel, n: int) -> np.ndarray:
-    """Σ_j weights_j W(r_ij) for each of n points over ``neighbour_pairs``."""
-    i, j, r = pairs
-    return np.bincount(i, weights=kernel(r) * weights[j], minlength=n)
-
-
-def splash_density(
-    x: np.ndarray, fluid_volume: float, boundary: np.ndarray, boundary_volume: np.ndarray, h: float, kernels: list
-) -> list[np.ndarray]:
-    """ρ/ρ0 of every particle at positions x for each of ``kernels``, as SPlisHSPlasH sums it with
-    Akinci boundary particles: V_f Σ_fluid W (itself included) + Σ_boundary V_b W."""
-    fluid_pairs, wall_pairs = neighbour_pairs(x, x, h), neighbour_pairs(x, boundary, h)
-    volumes = np.full(len(x), fluid_volume)
-    return [
-        kernel_sum(fluid_pairs, volumes, kernel, len(x)) + kernel_sum(wall_pairs, boundary_volume, kernel, len(x))
-        for kernel in kernels
-    ]
-
-
-@dataclass
-class Row:
-    """One run's figures."""
-
-    label: str
-    dt_ms: float
-    steps: int
-    iterations: float
-    ms_per_step: float
-    compute_s_per_s: float
-    mean_error: float
-    max_error: float
-    frames: int
-    divergence_iterations: float | None = None
-    recomputed_mean: float | None = None
-    recomputed_max: float | None = None
-    left_box: int | None = None
-    settings: str = ""
-    spec: str = ""
-    """Ours: the --ours spec the row ran."""
-    notes: list[str] = field(default_factory=list)
-
-
-def splash_interpreter(splash: Path) -> str:
-    """The Python of SPlisHSPlasH's environment: the splash script's own interpreter."""
-    first = splash.read_text(errors="replace").splitlines()[0]
-    return first[2:].strip() if first.startswith("#!") else str(splash.parent / "python")
-
-
-def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, seconds: float, threads: int) -> Row:
-    scene = load_scene(PRESET)
-    frame_dt, spacing = scene.time.frame_dt_s, scene.fluid.spacing_m
-    lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
-    box_obj = splash.parent / "data" / "models" / "UnitBox.obj"
-    _, block_name, _ = SPLASH_METHODS[method]
-    env = dict(os.environ, LD_PRELOAD=SYSTEM_GLDISPATCH, OMP_NUM_THREADS=str(threads))
-    with tempfile.TemporaryDirectory() as tmp:
-        scene_path = Path(tmp) / "dam_break.json"
-        scene_path.write_text(json.dumps(splash_scene(method, params, dt_s, seconds, box_obj), indent=1))
-        probe = subprocess.run(
-            [
-                splash_interpreter(splash),
-                "-c",
-                SPLASH_PROBE,
-                str(scene_path),
-                str(Path(tmp) / "probe"),
-                str(Path(tmp) / "probe.npz"),
-                json.dumps(SPLASH_PARAMETER_IDS),
-            ],
-            env=env,
-            capture_output=True,
-            text=True,
-        )
-        if probe.returncode:
-            sys.exit(f"SPlisHSPlasH probe failed ({probe.returncode}):\n{probe.stdout[-2000:]}{probe.stderr[-2000:]}")
-        meta = np.load(Path(tmp) / "probe.npz")
-        out = Path(tmp) / "out"
-        result = subprocess.run(
-            [str(splash), "--no-gui", "--no-initial-pause", "--output-dir", str(out), str(scene_path)],
-            env=env,
-            capture_output=True,
-            text=True,
-        )
-        if result.returncode:
-            sys.exit(f"{splash} failed ({result.returncode}):\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
-        log = result.stdout
-
-        def number(pattern):
-            found = re.search(pattern + r": ([-+\d.eE]+)", log)
-            return float(found.group(1)) if found else None
-
-        step_ms, sum_ms = number(r"Average time: SimStep"), number(r"Time sum: SimStep")
-        mean_dt, total_time = number(r"Average number: Time step size"), number(r"Total number: Time step size")
-        iterations = number(rf"Average number: {block_name} - iterations")
-        divergence = number(rf"Average number: {block_name} - iterationsV")
-        frames = sorted((out / "vtk").glob("ParticleData_Fluid_*.vtk"), key=lambda p: int(p.stem.rsplit("_", 1)[1]))
-        if len(frames) < 2 or None in (step_ms, sum_ms, mean_dt, total_time, iterations):
-            sys.exit(
-                f"{splash}: {len(frames)} exported frames, or its log lacks SimStep, time step or iteration "
-                f"figures:\n{log[-2000:]}"
-            )
-
-        # Its own kernel, checked against its Simulation.W; its fluid volume; its boundary particles.
-        applied = json.loads(str(meta["applied"]))
-        h, rho0, fluid_volume = float(meta["support"]), float(meta["density0"]), float(meta["fluid_volume"])
-        kernel = splash_kernel(applied["kernel"], h)
-        cubic = splash_kernel(0, h)  # TimeStep::computeDensities, which writes the exported density in
-        # its AVX build (the wheel's), sums the cubic spline whatever the kernel setting; its PBF's own is Poly6
-        kernels = [kernel] if applied["kernel"] in (0, 4) else [kernel, cubic]
-        kernel_gap = float(np.abs(meta["w"] - kernel(meta["r"])).max() / kernel(np.zeros(1))[0])
-        boundary, boundary_volume = meta["boundary"], meta["boundary_volume"]
-        x0 = meta["x0"]
-        initial = splash_density(x0, fluid_volume, boundary, boundary_volume, h, [kernel])[0]
-
-        means, maxima, re_means, re_maxima, gaps, cubic_gaps = [], [], [], [], [], []
-        left, first_left = set(), None
-        for k, path in enumerate(frames):
-            x, ids, rho = read_vtk(path)
-            outside = np.any((x < lower) | (x > upper), axis=1)
-            if outside.any() and first_left is None:
-                first_left = k
-            left.update(ids[outside].tolist())
-            if k == 0:  # after its first step (it exports once time ≥ 0): the placement check, no error
-                first_x = x
-                continue
-            error = np.maximum(rho / rho0 - 1.0, 0.0)
-            ratios = splash_density(x, fluid_volume, boundary, boundary_volume, h, kernels)
-            error_again = np.maximum(ratios[0] - 1.0, 0.0)
-            means.append(error.mean())
-            maxima.append(error.max())
-            re_means.append(error_again.mean())
-            re_maxima.append(error_again.max())
-            gaps.append(np.abs(ratios[0] * rho0 - rho).max() / rho0)
-            if len(ratios) > 1:
-                cubic_gaps.append(np.abs(ratios[1] * rho0 - rho).max() / rho0)
-
-    wanted = round(seconds / frame_dt)
-    if len(means) != wanted:
-        print(f"warning: SPlisHSPlasH exported {len(means)} frames after the first step, not {wanted}")
-    defaults = SPLASH_METHODS[method][2]
-    shown = ",".join(f"{k}={_num(v)}" for k, v in params.items() if k == "maxError" or v != defaults[k])
-    row = Row(
-        f"SPlisHSPlasH {block_name} {shown}",
-        dt_s * 1e3,
-        round(total_time / mean_dt),
-        iterations,
-        step_ms,
-        sum_ms / 1e3 / total_time,
-        float(np.mean(means)),
-        float(max(maxima)),
-        len(means),
-        divergence,
-        float(np.mean(re_means)),
-        float(max(re_maxima)),
-        len(left),
-    )
-    mm = 1e3
-    names = ("x = min", "y = min (floor)", "z = min", "x = max", "y = max", "z = max")
-    distances = lambda x: np.concatenate([x.min(0) - lower, upper - x.max(0)]) * mm  # noqa: E731
-    timers = re.findall(r"Average time: ([^:\n]+): ([\d.eE+-]+) ms", log)
-    row.notes += [
-        "its timers, mean ms per call: "
-        + ", ".join(f"{name} {float(ms):.2f}" for name, ms in timers if "sampling" not in name),
-        "applied by SPlisHSPlasH: " + ", ".join(f"{k} {_num(v)}" for k, v in applied.items()),
-        f"kernel: {SPLASH_KERNELS.get(applied['kernel'], applied['kernel'])}, support {h * mm:.1f} mm "
-        f"= {h / spacing:.1f} spacings; largest gap to its Simulation.W {kernel_gap:.1e} of W(0); fluid volume "
-        f"{fluid_volume / spacing**3:.3f} s³; {len(boundary):,} boundary particles",
-        f"placement: {len(x0):,} particles; nearest to each wall at the start, mm: "
-        + ", ".join(f"{n} {d:.1f}" for n, d in zip(names, distances(x0)))
-        + (
-            "; first layer one spacing from the wall particles: yes"
-            if distances(x0).min() >= 0.75 * spacing * mm
-            else f"; WARNING: closer than one spacing ({spacing * mm:.1f} mm) to its wall particles"
-        ),
-        "  in exported frame 1 (after its first step): "
-        + ", ".join(f"{n} {d:.1f}" for n, d in zip(names, distances(first_x)))
-        + f"; nearest boundary particle {_nearest(first_x, boundary, h) * mm:.1f} mm",
-        f"  initial density ρ/ρ0 by its kernel: bulk {np.median(initial):.4f}, largest {initial.max():.4f} "
-        f"(the layer against its wall particles)",
-        f"particles that left the box: {len(left)}" + (f" (first in exported frame {first_left + 1})" if left else ""),
-        f"exported density vs recomputed from the exported positions: mean error {row.mean_error:.3%} vs "
-        f"{row.recomputed_mean:.3%}, max {row.max_error:.2%} vs {row.recomputed_max:.2%}, largest particle "
-        f"difference {max(gaps):.2%} of ρ0"
-        + (
-            f"; its exported density is the cubic spline's (with the boundary volumes of its kernel): recomputed "
-            f"so, the largest particle difference is {max(cubic_gaps):.2%} of ρ0"
-            if cubic_gaps
-            else ""
-        ),
-    ]
-    return row
-
-
-def _nearest(points: np.ndarray, others: np.ndarray, reach: float) -> float:
-    """The smallest distance between any of ``points`` within ``reach`` of the bounding box's faces of
-    ``others`` and any of ``others`` (the wall particles lie on those faces)."""
-    near = points[np.any((points < others.min(0) + reach) | (points > others.max(0) - reach), axis=1)]
-    best = np.inf
-    for start in range(0, len(near), 100):
-        chunk = near[start : start + 100]
-        best = min(best, float(np.sqrt(((chunk[:, None, :] - others[None, :, :]) ** 2).sum(-1)).min()))
-    return best
-
-
-def _num(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value)
-
-
-# ----------------------------------------------------------------------------- ours
-
-
-class IterationCount:
-    """A stage hook that adds up the solver iterations of every substep (one Python call per stage)."""
-
-    _null = contextlib.nullcontext()
-
-    def __init__(self):
-        self.sim: Simulation | None = None
-        self.iterations = 0
-        self.substeps = 0
-
-    def stage(self, name: str):
-        return self if name == "velocity, vorticity, XSPH, x = x*" else self._null  # the last call's too
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.iterations += self.sim.iterations_used
-        self.substeps += 1
-
-
-def our_overrides(spec: str) -> list[str]:
-    """``"substeps=4,target=0.001"`` → ``--set`` overrides, the short names expanded."""
-    overrides = []
-    for item in filter(None, (part.strip() for part in spec.split(","))):
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise SceneError(f"--ours {spec!r}: expected KEY=VALUE, got {item!r}")
-        overrides.append(f"{OUR_SHORT_KEYS.get(key.strip(), key.strip())}={value.strip()}")
-    return overrides
-
-
-def our_scene(spec: str):
-    """The preset with the spec's overrides, vorticity off and the CFL limit at its most. A spec runs
-    fixed iterations unless it sets a target; ``preset`` keeps the preset's solver settings."""
-    pinned = [] if spec.strip() == "preset" else ["solver.target_density_error=0"]
-    overrides = ["vorticity.epsilon=0", *pinned, *our_overrides("" if spec.strip() == "preset" else spec)]
-    ratio = load_scene(PRESET, overrides).solver.kernel_ratio
-    if not any(o.startswith("time.max_cfl=") for o in overrides):
-        overrides.append(f"time.max_cfl={min(ratio, 4.0)!r}")
-    return load_scene(PRESET, overrides)
-
-
-def run_ours(spec: str, seconds: float, label: str | None = None) -> Row:
-    scene = our_scene(spec)
-    counter = IterationCount()
-    sim = Simulation(scene, quiet=True, hook=counter)
-    counter.sim = sim
-    # Compiles the kernels; the run below starts again from rest. Two frames: the kernels that take the
-    # two position buffers compile once per order, and with 1 substep of 1 iteration (the free fall)
-    # the second order first comes in the second frame (0.7 s that were counted in the timed run).
-    sim.step(2)
-    sim.reset()
-    counter.iterations = counter.substeps = 0
-    frame_s, means, maxima = [], [], []
-    for _ in range(round(seconds / scene.time.frame_dt_s)):
-        # The step alone, synchronised, as SPlisHSPlasH's SimStep timer leaves out its exports.
-        frame_s.append(timed(sim.step))
-        stats = sim.stats()
-        means.append(stats["mean_density_error"])
-        maxima.append(stats["max_density_error"])
-    simulated = len(frame_s) * scene.time.frame_dt_s
-    settings = (
-        f"substeps={scene.time.substeps},iterations={scene.solver.iterations}"
-        + (f",target={scene.solver.target_density_error:g}" if scene.solver.target_density_error else "")
-        + (f",divergence={scene.solver.divergence_iterations}" if scene.solver.divergence_iterations else "")
-    )
-    divergence = scene.solver.divergence_iterations or None  # fixed per substep when on
-    return Row(
-        label or f"pbf {spec} (h {scene.solver.kernel_ratio:g} s)",
-        scene.time.frame_dt_s / scene.time.substeps * 1e3,
-        counter.substeps,
-        counter.iterations / max(counter.substeps, 1),
-        sum(frame_s) / max(counter.substeps, 1) * 1e3,
-        sum(frame_s) / simulated,
-        statistics.fmean(means),
-        max(maxima),
-        len(means),
-        divergence,
-        settings=f"{settings} (h {scene.solver.kernel_ratio:g} s)",
-        spec=spec,
-    )
-
-
-def medians(runs: list[Row]) -> Row:
-    """One row from repeated runs: median time and mean error, the largest max error."""
-    first = runs[0]
-    if len(runs) == 1:
-        return first
-    first.ms_per_step = statistics.median(r.ms_per_step for r in runs)
-    first.compute_s_per_s = statistics.median(r.compute_s_per_s for r in runs)
-    first.mean_error = statistics.median(r.mean_error for r in runs)
-    first.max_error = max(r.max_error for r in runs)
-    first.label += f" (median of {len(runs)})"
-    return first
-
-
-# ----------------------------------------------------------------------------- the standing wave
-
-# Run inside SPlisHSPlasH's own environment: the sloshing tank settled, the mode imposed, its amplitude
-# written every frame (argv: scene file, output folder, result .npy, settle steps, steps per frame,
-# JSON of the mode: k, omega, depth, the water's lower corner, amplitude).
+# Run in SPlisHSPlasH's environment: the sloshing tank settled, the mode imposed, its amplitude written
+# every frame (argv: scene file, output folder, result .npy, settle steps, steps a frame, the mode's JSON).
 SPLASH_SLOSHING = r"""
 import json, math, sys
 import numpy as np
@@ -631,86 +136,287 @@ base.cleanup()
 """
 
 
+@dataclass
+class Row:
+    """One run's figures."""
+
+    label: str
+    dt_ms: float
+    steps: int
+    iterations: float
+    ms_per_step: float
+    compute_s_per_s: float
+    mean_error: float
+    max_error: float
+    divergence_iterations: float | None = None
+    recomputed_mean: float | None = None
+    recomputed_max: float | None = None
+    left_box: int | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------- SPlisHSPlasH
+
+
+def splash_config(splash: Path, method: str, params: dict, dt_s: float, stop_s: float, scene, box, block) -> dict:
+    """A SPlisHSPlasH scene: ``scene``'s fluid and gravity, walls on the box ``box`` (lower, upper), the
+    fluid block ``block`` (start, end: its first particle one spacing inside ``start``)."""
+    number, name, _ = SPLASH_METHODS[method]
+    (lower, upper), spacing = np.asarray(box), scene.fluid.spacing_m
+    return {
+        "Configuration": {
+            "particleRadius": spacing / 2, "simulationMethod": number, "gravitation": list(scene.gravity_m_s2),
+            "timeStepSize": dt_s, "cflMethod": 0, "boundaryHandlingMethod": 0, "stopAt": stop_s,
+            "enableVTKExport": True, "dataExportFPS": round(1 / scene.time.frame_dt_s),
+            "particleAttributes": "density", name: params,
+        },
+        "Materials": [{"id": "Fluid", "density0": scene.fluid.rest_density_kg_m3, "viscosityMethod": 0,
+                       "vorticityMethod": 0, "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0}}],
+        "RigidBodies": [{"geometryFile": str(splash.parent / "data" / "models" / "UnitBox.obj"),
+                         "translation": list((lower + upper) / 2), "scale": list(upper - lower), "isDynamic": False,
+                         "isWall": True, "mapInvert": True, "mapThickness": 0.0,
+                         "mapResolution": [20, 20, 20]}],
+        "FluidBlocks": [{"denseMode": 0, "start": list(block[0]), "end": list(block[1])}],
+    }  # fmt: skip
+
+
+def run_splash_python(splash: Path, code: str, args: list, threads: int) -> subprocess.CompletedProcess:
+    """``code`` in SPlisHSPlasH's own Python (the splash script's interpreter), or the script itself."""
+    first = splash.read_text(errors="replace").splitlines()[0]
+    command = [first[2:].strip() if first.startswith("#!") else str(splash.parent / "python"), "-c", code]
+    env = dict(os.environ, LD_PRELOAD=SYSTEM_GLDISPATCH, OMP_NUM_THREADS=str(threads))
+    done = subprocess.run((command if code else [str(splash)]) + list(map(str, args)), env=env, capture_output=True,
+                          text=True)  # fmt: skip
+    if done.returncode:
+        sys.exit(f"SPlisHSPlasH failed ({done.returncode}):\n{done.stdout[-2000:]}{done.stderr[-2000:]}")
+    return done
+
+
+def read_vtk(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (n, 3), ids (n,) and ``density`` (n,) of a legacy binary VTK file from SPlisHSPlasH."""
+    data = path.read_bytes()
+    points = re.search(rb"POINTS (\d+) float\n", data)
+    ids = re.search(rb"LOOKUP_TABLE id_table\n", data)
+    density = re.search(rb"\ndensity 1 (\d+) float\n", data)
+    if not (points and ids and density):
+        raise ValueError(f"{path}: expected float POINTS, ids and a density field")
+    n = int(points.group(1))
+    return (
+        np.frombuffer(data, ">f4", 3 * n, points.end()).reshape(n, 3).astype(np.float64),
+        np.frombuffer(data, ">u4", n, ids.end()).astype(np.int64),
+        np.frombuffer(data, ">f4", n, density.end()).astype(np.float64),
+    )
+
+
+def splash_kernel(kernel: int, h: float):
+    """SPlisHSPlasH's W(r) for its kernel id (3D): 0 and 4 the cubic spline (4 tabulated), 2 Poly6."""
+    if kernel in (0, 4):
+        k = 8.0 / (math.pi * h**3)
+        return lambda r: np.where(
+            r <= 0.5 * h, k * (6 * (r / h) ** 3 - 6 * (r / h) ** 2 + 1), np.where(r <= h, 2 * k * (1 - r / h) ** 3, 0)
+        )
+    if kernel == 2:
+        return lambda r: np.where(r <= h, 315.0 / (64.0 * math.pi * h**9) * np.clip(h * h - r * r, 0, None) ** 3, 0)
+    raise ValueError(f"SPlisHSPlasH kernel {kernel} is not implemented here")
+
+
+def neighbour_pairs(points: np.ndarray, sources: np.ndarray, h: float) -> tuple[np.ndarray, ...]:
+    """Every pair (i of points, j of sources) within h, with its distance, by a grid of h-wide cells."""
+    lower = np.minimum(points.min(0), sources.min(0)) - 2 * h
+    source_cells, point_cells = (np.floor((p - lower) / h).astype(np.int64) for p in (sources, points))
+    dims = np.maximum(source_cells.max(0), point_cells.max(0)) + 3
+    key = lambda cells: (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]  # noqa: E731
+    order = np.argsort(key(source_cells), kind="stable")
+    source_keys, found = key(source_cells)[order], []
+    for offset in itertools.product((-1, 0, 1), repeat=3):
+        wanted = key(point_cells + np.array(offset))
+        first = np.searchsorted(source_keys, wanted, "left")
+        count = np.searchsorted(source_keys, wanted, "right") - first
+        i = np.repeat(np.arange(len(points)), count)
+        j = order[np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)]
+        r = np.linalg.norm(points[i] - sources[j], axis=1)
+        found.append((i[r <= h], j[r <= h], r[r <= h]))
+    return tuple(np.concatenate(parts) for parts in zip(*found))
+
+
+def splash_density(x, fluid_volume: float, boundary, boundary_volume, h: float, kernels: list) -> list[np.ndarray]:
+    """ρ/ρ0 at positions x for each of ``kernels`` as SPlisHSPlasH sums it with Akinci boundary particles:
+    V_f Σ_fluid W (itself included) + Σ_boundary V_b W."""
+    (i, _, r), (k, j, s) = neighbour_pairs(x, x, h), neighbour_pairs(x, boundary, h)
+    n = len(x)
+    return [
+        np.bincount(i, kernel(r) * fluid_volume, n) + np.bincount(k, kernel(s) * boundary_volume[j], n)
+        for kernel in kernels
+    ]
+
+
+def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, seconds: float, threads: int) -> Row:
+    scene = load_scene(PRESET)
+    spacing, block = scene.fluid.spacing_m, scene.fluid.blocks[0]
+    lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
+    name = SPLASH_METHODS[method][1]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        config = splash_config(splash, method, params, dt_s, seconds, scene, (lower, upper),
+                               (block.min_m, np.array(block.max_m) + spacing))  # fmt: skip
+        (tmp / "scene.json").write_text(json.dumps(config, indent=1))
+        run_splash_python(splash, SPLASH_PROBE, [tmp / "scene.json", tmp / "probe", tmp / "probe.npz",
+                                                 json.dumps(SPLASH_PARAMETER_IDS)], threads)  # fmt: skip
+        meta = np.load(tmp / "probe.npz")
+        log = run_splash_python(splash, "", ["--no-gui", "--no-initial-pause", "--output-dir", tmp / "out",
+                                             tmp / "scene.json"], threads).stdout  # fmt: skip
+
+        def number(pattern):
+            found = re.search(pattern + r": ([-+\d.eE]+)", log)
+            return float(found.group(1)) if found else None
+
+        step_ms, sum_ms = number(r"Average time: SimStep"), number(r"Time sum: SimStep")
+        mean_dt, total_time = number(r"Average number: Time step size"), number(r"Total number: Time step size")
+        iterations = number(rf"Average number: {name} - iterations")
+        frames = sorted(
+            (tmp / "out" / "vtk").glob("ParticleData_Fluid_*.vtk"), key=lambda p: int(p.stem.split("_")[-1])
+        )
+        if len(frames) < 2 or None in (step_ms, sum_ms, mean_dt, total_time, iterations):
+            sys.exit(f"{splash}: {len(frames)} frames, or its log lacks SimStep, step or iterations:\n{log[-2000:]}")
+        applied = json.loads(str(meta["applied"]))
+        h, rho0, volume = float(meta["support"]), float(meta["density0"]), float(meta["fluid_volume"])
+        boundary, boundary_volume = meta["boundary"], meta["boundary_volume"]
+        # Its AVX build (the wheel) exports the cubic spline's density whatever the kernel (its PBF's is Poly6).
+        kernels = [splash_kernel(applied["kernel"], h)] + ([splash_kernel(0, h)] if applied["kernel"] == 2 else [])
+        initial = splash_density(meta["x0"], volume, boundary, boundary_volume, h, kernels[:1])[0]
+        errors, again, gaps, left = [], [], [], set()
+        for k, path in enumerate(frames):
+            x, ids, rho = read_vtk(path)
+            left.update(ids[np.any((x < lower) | (x > upper), axis=1)].tolist())
+            if k == 0:  # after its first step (it exports once time ≥ 0): no error counted
+                continue
+            ratios = splash_density(x, volume, boundary, boundary_volume, h, kernels)
+            errors.append(np.maximum(rho / rho0 - 1.0, 0.0))
+            again.append(np.maximum(ratios[0] - 1.0, 0.0))
+            gaps.append([np.abs(ratio * rho0 - rho).max() / rho0 for ratio in ratios])
+    shown = ",".join(f"{k}={v}" for k, v in params.items() if k == "maxError" or v != SPLASH_METHODS[method][2][k])
+    row = Row(
+        f"SPlisHSPlasH {name} {shown}", dt_s * 1e3, round(total_time / mean_dt), iterations, step_ms,
+        sum_ms / 1e3 / total_time, float(np.mean([e.mean() for e in errors])), float(max(e.max() for e in errors)),
+        number(rf"Average number: {name} - iterationsV"), float(np.mean([e.mean() for e in again])),
+        float(max(e.max() for e in again)), len(left),
+    )  # fmt: skip
+    gaps = np.max(gaps, axis=0)
+    row.notes += [
+        "applied by SPlisHSPlasH: "
+        + ", ".join(f"{k} {v:.6g}" if type(v) is float else f"{k} {v}" for k, v in applied.items()),
+        f"support {h / spacing:.1f} spacings, fluid volume {volume / spacing**3:.3f} s³, {len(boundary):,} "
+        f"boundary particles; initial ρ/ρ0 by its kernel: bulk {np.median(initial):.4f}, largest "
+        f"{initial.max():.4f} (the layer against its wall particles); {len(left)} particles left the box",
+        f"exported density against recomputed from the exported positions: largest particle difference "
+        f"{gaps[0]:.2%} of ρ0" + (f"; recomputed by the cubic spline {gaps[1]:.2%}" if len(gaps) > 1 else ""),
+    ]
+    return row
+
+
+# ----------------------------------------------------------------------------- ours
+
+
+class IterationCount:
+    """A stage hook that adds up the solver iterations of every substep (one Python call per stage)."""
+
+    def __init__(self):
+        self.sim, self.iterations, self.substeps = None, 0, 0
+
+    def stage(self, name: str):
+        return self if name == "velocity, vorticity, XSPH, x = x*" else contextlib.nullcontext()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.iterations += self.sim.iterations_used
+        self.substeps += 1
+
+
+def our_scene(spec: str):
+    """The preset with the spec's overrides, vorticity off and the CFL limit at its most. A spec runs
+    fixed iterations unless it sets a target; ``preset`` keeps the preset's solver settings."""
+    overrides = ["vorticity.epsilon=0"]
+    for item in filter(None, (part.strip() for part in ("" if spec.strip() == "preset" else spec).split(","))):
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SceneError(f"--ours {spec!r}: expected KEY=VALUE, got {item!r}")
+        overrides.append(f"{OUR_SHORT_KEYS.get(key.strip(), key.strip())}={value.strip()}")
+    if spec.strip() != "preset":
+        overrides.insert(1, "solver.target_density_error=0")
+    if not any(o.startswith("time.max_cfl=") for o in overrides):
+        overrides.append(f"time.max_cfl={min(load_scene(PRESET, overrides).solver.kernel_ratio, 4.0)!r}")
+    return load_scene(PRESET, overrides)
+
+
+def run_ours(spec: str, seconds: float) -> Row:
+    scene, counter = our_scene(spec), IterationCount()
+    sim = counter.sim = Simulation(scene, quiet=True, hook=counter)
+    sim.step(2)  # compiles every kernel (both position buffers' orders); the run starts again from rest
+    sim.reset()
+    counter.iterations = counter.substeps = 0
+    frame_s, means, maxima = [], [], []
+    for _ in range(round(seconds / scene.time.frame_dt_s)):
+        frame_s.append(timed(sim.step))  # the step alone, as SPlisHSPlasH's SimStep leaves out its exports
+        stats = sim.stats()
+        means.append(stats["mean_density_error"])
+        maxima.append(stats["max_density_error"])
+    steps = max(counter.substeps, 1)
+    return Row(
+        f"pbf {spec} (h {scene.solver.kernel_ratio:g} s)", scene.time.frame_dt_s / scene.time.substeps * 1e3,
+        counter.substeps, counter.iterations / steps, sum(frame_s) / steps * 1e3,
+        sum(frame_s) / (len(frame_s) * scene.time.frame_dt_s), statistics.fmean(means), max(maxima),
+        scene.solver.divergence_iterations or None,
+    )  # fmt: skip
+
+
+def medians(runs: list[Row]) -> Row:
+    """One row from repeated runs: median time and mean error, the largest max error."""
+    first = runs[0]
+    if len(runs) > 1:
+        first.ms_per_step = statistics.median(r.ms_per_step for r in runs)
+        first.compute_s_per_s = statistics.median(r.compute_s_per_s for r in runs)
+        first.mean_error = statistics.median(r.mean_error for r in runs)
+        first.max_error = max(r.max_error for r in runs)
+        first.label += f" (median of {len(runs)})"
+    return first
+
+
+# ----------------------------------------------------------------------------- the standing wave
+
+
 def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> tuple[np.ndarray, np.ndarray]:
-    """The standing wave in SPlisHSPlasH (module docstring, --sloshing): (times, the mode's amplitude)."""
+    """The standing wave in SPlisHSPlasH: (times, the mode's amplitude). Its container is one spacing
+    wider in x and z, so that its wall particles stand one spacing from the water as in its dam break."""
     from pbf.study import damping
 
     scene = load_scene(damping.PRESET)
-    spacing, frame_dt = scene.fluid.spacing_m, scene.time.frame_dt_s
-    per_frame = scene.time.substeps
-    dt = frame_dt / per_frame
-    block = scene.fluid.blocks[0]
-    lower, upper = np.array(block.min_m), np.array(block.max_m)
-    container_upper = np.array(scene.container.max_m) + np.array([spacing, 0.0, spacing])
-    length, depth, width = upper - lower
-    k, omega = damping.sloshing_mode(length, depth, float(np.linalg.norm(scene.gravity_m_s2)))
+    spacing, frame_dt, per_frame = scene.fluid.spacing_m, scene.time.frame_dt_s, scene.time.substeps
+    dt, block = frame_dt / per_frame, scene.fluid.blocks[0]
+    size = np.array(block.max_m) - np.array(block.min_m)
+    k, omega = damping.sloshing_mode(size[0], size[1], float(np.linalg.norm(scene.gravity_m_s2)))
     settle = round(1.0 / dt)
     stop = (settle + math.ceil(periods * 2 * math.pi / omega / dt) + 1) * dt
-    simulation_method, block_name, defaults = SPLASH_METHODS[method]
-    # The water one spacing inside the boundary particles in x and z (its dam break's placement);
-    # its first layer stands one spacing above the floor's.
-    water_lower = np.array([spacing, spacing, spacing])
-    config = {
-        "Configuration": {
-            "particleRadius": spacing / 2,
-            "simulationMethod": simulation_method,
-            "gravitation": list(scene.gravity_m_s2),
-            "timeStepSize": dt,
-            "cflMethod": 0,
-            "boundaryHandlingMethod": 0,
-            "stopAt": stop,
-            "enableVTKExport": False,
-            block_name: defaults,
-        },
-        "Materials": [
-            {
-                "id": "Fluid",
-                "density0": scene.fluid.rest_density_kg_m3,
-                "viscosityMethod": 0,
-                "vorticityMethod": 0,
-                "XSPH": {"xsph": scene.viscosity.xsph, "xsphBoundary": 0.0},
-            }
-        ],
-        "RigidBodies": [
-            {
-                "geometryFile": str(splash.parent / "data" / "models" / "UnitBox.obj"),
-                "translation": list(container_upper / 2),
-                "scale": list(container_upper),
-                "isDynamic": False,
-                "isWall": True,
-                "mapInvert": True,
-                "mapThickness": 0.0,
-                "mapResolution": [40, 30, 20],
-            }
-        ],
-        "FluidBlocks": [{"denseMode": 0, "start": [0.0, 0.0, 0.0], "end": list(water_lower + upper - lower)}],
+    water_lower = np.full(3, spacing)
+    box = (np.zeros(3), np.array(scene.container.max_m) + [spacing, 0.0, spacing])
+    config = splash_config(
+        splash, method, SPLASH_METHODS[method][2], dt, stop, scene, box, (np.zeros(3), water_lower + size)
+    )
+    config["Configuration"]["enableVTKExport"] = False
+    config["RigidBodies"][0]["mapResolution"] = [40, 30, 20]
+    mode = {
+        "k": k,
+        "omega": omega,
+        "depth": float(size[1]),
+        "lower": list(water_lower - spacing / 2),
+        "amplitude": 0.01,
     }
-    mode = {"k": k, "omega": omega, "depth": float(depth), "lower": list(water_lower - spacing / 2), "amplitude": 0.01}
-    env = dict(os.environ, LD_PRELOAD=SYSTEM_GLDISPATCH, OMP_NUM_THREADS=str(threads))
     with tempfile.TemporaryDirectory() as tmp:
         path, result = Path(tmp) / "sloshing.json", Path(tmp) / "amplitudes.npy"
         path.write_text(json.dumps(config))
-        run = subprocess.run(
-            [
-                splash_interpreter(splash),
-                "-c",
-                SPLASH_SLOSHING,
-                str(path),
-                str(Path(tmp) / "out"),
-                str(result),
-                str(settle),
-                str(per_frame),
-                json.dumps(mode),
-            ],
-            env=env,
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-        if run.returncode or not result.exists():
-            sys.exit(
-                f"SPlisHSPlasH's standing wave failed ({run.returncode}):\n{run.stdout[-2000:]}{run.stderr[-2000:]}"
-            )
+        run_splash_python(splash, SPLASH_SLOSHING, [path, Path(tmp) / "out", result, settle, per_frame,
+                                                    json.dumps(mode)], threads)  # fmt: skip
         amplitudes = np.load(result)
     return np.arange(len(amplitudes)) * frame_dt, amplitudes
 
@@ -719,143 +425,75 @@ def sloshing_comparison(splash: Path, methods: list[str], threads: int, periods:
     """The standing wave's decay per period in SPlisHSPlasH's methods and in ours (``--sloshing``)."""
     from pbf.study import damping
 
-    print(
-        f"{'run':<34} {'decay per period':>16} {'period':>8}   (linear theory: period "
-        f"{2 * math.pi / damping.sloshing_mode(0.45, 0.195, 9.81)[1]:.3f} s)"
-    )
+    theory = 2 * math.pi / damping.sloshing_mode(0.45, 0.195, 9.81)[1]
+    print(f"{'run':<34} {'decay per period':>16} {'period':>8}   (linear theory: period {theory:.3f} s)")
     for method in methods:
-        times, amplitudes = splash_sloshing(splash, method, periods, threads)
-        decay, _, period = damping.decay_per_period(times, amplitudes)
+        decay, _, period = damping.decay_per_period(*splash_sloshing(splash, method, periods, threads))
         print(f"{'SPlisHSPlasH ' + SPLASH_METHODS[method][1]:<34} {decay:>16.1%} {period:>7.3f}s")
     ours = damping.sloshing(periods=periods)
     print(f"{'ours (the sloshing preset)':<34} {ours.decay_per_period:>16.1%} {ours.period_s:>7.3f}s")
 
 
-# ----------------------------------------------------------------------------- output
-
-HEADER = (
-    f"{'run':<58} {'Δt ms':>5} {'steps':>5} {'iter/step':>9} {'div/step':>8} {'ms/step':>8} "
-    f"{'s/sim s':>7} {'mean err':>8} {'max err':>7}  {'recomputed':>16} {'left box':>8}"
-)
+# ----------------------------------------------------------------------------- the command
 
 
 def line(r: Row) -> str:
-    divergence = f"{r.divergence_iterations:.2f}" if r.divergence_iterations is not None else "-"
-    again = f"{r.recomputed_mean:.3%} / {r.recomputed_max:.1%}" if r.recomputed_mean is not None else "-"
-    left = str(r.left_box) if r.left_box is not None else "-"
+    divergence = "-" if r.divergence_iterations is None else f"{r.divergence_iterations:.2f}"
+    again = "-" if r.recomputed_mean is None else f"{r.recomputed_mean:.3%} / {r.recomputed_max:.1%}"
+    left = "-" if r.left_box is None else str(r.left_box)
     return (
         f"{r.label:<58.58} {r.dt_ms:>5.2f} {r.steps:>5} {r.iterations:>9.2f} {divergence:>8} {r.ms_per_step:>8.2f} "
         f"{r.compute_s_per_s:>7.2f} {r.mean_error:>8.3%} {r.max_error:>7.2%}  {again:>16} {left:>8}"
     )
 
 
-CANNOT_BE_EQUAL = """\
-What the comparison cannot make equal:
-* Kernels and support. SPlisHSPlasH's support radius is 4 particle radii, 2.0 spacings; its DFSPH uses
-  the cubic spline (tabulated), and its PBF Poly6 for the density and Spiky for the gradient (it sets
-  these whenever simulationMethod is 2, whatever the scene says): its PBF solves and stops on the Poly6
-  density, yet the density it exports is the cubic spline's (the lines above). Ours is the cubic spline
-  at 2.2 spacings by default (solver.kernel_ratio; ``kernel_ratio=2.0`` in an --ours spec runs it at
-  SPlisHSPlasH's support).
-* Walls. SPlisHSPlasH: Akinci et al. 2012 boundary particles, one layer on the box's surface (the
-  count is printed above); its fluid keeps about one spacing from them, so the water has about half a
-  spacing less room at each wall, and at the start the layer next to the wall particles stands above
-  rest density (the 'initial density' line), which pushes the block in the first step. Ours: the wall
-  density of ghost planes, the first layer half a spacing from the wall at exactly ρ0.
-* Rest state. SPlisHSPlasH's particle volume is s³ (its lattice at 2.0 spacings sums to 1.0000 with
-  the cubic spline, 1.0098 with Poly6); ours scales the mass so that the lattice is exactly at ρ0.
-* XSPH and viscosity. Both XSPH c = 0.01 and no vorticity confinement, but SPlisHSPlasH applies XSPH
-  as an acceleration (before its pressure solve in DFSPH, after the position solve in PBF), ours as the
-  velocity filter after the solve (Macklin & Müller, Eq. 17). Its shipped DamBreakModel scene uses its
-  'Standard' viscosity 0.01 instead; here viscosityMethod is 0 in both methods to match ours.
-* Solvers and their stopping rules. DFSPH stops on the mean predicted density deviation (and the
-  divergence solver on the mean divergence); its PBF on the mean of max(ρ/ρ0 − 1, 0) of the current
-  positions, both in percent, with 2 iterations at least; ours runs a fixed count or stops on the same
-  mean as a fraction (target). Its PBF is plain Jacobi (no relaxation); ours is under-relaxed (ω ≈ 0.58).
-* What is exported. DFSPH's exported density is the one it computed at the start of its last step
-  (one step before the exported positions); PBF's is computed after the position solve with the step's
-  neighbour lists; ours is the density of the positions we output. The recomputed column shows what
-  this changes.
-* Time. SPlisHSPlasH's SimStep timer is C++ around its step; ours is the wall time of step() with
-  Python's launches in it. Both use --threads threads."""
-
-
-def parse_param_sets(values: list[str] | None, methods: list[str]) -> list[dict]:
+def parse_param_sets(values: list[str] | None) -> list[dict]:
     """Each ``--param`` is one SPlisHSPlasH variant: comma-separated KEY=VALUE of the methods' blocks."""
-    known = set().union(*(SPLASH_METHODS[m][2] for m in SPLASH_METHODS))
+    known = set().union(*(defaults for _, _, defaults in SPLASH_METHODS.values()))
     sets = []
     for text in values or ["maxError=0.01", "maxError=0.1"]:
         variant = {}
         for item in filter(None, (part.strip() for part in text.split(","))):
-            key, sep, value = item.partition("=")
-            key = key.strip()
+            key, sep, value = (part.strip() for part in item.partition("="))
             if not sep or key not in known:
                 raise ValueError(
-                    f"--param {text!r}: {item!r}; expected KEY=VALUE with KEY one of {', '.join(sorted(known))}"
+                    f"--param {text!r}: {item!r}; expected KEY=VALUE, KEY one of {', '.join(sorted(known))}"
                 )
-            variant[key] = (
-                json.loads(value.strip().lower())
-                if value.strip().lower() in ("true", "false")
-                else (int(value) if re.fullmatch(r"[-+]?\d+", value.strip()) else float(value))
-            )
+            variant[key] = json.loads(value.lower()) if value.lower() in ("true", "false") else (
+                int(value) if re.fullmatch(r"[-+]?\d+", value) else float(value))  # fmt: skip
         sets.append(variant)
     return sets
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(
-        description=__doc__.splitlines()[0],
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="\n".join(__doc__.splitlines()[1:6]),
-    )
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--splash", type=Path, required=True, help="the splash script of a pysplishsplash 2.19 install")
-    parser.add_argument(
-        "--methods",
-        nargs="+",
-        choices=sorted(SPLASH_METHODS),
-        default=["dfsph", "pbf"],
-        help="SPlisHSPlasH's solvers to run (default: dfsph pbf)",
-    )
+    parser.add_argument("--methods", nargs="+", choices=sorted(SPLASH_METHODS), default=["dfsph", "pbf"])
     parser.add_argument(
         "--param",
         action="append",
         metavar="KEY=VALUE[,KEY=VALUE]",
-        help="one SPlisHSPlasH variant per --param, set in its method's block over the shipped "
-        "defaults (default: --param maxError=0.01 --param maxError=0.1; maxError is in percent)",
+        help="one SPlisHSPlasH variant each (default: maxError=0.01 and maxError=0.1, in percent)",
     )
     parser.add_argument(
         "--ours",
         nargs="*",
         default=["substeps=4,iterations=4", "substeps=2,iterations=4", "preset"],
-        help="our settings, each a comma-separated list of overrides of the preset (fixed "
-        "iterations unless a target is given), or 'preset' for the preset's own solver settings",
+        help="our settings, each comma-separated overrides of the preset, or 'preset'",
     )
     parser.add_argument("--dt-ms", type=float, default=4.1667, help="SPlisHSPlasH's fixed step (default 4.1667)")
     parser.add_argument("--seconds", type=float, default=1.0, help="simulated time of every run (default 1)")
     parser.add_argument("--threads", type=int, default=2, help="CPU threads for both simulators (default 2)")
-    parser.add_argument(
-        "--repeats",
-        type=int,
-        default=1,
-        help="runs of each SPlisHSPlasH and --ours row, alternating; medians are reported (default 1)",
-    )
-    parser.add_argument(
-        "--sloshing",
-        action="store_true",
-        help="instead: the standing wave's decay per period in --methods and ours (pbf.study.damping)",
-    )
-    args = parser.parse_args(argv)
-    sys.stdout.reconfigure(line_buffering=True)  # progress shows as it comes when written to a file
+    parser.add_argument("--repeats", type=int, default=1, help="runs of each row, alternating; medians (default 1)")
+    parser.add_argument("--sloshing", action="store_true", help="instead: the standing wave's decay a period")
+    args = parser.parse_args(argv)  # fmt: skip
+    sys.stdout.reconfigure(line_buffering=True)
     if not args.splash.exists():
-        parser.error(
-            f"--splash: {args.splash} does not exist; SPlisHSPlasH is installed apart from this project: "
-            f"python3 -m venv /tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 'numpy<2', "
-            f"then --splash /tmp/sphvenv/bin/splash"
-        )
+        parser.error(f"--splash: {args.splash} does not exist; install SPlisHSPlasH apart (see --help's module doc)")
     if args.threads < 1 or args.repeats < 1 or args.seconds <= 0:
         parser.error("--threads and --repeats must be positive integers, --seconds positive")
     try:
-        param_sets = parse_param_sets(args.param, args.methods)
+        param_sets = parse_param_sets(args.param)
         for spec in args.ours:
             our_scene(spec)
     except (ValueError, SceneError) as error:
@@ -865,53 +503,34 @@ def main(argv=None):
         return sloshing_comparison(args.splash, args.methods, args.threads)
     started = time.perf_counter()
     print(f"SPlisHSPlasH: {args.splash}; {args.threads} threads; {args.seconds:g} simulated s; Δt {args.dt_ms:g} ms")
-
-    jobs = []  # (label, callable) in the order they run, alternating over repeats
+    jobs = []  # in the order they run, alternating over repeats
     for method in args.methods:
-        block_defaults = SPLASH_METHODS[method][2]
+        defaults = SPLASH_METHODS[method][2]
         for variant in param_sets:
-            params = {**block_defaults, **{k: v for k, v in variant.items() if k in block_defaults}}
-            ignored = [k for k in variant if k not in block_defaults]
-            if ignored:
-                print(f"note: {SPLASH_METHODS[method][1]} has no {', '.join(ignored)}; left out of its runs")
-            jobs.append(
-                (
-                    "theirs",
-                    lambda m=method, p=params: run_splishsplash(
-                        args.splash, m, p, args.dt_ms / 1e3, args.seconds, args.threads
-                    ),
-                )
-            )
-    for spec in args.ours:
-        jobs.append(("ours", lambda s=spec: run_ours(s, args.seconds)))
+            params = {**defaults, **{k: v for k, v in variant.items() if k in defaults}}
+            jobs.append(lambda m=method, p=params: run_splishsplash(args.splash, m, p, args.dt_ms / 1e3, args.seconds,
+                                                                    args.threads))  # fmt: skip
+    jobs += [lambda s=spec: run_ours(s, args.seconds) for spec in args.ours]
     results = [[] for _ in jobs]
     for _ in range(args.repeats):
-        for k, (_, job) in enumerate(jobs):
+        for runs, job in zip(results, jobs):
             began, load = time.perf_counter(), os.getloadavg()[0]
-            results[k].append(job())
-            print(
-                f"  ran {results[k][-1].label} ({time.perf_counter() - began:.0f} s; load average "
-                f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)"
-            )
+            runs.append(job())
+            print(f"  ran {runs[-1].label} ({time.perf_counter() - began:.0f} s; load {load:.1f} before)")
     rows = [medians(runs) for runs in results]
-    theirs = [r for (kind, _), r in zip(jobs, rows) if kind == "theirs"]
-
-    print()
-    print(HEADER)
-    for r in rows:
-        print(line(r))
     print(
-        "(s/sim s: seconds of compute per simulated second; recomputed: SPlisHSPlasH's density recomputed from its "
-        "exported positions, mean / max error; left box: its particles that ever left the box)"
+        f"\n{'run':<58} {'Δt ms':>5} {'steps':>5} {'iter/step':>9} {'div/step':>8} {'ms/step':>8} "
+        f"{'s/sim s':>7} {'mean err':>8} {'max err':>7}  {'recomputed':>16} {'left box':>8}"
     )
-    for r in theirs:
-        print(f"\n{r.label}:")
-        for note in r.notes:
-            print(f"  {note}")
-
-    print()
-    print(CANNOT_BE_EQUAL)
-    print(f"\n(total wall time {time.perf_counter() - started:.0f} s)")
+    print("\n".join(map(line, rows)))
+    print("(s/sim s: compute a simulated second; recomputed: SPlisHSPlasH's density from its exported positions)")
+    for r in rows:
+        if r.notes:
+            print(f"\n{r.label}:\n" + "\n".join(f"  {note}" for note in r.notes))
+    print(
+        "\nNot equal in the comparison (docs/BENCHMARKS.md): kernels and support, walls (Akinci particles against "
+        f"our ghost), rest state, XSPH, stopping rules, timers.\n(wall time {time.perf_counter() - started:.0f} s)"
+    )
     return rows
 
 

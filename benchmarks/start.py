@@ -1,29 +1,14 @@
 """How long a user waits before the first frame: cold and warm starts of every preset, each a fresh process.
 
     python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
-
-A start is what a user runs: ``pbf PRESET --stats-only --frames 1`` in a new process, timed from the
-process's launch to its exit (``wall``) and by the program's own "kernels ready in" line (``ready``:
-building the Simulation, settling and the first frame's kernels). Taichi's offline cache keeps each
-compiled kernel as one ``.tic`` file, named by a hash of the kernel's IR, argument types and the fields
-it touches, so the files a start adds to the cache folder are the kernels it had to compile; a start
-that adds none was served entirely from the cache.
-
-Per preset, in a cache folder of its own, emptied first:
-
-* ``cold``: the first start (every kernel compiled);
-* ``warm``: the same start again (everything from the cache);
-* ``spacing``: the same preset with ``fluid.spacing_m`` 10% larger, another particle count and grid
-  (what a user changing one key in a file waits for).
-
-Then, unless ``--no-shared``, every preset once more in order in one fresh shared folder (``shared``):
-what a preset costs after the ones before it have run, e.g. ``drop_into_pool`` after ``dam_break``.
-
-With ``--first-calls``, where a cold start's compile goes instead: per preset, in a fresh process with
-an empty offline cache, the Simulation built with settling off and one substep, and the first call of
-each kernel timed (Taichi's Python front end, the compile and one run), the longest first:
-
     python -m benchmarks.bench start --first-calls [--presets hydrostatic ...]
+
+A start is ``pbf PRESET --stats-only --frames 1`` in a new process, timed by its own "kernels ready in"
+line; the ``.tic`` files it adds to its Taichi offline cache folder are the kernels it compiled. Per
+preset, in a folder of its own: ``cold`` (emptied first), ``warm`` (again), ``spacing`` (10% larger:
+another particle count and grid); then, unless ``--no-shared``, every preset in order in one shared
+folder. ``--first-calls``: per preset, in a fresh process with an empty cache, the Simulation built
+with settling off and one substep, each kernel's first call timed (front end, compile, one run).
 """
 
 from __future__ import annotations

@@ -1,24 +1,15 @@
 """A substep timed whole on any backend, the host's share of it, and a preset's frame rate: the GPU's figures.
 
     python benchmarks/substep_time.py --arch cuda --sizes 8000 64000 1000000
-    python benchmarks/substep_time.py --arch cuda --preset dam_break_large
+    python benchmarks/substep_time.py --arch cuda --preset dam_break_large [--set KEY=VALUE ...]
     python benchmarks/substep_time.py --arch cuda --sizes 8000 --profile     # Taichi's profiler, per task
 
-``--sizes``: the seed dam break scaled to each size (``pbf.study.common.dam_break``, 4 iterations at
-most, the preset's target), 5 frames to warm up (the kernels compile), then ``--substeps`` substeps
-timed whole, the device synchronised at each end, ``--rounds`` times: medians of ms per substep, and
-of the time the host took to issue them (the same as the whole when the host is the limit, less when
-the device is), and of the CPU time the issuing thread spent (Python and the launches' own work:
-what a GPU backend costs the host per substep, whatever else the machine runs; on the CPU backend
-that thread also runs its share of the kernels). ``benchmarks/ab.py`` runs it for versions of the package
-against each other (folders or git revisions), alternated in fresh processes.
-
-``--preset`` (with ``--set KEY=VALUE`` overrides of it, repeatable): 3 frames to warm up, then 30
-frames of the preset timed (frames of 1/60 s simulated per second of wall time), then 30 more with the
-density error read each frame, and where the particles lie.
-
-``--profile``: Taichi's kernel profiler (it is chosen when Taichi starts, so only as the first thing
-this process does): the device time of each task of 10 substeps, in the order they ran.
+``--sizes``: the seed dam break scaled to each (``pbf.study.common.dam_break``, at most 4 iterations),
+5 frames to warm up, then ``--substeps`` substeps timed whole, the device synchronised at each end,
+``--rounds`` times: medians of ms a substep, of the host's time to issue them and of the issuing
+thread's CPU time (``benchmarks/ab.py`` runs it for versions against each other). ``--preset``: 3
+frames to warm up, 30 timed, 30 more with the density error read. ``--profile``: each task's device
+time over 10 substeps (the profiler is chosen when Taichi starts).
 """
 
 import argparse

@@ -1,37 +1,20 @@
-"""Where a frame of the interactive window goes: the simulation's step, our renderer's draw, the
-panel and GGUI's show (the canvas image, the panel's drawing, the present), each in wall-clock and
-CPU milliseconds, for the window as ``python run.py`` opens it and a few variants of it
-(docs/BENCHMARKS.md, "The window"). Needs a display and Vulkan; on a machine without either:
+"""Where a frame of the interactive window goes: the simulation's step, our renderer's draw, the panel
+and GGUI's show, in wall-clock and CPU ms, for the window as ``python run.py`` opens it (the seed from
+rest, 1280 × 720, no input) and its variants (docs/BENCHMARKS.md, "The window"). Needs Vulkan and a
+display (``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives both in software):
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
-        [--variants window,paused,...] [--scene dam_break] [--warmup 30]
-
-(Debian/Ubuntu: ``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives a virtual display and
-Mesa's software Vulkan, lavapipe.)
-
-Each variant runs in a fresh process (some levers are environment variables read when the Vulkan
-driver or Taichi starts), the variants alternate round by round, and every figure is the median over
-the rounds of a round's median over its frames, after ``--warmup`` frames (JIT, the first impact);
-``fps`` is the frames over the wall time they took. The frames are those of ``python run.py``: the
-seed scene from rest at 1280 × 720, the same camera, no input. ``cpu`` is the CPU time of the
-window's process per frame (every thread: Taichi's, the Vulkan driver's), ``X`` that of the X server
-(Xvfb) when there is one to read: on a 2-core machine the frame rate cannot exceed 2000 / (their sum).
-
-``--offscreen`` runs the same loop without a display: GGUI draws into an offscreen image
-(``ti.ui.Window(..., show_window=False)``; Vulkan, but no X server), and a frame's ``show`` is
-drawing it and reading it back to the host (``get_image_buffer_as_numpy``: Taichi 1.7.4 has no present
-without a surface), a copy a shown window does not make. ``--arch`` picks the simulation's and the
-renderer's backend (GGUI itself always draws with Vulkan). On a machine with a GPU and no display:
-
+        [--variants window,paused,surface] [--scene dam_break] [--warmup 30]
     python benchmarks/window.py --offscreen --arch cuda --frames 300 --rounds 3 --variants window,surface,paused
-
-``--start`` measures instead how long ``python run.py`` takes from its launch to the first frame, in
-the window and headless, with an empty Taichi kernel cache (a first run: ``TI_OFFLINE_CACHE_FILE_PATH``
-and Mesa's shader cache pointed at empty folders) and again with the cache that run filled, in
-``--rounds`` alternated rounds; it also counts the files each start adds to the kernel cache (none on
-a second start: every kernel, the window's and the renderers' included, came from the cache):
-
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py --start [--rounds 3] [--scene dam_break]
+
+Each variant runs in a fresh process, the variants alternating round by round; a figure is the median
+over the rounds of a round's median over its frames after ``--warmup``; ``fps`` is frames over their
+wall time, ``cpu`` the window process's CPU a frame (every thread), ``X`` the X server's. ``--offscreen``:
+GGUI draws into an offscreen image (``show_window=False``; no X server), ``show`` drawing it and reading
+it back. ``--start``: ``python run.py`` from its launch to the first frame, window and headless, with
+an empty kernel cache (and Mesa's shader cache) and again with the one it filled, and the files each
+start added to the cache.
 """
 
 import argparse
@@ -44,19 +27,14 @@ import tempfile
 import time
 from pathlib import Path
 
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
+from benchmarks.lab import Clock  # noqa: E402
+
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
-# on it before (GGUI's own particles, the simulation in a second process, ...) are in
-# docs/HISTORY_BENCHMARKS.md, "The window: the levers".
-VARIANTS = {
-    "window": {},
-    "paused": {"paused": True},
-    "surface": {"surface": True},
-    "lavapipe-bilinear": {"env": {"LP_PERF": ""}},
-    "stats-every-frame": {"stats_interval_s": 0.0},
-    "no-vsync": {"vsync": False},
-    "taichi-1-thread": {"cpu_threads": 1},
-    "lavapipe-1-thread": {"env": {"LP_NUM_THREADS": "1"}},
-}
+# on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
+# in docs/HISTORY_BENCHMARKS.md, "The window: the levers".
+VARIANTS = {"window": {}, "paused": {"paused": True}, "surface": {"surface": True}}
 DEFAULT_VARIANTS = ("window", "paused")
 WARMUP_FRAMES = 30
 """Frames before the measured ones by default: the kernels compile and the block reaches the floor."""
@@ -84,7 +62,7 @@ def x_server_cpu_s() -> float | None:
     return None
 
 
-class Clock:
+class Phases:
     """Wall and process CPU time, in ms, of the phases of one frame."""
 
     def __init__(self):
@@ -92,11 +70,11 @@ class Clock:
 
     def timed(self, phase, function):
         def run(*args, **kwargs):
-            wall, cpu = time.perf_counter(), time.process_time()
+            clock = Clock()
             try:
                 return function(*args, **kwargs)
             finally:
-                self.add(phase, time.perf_counter() - wall, time.process_time() - cpu)
+                self.add(phase, *clock.lap())
 
         return run
 
@@ -125,14 +103,14 @@ def measure(
     from pbf.app import window  # pbf first: it keeps Taichi's banner off
     from pbf.solver import Simulation, start_backend
 
-    start_backend(arch, quiet=True, cpu_threads=settings.get("cpu_threads"))
+    start_backend(arch, quiet=True)
     sim = Simulation(scene, quiet=True)
     try:
         gui_window = window.open_window(
             "pbf benchmark",
             sim.scene.render.width_px,
             sim.scene.render.height_px,
-            vsync=settings.get("vsync", True) and not offscreen,
+            vsync=not offscreen,
             show_window=not offscreen,
         )
     except window.WindowUnavailable as reason:
@@ -142,13 +120,12 @@ def measure(
     viewer = window.WindowViewer(sim, gui_window)
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
-    window.STATS_INTERVAL_S = settings.get("stats_interval_s", window.STATS_INTERVAL_S)
 
     def step():
         sim.step()
         ti.sync()
 
-    clock = Clock()
+    clock = Phases()
     viewer.draw = clock.timed("draw", viewer.draw)
     viewer.panel = clock.timed("panel", viewer.panel)
     viewer.window.show = clock.timed("show", viewer.window.show)
@@ -320,25 +297,9 @@ def main(argv=None) -> None:
         for name in names:
             # Environment variables of a variant are set before the process starts: the C library
             # and the Vulkan driver read theirs when they load.
-            run = subprocess.run(
-                [
-                    sys.executable,
-                    __file__,
-                    "--one",
-                    name,
-                    "--frames",
-                    str(args.frames),
-                    "--scene",
-                    args.scene,
-                    "--warmup",
-                    str(args.warmup),
-                    *(["--offscreen"] if args.offscreen else []),
-                    *(["--arch", args.arch] if args.arch else []),
-                ],
-                capture_output=True,
-                text=True,
-                env={**os.environ, **VARIANTS[name].get("env", {})},
-            )
+            options = ["--frames", str(args.frames), "--scene", args.scene, "--warmup", str(args.warmup)]
+            options += (["--offscreen"] if args.offscreen else []) + (["--arch", args.arch] if args.arch else [])
+            run = subprocess.run([sys.executable, __file__, "--one", name, *options], capture_output=True, text=True)
             if run.returncode != 0:
                 raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
             result = json.loads(run.stdout.strip().splitlines()[-1])

@@ -440,22 +440,9 @@ def _box_mesh(half: np.ndarray):
     corners = np.array([[(-1, 1)[k >> a & 1] * half[a] for a in range(3)] for k in range(8)], np.float64)
     # Two triangles per face, counter-clockwise seen from outside (corner k has bit a set for +half on axis a).
     faces = np.array(
-        [
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ],
+        [0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4, 2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5],
         np.int32,
-    )
+    ).reshape(12, 3)
     return corners, faces
 
 

@@ -8,7 +8,7 @@ import dataclasses
 import typing
 
 from pbf.scene.root import Scene
-from pbf.scene.schema import MOVED, REMOVED, _num, _show
+from pbf.scene.schema import MOVED, REMOVED, _num, _show, public_fields
 
 HEADER = """# Scene keys
 
@@ -53,11 +53,7 @@ def _default(f) -> str:
 
 def _rows(cls, prefix: str, tables: list) -> list[str]:
     rows = []
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        if f.metadata.get("internal"):
-            continue
-        annotation = hints[f.name]
+    for f, annotation in public_fields(cls):
         item = typing.get_args(annotation)[0] if typing.get_origin(annotation) is tuple else None
         if dataclasses.is_dataclass(annotation):
             tables.append((f"[{prefix}{f.name}]", annotation, f"{prefix}{f.name}."))

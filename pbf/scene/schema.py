@@ -247,14 +247,17 @@ def _convert(value, annotation, where):
     raise SceneError(f"{where}: expected {_type_name(annotation)}, got {_show(value)}")
 
 
+def public_fields(cls) -> list[tuple[dataclasses.Field, object]]:
+    """The keys a scene file may set in the table of dataclass ``cls``: each field but the internal
+    ones, with its annotation resolved (a nested table's dataclass, ``tuple[Item, ...]``, a type)."""
+    hints = typing.get_type_hints(cls)
+    return [(f, hints[f.name]) for f in dataclasses.fields(cls) if not f.metadata.get("internal")]
+
+
 def _schema_keys(cls, prefix="") -> list[str]:
     """Every dotted key of the schema under ``cls`` (for "did you mean")."""
     found = []
-    hints = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        if f.metadata.get("internal"):
-            continue
-        annotation = hints[f.name]
+    for f, annotation in public_fields(cls):
         found.append(prefix + f.name)
         if dataclasses.is_dataclass(annotation):
             found += _schema_keys(annotation, f"{prefix}{f.name}.")
@@ -329,8 +332,8 @@ def _table_values(cls, table, source: str, prefix: str, root=None) -> dict:
     built the same way. ``root`` is the outermost table's class (for "did you mean" across tables)."""
     root = root or cls
     where_table = f"{source}: key '{prefix.rstrip('.')}'" if prefix else source
-    hints = typing.get_type_hints(cls)
-    known = {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
+    fields = public_fields(cls)
+    known, hints = {f.name: f for f, _ in fields}, {f.name: annotation for f, annotation in fields}
     if isinstance(table, cls):
         raw = {name: getattr(table, name) for name in known}
     elif isinstance(table, dict):
