@@ -70,7 +70,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     x_star, kernels, control = sim.integrator.predicted, sim.kernels, sim.control
     control.target_density_error, control.iterations = 0.0, 3
     features = Features.of(sim.model, control)
-    kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features)  # a substep's lines 1-7
+    kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features, 0)  # a substep's lines 1-7
     for start in range(3):  # three iterations, an iteration a call: x* ends in the second buffer
         kernels._call(features, control, start, False)
     newer, older = x_star.second.to_numpy(), x_star.first.to_numpy()

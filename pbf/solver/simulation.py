@@ -404,11 +404,11 @@ class Simulation:
     def _find_neighbours_in_place(self) -> None:
         """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
         features = Features.of(self.model, self.control, in_place=True)
-        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
         most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
         if truncated:
             self.grid.settle_frame(most_entries, False)
-            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
         self.grid.status.fill(0)  # the frames' record starts here
 
     @property
@@ -466,7 +466,7 @@ class Simulation:
         with hook.stage("predict, sort by cell, neighbour lists"):
             # Lines 1-7: v += Δt g, x* = x + Δt v; the particles sorted by the cell of x* and their
             # neighbours; ours: v made divergence-free, x* again; the denominators of λ (Eq. 10) at x*.
-            kernels.find_neighbours(dt, control.gravity_m_s2, features)
+            kernels.find_neighbours(dt, control.gravity_m_s2, features, control.divergence_iterations)
         with hook.stage("solver iterations"):
             # Lines 8-19 until the error target: λ (Eq. 10), Δx with s_corr (Eqs. 11-12), collisions,
             # x* += Δx; all calls but the last.
