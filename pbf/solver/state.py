@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
+from pbf.solver.constants import array_loader
 from pbf.solver.scan import read_count
 
 
@@ -96,6 +97,7 @@ class State:
             self._carried.append((getattr(self, spec.name), self._allocate(spec.dtype, spec.components)))
         self._unsorted = ti.Vector.field(3, ti.f32, shape=capacity)
         self._unsorted_scalar = ti.field(ti.f32, shape=capacity)
+        self._loader = None  # made at the first load (pbf.solver.constants.array_loader)
 
     def _allocate(self, dtype, components: int):
         if components == 1:
@@ -114,6 +116,7 @@ class State:
     def load(self, values: dict) -> None:
         """Make ``values`` (name → array in creation order; x required) the live particles, the rest initial."""
         n = len(values["x"])
+        arrays = []
         for spec in self.fields:
             shape = (self.capacity,) if spec.components == 1 else (self.capacity, spec.components)
             if spec.initial == "creation":
@@ -122,7 +125,10 @@ class State:
                 padded = np.zeros(shape, np.float32 if spec.dtype == ti.f32 else np.int32)
             if spec.name in values and values[spec.name] is not None:
                 padded[:n] = values[spec.name]
-            getattr(self, spec.name).from_numpy(padded)
+            arrays.append(padded)
+        if self._loader is None:
+            self._loader = array_loader(getattr(self, spec.name) for spec in self.fields)
+        self._loader(arrays)
         self.active[None] = n
 
     @ti.func
