@@ -30,20 +30,20 @@ class SubstepKernels:
         per_call = self.divergence.PER_CALL
         calls(lambda it: self._divergence(entries, dt, it, count), per_call, count, per_call)
 
-    def iterate(self, features, control) -> int:
-        """The substep's iterations, ``per_call`` a call, while not done and short of the most: every call
-        but the last; returns the first iteration of the last call, which :meth:`iterate_and_finish` runs."""
+    def iterate(self, features, control) -> None:
+        """The substep's iterations, ``per_call`` a call, while not done and short of the most."""
         iterations, per_call = control.iterations, self.iterations.per_call
         self.iterations.begin(iterations, features.measure)
         call = lambda it: self._call(features, control, it, False)  # noqa: E731
         # The device's decision read where the backend reads it (never on a GPU's choices).
-        return calls(call, 0, iterations - per_call, per_call, self.iterations.done)
+        calls(call, 0, iterations, per_call, self.iterations.done)
 
-    def iterate_and_finish(self, start: int, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
-        """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
-        and the pressure (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``;
-        restarted ``first_of_frame``)."""
-        self._call(features, control, start, True, dt, scales, first_of_frame, max_speed)
+    def finish(self, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
+        """x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not), and the pressure
+        (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``; restarted
+        ``first_of_frame``). The same kernel as the iterations' with the end compiled in instead of them:
+        an iteration's code compiled once, not again in the last call."""
+        self._call(features, control, 0, True, dt, scales, first_of_frame, max_speed)
 
     def _call(self, features, control, start, finish, dt=0.0, scales=(0.0, 0.0), first_of_frame=False, max_speed=0.0):
         self._iterations(
@@ -156,7 +156,8 @@ class SubstepKernels:
                 max_speed=max_speed,
             )
         )
-        self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
-        if ti.static(finish):  # the substep's last call:
+        if ti.static(not finish):
+            self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
+        else:  # the substep's last call:
             self.iterations.settle(x.first, x.second, run)  # x* back in the first buffer,
             self.postprocess.finish(x.first, entries, self.density.lam_total, run)  # lines 20-23
