@@ -164,18 +164,47 @@ class State:
         self._unsort(values, unsorted)
         return unsorted.to_numpy()[: self.count]
 
+    @property
+    def _kept(self) -> tuple:
+        """The kept float32 fields (a snapshot's): (name, field, components, first column) each."""
+        kept, column = [], 0
+        for spec in self.fields:
+            if spec.kept and spec.dtype == ti.f32:
+                kept.append((spec.name, getattr(self, spec.name), spec.components, column))
+                column += spec.components
+        return tuple(kept)
+
+    @ti.kernel
+    def _unsort_kept(self, out: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for i in range(self.active[None]):
+            for k in ti.static(range(len(self._kept))):
+                _, values, components, column = ti.static(self._kept[k])
+                if ti.static(components == 1):
+                    out[self.index[i], column] = values[i]
+                else:
+                    for c in ti.static(range(components)):
+                        out[self.index[i], column + c] = values[i][c]
+
+    def kept_in_creation_order(self) -> dict:
+        """Every kept field by name, in creation order, (n,) or (n, 3), read in one launch: a kernel a
+        field (and a copy out for each shape) would each compile on a cold start."""
+        kept = self._kept
+        out = np.zeros((self.count, kept[-1][3] + kept[-1][2]), np.float32)
+        self._unsort_kept(out)
+        return {
+            name: np.ascontiguousarray(out[:, column : column + components] if components > 1 else out[:, column])
+            for name, _, components, column in kept
+        }
+
     def positions(self) -> np.ndarray:
         """(n, 3) float32 positions (m) in creation order."""
-        return self.in_creation_order(self.x)
+        return self.kept_in_creation_order()["x"]
 
     def velocities(self) -> np.ndarray:
         """(n, 3) float32 velocities (m/s) in creation order."""
-        return self.in_creation_order(self.v)
+        return self.kept_in_creation_order()["v"]
 
     def kept_fields(self) -> dict:
         """Every kept field but x and v, by name, in creation order (a Snapshot's ``fields``)."""
-        return {
-            spec.name: self.in_creation_order(getattr(self, spec.name))
-            for spec in self.fields
-            if spec.kept and spec.name not in SNAPSHOT_NAMES
-        }
+        kept = self.kept_in_creation_order()
+        return {name: values for name, values in kept.items() if name not in SNAPSHOT_NAMES}
