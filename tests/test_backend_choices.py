@@ -1,5 +1,5 @@
 """One substep on every backend; what differs is chosen when the Simulation is built: on a GPU backend
-(here the CPU told to act as one, ``pbf.solver.backend.choices(decisions_on_device=True)``) two iterations a call,
+(here the CPU told to act as one, ``pbf.solver.backend.choices(decisions_on_device=True)``) four iterations a call,
 loops over the particles' bucket and no decision read by the host; on the CPU an iteration a call and
 the error target's decision read after each. The same kernels take the same decisions on the device:
 the two give the same bits."""
@@ -33,7 +33,7 @@ def test_the_gpus_choices_give_the_cpus_bits(step_back):
     scene["solver"].update(target_density_error=0.002, expert={"step_back": step_back})
     cpu = Simulation(scene)
     gpu = Simulation(scene, choices=choices(decisions_on_device=True))
-    assert (cpu.iterations.per_call, gpu.iterations.per_call) == (1, 2)
+    assert (cpu.iterations.per_call, gpu.iterations.per_call) == (1, 4)
     assert cpu.iterations.reads_decisions and not gpu.iterations.reads_decisions
     cpu_used, cpu_reads, cpu_launches = frames(cpu, 8)
     gpu_used, gpu_reads, gpu_launches = frames(gpu, 8)
@@ -41,10 +41,11 @@ def test_the_gpus_choices_give_the_cpus_bits(step_back):
     assert np.array_equal(gpu.positions(), cpu.positions())
     assert np.array_equal(gpu.velocities(), cpu.velocities())
     assert gpu_reads <= 1.0 < cpu_reads  # the CPU reads the target's decision after each call
-    # lines 1-7, the iterations two a call (the last with lines 20-23), the frame's read of the fastest speed
-    assert gpu_launches <= 1 + 5 + 1
-    # No call past the target on the CPU (a read of the decision counts as a launch too).
-    assert cpu_launches - cpu_reads <= gpu_launches + 1, (cpu_launches, cpu_reads, gpu_launches)
+    # lines 1-7, the iterations four a call, lines 20-23, the frame's read of the fastest speed
+    assert gpu_launches <= 1 + 3 + 1 + 1
+    # No call past the target on the CPU (a read of the decision counts as a launch too): lines 1-7, the
+    # iterations used, lines 20-23 and the frame's read, at most.
+    assert cpu_launches - cpu_reads <= 2 + np.mean(cpu_used) + 1, (cpu_launches, cpu_reads, cpu_used)
 
 
 @pytest.mark.slow  # several Simulations compiled twice: the default run's time

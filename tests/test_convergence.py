@@ -70,7 +70,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     x_star, kernels, control = sim.integrator.predicted, sim.kernels, sim.control
     control.target_density_error, control.iterations = 0.0, 3
     features = Features.of(sim.model, control)
-    kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features)  # a substep's lines 1-7
+    kernels.find_neighbours(sim.dt_s, control.gravity_m_s2, features, 0)  # a substep's lines 1-7
     for start in range(3):  # three iterations, an iteration a call: x* ends in the second buffer
         kernels._call(features, control, start, False)
     newer, older = x_star.second.to_numpy(), x_star.first.to_numpy()
@@ -80,7 +80,7 @@ def test_the_step_back_lands_between_the_last_two_iterations():
     flags, values = sim.iterations.flags, sim.iterations.values
     flags[DONE], flags[IN_SECOND], flags[STEPPING_BACK], values[FRACTION] = 1, 1, 1, 0.25
     control.target_density_error = 0.001
-    kernels.iterate_and_finish(3, sim.dt_s, Features.of(sim.model, control), control, (1.0, 0.0), True, 0.0)
+    kernels.finish(sim.dt_s, Features.of(sim.model, control), control, (1.0, 0.0), True, 0.0)
     n = sim.particle_count
     np.testing.assert_allclose(sim.state.x.to_numpy()[:n], (newer + 0.25 * (older - newer))[:n], atol=1e-6)
     np.testing.assert_allclose(

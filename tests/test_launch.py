@@ -3,6 +3,8 @@ ordinary calls do: the variant the template arguments select, the arguments of t
 Only on the Taichi the launch was written for, and not under ``PBF_PUBLIC_LAUNCH=1``: elsewhere every
 call is Taichi's own. Arguments by name as by position; what the studies see of the launches."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -142,7 +144,7 @@ def test_the_substep_launched_directly_steps_the_bits_of_ordinary_calls(on_devic
     # One Simulation run twice from its start (reset() restores it exactly): launched directly, then
     # with every Launcher calling its kernel the ordinary way. One set of kernels, not two.
     sim = Simulation(small_dam_break(), quiet=True, choices=choices(decisions_on_device=on_device))
-    assert len(launchers(sim)) == 2
+    assert len(launchers(sim)) == 3  # lines 1-7, the divergence pass's further iterations, the iterations
     start = sim.positions()
     sim.step(10)
     assert sum(len(launcher._variants) for launcher in launchers(sim)) >= 3  # launched directly
@@ -286,3 +288,23 @@ def test_an_observer_sees_each_launch_and_each_compile_once(monkeypatch, fast_la
     assert seen.compiles.count("Writer.write") == 2 and seen.compiles.count("Writer.mix") == 1
     assert seen.accesses == [False, True]
     assert watching_nothing()  # Taichi's classes as they were
+
+
+def test_a_compile_error_with_the_short_positions_still_shows_its_line_with_taichis_caret():
+    # The front end's positions are short while it compiles (start_taichi installs them on this Taichi);
+    # an error being raised gets Taichi's whole text, which points at the node.
+    launch.short_positions()
+    assert getattr(launch.ASTTransformerContext.get_pos_info, "short", False)
+
+    @ti.kernel
+    def wrong():
+        for i in range(4):
+            not_defined_anywhere[i] = 1.0  # noqa: F821 (the error the test wants)
+
+    with pytest.raises(Exception) as error:
+        wrong()
+    source = Path(__file__).read_text(encoding="utf-8").splitlines()
+    line = next(n for n, text in enumerate(source, 1) if "not_defined_anywhere[i] = 1.0" in text)
+    message = str(error.value)
+    assert f"line {line}" in message and "not_defined_anywhere" in message, message
+    assert "^^^" in message, message  # the caret under the name: Taichi's own text

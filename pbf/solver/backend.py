@@ -270,7 +270,7 @@ class Choices:
     stages that build on it (docs/METHOD.md, "One substep on every backend")."""
 
     decisions_on_device: bool = False
-    """A GPU's path: two iterations a call, no decision read by the host, loops over the capacity bucket."""
+    """A GPU's path: four iterations a call, no decision read by the host, loops over the capacity bucket."""
     gpu_blocks: bool = False
     """Prefix sums and tree sums laid out in a GPU's blocks of 32 (``pbf.solver.scan``)."""
     shared_memory: bool = False

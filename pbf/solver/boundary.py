@@ -16,7 +16,7 @@ import taichi as ti
 
 from pbf.solver import sph
 from pbf.solver.bodies import Bodies, component
-from pbf.solver.constants import scene_constants
+from pbf.solver.constants import array_loader, scene_constants
 from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
 
@@ -34,8 +34,6 @@ class GhostTables:
         density, slope = sph.wall_density_table(spacing_m, kernel_radius_m, TABLE_SAMPLES)
         self.density_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
         self.slope_table = ti.field(ti.f32, shape=TABLE_SAMPLES)
-        self.density_table.from_numpy(density.astype(np.float32))
-        self.slope_table.from_numpy(slope.astype(np.float32))
         n = OVERLAP_SAMPLES
         tables = (
             sph.wall_overlap_tables(spacing_m, kernel_radius_m, n)
@@ -46,8 +44,9 @@ class GhostTables:
         self.edge_gradient = ti.Vector.field(2, ti.f32, shape=(n, n))
         self.corner = ti.field(ti.f32, shape=(n, n, n))
         self.corner_gradient = ti.Vector.field(3, ti.f32, shape=(n, n, n))
-        for field, table in zip((self.edge, self.edge_gradient, self.corner, self.corner_gradient), tables):
-            field.from_numpy(table.astype(np.float32))
+        array_loader(
+            (self.density_table, self.slope_table, self.edge, self.edge_gradient, self.corner, self.corner_gradient)
+        )((density, slope, *tables))
 
     @ti.func
     def wall(self, distance):
@@ -320,10 +319,10 @@ class Obstacles:
         self.upper = ti.Vector.field(3, ti.f32, shape=slots)
         self.exit_lower = ti.Vector.field(3, ti.i32, shape=slots)
         self.exit_upper = ti.Vector.field(3, ti.i32, shape=slots)
-        for field, values in zip(
-            (self.lower, self.upper, self.exit_lower, self.exit_upper), (lower, upper, exit_lower, exit_upper)
-        ):
-            field.from_numpy(values)
+        if count:  # new fields hold zeros: a scene without obstacles launches (and compiles) no copy
+            array_loader((self.lower, self.upper, self.exit_lower, self.exit_upper))(
+                (lower, upper, exit_lower, exit_upper)
+            )
 
     def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Obstacles stand still."""

@@ -1,8 +1,10 @@
 """A stage's scene constants as data, one () struct field: a Python number would be baked into the kernels,
-and every scene of another spacing would compile again. Read them into locals once a particle."""
+and every scene of another spacing would compile again. Read them into locals once a particle. And
+fields filled from NumPy arrays in one launch (:func:`array_loader`)."""
 
 import numbers
 
+import numpy as np
 import taichi as ti
 
 
@@ -35,3 +37,50 @@ def _write(field, struct, values: dict) -> None:
         field[None] = value
 
     write(struct(**{name: int(v) if isinstance(v, bool) else v for name, v in values.items()}))
+
+
+def array_loader(fields):
+    """A function that fills ``fields`` (float32 or int32, scalar or vector, any shape) from NumPy arrays
+    of their shapes in one launch: a ``from_numpy`` compiles a kernel of its own for every field, each
+    with the whole of a compile's fixed cost. Make it once and call it as often as needed."""
+    fields = tuple(fields)
+    widths = tuple(getattr(field, "n", 1) for field in fields)
+    integer = tuple(field.dtype == ti.i32 for field in fields)
+    sizes = [int(np.prod(field.shape)) * width for field, width in zip(fields, widths)]
+    offsets, taken = [], {False: 0, True: 0}  # each field's start in the flat array of its type
+    for size, is_integer in zip(sizes, integer):
+        offsets.append(taken[is_integer])
+        taken[is_integer] += size
+    offsets = tuple(offsets)
+
+    @ti.kernel
+    def load(reals: ti.types.ndarray(dtype=ti.f32, ndim=1), integers: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        for k in ti.static(range(len(fields))):
+            for index in ti.grouped(fields[k]):
+                flat = 0  # the row-major index NumPy's ravel gives
+                for d in ti.static(range(len(fields[k].shape))):
+                    flat = flat * fields[k].shape[d] + index[d]
+                at = offsets[k] + flat * widths[k]
+                if ti.static(widths[k] == 1):
+                    if ti.static(integer[k]):
+                        fields[k][index] = integers[at]
+                    else:
+                        fields[k][index] = reals[at]
+                else:
+                    for c in ti.static(range(widths[k])):
+                        if ti.static(integer[k]):
+                            fields[k][index][c] = integers[at + c]
+                        else:
+                            fields[k][index][c] = reals[at + c]
+
+    def loader(arrays) -> None:
+        flat = {False: [np.zeros(1, np.float32)], True: [np.zeros(1, np.int32)]}  # never empty
+        for field, width, is_integer, values in zip(fields, widths, integer, arrays):
+            expected = tuple(field.shape) + ((width,) if width > 1 else ())
+            values = np.asarray(values)
+            if values.shape != expected:
+                raise ValueError(f"expected an array of shape {expected}, got {values.shape}")
+            flat[is_integer].insert(-1, values.astype(np.int32 if is_integer else np.float32).ravel())
+        load(np.concatenate(flat[False]), np.concatenate(flat[True]))
+
+    return loader

@@ -23,7 +23,7 @@ class Diagnostics:
         """ρ_i/ρ0 (wall density included) from :meth:`density_ratios`, in the state's sorted order."""
 
     @ti.kernel
-    def _reduce(self, neighbours: NeighbourList):
+    def _reduce(self, neighbours: NeighbourList) -> ti.types.vector(12, ti.f32):
         for i in range(self.state.live_bound()):  # the bucket on a GPU: no one-thread task for a bound
             if i < self.state.active[None]:
                 ratio = self.density.density_ratio(self.state.x, i, neighbours)
@@ -37,6 +37,10 @@ class Diagnostics:
         self.sums.maximum(self.terms[0], 3, self.state.active)
         self.sums.maximum(self.speed, 4, self.state.active)
         self.sums.maximum(self.terms[2], 5, self.state.active)
+        # Returned, not read with to_numpy: a copy out compiles a kernel of its own for each field.
+        return ti.Vector(
+            [self.sums.high[k] for k in ti.static(range(6))] + [self.sums.low[k] for k in ti.static(range(6))]
+        )
 
     @ti.kernel
     def _density_ratios(self, neighbours: NeighbourList):
@@ -68,9 +72,8 @@ class Diagnostics:
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""
-        self._reduce(neighbours)
-        high, low = self.sums.high.to_numpy(), self.sums.low.to_numpy()
-        sums = [float(h) + float(lo) for h, lo in zip(high, low)]
+        values = self._reduce(neighbours)
+        sums = [float(values[k]) + float(values[6 + k]) for k in range(6)]
         n = max(self.state.count, 1)  # an empty box (before an emitter starts) has zero means
         return {
             "mean_density_error": sums[0] / n,

@@ -20,6 +20,10 @@ from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_gradient
 class DivergenceCorrection:
     """The pass's loops and scratch; Λ persists as ``State.multiplier`` = Λ/Δt² (1/s²), free of Δt."""
 
+    PER_CALL = 1
+    """Iterations a kernel call runs (copies of an iteration's code, each skipped past the count): the
+    presets that run the pass run one, so a second copy would be two empty launches a substep for them."""
+
     def __init__(self, params: DensityParams, state, boundaries, grid, density):
         self.state = state
         self.boundaries = boundaries
@@ -92,8 +96,9 @@ class DivergenceCorrection:
         self.state.multiplier[i] = total / (dt * dt)
 
     @ti.func
-    def correct(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), iterations: ti.template()):
-        """For the top level of a kernel: v += Δv of the warm start, then ``iterations`` of all δλ̂, then all Δv."""
+    def start(self, x: ti.template(), neighbours: ti.template(), dt: ti.template()):
+        """For the top level of a kernel: v += Δv of the warm start, with min(C, 0), the denominators and the
+        walls' gradient at the fixed positions."""
         bound = ti.static(self.state.loop_bound)
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
@@ -101,10 +106,18 @@ class DivergenceCorrection:
         for i in range(read_count(bound, 1)):
             if i < self.state.active[None]:
                 self.state.v[i] += self.velocity_change(x, i, neighbours, dt, True)
-        for _ in ti.static(range(iterations)):
+
+    @ti.func
+    def iterate(
+        self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), first: ti.template(), count: ti.template()
+    ):
+        """For the top level of a kernel: iterations ``first`` … ``first + PER_CALL − 1`` of those below
+        ``count``, each every δλ̂, then every Δv. The count is data: every count compiles the same code."""
+        bound = ti.static(self.state.loop_bound)
+        for u in ti.static(range(self.PER_CALL)):
             for i in range(read_count(bound, 1)):
-                if i < self.state.active[None]:
+                if first + u < count and i < self.state.active[None]:
                     self.multiplier_increment(x, i, neighbours, dt)
             for i in range(read_count(bound, 1)):
-                if i < self.state.active[None]:
+                if first + u < count and i < self.state.active[None]:
                     self.state.v[i] += self.velocity_change(x, i, neighbours, dt, False)

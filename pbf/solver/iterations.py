@@ -1,6 +1,6 @@
 """The Jacobi iterations of a substep (Algorithm 1, lines 8-19) as loops for ``pbf.solver.substep``'s kernels,
 and the stopping rule, decided on the device after each error sum (docs/METHOD.md, "One substep on every
-backend"); the host's loop over the calls is ``SubstepKernels.iterate``.
+backend"); the host's loop over a pass's calls, :func:`calls` (the density's and the divergence's).
 """
 
 import numpy as np
@@ -12,6 +12,19 @@ DONE, WEIGHT_INDEX, USED, IN_SECOND, STEPPING_BACK = range(5)
 """Entries of ``JacobiIterations.flags``."""
 LAST_ERROR, FRACTION = range(2)
 """Entries of ``JacobiIterations.values``."""
+
+
+def calls(call, first: int, end: int, per_call: int, done=None) -> int:
+    """The host's loop over a pass's kernel calls: ``call(it)`` runs iterations it … it + per_call − 1
+    (the kernel skips those past the pass's count), while not ``done()`` (read after each call) and it
+    is short of ``end``; returns the first iteration no call ran. The count is data, so every count
+    runs the same compiled kernels."""
+    it, finished = first, False
+    while not finished and it < end:
+        call(it)
+        it += per_call
+        finished = done is not None and done()
+    return it
 
 
 @ti.data_oriented

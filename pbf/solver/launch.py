@@ -1,6 +1,7 @@
 """Taichi's internals in one module (``tests/test_private_taichi.py``), used only on the Taichi
 ``WRITTEN_FOR`` unless ``PBF_PUBLIC_LAUNCH`` is set: :class:`Launcher` (the same launch without Taichi's
-per-call Python). It keeps no state of its own: the lab's instruments (``benchmarks/instruments.py``)
+per-call Python) and :func:`short_positions` (its front end's source positions without the caret's
+text until an error). It keeps no state of its own: the lab's instruments (``benchmarks/instruments.py``)
 watch a direct launch at ``Launcher._launch``.
 """
 
@@ -18,6 +19,7 @@ import taichi as ti
 try:  # the internals this module reads, in the Taichi it was written for
     from taichi._lib.core.taichi_python import is_signed
     from taichi.lang import impl
+    from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
     from taichi.lang.exception import handle_exception_from_cpp
     from taichi.lang.kernel_impl import Kernel
     from taichi.lang.util import cook_dtype
@@ -57,7 +59,10 @@ TAICHI_START_LINE = "[Taichi] Starting on arch="  # printed by every ti.init; no
 
 
 def start_taichi(**options) -> None:
-    """``ti.init(**options)`` without Taichi's "Starting on" line; anything else it prints passes."""
+    """``ti.init(**options)`` without Taichi's "Starting on" line; anything else it prints passes. On the
+    Taichi this module knows (unless ``PBF_PUBLIC_LAUNCH``), with :func:`short_positions`."""
+    if fast_launch():
+        short_positions()
     printed = io.StringIO()
     try:
         with contextlib.redirect_stdout(printed):
@@ -65,6 +70,28 @@ def start_taichi(**options) -> None:
     finally:
         rest = [line for line in printed.getvalue().splitlines(keepends=True) if not line.startswith(TAICHI_START_LINE)]
         sys.stdout.write("".join(rest))
+
+
+def short_positions() -> None:
+    """Taichi's front end writes every AST node's source position as text, for messages that may never
+    come: the line, a caret line under the node, both wrapped by ``textwrap``, for each inlined copy of a
+    ``ti.func``, on every start (the offline cache is keyed by the front end's output). Here a node's text
+    is its file, line, function and source line (Taichi's own form for Pythons before 3.8), so a compile
+    error from Taichi's C++ still names the line; a Python-side error, raised once the transformer has
+    marked its context, gets Taichi's whole text with the caret."""
+    original = ASTTransformerContext.__dict__["get_pos_info"]
+    if getattr(original, "short", False):
+        return
+
+    def get_pos_info(context, node):
+        if context.raised:  # the message of an error being raised
+            return original(context, node)
+        line = node.lineno + context.lineno_offset
+        return f'File "{context.file}", line {line}, in {context.func.func.__name__}:\n{context.src[node.lineno - 1]}\n'
+
+    get_pos_info.short = True
+    get_pos_info.original = original
+    ASTTransformerContext.get_pos_info = get_pos_info
 
 
 MOST_VARIANTS = 64  # variants a Launcher keeps; past them the ordinary call (a NaN template adds one a call)

@@ -272,7 +272,8 @@ class Features:
 
     measure: bool
     """An error target is set: the iterations' error sums and the stopping rule."""
-    divergence_iterations: int
+    divergence: bool
+    """The divergence pre-correction runs (its count is data, ``Control.divergence_iterations``)."""
     vorticity: bool
 
     @classmethod
@@ -280,7 +281,7 @@ class Features:
         """The features of ``model``'s scene under ``control``; ``in_place``: a Δt = 0 substep (a restore)."""
         return _features(
             control.target_density_error > 0.0,
-            0 if in_place else control.divergence_iterations,
+            control.divergence_iterations > 0 and not in_place,
             control.vorticity > 0.0,
         )
 

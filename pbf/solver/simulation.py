@@ -168,7 +168,9 @@ class Simulation:
             weights=model.iteration_weights,
             active=self.state.active,
             loop_bound=self.state.loop_bound,
-            per_call=2 if on_device else 1,
+            # A GPU's host never waits inside a substep: at 4 iterations lines 1-7, the iterations and
+            # the end are 3 calls. The CPU reads the decision after each iteration.
+            per_call=4 if on_device else 1,
             reads_decisions=not on_device,
         )
         self.boundaries.allocate_solids(model.allocated)
@@ -404,11 +406,11 @@ class Simulation:
     def _find_neighbours_in_place(self) -> None:
         """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
         features = Features.of(self.model, self.control, in_place=True)
-        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
         most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
         if truncated:
             self.grid.settle_frame(most_entries, False)
-            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features)
+            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
         self.grid.status.fill(0)  # the frames' record starts here
 
     @property
@@ -466,17 +468,17 @@ class Simulation:
         with hook.stage("predict, sort by cell, neighbour lists"):
             # Lines 1-7: v += Δt g, x* = x + Δt v; the particles sorted by the cell of x* and their
             # neighbours; ours: v made divergence-free, x* again; the denominators of λ (Eq. 10) at x*.
-            kernels.find_neighbours(dt, control.gravity_m_s2, features)
+            kernels.find_neighbours(dt, control.gravity_m_s2, features, control.divergence_iterations)
         with hook.stage("solver iterations"):
             # Lines 8-19 until the error target: λ (Eq. 10), Δx with s_corr (Eqs. 11-12), collisions,
-            # x* += Δx; all calls but the last.
-            last = kernels.iterate(features, control)
+            # x* += Δx.
+            kernels.iterate(features, control)
         with hook.stage("velocity, vorticity, XSPH, x = x*"):
-            # The last call's iterations, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14),
-            # XSPH (Eq. 15), x = x*; and the pressure, summed for pressures().
+            # x* settled, then lines 20-23: v = (x* − x)/Δt, confinement (Eqs. 13-14), XSPH (Eq. 15),
+            # x = x*; and the pressure, summed for pressures().
             scales = pressure_scales(self.scene.fluid.rest_density_kg_m3, self.model.grid.kernel_radius_m, dt)
             first, cap = self.pressure_substeps == 0, self.scene.time.max_speed_m_s
-            kernels.iterate_and_finish(last, dt, features, control, scales, first, cap)
+            kernels.finish(dt, features, control, scales, first, cap)
         if self.bodies is not None:  # the water's reaction on the bodies
             self.bodies.gather(self.state.x, self.density.lam_total, self.state.multiplier, self.state.active, dt)
         self.pressure_substeps += 1

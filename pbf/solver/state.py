@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import taichi as ti
 
+from pbf.solver.constants import array_loader
 from pbf.solver.scan import read_count
 
 
@@ -96,6 +97,7 @@ class State:
             self._carried.append((getattr(self, spec.name), self._allocate(spec.dtype, spec.components)))
         self._unsorted = ti.Vector.field(3, ti.f32, shape=capacity)
         self._unsorted_scalar = ti.field(ti.f32, shape=capacity)
+        self._loader = None  # made at the first load (pbf.solver.constants.array_loader)
 
     def _allocate(self, dtype, components: int):
         if components == 1:
@@ -114,6 +116,7 @@ class State:
     def load(self, values: dict) -> None:
         """Make ``values`` (name → array in creation order; x required) the live particles, the rest initial."""
         n = len(values["x"])
+        arrays = []
         for spec in self.fields:
             shape = (self.capacity,) if spec.components == 1 else (self.capacity, spec.components)
             if spec.initial == "creation":
@@ -122,7 +125,10 @@ class State:
                 padded = np.zeros(shape, np.float32 if spec.dtype == ti.f32 else np.int32)
             if spec.name in values and values[spec.name] is not None:
                 padded[:n] = values[spec.name]
-            getattr(self, spec.name).from_numpy(padded)
+            arrays.append(padded)
+        if self._loader is None:
+            self._loader = array_loader(getattr(self, spec.name) for spec in self.fields)
+        self._loader(arrays)
         self.active[None] = n
 
     @ti.func
@@ -158,18 +164,47 @@ class State:
         self._unsort(values, unsorted)
         return unsorted.to_numpy()[: self.count]
 
+    @property
+    def _kept(self) -> tuple:
+        """The kept float32 fields (a snapshot's): (name, field, components, first column) each."""
+        kept, column = [], 0
+        for spec in self.fields:
+            if spec.kept and spec.dtype == ti.f32:
+                kept.append((spec.name, getattr(self, spec.name), spec.components, column))
+                column += spec.components
+        return tuple(kept)
+
+    @ti.kernel
+    def _unsort_kept(self, out: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for i in range(self.active[None]):
+            for k in ti.static(range(len(self._kept))):
+                _, values, components, column = ti.static(self._kept[k])
+                if ti.static(components == 1):
+                    out[self.index[i], column] = values[i]
+                else:
+                    for c in ti.static(range(components)):
+                        out[self.index[i], column + c] = values[i][c]
+
+    def kept_in_creation_order(self) -> dict:
+        """Every kept field by name, in creation order, (n,) or (n, 3), read in one launch: a kernel a
+        field (and a copy out for each shape) would each compile on a cold start."""
+        kept = self._kept
+        out = np.zeros((self.count, kept[-1][3] + kept[-1][2]), np.float32)
+        self._unsort_kept(out)
+        return {
+            name: np.ascontiguousarray(out[:, column : column + components] if components > 1 else out[:, column])
+            for name, _, components, column in kept
+        }
+
     def positions(self) -> np.ndarray:
         """(n, 3) float32 positions (m) in creation order."""
-        return self.in_creation_order(self.x)
+        return self.kept_in_creation_order()["x"]
 
     def velocities(self) -> np.ndarray:
         """(n, 3) float32 velocities (m/s) in creation order."""
-        return self.in_creation_order(self.v)
+        return self.kept_in_creation_order()["v"]
 
     def kept_fields(self) -> dict:
         """Every kept field but x and v, by name, in creation order (a Snapshot's ``fields``)."""
-        return {
-            spec.name: self.in_creation_order(getattr(self, spec.name))
-            for spec in self.fields
-            if spec.kept and spec.name not in SNAPSHOT_NAMES
-        }
+        kept = self.kept_in_creation_order()
+        return {name: values for name, values in kept.items() if name not in SNAPSHOT_NAMES}

@@ -4,6 +4,7 @@
 import taichi as ti
 
 from pbf.solver.grid import NeighbourList, named
+from pbf.solver.iterations import calls
 from pbf.solver.launch import Launcher
 
 
@@ -16,30 +17,33 @@ class SubstepKernels:
         self.density, self.divergence, self.iterations, self.postprocess = density, divergence, iterations, postprocess
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
         self._iterations = Launcher(self._iterations_kernel)
+        self._divergence = Launcher(self._divergence_kernel)
 
-    def find_neighbours(self, dt: float, gravity, features) -> None:
-        """Lines 1-7, the divergence pre-correction and the denominators of λ (Eq. 10) at x*, one call;
-        with ``dt`` 0 and no gravity, only the sort and the lists (a restore)."""
+    def find_neighbours(self, dt: float, gravity, features, divergence_iterations: int) -> None:
+        """Lines 1-7, the divergence pre-correction's ``divergence_iterations`` (if ``features.divergence``)
+        and the denominators of λ (Eq. 10) at x*: one call, more only for the pass's iterations past its
+        ``PER_CALL``; with ``dt`` 0 and no gravity, only the sort and the lists (a restore)."""
         gx, gy, gz = (float(g) for g in gravity)
-        self._find_neighbours(entries=self.grid.neighbours, dt=dt, gx=gx, gy=gy, gz=gz, features=features)
+        count = divergence_iterations if features.divergence else 0
+        entries = self.grid.neighbours
+        self._find_neighbours(entries=entries, dt=dt, gx=gx, gy=gy, gz=gz, features=features, count=count)
+        per_call = self.divergence.PER_CALL
+        calls(lambda it: self._divergence(entries, dt, it, count), per_call, count, per_call)
 
-    def iterate(self, features, control) -> int:
-        """The substep's iterations, ``per_call`` a call, while not done and short of the most: every call
-        but the last; returns the first iteration of the last call, which :meth:`iterate_and_finish` runs."""
+    def iterate(self, features, control) -> None:
+        """The substep's iterations, ``per_call`` a call, while not done and short of the most."""
         iterations, per_call = control.iterations, self.iterations.per_call
         self.iterations.begin(iterations, features.measure)
-        it, done = 0, False
-        while not done and it + per_call < iterations:
-            self._call(features, control, it, False)
-            it += per_call
-            done = self.iterations.done()  # the device's decision, read where the backend reads it
-        return it
+        call = lambda it: self._call(features, control, it, False)  # noqa: E731
+        # The device's decision read where the backend reads it (never on a GPU's choices).
+        calls(call, 0, iterations, per_call, self.iterations.done)
 
-    def iterate_and_finish(self, start: int, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
-        """The iterations from ``start``, x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not),
-        and the pressure (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``;
-        restarted ``first_of_frame``)."""
-        self._call(features, control, start, True, dt, scales, first_of_frame, max_speed)
+    def finish(self, dt: float, features, control, scales, first_of_frame, max_speed) -> None:
+        """x* settled, then lines 20-23 with v capped at ``max_speed`` (0: not), and the pressure
+        (``scales``: Pa a unit of L and of Λ, ``pbf.solver.density.pressure_scales``; restarted
+        ``first_of_frame``). The same kernel as the iterations' with the end compiled in instead of them:
+        an iteration's code compiled once, not again in the last call."""
+        self._call(features, control, 0, True, dt, scales, first_of_frame, max_speed)
 
     def _call(self, features, control, start, finish, dt=0.0, scales=(0.0, 0.0), first_of_frame=False, max_speed=0.0):
         self._iterations(
@@ -62,7 +66,14 @@ class SubstepKernels:
 
     @ti.kernel
     def _find_neighbours_kernel(
-        self, entries: NeighbourList, dt: ti.f32, gx: ti.f32, gy: ti.f32, gz: ti.f32, features: ti.template()
+        self,
+        entries: NeighbourList,
+        dt: ti.f32,
+        gx: ti.f32,
+        gy: ti.f32,
+        gz: ti.f32,
+        features: ti.template(),
+        count: ti.i32,
     ):
         state, grid = self.state, self.grid
         x_star = ti.static(self.integrator.predicted.first)
@@ -75,14 +86,37 @@ class SubstepKernels:
                 grid.count_in_cell(x_i, i)  # lines 5-6: a counting sort by the cell of x*,
         grid.order_loops(state.index, ti.static(state.carried))  # the state and x* gathered in sorted order
         grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, ti.static(state.carried))  # line 7
-        if ti.static(features.divergence_iterations > 0):  # ours: v made divergence-free at x,
-            self.divergence.correct(state.x, entries, dt, features.divergence_iterations)
-            for i in range(state.live_bound()):  # then x* = x + Δt v again
-                if i < state.active[None]:
+        if ti.static(features.divergence):  # ours: v made divergence-free at x, its first iterations,
+            self.divergence.start(state.x, entries, dt)
+            self.divergence.iterate(state.x, entries, dt, 0, count)
+        self._predict_and_prepare(entries, dt, features.divergence, 0, count)
+
+    @ti.kernel
+    def _divergence_kernel(self, entries: NeighbourList, dt: ti.f32, first: ti.i32, count: ti.i32):
+        """The divergence pre-correction's iterations past the first call's, ``PER_CALL`` a call."""
+        self.divergence.iterate(self.state.x, entries, dt, first, count)
+        self._predict_and_prepare(entries, dt, True, first, count)
+
+    @ti.func
+    def _predict_and_prepare(
+        self,
+        entries: ti.template(),
+        dt: ti.template(),
+        divergence: ti.template(),
+        first: ti.template(),
+        count: ti.template(),
+    ):
+        """In the divergence pass's last call (the one that runs iterations ``first`` … up to ``count``):
+        x* = x + Δt v again, then the denominators of λ (Eq. 10) at x*. Whether it is the last is read
+        inside the loops, and the numbers are templates: a value made outside the loops is a one-thread task."""
+        state, per_call = self.state, ti.static(self.divergence.PER_CALL)
+        if ti.static(divergence):
+            for i in range(state.live_bound()):
+                if i < state.active[None] and first + per_call >= count:
                     self.integrator.predict_particle(dt, i)
-        for i in range(state.live_bound()):  # the denominators of λ (Eq. 10) at x*
-            if i < state.active[None]:
-                self.density.prepare(x_star, i, entries)
+        for i in range(state.live_bound()):
+            if i < state.active[None] and first + per_call >= count:
+                self.density.prepare(self.integrator.predicted.first, i, entries)
 
     @ti.kernel
     def _iterations_kernel(
@@ -122,7 +156,8 @@ class SubstepKernels:
                 max_speed=max_speed,
             )
         )
-        self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
-        if ti.static(finish):  # the substep's last call:
+        if ti.static(not finish):
+            self.iterations.iterate(x.first, x.second, entries, run)  # lines 8-19
+        else:  # the substep's last call:
             self.iterations.settle(x.first, x.second, run)  # x* back in the first buffer,
             self.postprocess.finish(x.first, entries, self.density.lam_total, run)  # lines 20-23
