@@ -32,6 +32,7 @@ the same white water, bit for bit.
 """
 
 import math
+import numbers
 
 import numpy as np
 import taichi as ti
@@ -117,10 +118,13 @@ def budget_of(scene) -> int:
 class WhiteWater:
     """The diffuse particles of one Simulation, advanced once per frame the simulation advanced (:meth:`sync`)."""
 
-    def __init__(self, sim):
+    def __init__(self, sim, budget: int | None = None):
+        """``budget``: the most diffuse particles at once (default ``budget_of(sim.scene)``)."""
         scene = sim.scene
         self.sim = sim
-        self.budget = budget_of(scene)
+        if budget is not None and (isinstance(budget, bool) or not isinstance(budget, numbers.Integral) or budget < 1):
+            raise ValueError(f"WhiteWater: budget: expected a whole number of particles ≥ 1, got {budget!r}")
+        self.budget = budget_of(scene) if budget is None else int(budget)
         slots = bucket(self.budget, 2**10)
         self.position = ti.Vector.field(3, ti.f32, shape=slots)
         self.velocity = ti.Vector.field(3, ti.f32, shape=slots)
