@@ -205,6 +205,18 @@ class SphereRenderer:
         self.per_item = per_item()
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
+        self.camera = ti.Struct.field(
+            {"eye": vec3, "right": vec3, "up": vec3, "forward": vec3, "focal": ti.f32}, shape=()
+        )
+        """The view of the current draw (eye, its unit axes, the focal length in pixels), set once a draw."""
+
+    @ti.kernel
+    def _aim(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
+        self.camera[None].eye = eye
+        self.camera[None].right = right
+        self.camera[None].up = up
+        self.camera[None].forward = forward
+        self.camera[None].focal = focal
 
     def _allocate(self, capacity: int) -> None:
         if capacity > self.capacity:
@@ -213,11 +225,11 @@ class SphereRenderer:
             self.footprints = Footprints(capacity) if self.per_item else None
 
     @ti.func
-    def _ray(self, row, col, right, up, forward, focal):
+    def _ray(self, row, col, cam):
         """Unit direction of the ray through the centre of pixel (row, col); row 0 is the top."""
-        u = (col + 0.5 - 0.5 * self.width) / focal
-        w = (0.5 * self.height - row - 0.5) / focal
-        return (right * u + up * w + forward).normalized()
+        u = (col + 0.5 - 0.5 * self.width) / cam.focal
+        w = (0.5 * self.height - row - 0.5) / cam.focal
+        return (cam.right * u + cam.up * w + cam.forward).normalized()
 
     @ti.func
     def _hit(self, centre, direction, radius):
@@ -230,12 +242,16 @@ class SphereRenderer:
         return t
 
     @ti.func
-    def _pixel_key(self, i, centre, radius, c, r, right, up, forward, focal):
+    def _pixel_key(self, i, centre, radius, c, r, cam):
         """The depth key of sphere i (eye-relative ``centre``, ``radius``) at pixel (column c,
         row r from the top), or EMPTY where the pixel's ray misses it; both splats test pixels with it.
         The ray eye + t·ray (its forward component 1, so t is the view depth) meets the sphere where
         t² |ray|² − 2 t ray·c + |c|² − r² = 0."""
-        ray = right * ((c + 0.5 - 0.5 * self.width) / focal) + forward + up * ((0.5 * self.height - r - 0.5) / focal)
+        ray = (
+            cam.right * ((c + 0.5 - 0.5 * self.width) / cam.focal)
+            + cam.forward
+            + cam.up * ((0.5 * self.height - r - 0.5) / cam.focal)
+        )
         a, b = ray.norm_sqr(), ray.dot(centre)
         disc = b * b - a * (centre.norm_sqr() - radius * radius)
         key = ti.i64(EMPTY)
@@ -250,9 +266,10 @@ class SphereRenderer:
             self.keys[x, y] = ti.i64(EMPTY)
 
     @ti.kernel
-    def _order(self, x: ti.template(), count: ti.i32, eye: vec3, forward: vec3):
+    def _order(self, x: ti.template(), count: ti.i32):
         """``order``: the particles by view depth, nearest slab first (a counting sort; the order within
         a slab is whichever thread came first, which the image does not depend on)."""
+        eye, forward = self.camera[None].eye, self.camera[None].forward
         for s in self.slab_count:
             self.slab_count[s] = 0
         self.depth_range[0] = ti.math.inf
@@ -281,17 +298,17 @@ class SphereRenderer:
             self.order[i] = i
 
     @ti.func
-    def _projected(self, centre, radius, right, up, forward, focal):
+    def _projected(self, centre, radius, cam):
         """(visible, column, row, extent) of the sphere at ``centre`` (from the eye): whether it lies wholly
         in front, its image's centre, and the radius in pixels that bounds its image. Off the axis by θ
         the sphere's image is an ellipse of semi-major axis about f r / (d cos θ) = f r |c| / d²; the
         extent bounds it with 10% and a pixel to spare."""
-        depth = centre.dot(forward)
+        depth = centre.dot(cam.forward)
         visible = depth > radius * 1.01
         safe = ti.select(visible, depth, 2.0 * radius + 1.0)
-        col = 0.5 * self.width + focal * centre.dot(right) / safe
-        row = 0.5 * self.height - focal * centre.dot(up) / safe
-        extent = 1.1 * focal * radius * centre.norm() / ((safe - radius) * safe) + 1.0
+        col = 0.5 * self.width + cam.focal * centre.dot(cam.right) / safe
+        row = 0.5 * self.height - cam.focal * centre.dot(cam.up) / safe
+        extent = 1.1 * cam.focal * radius * centre.norm() / ((safe - radius) * safe) + 1.0
         return visible, col, row, extent
 
     @ti.func
@@ -306,35 +323,26 @@ class SphereRenderer:
         return ti.max(0, ti.cast(row - half, ti.i32)), ti.min(self.height, ti.cast(row + half, ti.i32) + 1)
 
     @ti.func
-    def _try_pixel(self, i, centre, radius, c, r, right, up, forward, focal):
+    def _try_pixel(self, i, centre, radius, c, r, cam):
         """Sphere i's hit at pixel (c, r) into its key, unless the key is already nearer than any hit on
         the sphere can be (depth − r, with a margin for rounding)."""
-        depth = centre.dot(forward)
+        depth = centre.dot(cam.forward)
         nearest = ti.cast(ti.bit_cast((depth - radius) * (1.0 - 1e-4), ti.i32), ti.i64) << 32
         y = self.height - 1 - r
         if self.keys[c, y] > nearest:
-            key = self._pixel_key(i, centre, radius, c, r, right, up, forward, focal)
+            key = self._pixel_key(i, centre, radius, c, r, cam)
             if key < self.keys[c, y]:
                 ti.atomic_min(self.keys[c, y], key)
 
     @ti.kernel
-    def _splat(
-        self,
-        x: ti.template(),
-        count: ti.i32,
-        radius: ti.f32,
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
-    ):
+    def _splat(self, x: ti.template(), count: ti.i32, radius: ti.f32):
         """Every sphere into the keys. On the CPU a thread per particle, over each column's span of its disc
         (a column is contiguous in ``keys``); on a GPU a thread per (particle, pixel) of each particle's
         bounding square (``pbf.app.splat``), with the same tests."""
+        cam = self.camera[None]
         if ti.static(self.per_item):
             for k in range(count):
-                visible, col, row, extent = self._projected(x[self.order[k]] - eye, radius, right, up, forward, focal)
+                visible, col, row, extent = self._projected(x[self.order[k]] - cam.eye, radius, cam)
                 c0, c1, r0, r1 = 0, 0, 0, 0
                 if visible:
                     c0, c1 = self._columns(col, extent)
@@ -345,22 +353,22 @@ class SphereRenderer:
             for w in range(self.footprints.total(count)):
                 k, c, r = self.footprints.item(w, count)
                 i = self.order[k]
-                centre = x[i] - eye
-                _, col, row, extent = self._projected(centre, radius, right, up, forward, focal)
+                centre = x[i] - cam.eye
+                _, col, row, extent = self._projected(centre, radius, cam)
                 r0, r1 = self._rows_at(row, extent, c + 0.5 - col)  # the disc, as the CPU visits it
                 if r0 <= r < r1:
-                    self._try_pixel(i, centre, radius, c, r, right, up, forward, focal)
+                    self._try_pixel(i, centre, radius, c, r, cam)
         else:
             for k in range(count):
                 i = self.order[k]
-                centre = x[i] - eye
-                visible, col, row, extent = self._projected(centre, radius, right, up, forward, focal)
+                centre = x[i] - cam.eye
+                visible, col, row, extent = self._projected(centre, radius, cam)
                 if visible:
                     c0, c1 = self._columns(col, extent)
                     for c in range(c0, c1):
                         r0, r1 = self._rows_at(row, extent, c + 0.5 - col)
                         for r in range(r0, r1):
-                            self._try_pixel(i, centre, radius, c, r, right, up, forward, focal)
+                            self._try_pixel(i, centre, radius, c, r, cam)
 
     @ti.kernel
     def _shade(
@@ -368,22 +376,18 @@ class SphereRenderer:
         x: ti.template(),
         colours: ti.template(),
         radius: ti.f32,
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
         light: vec3,
         out: ti.types.ndarray(dtype=ti.u32, ndim=2),
     ):
+        cam = self.camera[None]
         for col, y in self.keys:
             key = self.keys[col, y]
             word = pack_rgba(self.constants[None].background)  # the same for all: most pixels are background
             if key != ti.i64(EMPTY):
                 row = self.height - 1 - y
                 i = ti.cast(key & ti.i64(0xFFFFFFFF), ti.i32)
-                direction = self._ray(row, col, right, up, forward, focal)
-                centre = x[i] - eye
+                direction = self._ray(row, col, cam)
+                centre = x[i] - cam.eye
                 t = self._hit(centre, direction, radius)
                 normal = (direction * t - centre) / radius
                 diffuse = ti.max(normal.dot(light), 0.0)
@@ -396,21 +400,16 @@ class SphereRenderer:
             out[col, y] = word
 
     @ti.kernel
-    def _lines(
-        self,
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
-        out: ti.types.ndarray(dtype=ti.u32, ndim=2),
-    ):
+    def _lines(self, out: ti.types.ndarray(dtype=ti.u32, ndim=2)):
+        cam = self.camera[None]
         for s in range(self.constants[None].segment_count):
             a, b = self.segments[2 * s], self.segments[2 * s + 1]
             samples = 2 * (self.width + self.height)
             for k in range(samples + 1):
-                p = a + (b - a) * (k / samples) - eye
-                row, col, depth, inside = to_pixel(p, right, up, forward, focal, self.width, self.height)
+                p = a + (b - a) * (k / samples) - cam.eye
+                row, col, depth, inside = to_pixel(
+                    p, cam.right, cam.up, cam.forward, cam.focal, self.width, self.height
+                )
                 if inside:
                     key = self.keys[col, self.height - 1 - row]
                     hit = ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)  # the sphere's view depth
@@ -466,29 +465,18 @@ class SphereRenderer:
         """The image into ``image`` (on the device on a GPU backend)."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
-        focal = view.focal_px(self.height)
+        self._aim(eye, right, up, forward, view.focal_px(self.height))
         self._clear()
         if count:
             self._allocate(positions.shape[0])
             if self.front_to_back:
-                self._order(positions, count, eye, forward)
+                self._order(positions, count)
             else:
                 self._identity(count)
-            self._splat(positions, count, radius_m, eye, right, up, forward, focal)
-        self._shade(
-            positions,
-            colours,
-            radius_m,
-            eye,
-            right,
-            up,
-            forward,
-            focal,
-            ti.Vector(LIGHT_DIRECTION.astype(np.float32)),
-            self.image,
-        )
+            self._splat(positions, count, radius_m)
+        self._shade(positions, colours, radius_m, ti.Vector(LIGHT_DIRECTION.astype(np.float32)), self.image)
         if self.segment_count:
-            self._lines(eye, right, up, forward, focal, self.image)
+            self._lines(self.image)
 
     def render(self, view: View, positions, colours, count: int, radius_m: float) -> np.ndarray:
         """(H, W, 3) uint8 image of ``count`` spheres of ``radius_m`` (Taichi fields) and the segments,
