@@ -24,11 +24,9 @@ import tempfile
 import time
 from pathlib import Path
 
-SPACING_FACTOR = 1.1
-"""``spacing``: the preset's spacing times this (fewer particles, so the variant is never the slower run)."""
+SPACING_FACTOR = 1.1  # ``spacing``: the preset's spacing times this (fewer particles: never the slower run)
 READY = re.compile(r"kernels ready(?: and the first frame drawn)? in ([0-9.]+) s")
-TIMEOUT_S = 1200
-"""One start may take this long before it is reported as failed (a cold start of bodies under load)."""
+TIMEOUT_S = 1200  # a start this long is reported as failed (a cold start of bodies under load takes minutes)
 LAUNCH = "import sys; from pbf.app.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
@@ -62,8 +60,7 @@ def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str])
     }
 
 
-FIRST_CALLS_SHOWN = 8
-"""Kernels each ``--first-calls`` table lists."""
+FIRST_CALLS_SHOWN = 8  # kernels each ``--first-calls`` table lists
 
 
 def first_calls(presets: list[str], arch: str | None) -> None:
@@ -157,8 +154,7 @@ def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | Non
             for row in rows:
                 row["shared"] = one_start(row["preset"], folder, arch, [])
                 print(f"{row['preset']:<20} {cell(row['shared']):>16}", flush=True)
-        ready = [row[name]["ready_s"] for row in rows for name in ("cold",) if not row[name]["error"]]
-        warm = [row["warm"]["ready_s"] for row in rows if not row["warm"]["error"]]
+        ready, warm = ([row[name]["ready_s"] for row in rows if not row[name]["error"]] for name in ("cold", "warm"))
         if ready and warm:
             print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
     finally:
@@ -175,8 +171,7 @@ def write_csv(rows: list[dict], path: Path) -> None:
         writer = csv.writer(file)
         writer.writerow(["preset", "start", "ready_s", "wall_s", "compiled", "error"])
         for row in rows:
-            for name in ("cold", "warm", "spacing", "shared"):
-                if name in row:
-                    r = row[name]
-                    figures = [f"{r['ready_s']:.2f}", f"{r['wall_s']:.2f}", r["compiled"], r["error"]]
-                    writer.writerow([row["preset"], name, *figures])
+            for name, r in ((name, row[name]) for name in ("cold", "warm", "spacing", "shared") if name in row):
+                writer.writerow(
+                    [row["preset"], name, f"{r['ready_s']:.2f}", f"{r['wall_s']:.2f}", r["compiled"], r["error"]]
+                )

@@ -29,7 +29,7 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import Clock  # noqa: E402
+from benchmarks.lab import Clock, medians  # noqa: E402
 
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
@@ -155,8 +155,8 @@ def measure(
     }
     for phase in PHASES:
         present = any(phase in row for row in rows)
-        result[phase] = statistics.median(row.get(phase, (0.0, 0.0))[0] for row in rows) if present else None
-        result[phase + "_cpu"] = statistics.median(row.get(phase, (0.0, 0.0))[1] for row in rows) if present else None
+        wall, cpu = medians(row.get(phase, (0.0, 0.0)) for row in rows) if present else (None, None)
+        result[phase], result[phase + "_cpu"] = wall, cpu
     return result
 
 
@@ -233,12 +233,9 @@ def start_times(scene: str, rounds: int) -> str:
                 for state in ("empty", "filled"):  # the first start fills the cache the second reads
                     result = first_frame_s(scene, where == "window", cache, out)
                     rows[where, state].append(result)
-                    print(
-                        f"round {round_ + 1}/{rounds} {where}, cache {state}: first frame after {result[0]:.1f} s "
-                        f"({result[1]:.1f} s from the compile line), {result[2]} new cache files",
-                        file=sys.stderr,
-                        flush=True,
-                    )
+                    figures = f"first frame after {result[0]:.1f} s ({result[1]:.1f} s from the compile line)"
+                    print(f"round {round_ + 1}/{rounds} {where}, cache {state}: {figures}, {result[2]} new cache files",
+                          file=sys.stderr, flush=True)  # fmt: skip
     lines = [
         "| start | kernel cache | s to the first frame: median (runs) | s from the compile line | new cache files |",
         "|---|---|---:|---:|---:|",
@@ -295,8 +292,6 @@ def main(argv=None) -> None:
     results = {name: [] for name in names}
     for round_ in range(args.rounds):
         for name in names:
-            # Environment variables of a variant are set before the process starts: the C library
-            # and the Vulkan driver read theirs when they load.
             options = ["--frames", str(args.frames), "--scene", args.scene, "--warmup", str(args.warmup)]
             options += (["--offscreen"] if args.offscreen else []) + (["--arch", args.arch] if args.arch else [])
             run = subprocess.run([sys.executable, __file__, "--one", name, *options], capture_output=True, text=True)
@@ -305,16 +300,10 @@ def main(argv=None) -> None:
             result = json.loads(run.stdout.strip().splitlines()[-1])
             results[name].append(result)
             phases = " + ".join(
-                f"{phase} {result[phase]:.1f}"
-                for phase in ("sim", "draw", "panel", "show")
-                if result[phase] is not None
+                f"{p} {result[p]:.1f}" for p in ("sim", "draw", "panel", "show") if result[p] is not None
             )
-            print(
-                f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps, "
-                f"{phases} ms",
-                file=sys.stderr,
-                flush=True,
-            )
+            progress = f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps"
+            print(f"{progress}, {phases} ms", file=sys.stderr, flush=True)
     where = "offscreen (GGUI show_window=False; show = draw + read back)" if args.offscreen else "in a window"
     print(
         f"{args.scene}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend_name(args.arch)}, "

@@ -1,5 +1,6 @@
 """The tests run in two worker processes by default (pytest-xdist, ``-n 2`` in pyproject.toml's
-addopts), one per core of the 2-core machine the suite is sized for; a later ``-n`` wins, so
+addopts), one per core of the 2-core machine the suite is sized for, each test file whole on one worker
+(``--dist loadfile``: a module's shared fixtures are built once); a later ``-n`` wins, so
 ``python -m pytest -n 0`` runs one process (as a debugger wants) and ``-n auto`` one worker per core
 (CONTRIBUTING.md). Each worker runs one Taichi CPU runtime compiled for speed of compiling: each
 Simulation compiles its kernels anew, and without Taichi's advanced optimisation that is several
