@@ -192,10 +192,8 @@ SETTING = (
 )
 
 
-# Slow: an example that sets control.divergence_iterations compiles the divergence pass anew with that
-# many iterations unrolled (12 s at 83 with a warm kernel cache, 28 s without), so the default run's time
-# hung on the draw. Each refusal, and good assignments, stay in the default run in test_api_strict.py.
-@pytest.mark.slow
+# In the default run: an example that sets control.divergence_iterations runs the kernels compiled for
+# any count (the count is data), where an unrolled count compiled anew for each value drawn.
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.lists(st.tuples(st.sampled_from(FIELDS + ["iteration"]), SETTING), min_size=1, max_size=4))
 def test_random_control_assignments_are_refused_at_once_or_run_cleanly(sim, assignments):

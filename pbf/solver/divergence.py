@@ -96,15 +96,15 @@ class DivergenceCorrection:
         self.state.multiplier[i] = total / (dt * dt)
 
     @ti.func
-    def start(self, x: ti.template(), neighbours: ti.template(), dt: ti.template()):
+    def start(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), count: ti.template()):
         """For the top level of a kernel: v += Δv of the warm start, with min(C, 0), the denominators and the
-        walls' gradient at the fixed positions."""
+        walls' gradient at the fixed positions; nothing if ``count`` is 0 (a restore, Δt = 0)."""
         bound = ti.static(self.state.loop_bound)
         for i in range(read_count(bound, 1)):
-            if i < self.state.active[None]:
+            if i < self.state.active[None] and count > 0:
                 self.increment[i] = self.state.multiplier[i] * dt * dt
         for i in range(read_count(bound, 1)):
-            if i < self.state.active[None]:
+            if i < self.state.active[None] and count > 0:
                 self.state.v[i] += self.velocity_change(x, i, neighbours, dt, True)
 
     @ti.func

@@ -277,11 +277,12 @@ class Features:
     vorticity: bool
 
     @classmethod
-    def of(cls, model: Model, control: Control, in_place: bool = False) -> Features:
-        """The features of ``model``'s scene under ``control``; ``in_place``: a Δt = 0 substep (a restore)."""
+    def of(cls, model: Model, control: Control) -> Features:
+        """The features of ``model``'s scene under ``control`` (a restore's too: it runs no divergence
+        iteration, the same compiled kernel)."""
         return _features(
             control.target_density_error > 0.0,
-            control.divergence_iterations > 0 and not in_place,
+            control.divergence_iterations > 0,
             control.vorticity > 0.0,
         )
 

@@ -405,7 +405,7 @@ class Simulation:
 
     def _find_neighbours_in_place(self) -> None:
         """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
-        features = Features.of(self.model, self.control, in_place=True)
+        features = Features.of(self.model, self.control)  # the substep's: one compile for both
         self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
         most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
         if truncated:

@@ -22,9 +22,10 @@ class SubstepKernels:
     def find_neighbours(self, dt: float, gravity, features, divergence_iterations: int) -> None:
         """Lines 1-7, the divergence pre-correction's ``divergence_iterations`` (if ``features.divergence``)
         and the denominators of λ (Eq. 10) at x*: one call, more only for the pass's iterations past its
-        ``PER_CALL``; with ``dt`` 0 and no gravity, only the sort and the lists (a restore)."""
+        ``PER_CALL``; with ``dt`` 0, no gravity and no divergence iteration, only the sort, the lists and the
+        denominators (a restore)."""
         gx, gy, gz = (float(g) for g in gravity)
-        count = divergence_iterations if features.divergence else 0
+        count = divergence_iterations if features.divergence else 0  # 0: a restore runs none
         entries = self.grid.neighbours
         self._find_neighbours(entries=entries, dt=dt, gx=gx, gy=gy, gz=gz, features=features, count=count)
         per_call = self.divergence.PER_CALL
@@ -87,7 +88,7 @@ class SubstepKernels:
         grid.order_loops(state.index, ti.static(state.carried))  # the state and x* gathered in sorted order
         grid.find_neighbours(ti.static(state.scratch_of(x_star)), x_star, entries, ti.static(state.carried))  # line 7
         if ti.static(features.divergence):  # ours: v made divergence-free at x, its first iterations,
-            self.divergence.start(state.x, entries, dt)
+            self.divergence.start(state.x, entries, dt, count)
             self.divergence.iterate(state.x, entries, dt, 0, count)
         self._predict_and_prepare(entries, dt, features.divergence, 0, count)
 
@@ -112,7 +113,7 @@ class SubstepKernels:
         state, per_call = self.state, ti.static(self.divergence.PER_CALL)
         if ti.static(divergence):
             for i in range(state.live_bound()):
-                if i < state.active[None] and first + per_call >= count:
+                if i < state.active[None] and count > 0 and count <= first + per_call:
                     self.integrator.predict_particle(dt, i)
         for i in range(state.live_bound()):
             if i < state.active[None] and first + per_call >= count:
