@@ -490,6 +490,9 @@ at under e⁻⁵ of its brightness) is not drawn."""
 OPACITY_STEPS = 4096
 """Fixed-point steps of opacity in the sprites' sum (integer atomics: the same image on every run)."""
 WHITE_RGB = (0.96, 0.98, 1.0)
+FAINTEST = 8
+"""The least opacity sum (in OPACITY_STEPS) a corner of a cell needs for the blend to visit it: below it on
+every corner, 1 − exp(−Σ) is under half a level of an 8-bit channel, which the blend would round away."""
 
 
 @ti.data_oriented
@@ -524,9 +527,10 @@ class Sprites:
 
     @ti.func
     def _sprite(self, ww: ti.template(), surface: ti.template(), p, eye, right, up, forward, focal, exposure):
-        """Diffuse particle p on screen: its streak's ends (column, row, depth), σ in pixels and peak opacity;
-        σ = 0 where it is not drawn (behind the eye, or so deep behind the water's surface, ``surface``'s
-        depth at its centre, that it would add nothing)."""
+        """Diffuse particle p on screen: its streak's ends (column, row, depth), σ in pixels and peak opacity,
+        dimmed by the water in front of its centre (``surface``'s depth there: a sprite spans a pixel or
+        two, over which the surface's depth hardly changes); σ = 0 where it is not drawn (behind the eye,
+        or so deep behind the water's surface that it would add nothing)."""
         kind = ww.kind[p]
         half = 0.5 * exposure * ww.velocity[p]
         a = self._project(ww.position[p] - half, eye, right, up, forward, focal)
@@ -546,9 +550,12 @@ class Sprites:
             peak = brightness * (true_px / sigma) ** 2 / (1.0 + length / (2.5 * sigma))
             col = ti.min(ti.max(ti.cast(0.5 * (a[0] + b[0]), ti.i32), 0), self.width - 1)
             row = ti.min(ti.max(ti.cast(0.5 * (a[1] + b[1]), ti.i32), 0), self.height - 1)
-            hidden = HIDDEN_SEEN_THROUGH * SEEN_THROUGH_SPACINGS * self.constants[None].spacing
-            if ti.min(a[2], b[2]) > self._surface_at(surface, row, col) + hidden:
+            seen_through = SEEN_THROUGH_SPACINGS * self.constants[None].spacing
+            behind = 0.5 * (a[2] + b[2]) - self._surface_at(surface, row, col)
+            if ti.min(a[2], b[2]) > self._surface_at(surface, row, col) + HIDDEN_SEEN_THROUGH * seen_through:
                 sigma = 0.0
+            elif behind > 0.0:
+                peak *= ti.exp(-behind / seen_through)
         return a, b, sigma, peak
 
     @ti.func
@@ -569,7 +576,7 @@ class Sprites:
         return c0, c1, r0, r1
 
     @ti.func
-    def _add(self, a, b, sigma, peak, row, col, surface: ti.template()):
+    def _add(self, a, b, sigma, peak, row, col):
         """The sprite's opacity at pixel (row, col), added to the pixel's sum: a bump (1 − d²/R²)² of the
         distance d to the streak, R = REACH_SIGMAS σ (close to a Gaussian of σ, without an exponential)."""
         centre = ti.Vector([col + 0.5, row + 0.5])
@@ -579,12 +586,7 @@ class Sprites:
             t = ti.min(ti.max((centre - start).dot(along) / along.norm_sqr(), 0.0), 1.0)
         falloff = 1.0 - (start + t * along - centre).norm_sqr() / (REACH_SIGMAS * REACH_SIGMAS * sigma * sigma)
         if falloff > 0.0:
-            value = peak * falloff * falloff
-            depth = a[2] + t * (b[2] - a[2])
-            in_front = self._surface_at(surface, row, col)
-            if depth > in_front:
-                value *= ti.exp(-(depth - in_front) / (SEEN_THROUGH_SPACINGS * self.constants[None].spacing))
-            steps = ti.cast(value * OPACITY_STEPS + 0.5, ti.i32)
+            steps = ti.cast(peak * falloff * falloff * OPACITY_STEPS + 0.5, ti.i32)
             if steps > 0:
                 ti.atomic_add(self.opacity[row, col], steps)
                 self.row_used[row] = 1
@@ -616,7 +618,7 @@ class Sprites:
             for w in range(self.footprints.total(live)):
                 p, col, row = self.footprints.item(w, live)
                 a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
-                self._add(a, b, sigma, peak, row, col, surface)
+                self._add(a, b, sigma, peak, row, col)
         else:
             for p in range(live):
                 a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
@@ -635,7 +637,7 @@ class Sprites:
                         first = ti.max(ti.cast(ti.floor(ti.min(x0, x1) - reach), ti.i32), c0)
                         last = ti.min(ti.cast(ti.floor(ti.max(x0, x1) + reach), ti.i32) + 1, c1)
                         for col in range(first, last):
-                            self._add(a, b, sigma, peak, row, col, surface)
+                            self._add(a, b, sigma, peak, row, col)
 
     @ti.kernel
     def _blend(self, image: ti.template()):
@@ -648,7 +650,7 @@ class Sprites:
                 corners = ti.Vector(
                     [self.opacity[r, c], self.opacity[r, c + 1], self.opacity[r + 1, c], self.opacity[r + 1, c + 1]]
                 )
-            if corners.max() > 0:
+            if corners.max() >= FAINTEST:
                 rows, cols = self._span(r, self.height, self.full_height), self._span(c, self.width, self.full_width)
                 for row in range(rows[0], rows[1]):
                     for col in range(cols[0], cols[1]):
