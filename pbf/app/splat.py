@@ -18,7 +18,7 @@ import math
 
 import taichi as ti
 
-from pbf.solver import NeighbourList, scene_constants
+from pbf.solver import ExclusiveScan, NeighbourList, scene_constants
 
 
 def per_item() -> bool:
@@ -28,37 +28,31 @@ def per_item() -> bool:
 
 @ti.data_oriented
 class PrefixSum:
-    """Exclusive prefix sums of up to ``capacity`` integers (Hillis & Steele: log₂ n passes, each a parallel
-    loop). Integer sums are exact, so the result never depends on the order threads run in."""
+    """Exclusive prefix sums of up to ``capacity`` integers, by the solver's block tree
+    (``pbf.solver.ExclusiveScan``: a few parallel passes, however many entries). Integer sums are exact, so
+    the result never depends on the order threads run in."""
 
     def __init__(self, capacity: int):
         self.capacity = max(int(capacity), 1)
-        self.sums = [ti.field(ti.i32, shape=self.capacity + 1) for _ in range(2)]
-        """Ping-pong buffers: the values (shifted by one), then their inclusive sums."""
-        self.passes = max(1, math.ceil(math.log2(self.capacity)))
+        self.values = ti.field(ti.i32, shape=self.capacity)
+        self.starts = ti.field(ti.i32, shape=self.capacity + 1)
+        self.tree = ExclusiveScan(self.capacity, gpu=per_item())
 
     @ti.func
     def put(self, k, value):
         """Entry k's value, before :meth:`scan`."""
-        self.sums[0][k + 1] = value
+        self.values[k] = value
 
     @ti.func
     def scan(self, count):
         """start(k) = Σ_{l<k} value[l] for k ≤ count; called at a kernel's top level after :meth:`put` of
         entries 0 … count − 1."""
-        self.sums[0][0] = 0
-        for p in ti.static(range(self.passes)):
-            source, target = ti.static(self.sums[p % 2], self.sums[(p + 1) % 2])
-            for k in range(count + 1):
-                value = source[k]
-                if k >= (1 << p):
-                    value += source[k - (1 << p)]
-                target[k] = value
+        self.tree.scan(self.values, self.starts, count)
 
     @ti.func
     def start(self, k):
         """The sum of the values before entry k (k ≤ count), after :meth:`scan`."""
-        return self.sums[self.passes % 2][k]
+        return self.starts[k]
 
 
 @ti.data_oriented
@@ -93,7 +87,7 @@ class Footprints:
     @ti.func
     def item(self, w, count):
         """The particle slot k of work item w and its pixel (column, row)."""
-        starts = ti.static(self.areas.sums[self.areas.passes % 2])
+        starts = ti.static(self.areas.starts)
         low, high = 0, count  # the last k with starts[k] ≤ w: its area is not empty
         while high - low > 1:
             middle = (low + high) // 2

@@ -202,8 +202,9 @@ class SurfaceRenderer:
         self.per_item = per_item()
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.exposure = float(exposure_s)
-        self.sprites = Sprites(self.width, self.height, self.spacing, self.per_item)
-        """White water's sprites (``pbf.app.white_water``), drawn where a draw is given white water."""
+        self.sprites = Sprites(self.coarse_width, self.coarse_height, self.spacing, self.per_item)
+        """White water's sprites (``pbf.app.white_water``): their sums, filled where a draw is given white
+        water, whiten the frame in :meth:`_compose`."""
         self.footprints = None
         self.splats = None
         """The particles' splats (``pbf.app.splat.Ellipsoids``), allocated on first use for the positions'
@@ -329,6 +330,16 @@ class SurfaceRenderer:
             self.solid_half[b] = half[b]
             self.solid_position[b] = position[b]
             self.solid_rotation[b] = rotation[b]
+
+    @ti.func
+    def front_depth(self, row, col, eye, right, up, forward, focal):
+        """The view depth of the nearest water or body at coarse pixel (row, col) (FAR where there is
+        neither), for the white water's sprites; ``focal`` of the coarse image."""
+        depth = self.smooth_depth[row, col]
+        if ti.static(self.with_solids):
+            ray = self._ray(row, col, right, up, forward, focal, self.coarse_width, self.coarse_height)
+            depth = ti.min(depth, self._hit_solid(eye, ray)[0])
+        return depth
 
     @ti.func
     def _solid_colour(self, normal, light):
@@ -654,7 +665,8 @@ class SurfaceRenderer:
     def _compose(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, light: vec3):
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
         depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
-        where one is nearer than the water."""
+        where one is nearer than the water; all of it whitened by the white water's sprites. Then the
+        sprites' sums cleared for the next frame."""
         if ti.static(self.per_item):  # a GPU backend: a thread per pixel
             for row, col in self.image:
                 self._compose_pixel(row, col, eye, right, up, forward, focal, light)
@@ -664,6 +676,7 @@ class SurfaceRenderer:
             for row in range(self.height):
                 for col in range(self.width):
                     self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+        self.sprites.clear()
 
     @ti.func
     def _compose_pixel(self, row, col, eye, right, up, forward, focal, light):
@@ -694,7 +707,8 @@ class SurfaceRenderer:
         # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
         # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
         share = coverage
-        if coverage == 0.0 and solid == FAR:  # most pixels: the view without water, as it is
+        white = self.sprites.share(r0, c0, fy, fx)  # white water, over and through the water alike
+        if coverage == 0.0 and solid == FAR and white == 0.0:  # most pixels: the view without water, as it is
             self.image[row, col] = self.background[row, col]
         else:
             background = ti.cast(self.background[row, col], ti.f32) / 255.0
@@ -703,7 +717,7 @@ class SurfaceRenderer:
             water = background
             if coverage > 0.0:
                 water = ti.min(colour / coverage, 1.0)
-            blended = share * water + (1.0 - share) * background
+            blended = self.sprites.whiten(share * water + (1.0 - share) * background, white)
             self.image[row, col] = ti.cast(blended * 255.0 + 0.5, ti.u8)
         self.image_depth[row, col] = solid
         if coverage >= 0.5:
@@ -918,8 +932,8 @@ class SurfaceRenderer:
         light = ti.Vector(np.asarray(light_direction, np.float32))
         self._normals(eye, right, up, forward, coarse_focal)
         self._shade(eye, right, up, forward, coarse_focal, light)
-        self._compose(eye, right, up, forward, focal, light)
         if white_water is not None:
-            self.sprites.draw(white_water, self.image, self.image_depth, view, self.exposure)
+            self.sprites.splat(white_water, self, view, self.exposure)
+        self._compose(eye, right, up, forward, focal, light)
         if len(self.segment_points):
             self._lines()

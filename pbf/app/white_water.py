@@ -470,8 +470,6 @@ class WhiteWater:
         row[slot, 8] = ti.cast(kind, ti.f32)
 
 
-COARSE = 2
-"""The sprites' opacities add up at 1/COARSE of the frame's width and height."""
 SPRITE_RADIUS_SPACINGS = (0.15, 0.2, 0.12)
 """A sprite's radius (its Gaussian's σ) for spray, foam and bubbles, in spacings: white water is finer
 than the fluid's particles."""
@@ -500,14 +498,14 @@ class Sprites:
     """White water drawn into a surface frame: each diffuse particle a soft white sprite (a Gaussian of its
     kind's radius) stretched along its screen velocity over the exposure (motion blur: a streak keeps the
     sprite's total brightness), depth-tested against the water's surface and seen through it dimmed by
-    the water in front. The opacities add up as integers per pixel of an image ``COARSE`` times smaller each
-    way (the sprites are soft: a quarter of the pixels costs a quarter), then each pixel of the frame takes
-    white by 1 − exp(−Σ), Σ interpolated bilinearly, so dense foam saturates to white and a lone drop stays
-    faint."""
+    the water in front. The opacities add up as integers per pixel of the surface renderer's coarse image
+    (half the frame's width and height: the sprites are soft, and a quarter of the pixels costs a quarter).
+    The surface renderer's compose then whitens each pixel of the frame by 1 − exp(−Σ) (:meth:`share`), Σ
+    interpolated bilinearly, so dense foam saturates to white and a lone drop stays faint."""
 
     def __init__(self, width_px: int, height_px: int, spacing_m: float, per_item: bool):
-        self.full_width, self.full_height = int(width_px), int(height_px)
-        self.width, self.height = max(self.full_width // COARSE, 2), max(self.full_height // COARSE, 2)
+        """``width_px`` × ``height_px``: the sums' size, the surface renderer's coarse image."""
+        self.width, self.height = int(width_px), int(height_px)
         self.opacity = ti.field(ti.i32, shape=(self.height, self.width))
         self.row_used = ti.field(ti.i32, shape=self.height)
         """1 where a row of the sums holds any opacity: the blend passes over the rest in a read."""
@@ -526,11 +524,11 @@ class Sprites:
         )
 
     @ti.func
-    def _sprite(self, ww: ti.template(), surface: ti.template(), p, eye, right, up, forward, focal, exposure):
+    def _sprite(self, ww: ti.template(), front: ti.template(), p, eye, right, up, forward, focal, exposure):
         """Diffuse particle p on screen: its streak's ends (column, row, depth), σ in pixels and peak opacity,
-        dimmed by the water in front of its centre (``surface``'s depth there: a sprite spans a pixel or
-        two, over which the surface's depth hardly changes); σ = 0 where it is not drawn (behind the eye,
-        or so deep behind the water's surface that it would add nothing)."""
+        dimmed by the water in front of its centre (``front.front_depth`` there, the nearest water or body:
+        a sprite spans a pixel or two, over which the surface's depth hardly changes); σ = 0 where it is
+        not drawn (behind the eye, or so deep behind the water's surface that it would add nothing)."""
         kind = ww.kind[p]
         half = 0.5 * exposure * ww.velocity[p]
         a = self._project(ww.position[p] - half, eye, right, up, forward, focal)
@@ -551,20 +549,13 @@ class Sprites:
             col = ti.min(ti.max(ti.cast(0.5 * (a[0] + b[0]), ti.i32), 0), self.width - 1)
             row = ti.min(ti.max(ti.cast(0.5 * (a[1] + b[1]), ti.i32), 0), self.height - 1)
             seen_through = SEEN_THROUGH_SPACINGS * self.constants[None].spacing
-            behind = 0.5 * (a[2] + b[2]) - self._surface_at(surface, row, col)
-            if ti.min(a[2], b[2]) > self._surface_at(surface, row, col) + HIDDEN_SEEN_THROUGH * seen_through:
+            surface = front.front_depth(row, col, eye, right, up, forward, focal)
+            behind = 0.5 * (a[2] + b[2]) - surface
+            if ti.min(a[2], b[2]) > surface + HIDDEN_SEEN_THROUGH * seen_through:
                 sigma = 0.0
             elif behind > 0.0:
                 peak *= ti.exp(-behind / seen_through)
         return a, b, sigma, peak
-
-    @ti.func
-    def _surface_at(self, surface: ti.template(), row, col):
-        """The water's view depth at the centre of coarse pixel (row, col), from the frame's depth."""
-        return surface[
-            ti.min(row * COARSE + COARSE // 2, self.full_height - 1),
-            ti.min(col * COARSE + COARSE // 2, self.full_width - 1),
-        ]
 
     @ti.func
     def _bounds(self, a, b, sigma):
@@ -595,7 +586,7 @@ class Sprites:
     def _splat(
         self,
         ww: ti.template(),
-        surface: ti.template(),
+        front: ti.template(),
         eye: vec3,
         right: vec3,
         up: vec3,
@@ -609,7 +600,7 @@ class Sprites:
         live = ww.live[None]
         if ti.static(self.per_item):
             for p in range(live):
-                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 c0, c1, r0, r1 = 0, 0, 0, 0
                 if sigma > 0.0:
                     c0, c1, r0, r1 = self._bounds(a, b, sigma)
@@ -617,11 +608,11 @@ class Sprites:
             self.footprints.scan(live)
             for w in range(self.footprints.total(live)):
                 p, col, row = self.footprints.item(w, live)
-                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 self._add(a, b, sigma, peak, row, col)
         else:
             for p in range(live):
-                a, b, sigma, peak = self._sprite(ww, surface, p, eye, right, up, forward, focal, exposure)
+                a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 if sigma > 0.0:
                     c0, c1, r0, r1 = self._bounds(a, b, sigma)
                     reach = REACH_SIGMAS * sigma + 1.0
@@ -639,69 +630,44 @@ class Sprites:
                         for col in range(first, last):
                             self._add(a, b, sigma, peak, row, col)
 
-    @ti.kernel
-    def _blend(self, image: ti.template()):
-        """Each pixel of the frame whitened by 1 − exp(−its opacity, interpolated from the coarse sums), then
-        the sums cleared for the next frame. A thread per cell between four coarse pixels, over the frame's
-        pixels that interpolate in it: most cells have no white water near and cost four reads."""
-        for r, c in ti.ndrange(self.height - 1, self.width - 1):
-            corners = ti.Vector([0, 0, 0, 0])
-            if self.row_used[r] or self.row_used[r + 1]:
-                corners = ti.Vector(
-                    [self.opacity[r, c], self.opacity[r, c + 1], self.opacity[r + 1, c], self.opacity[r + 1, c + 1]]
-                )
+    @ti.func
+    def share(self, r0, c0, fy, fx):
+        """The white a frame's pixel takes, 1 − exp(−Σ), Σ interpolated bilinearly (weights fy, fx) from the
+        coarse sums (r0, c0) … (r0 + 1, c0 + 1); 0 where no corner holds ``FAINTEST``: most pixels have no
+        white water near and cost a read of two rows' flags."""
+        white = 0.0
+        if self.row_used[r0] or self.row_used[r0 + 1]:
+            corners = ti.Vector(
+                [self.opacity[r0, c0], self.opacity[r0, c0 + 1], self.opacity[r0 + 1, c0], self.opacity[r0 + 1, c0 + 1]]
+            )
             if corners.max() >= FAINTEST:
-                rows, cols = self._span(r, self.height, self.full_height), self._span(c, self.width, self.full_width)
-                for row in range(rows[0], rows[1]):
-                    for col in range(cols[0], cols[1]):
-                        self._blend_pixel(image, corners, r, c, row, col)
+                steps = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * (
+                    (1.0 - fx) * corners[2] + fx * corners[3]
+                )
+                white = 1.0 - ti.exp(-steps / OPACITY_STEPS)
+        return white
+
+    @ti.func
+    def whiten(self, colour, white):
+        """``colour`` (RGB in [0, 1]) whitened by the share ``white`` (:meth:`share`)."""
+        return colour + white * (ti.Vector(WHITE_RGB) - colour)
+
+    @ti.func
+    def clear(self):
+        """The sums cleared once the frame has read them, for the next one; at a kernel's top level."""
         for row, col in self.opacity:
             if self.row_used[row]:
                 self.opacity[row, col] = 0
         for row in self.row_used:
             self.row_used[row] = 0
 
-    @ti.func
-    def _cell(self, pixel, coarse):
-        """The cell of the coarse grid (its lower corner, clamped in) a frame's pixel interpolates in, and
-        the pixel's centre in coarse pixels."""
-        y = (pixel + 0.5) / COARSE - 0.5
-        return ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), coarse - 2), y
-
-    @ti.func
-    def _span(self, cell, coarse, full):
-        """The frame's pixels [first, end) along one axis whose interpolation cell is ``cell``: those of
-        COARSE (cell + ½) − ½ ≤ pixel < COARSE (cell + 3/2) − ½, the first and last cells taking the edges."""
-        first, end = 0, full
-        if cell > 0:
-            first = ti.max(ti.cast(ti.floor(COARSE * (cell + 0.5) - 0.5), ti.i32) - 1, 0)
-            while self._cell(first, coarse)[0] < cell:
-                first += 1
-        if cell < coarse - 2:
-            end = ti.min(ti.cast(ti.floor(COARSE * (cell + 1.5) - 0.5), ti.i32) + 1, full)
-            while end > first and self._cell(end - 1, coarse)[0] > cell:
-                end -= 1
-        return ti.Vector([first, end])
-
-    @ti.func
-    def _blend_pixel(self, image: ti.template(), corners, r0, c0, row, col):
-        fy = ti.min(ti.max(self._cell(row, self.height)[1] - r0, 0.0), 1.0)
-        fx = ti.min(ti.max(self._cell(col, self.width)[1] - c0, 0.0), 1.0)
-        steps = (1.0 - fy) * ((1.0 - fx) * corners[0] + fx * corners[1]) + fy * (
-            (1.0 - fx) * corners[2] + fx * corners[3]
-        )
-        share = 1.0 - ti.exp(-steps / OPACITY_STEPS)
-        colour = ti.cast(image[row, col], ti.f32) / 255.0
-        blended = colour + share * (ti.Vector(WHITE_RGB) - colour)
-        image[row, col] = ti.cast(ti.min(blended, 1.0) * 255.0 + 0.5, ti.u8)
-
-    def draw(self, white_water: WhiteWater, image, surface_depth, view, exposure_s: float) -> None:
-        """The live diffuse particles of ``white_water`` into ``image`` ((H, W) u8 RGB field) over the water
-        whose view depth per pixel is ``surface_depth`` ((H, W) f32 field), seen through ``view``."""
+    def splat(self, white_water: WhiteWater, front, view, exposure_s: float) -> None:
+        """The live diffuse particles of ``white_water`` into the sums, seen through ``view``, in front of
+        or behind the nearest water or body of ``front`` (a renderer with a ``front_depth`` function of a
+        coarse pixel, ``pbf.app.surface_render.SurfaceRenderer``)."""
         right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
         eye = ti.Vector(view.eye.astype(np.float32))
         focal = view.focal_px(self.height)  # of the coarse image
         if self.per_item and (self.footprints is None or self.footprints.capacity < white_water.position.shape[0]):
             self.footprints = Footprints(white_water.position.shape[0])
-        self._splat(white_water, surface_depth, eye, right, up, forward, focal, exposure_s)
-        self._blend(image)
+        self._splat(white_water, front, eye, right, up, forward, focal, exposure_s)

@@ -6,6 +6,7 @@ from pbf.solver.bodies import STATE_LAYOUT, quaternion_matrix_np
 from pbf.solver.constants import scene_constants
 from pbf.solver.grid import NeighbourList
 from pbf.solver.model import Control, Model, Push, allocation
+from pbf.solver.scan import ExclusiveScan
 from pbf.solver.simulation import STAGES, Neighbourhood, Readout, Simulation, Solids, StageHook
 from pbf.solver.state import Snapshot
 
@@ -13,6 +14,7 @@ __all__ = [
     "ARCHES",
     "ENV_VAR",
     "BackendError",
+    "ExclusiveScan",
     "Control",
     "Model",
     "NeighbourList",
