@@ -493,6 +493,15 @@ FAINTEST = 8
 every corner, 1 − exp(−Σ) is under half a level of an 8-bit channel, which the blend would round away."""
 
 
+@ti.func
+def _within(low, high, reach, size):
+    """The pixels [first, end) of a row or column of ``size`` whose centres (k + ½) lie less than ``reach``
+    from [low, high]: the only ones a sprite's bump, which is 0 at its reach, adds to."""
+    first = ti.max(ti.cast(ti.floor(low - reach - 0.5), ti.i32) + 1, 0)
+    end = ti.min(ti.cast(ti.floor(high + reach - 0.5), ti.i32) + 1, size)
+    return first, end
+
+
 @ti.data_oriented
 class Sprites:
     """White water drawn into a surface frame: each diffuse particle a soft white sprite (a Gaussian of its
@@ -559,11 +568,9 @@ class Sprites:
 
     @ti.func
     def _bounds(self, a, b, sigma):
-        reach = REACH_SIGMAS * sigma + 1.0
-        c0 = ti.max(ti.cast(ti.floor(ti.min(a[0], b[0]) - reach), ti.i32), 0)
-        c1 = ti.min(ti.cast(ti.floor(ti.max(a[0], b[0]) + reach), ti.i32) + 1, self.width)
-        r0 = ti.max(ti.cast(ti.floor(ti.min(a[1], b[1]) - reach), ti.i32), 0)
-        r1 = ti.min(ti.cast(ti.floor(ti.max(a[1], b[1]) + reach), ti.i32) + 1, self.height)
+        reach = REACH_SIGMAS * sigma
+        c0, c1 = _within(ti.min(a[0], b[0]), ti.max(a[0], b[0]), reach, self.width)
+        r0, r1 = _within(ti.min(a[1], b[1]), ti.max(a[1], b[1]), reach, self.height)
         return c0, c1, r0, r1
 
     @ti.func
@@ -615,7 +622,7 @@ class Sprites:
                 a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 if sigma > 0.0:
                     c0, c1, r0, r1 = self._bounds(a, b, sigma)
-                    reach = REACH_SIGMAS * sigma + 1.0
+                    reach = REACH_SIGMAS * sigma
                     for row in range(r0, r1):
                         # The streak's points within reach of this row: t in [low, high], their columns ± reach.
                         low, high = 0.0, 1.0
@@ -625,9 +632,8 @@ class Sprites:
                             t1 = (row + 0.5 + reach - a[1]) / rise
                             low, high = ti.max(ti.min(t0, t1), 0.0), ti.min(ti.max(t0, t1), 1.0)
                         x0, x1 = a[0] + low * (b[0] - a[0]), a[0] + high * (b[0] - a[0])
-                        first = ti.max(ti.cast(ti.floor(ti.min(x0, x1) - reach), ti.i32), c0)
-                        last = ti.min(ti.cast(ti.floor(ti.max(x0, x1) + reach), ti.i32) + 1, c1)
-                        for col in range(first, last):
+                        first, end = _within(ti.min(x0, x1), ti.max(x0, x1), reach, self.width)
+                        for col in range(first, end):
                             self._add(a, b, sigma, peak, row, col)
 
     @ti.func
@@ -654,12 +660,13 @@ class Sprites:
 
     @ti.func
     def clear(self):
-        """The sums cleared once the frame has read them, for the next one; at a kernel's top level."""
-        for row, col in self.opacity:
-            if self.row_used[row]:
-                self.opacity[row, col] = 0
+        """The sums cleared once the frame has read them, for the next one; at a kernel's top level. A thread
+        per row: most rows hold none."""
         for row in self.row_used:
-            self.row_used[row] = 0
+            if self.row_used[row]:
+                for col in range(self.width):
+                    self.opacity[row, col] = 0
+                self.row_used[row] = 0
 
     def splat(self, white_water: WhiteWater, front, view, exposure_s: float) -> None:
         """The live diffuse particles of ``white_water`` into the sums, seen through ``view``, in front of
