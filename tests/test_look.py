@@ -9,7 +9,7 @@ import taichi as ti
 
 from benchmarks.frames import particles_top, speckle, top_face
 from pbf.app.render import SceneRenderer
-from pbf.app.splat import DROP_RADIUS_SPACINGS, Ellipsoids, symmetric_eigen
+from pbf.app.splat import DROP_RADIUS_SPACINGS, PUDDLE_HALF_THICKNESS_SPACINGS, Ellipsoids, symmetric_eigen
 from pbf.app.surface_render import SPLAT_RADIUS_SPACINGS
 from pbf.solver import Simulation
 from scenes import column_scene, small_dam_break
@@ -79,19 +79,27 @@ def test_splats_are_flat_at_the_surface_round_in_the_bulk_and_drops_alone():
         assert lengths == pytest.approx(np.full(3, SPLAT_RADIUS_SPACINGS * s), rel=1e-3)
         assert reach[i] == pytest.approx(SPLAT_RADIUS_SPACINGS * s, rel=1e-3)
         assert centre[i] == pytest.approx(x[i], abs=1e-6)
-    # Without neighbours (lists of particles far apart), every splat is a drop of a particle's volume.
+    # Without neighbours (lists of particles far apart), every splat is a drop of a particle's volume: a
+    # sphere in the air, and on the floor a level disc (a puddle), flat where water wets it.
+    blocks = [{"min_m": [0.4, y, 0.4], "max_m": [0.4 + s, y + s, 0.4 + s]} for y in (0.4, 0.0)]
     lone = Simulation(
-        {
-            "name": "drops",
-            "container": {"max_m": [1.0, 1.0, 1.0]},
-            "fluid": {"spacing_m": s, "blocks": [{"min_m": [0.4, 0.4, 0.4], "max_m": [0.4 + s, 0.4 + s, 0.4 + s]}]},
-        },
+        {"name": "drops", "container": {"max_m": [1.0, 1.0, 1.0]}, "fluid": {"spacing_m": s, "blocks": blocks}},
         quiet=True,
     )
     hood = lone.neighbourhood()
+    splats = Ellipsoids(hood.positions.shape[0], SPLAT_RADIUS_SPACINGS * s, s, floor_y_m=0.0)
     splats.update(hood.positions, hood.count, hood)
-    lengths, _ = semi_axes(splats.inverse.to_numpy()[0])
-    assert lengths == pytest.approx(np.full(3, DROP_RADIUS_SPACINGS * s), rel=1e-4)
+    heights = hood.positions.to_numpy()[: hood.count, 1]  # in the lists' order
+    assert hood.count == 2 and heights.max() > 0.4 and heights.min() < s
+    for i in range(2):
+        lengths, directions = semi_axes(splats.inverse.to_numpy()[i])
+        assert np.prod(lengths) == pytest.approx(DROP_RADIUS_SPACINGS**3 * s**3, rel=1e-4)  # a drop's volume
+        if heights[i] > 0.4:
+            assert lengths == pytest.approx(np.full(3, DROP_RADIUS_SPACINGS * s), rel=1e-4)
+        else:
+            assert lengths[0] == pytest.approx(PUDDLE_HALF_THICKNESS_SPACINGS * s, rel=1e-4)
+            assert lengths[1] == pytest.approx(lengths[2], rel=1e-4) and lengths[2] > 2 * DROP_RADIUS_SPACINGS * s
+            assert abs(directions[1, 0]) > 0.999  # its short axis vertical
 
 
 @pytest.mark.slow  # a column settled, then drawn: among the default run's longest

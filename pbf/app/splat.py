@@ -113,6 +113,13 @@ Turk's 25 count the neighbours within twice their kernel's support; the solver's
 filament), and a sheet should stay a sheet."""
 DROP_RADIUS_SPACINGS = (3.0 / (4.0 * math.pi)) ** (1.0 / 3.0)
 """A drop's sphere, in spacings: the volume of a spacing cubed (0.62)."""
+ON_FLOOR_SPACINGS = 1.0
+"""A drop whose particle lies within this many spacings of the floor rests on it."""
+PUDDLE_HALF_THICKNESS_SPACINGS = 0.07
+"""A drop resting on the floor wets it: drawn as a level disc of its volume, this thin (a half-thickness, in
+spacings; its radius 1.85). Water spreading over a floor in a layer a particle deep breaks into strands and
+lone particles, which as spheres read as beads scattered on the floor; as discs they join into a film."""
+PUDDLE_RADIUS_SPACINGS = (DROP_RADIUS_SPACINGS**3 / PUDDLE_HALF_THICKNESS_SPACINGS) ** 0.5
 
 
 @ti.func
@@ -233,9 +240,11 @@ class Ellipsoids:
     in the surface's plane, in a sheet a disc in the sheet's, along a filament a rod. Each particle
     keeps ``inverse``, G = diag(1/a) Rᵀ, which maps the ellipsoid to the unit sphere
     (x' = G (x − c)), ``reach``, its longest semi-axis (its screen bound), and ``chord``, its volume's
-    share of the sphere's (which scales the thickness its chord adds)."""
+    share of the sphere's (which scales the thickness its chord adds). A particle with fewer than
+    ``FEW_NEIGHBOURS`` is a drop: a sphere of its volume, or on the floor (y = ``floor_y_m``) a level disc.
+    """
 
-    def __init__(self, capacity: int, radius_m: float, spacing_m: float):
+    def __init__(self, capacity: int, radius_m: float, spacing_m: float, floor_y_m: float = -math.inf):
         self.capacity = max(int(capacity), 1)
         self.point = ti.Vector.field(3, ti.f32, shape=self.capacity)
         """The particles' positions, copied: the neighbour walk reads them from here."""
@@ -243,8 +252,15 @@ class Ellipsoids:
         self.inverse = ti.Matrix.field(3, 3, ti.f32, shape=self.capacity)
         self.reach = ti.field(ti.f32, shape=self.capacity)
         self.chord = ti.field(ti.f32, shape=self.capacity)
-        self.constants = scene_constants(radius=float(radius_m), drop=DROP_RADIUS_SPACINGS * float(spacing_m))
-        """The sphere's radius and a drop's, m (data: another spacing compiles nothing)."""
+        spacing = float(spacing_m)
+        self.constants = scene_constants(
+            radius=float(radius_m),
+            drop=DROP_RADIUS_SPACINGS * spacing,
+            on_floor=max(float(floor_y_m), -1e30) + ON_FLOOR_SPACINGS * spacing,
+            puddle=(PUDDLE_RADIUS_SPACINGS * spacing, PUDDLE_HALF_THICKNESS_SPACINGS * spacing),
+        )
+        """The sphere's radius and a drop's, the height below which a drop rests on the floor, and a puddle's
+        radius and half-thickness, m (data: another spacing compiles nothing)."""
 
     @ti.kernel
     def spheres(self, x: ti.template(), count: ti.i32):
@@ -275,7 +291,8 @@ class Ellipsoids:
         positions ``x``."""
         for i in range(count):
             self.point[i] = x[i]
-        radius, drop = self.constants[None].radius, self.constants[None].drop
+        c = self.constants[None]
+        radius, drop = c.radius, c.drop
         for i in range(count):
             # The particle itself (w = 1, offset 0), then its neighbours; offsets from x_i keep float32's
             # digits for the covariance (positions are metres, offsets a few centimetres).
@@ -303,6 +320,11 @@ class Ellipsoids:
                     inverse = ti.Matrix([[1.0 / a[0], 0.0, 0.0], [0.0, 1.0 / a[1], 0.0], [0.0, 0.0, 1.0 / a[2]]])
                     inverse = inverse @ axes.transpose()
                     reach, chord = ti.max(a[0], a[1], a[2]), 1.0
+            elif self.point[i].y < c.on_floor:  # a drop on the floor: a puddle of its volume, as thick anywhere
+                inverse = ti.Matrix(
+                    [[1.0 / c.puddle[0], 0.0, 0.0], [0.0, 1.0 / c.puddle[1], 0.0], [0.0, 0.0, 1.0 / c.puddle[0]]]
+                )
+                reach = c.puddle[0]
             self.centre[i] = centre
             self.inverse[i] = inverse
             self.reach[i] = reach

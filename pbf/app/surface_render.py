@@ -140,6 +140,7 @@ class SurfaceRenderer:
         self.width, self.height = int(width_px), int(height_px)
         self.coarse_width, self.coarse_height = self.width // COARSE, self.height // COARSE
         self.spacing = float(spacing_m)
+        self.floor_y = float(floor_y_m)
         self.radius = SPLAT_RADIUS_SPACINGS * self.spacing
         self.quantum = self.spacing / THICKNESS_STEPS_PER_SPACING
         """The thickness sum's step, m (a fixed-point unit)."""
@@ -885,7 +886,7 @@ class SurfaceRenderer:
         self._clear()
         if count:
             if self.splats is None or self.splats.capacity < positions.shape[0]:
-                self.splats = Ellipsoids(positions.shape[0], self.radius, self.spacing)
+                self.splats = Ellipsoids(positions.shape[0], self.radius, self.spacing, self.floor_y)
                 self.splat_rows = ti.Vector.field(2, ti.i32, shape=self.splats.capacity)
             self.splats.update(positions, count, neighbourhood, velocities, self.exposure)
         if count and self.per_item:
