@@ -171,12 +171,8 @@ class Container:
         self.tables = tables
         # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r.
         self.constants = scene_constants(
-            radius=params.particle_radius_m,
-            lower=tuple(params.lower_m),
-            upper=tuple(params.upper_m),
-            kernel_radius=params.kernel_radius_m,
+            **params.wall_constants(),
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
-            wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
         )
         # mirrored: the ghost behind these walls is the fluid's mirror image (solver.wall_mirror): the density
@@ -307,7 +303,7 @@ class Obstacles:
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
-        self.constants = scene_constants(radius=radius, count=count, wall_density=int(params.wall_density))
+        self.constants = scene_constants(**params.wall_constants(), count=count)
         lower, upper = np.zeros((slots, 3), np.float32), np.zeros((slots, 3), np.float32)
         # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
         exit_lower, exit_upper = np.zeros((slots, 3), np.int32), np.zeros((slots, 3), np.int32)
