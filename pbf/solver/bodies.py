@@ -687,7 +687,6 @@ class Bodies:
 
     @ti.func
     def project(self, p):
-        """p moved out of every body (:meth:`push_out`)."""
         q, _pusher = self.push_out(p)
         return q
 
