@@ -391,13 +391,10 @@ class Boundaries:
         for part in self.parts:
             part.move(clock_s, dt)
 
-    def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
+    def speed_limit_m_s(self, bodies_m_s: float) -> float:
         """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as
         already read from the device (``Diagnostics.frame_read``), instead of a read of its own."""
-        return max(
-            bodies_m_s if bodies_m_s is not None and part is self.bodies else part.speed_limit_m_s()
-            for part in self.parts
-        )
+        return max(bodies_m_s if part is self.bodies else part.speed_limit_m_s() for part in self.parts)
 
     @ti.func
     def project(self, p):
