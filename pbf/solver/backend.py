@@ -293,19 +293,15 @@ def choices(decisions_on_device: bool | None = None, gpu_blocks: bool | None = N
 
 
 @contextlib.contextmanager
-def _choosing(owner, name: str, value):
-    """``owner``'s choice ``name`` set to ``value`` for what is built (or first compiled) inside, then set back."""
-    before = getattr(owner, name)
-    setattr(owner, name, value)
+def light_compile():
+    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
+    config = compile_config()
+    before = config.advanced_optimization
+    config.advanced_optimization = False
     try:
         yield
     finally:
-        setattr(owner, name, before)
-
-
-def light_compile():
-    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
-    return _choosing(compile_config(), "advanced_optimization", False)
+        config.advanced_optimization = before
 
 
 def host_available_bytes() -> int:

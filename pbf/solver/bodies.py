@@ -129,15 +129,14 @@ class Bodies:
         self.tables = tables
         self.obstacles = obstacles
         self.count = bodies.count  # for the host side; kernels read constants[None].count
-        self.particle_radius = params.particle_radius_m
         self.kernel_radius = params.kernel_radius_m
         slots = allocation(self.count, 8)
         # The particles' arrays first, closed into a SNode tree of their own by a launch (the fill), then
         # the bodies' slots: the rigid step's kernels are then shared by scenes of any particle bucket.
-        self.block = max(64, math.ceil(capacity / 1024))
-        self.blocks = math.ceil(capacity / self.block)
-        self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
-        self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, self.blocks))
+        block = max(64, math.ceil(capacity / 1024))  # particles a thread sums the reaction of (_gather)
+        blocks = math.ceil(capacity / block)
+        self.partial_force = ti.Vector.field(3, ti.f32, shape=(slots, blocks))
+        self.partial_torque = ti.Vector.field(3, ti.f32, shape=(slots, blocks))
         self.shift = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i: x*_i's move by the bodies' collision
         self.shift_before = ti.Vector.field(3, ti.f32, shape=capacity)  # D_i as the iteration before left it
         self.pusher = ti.field(ti.i32, shape=capacity)  # the body that pushed i last (−1: none) takes D_i
@@ -160,24 +159,18 @@ class Bodies:
         self.bounding = ti.field(ti.f32, shape=slots)  # bounding sphere's radius about the centre, m
         self.fastest = ti.field(ti.f32, shape=())  # speed_limit_m_s, kept by each launch that changes it
         pairs = [(a, b) for a in range(self.count) for b in range(a + 1, self.count)]
-        self.pairs = len(pairs)
-        pair_slots = allocation(self.pairs, 8)
+        pair_slots = allocation(len(pairs), 8)
         self.pair_first = ti.field(ti.i32, shape=pair_slots)  # the pairs a < b in order (_contacts)
         self.pair_second = ti.field(ti.i32, shape=pair_slots)
-        self.static_candidates = CONTAINER_CANDIDATES + CORNERS * obstacles.count
         self.constants = scene_constants(
+            **params.wall_constants(),
             count=self.count,
-            pairs=self.pairs,
-            static_candidates=self.static_candidates,
-            block=self.block,
-            blocks=self.blocks,
-            lower=tuple(float(v) for v in params.lower_m),
-            upper=tuple(float(v) for v in params.upper_m),
-            particle_radius=float(self.particle_radius),
-            wall_margin=0.99 * float(self.particle_radius),  # how far inside the walls a way out of a body ends (_exit)
-            kernel_radius=float(self.kernel_radius),
+            pairs=len(pairs),
+            static_candidates=CONTAINER_CANDIDATES + CORNERS * obstacles.count,
+            block=block,
+            blocks=blocks,
+            wall_margin=0.99 * float(params.particle_radius_m),  # how far inside the walls a way out ends (_exit)
             volume=float(bodies.particle_volume_m3),
-            wall_density=int(params.wall_density),
         )
         rows = np.zeros((slots, 9), np.float32)  # sphere, half extents, 1/mass, inertia, bounding radius
         for b, (shape, extents) in enumerate(zip(bodies.shapes, bodies.half_extents_m)):
@@ -327,12 +320,12 @@ class Bodies:
     def _rest_reach(self):
         # Not ``reach.fill(number)``: Taichi's fill compiles its value into the kernel.
         for b in range(self.constants[None].count):
-            self.reach[b] = COLLISION_AT_REST * self.constants[None].particle_radius
+            self.reach[b] = COLLISION_AT_REST * self.constants[None].radius
 
     @ti.func
     def collision_reach(self, b, dt):
         """How far outside body b the collision keeps particle centres this substep (COLLISION_GIVE)."""
-        r = self.constants[None].particle_radius
+        r = self.constants[None].radius
         return ti.max(COLLISION_MOVING * r, COLLISION_AT_REST * r - COLLISION_GIVE * self.fastest_point(b) * dt)
 
     @ti.func
@@ -694,7 +687,6 @@ class Bodies:
 
     @ti.func
     def project(self, p):
-        """p moved out of every body (:meth:`push_out`)."""
         q, _pusher = self.push_out(p)
         return q
 

@@ -171,12 +171,8 @@ class Container:
         self.tables = tables
         # mirror_reach: a wall's mirror images come within h of a particle only if it is closer than h − r.
         self.constants = scene_constants(
-            radius=params.particle_radius_m,
-            lower=tuple(params.lower_m),
-            upper=tuple(params.upper_m),
-            kernel_radius=params.kernel_radius_m,
+            **params.wall_constants(),
             mirror_reach=params.kernel_radius_m - params.particle_radius_m,
-            wall_density=int(params.wall_density),
             wave_maker=int(params.piston_stroke_m > 0.0),
         )
         # mirrored: the ghost behind these walls is the fluid's mirror image (solver.wall_mirror): the density
@@ -202,16 +198,14 @@ class Container:
         """The piston's largest speed, π S / T (0 without a wave maker): the CFL limit counts it."""
         return math.pi * self.piston_stroke_m / self.piston_period_s if self.wave_maker else 0.0
 
-    def move(self, piston_time_s: float, dt: float = 0.0) -> tuple[float, float]:
+    def move(self, piston_time_s: float, dt: float = 0.0) -> None:
         """Place moving walls where they stand at the end of the coming substep of ``dt`` (where x* is
-        projected: a particle the piston pushes leaves with its velocity). Returns its place and velocity."""
-        if not self.wave_maker:
-            return self._piston_x_host, 0.0
-        position = self.piston_position_m(piston_time_s)
-        velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
-        self._launch_place(position, velocity)
-        self._piston_x_host = float(np.float32(position))
-        return position, velocity
+        projected: a particle the piston pushes leaves with its velocity)."""
+        if self.wave_maker:
+            position = self.piston_position_m(piston_time_s)
+            velocity = (position - self._piston_x_host) / dt if dt > 0.0 else 0.0
+            self._launch_place(position, velocity)
+            self._piston_x_host = float(np.float32(position))
 
     @ti.kernel
     def _place(self, position: ti.f32, velocity: ti.f32):
@@ -307,7 +301,7 @@ class Obstacles:
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
-        self.constants = scene_constants(radius=radius, count=count, wall_density=int(params.wall_density))
+        self.constants = scene_constants(**params.wall_constants(), count=count)
         lower, upper = np.zeros((slots, 3), np.float32), np.zeros((slots, 3), np.float32)
         # A face flush with a container wall is no way out of an obstacle: collision never pushes there.
         exit_lower, exit_upper = np.zeros((slots, 3), np.int32), np.zeros((slots, 3), np.int32)
@@ -391,20 +385,16 @@ class Boundaries:
             self.bodies = Bodies(self.params, self.tables, self.obstacles, capacity)
             self.parts += (self.bodies,)
 
-    def move(self, clock_s: float, dt: float = 0.0) -> tuple[float, float]:
+    def move(self, clock_s: float, dt: float = 0.0) -> None:
         """Place moving boundaries where they stand at the end of the coming substep of ``dt``
-        (``clock_s``: the wave maker's clock). Returns the piston's place and velocity."""
-        for part in self.parts[1:]:
+        (``clock_s``: the wave maker's clock)."""
+        for part in self.parts:
             part.move(clock_s, dt)
-        return self.container.move(clock_s, dt)
 
-    def speed_limit_m_s(self, bodies_m_s: float | None = None) -> float:
+    def speed_limit_m_s(self, bodies_m_s: float) -> float:
         """The fastest any boundary moves (the CFL limit counts it); ``bodies_m_s``: the bodies' part as
         already read from the device (``Diagnostics.frame_read``), instead of a read of its own."""
-        return max(
-            bodies_m_s if bodies_m_s is not None and part is self.bodies else part.speed_limit_m_s()
-            for part in self.parts
-        )
+        return max(bodies_m_s if part is self.bodies else part.speed_limit_m_s() for part in self.parts)
 
     @ti.func
     def project(self, p):
@@ -454,7 +444,6 @@ class Boundaries:
 
     @ti.func
     def mirror_walls(self, p):
-        """The walls whose ghost is the fluid's mirror image near p (``Container.mirror_walls``)."""
         return self.container.mirror_walls(p)
 
     @ti.func

@@ -241,17 +241,13 @@ class DensityConstraint:
         psi = 0.0
         cap = -2.0 * self.plain_error[i]
         if self.constants[None].surface_density and cap > SURFACE_SKIP:
-            (surface_offset, surface_slope, surface_top) = (
-                self.constants[None].surface_offset,
-                self.constants[None].surface_slope,
-                self.constants[None].surface_top,
-            )
             h, volume, scale = self.particle_constants()
             smoothed = volume * scaled_kernel(0.0, scale) * self.colour_gradient[i]
             p = ti.static(named(x=x, xi=x[i], volume=volume, scale=scale, smoothed=smoothed))
             self.grid.for_each_neighbour(i, neighbours, self.colour_pair, p)
-            u = ti.min(ti.max((smoothed.norm() - surface_offset) * surface_slope, 0.0), 1.0)
-            psi = ti.min(surface_top * u * u * (3.0 - 2.0 * u), cap)
+            offset, slope = self.constants[None].surface_offset, self.constants[None].surface_slope
+            u = ti.min(ti.max((smoothed.norm() - offset) * slope, 0.0), 1.0)
+            psi = ti.min(self.constants[None].surface_top * u * u * (3.0 - 2.0 * u), cap)
         return psi
 
     @ti.func
@@ -305,7 +301,6 @@ class DensityConstraint:
 
     @ti.func
     def correction_pair(self, i, j, p: ti.template()):
-        """Pair (i, j)'s term into Δx_i."""
         p.dx += self.correction_term(j, p)
 
     @ti.func

@@ -38,13 +38,12 @@ LAYERS_PER_LAUNCH = 16
 class Emitters:
     """Appends the layers due on the device; a drowned one (water within s/2 of a site) is skipped."""
 
-    def __init__(self, emitters, spacing_m: float, state, grid=None, capacity: int | None = None):
+    def __init__(self, emitters, spacing_m: float, state, grid, capacity: int):
         self.emitters = emitters
         self.spacing = spacing_m
         self.state = state
-        self.capacity = state.capacity if capacity is None else min(int(capacity), state.capacity)  # the budget
-        self.grid = grid  # the last sort's grid, to find water at a nozzle (None: no check)
-        self.checks_water = grid is not None
+        self.capacity = min(int(capacity), state.capacity)  # the budget
+        self.grid = grid  # the last sort's grid, to find water at a nozzle
         self.sites = [nozzle_sites(e, spacing_m) for e in emitters]
         self.emitted = [0] * len(emitters)  # layers each emitter has added so far
         self.offsets = [0, *itertools.accumulate(len(sites) for sites in self.sites)]  # into site_offsets
@@ -99,10 +98,7 @@ class Emitters:
             spacing = self.constants[None].spacing
             radius = 0.5 * spacing
             p = centre + (travelled - j * spacing) * direction + self.site_offsets[first_site + k]
-            found = 0
-            if ti.static(self.checks_water):
-                found = self._water_within(p, radius)
-            self.taken[j * sites + k] = found
+            self.taken[j * sites + k] = self._water_within(p, radius)
         for j in range(layers):
             found = 0
             for k in range(sites):

@@ -102,13 +102,8 @@ class NeighbourGrid:
     @ti.func
     def cell_of(self, p):
         """Integer cell coordinates of position p, clamped to the grid (monotone, so exactness holds)."""
-        (lower, inverse_cell_size, resolution) = (
-            self.constants[None].lower,
-            self.constants[None].inverse_cell_size,
-            self.constants[None].resolution,
-        )
-        c = ti.cast(ti.floor((p - lower) * inverse_cell_size), ti.i32)
-        return ti.max(0, ti.min(c, resolution - 1))
+        c = ti.cast(ti.floor((p - self.constants[None].lower) * self.constants[None].inverse_cell_size), ti.i32)
+        return ti.max(0, ti.min(c, self.constants[None].resolution - 1))
 
     @ti.func
     def linear(self, c):

@@ -26,7 +26,6 @@ class Integrator:
 
     @ti.func
     def advance_particle(self, dt, gravity, i):
-        """v_i ← v_i + Δt g, then :meth:`predict_particle`."""
         self.state.v[i] = self.state.v[i] + dt * gravity
         return self.predict_particle(dt, i)
 

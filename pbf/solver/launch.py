@@ -150,23 +150,18 @@ class Launcher:
         )
         self._primal = primal if direct else None  # Taichi's kernel; None: every call is the public one
         self._owner = owner
-        self._name = primal.func.__qualname__ if direct else ""
-        # The call site's parameters and its template arguments' places (the owner, ``self``, not counted).
-        self._names = tuple(inspect.signature(primal.func).parameters)[1:] if direct else ()
-        self._templates = tuple(i - 1 for i in primal.template_slot_locations if i > 0) if direct else ()
-        # Ndarray arguments select a variant by element type and dimensions (Taichi's features of them).
-        self._arrays = (
-            tuple(
-                i - 1
-                for i, argument in enumerate(primal.arguments)
-                if i > 0 and isinstance(argument.annotation, NdarrayType)
-            )
-            if direct
-            else ()
-        )
-        self._setters = _argument_setters(primal) if direct else None
-        self._count = len(primal.arguments) - 1 if direct else 0  # the call site's arguments (not the owner)
         self._variants: dict = {}  # key → (compiled kernel, its template arguments kept alive, launch data)
+        if not direct:  # the rest is read only by a direct launch
+            return
+        self._name = primal.func.__qualname__
+        # The call site's parameters and its template arguments' places (the owner, ``self``, not counted).
+        self._names = tuple(inspect.signature(primal.func).parameters)[1:]
+        self._templates = tuple(i - 1 for i in primal.template_slot_locations if i > 0)
+        # Ndarray arguments select a variant by element type and dimensions (Taichi's features of them).
+        arguments = enumerate(primal.arguments)
+        self._arrays = tuple(i - 1 for i, a in arguments if i > 0 and isinstance(a.annotation, NdarrayType))
+        self._setters = _argument_setters(primal)
+        self._count = len(primal.arguments) - 1  # the call site's arguments (not the owner)
 
     def _in_order(self, args: tuple, kwargs: dict) -> tuple | None:
         """The arguments by position; None where they do not fill the parameters once each."""

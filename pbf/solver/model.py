@@ -166,6 +166,16 @@ class BoundaryParams:
     bodies: BodyParams = BodyParams()
     """The rigid bodies (none: compiled out)."""
 
+    def wall_constants(self) -> dict:
+        """The container's numbers every boundary part reads as data (``pbf.solver.scene_constants``)."""
+        return dict(
+            radius=float(self.particle_radius_m),
+            lower=tuple(float(v) for v in self.lower_m),
+            upper=tuple(float(v) for v in self.upper_m),
+            kernel_radius=float(self.kernel_radius_m),
+            wall_density=int(self.wall_density),
+        )
+
 
 @dataclass(frozen=True)
 class DensityParams:

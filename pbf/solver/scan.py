@@ -35,14 +35,6 @@ CPU_SCAN_BLOCKS = 256
 """The prefix sum's CPU_BLOCKS: few enough that each block of the pass down adds the sums before its own."""
 
 
-def block_sizes(length: int, blocks: int = CPU_BLOCKS, gpu: bool = False) -> tuple[int, int]:
-    """Entries per block at level 0 and above it: on the CPU few long blocks (a level is a task), in a GPU's
-    blocks (``gpu``, ``pbf.solver.backend.Choices.gpu_blocks``) 32 (a long block idles thousands of threads)."""
-    if gpu:
-        return GPU_BLOCK, GPU_BLOCK
-    return max(64, math.ceil(length / blocks)), blocks
-
-
 class Tree:
     """The static shape of a block tree over ``length`` entries (block sizes, each level's length and
     offset in one scratch field): it never depends on the live count, so a result depends on the values."""
@@ -50,7 +42,10 @@ class Tree:
     def __init__(self, length: int, block: int | None, cpu_blocks: int, top: int, gpu: bool):
         """``top``: the most entries the top level may hold as one block (:data:`GPU_SCAN_TOP`)."""
         self.length = max(int(length), 1)
-        first, above = block_sizes(self.length, cpu_blocks, gpu) if block is None else (block, block)
+        if block is not None or gpu:  # in a GPU's blocks (``Choices.gpu_blocks``): a long one idles threads
+            first = above = block or GPU_BLOCK
+        else:  # on the CPU few long blocks at level 0 and above it (a level is a task)
+            first, above = max(64, math.ceil(self.length / cpu_blocks)), cpu_blocks
         self.blocks = [first]
         self.lengths = [self.length]
         while self.lengths[-1] > (first if len(self.lengths) == 1 else max(above, top)):

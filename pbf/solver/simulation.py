@@ -238,14 +238,15 @@ class Simulation:
 
     def snapshot(self) -> Snapshot:
         """What :meth:`restore` takes: the particles' kept fields (creation order), clocks, emitters, bodies."""
+        kept = self.state.kept_in_creation_order()  # x, v and the other kept fields in one read
         return Snapshot(
-            self.positions(),
-            self.velocities(),
+            kept.pop("x"),
+            kept.pop("v"),
             self.time_s,
             self.frame,
             tuple(self.emitters.emitted),
             self.piston_time_s,
-            self.state.kept_fields(),
+            kept,
             None if self.bodies is None else self.bodies.state(),
         )
 

@@ -40,13 +40,11 @@ def scaled_kernel_and_gradient(r: ti.template(), k):
 
 @ti.func
 def kernel(r2: ti.f32, h: ti.f32) -> ti.f32:
-    """W(r, h) from r² (:func:`scaled_kernel` with its scale)."""
     return scaled_kernel(r2, kernel_scale(h))
 
 
 @ti.func
 def kernel_and_gradient(r: ti.template(), h: ti.f32):
-    """(W, ∇W) at offset r (:func:`scaled_kernel_and_gradient` with its scale)."""
     return scaled_kernel_and_gradient(r, kernel_scale(h))
 
 

@@ -54,8 +54,6 @@ PARTICLE_FIELDS = (
     ),
 )
 """The particles' quantities, in the order the sort carries them."""
-SNAPSHOT_NAMES = {"x": "positions_m", "v": "velocities_m_s"}
-"""Kept fields a :class:`Snapshot` holds under their own name; the others are in its ``fields``."""
 
 
 @dataclass(frozen=True)
@@ -82,9 +80,9 @@ class Snapshot:
 class State:
     """A (capacity,) field per :data:`PARTICLE_FIELDS` entry; slots below ``active[None]`` hold the live ones."""
 
-    def __init__(self, capacity: int, on_device: bool, fields=PARTICLE_FIELDS):
+    def __init__(self, capacity: int, on_device: bool):
         self.capacity = capacity
-        self.fields = tuple(fields)
+        self.fields = PARTICLE_FIELDS
         self.active = ti.field(ti.i32, shape=())
         self.loop_bound = capacity if on_device else self.active
         """What loops over the live particles run to: on a GPU's path (``on_device``,
@@ -142,7 +140,6 @@ class State:
         return tuple(self._carried)
 
     def scratch_of(self, values):
-        """The scratch the sort gathers the carried array ``values`` into."""
         return next(scratch for field, scratch in self._carried if field is values)
 
     @ti.func
@@ -197,14 +194,7 @@ class State:
         }
 
     def positions(self) -> np.ndarray:
-        """(n, 3) float32 positions (m) in creation order."""
         return self.kept_in_creation_order()["x"]
 
     def velocities(self) -> np.ndarray:
-        """(n, 3) float32 velocities (m/s) in creation order."""
         return self.kept_in_creation_order()["v"]
-
-    def kept_fields(self) -> dict:
-        """Every kept field but x and v, by name, in creation order (a Snapshot's ``fields``)."""
-        kept = self.kept_in_creation_order()
-        return {name: values for name, values in kept.items() if name not in SNAPSHOT_NAMES}
