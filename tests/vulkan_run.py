@@ -238,6 +238,14 @@ def render_task(out: dict) -> None:
     sim.restore(Snapshot(state["positions"], state["velocities"], 0.0, 0))
     for style in ("particles", "surface"):
         out[f"render_{style}"] = SceneRenderer(sim, *RENDER_SIZE, style=style).frame()
+    # White water on this backend's path (a GPU's: per-item sprites, the block tree's prefix sums): it starts at
+    # the snapshot's frame and emits over the next; the frame drawn twice.
+    renderer = SceneRenderer(sim, *RENDER_SIZE, style="surface")
+    renderer.frame()
+    sim.step()
+    out["render_white"] = renderer.frame()
+    out["render_white_again"] = renderer.frame()
+    out["white_counts"] = np.array(renderer.white_water.counts())
 
 
 TASKS = {
