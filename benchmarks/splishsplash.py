@@ -3,16 +3,15 @@
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash                    # the default rows
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --sloshing         # the standing wave's decay
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --methods dfsph \\
-        --param maxError=0.01 --param "maxError=0.1,maxIterations=50" \\
-        --ours "substeps=4,iterations=4" "substeps=4,target=0.001,max_iterations=30" --seconds 0.25
+        --ours "substeps=4,iterations=4" "substeps=4,target=0.001,max_iterations=30"
 
 SPlisHSPlasH is installed apart (it needs NumPy 1; its bundled libGLdispatch clashes with the system's,
 so it runs as its own process with the system library preloaded): ``python3 -m venv /tmp/sphvenv &&
 /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``.
 
-Both run the ``dam_break`` preset for ``--seconds``, measured at its 60 frames a second. SPlisHSPlasH:
-each ``--methods`` (dfsph: simulationMethod 4; pbf: 2) with each ``--param`` set over its shipped
-stopping rules (maxError in percent), a fixed step ``--dt-ms``, Akinci boundary particles on the box,
+Both run the ``dam_break`` preset for 1 s, measured at its 60 frames a second. SPlisHSPlasH: each
+``--methods`` (dfsph: simulationMethod 4; pbf: 2) at its shipped stopping rules with maxError 0.01% and
+0.1% (MAX_ERRORS), a fixed step of 4.17 ms (DT_S), Akinci boundary particles on the box,
 XSPH as ours, no viscosity or vorticity; its block starts one spacing inside the preset's, as it places
 particles. Its time is its own mean "SimStep", its iterations its own counters. The density error of
 every run is the mean over frames of the mean over particles of max(ρ/ρ0 − 1, 0), and the max of the
@@ -40,6 +39,7 @@ import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -50,6 +50,9 @@ from pbf.study.common import timed
 
 SYSTEM_GLDISPATCH = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"
 PRESET = "dam_break"
+SECONDS = 1.0  # simulated, every run
+DT_S = 1 / 240  # SPlisHSPlasH's fixed step: four a frame, our preset's substeps
+MAX_ERRORS = (0.01, 0.1)  # SPlisHSPlasH's variants: its maxError, percent (its default, and ten times looser)
 SPLASH_METHODS = {  # name: (simulationMethod, its scene block and log prefix, its shipped stopping rules)
     "dfsph": (4, "DFSPH", dict(minIterations=2, maxIterations=100, maxError=0.01, enableDivergenceSolver=True,
                                maxIterationsV=100, maxErrorV=0.1)),
@@ -250,14 +253,14 @@ def splash_density(x, fluid_volume: float, boundary, boundary_volume, h: float, 
     ]
 
 
-def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, seconds: float, threads: int) -> Row:
+def run_splishsplash(splash: Path, method: str, params: dict, threads: int) -> Row:
     scene = load_scene(PRESET)
     spacing, block = scene.fluid.spacing_m, scene.fluid.blocks[0]
     lower, upper = np.array(scene.container.min_m), np.array(scene.container.max_m)
     name = SPLASH_METHODS[method][1]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        config = splash_config(splash, method, params, dt_s, seconds, scene, (lower, upper),
+        config = splash_config(splash, method, params, DT_S, SECONDS, scene, (lower, upper),
                                (block.min_m, np.array(block.max_m) + spacing))  # fmt: skip
         (tmp / "scene.json").write_text(json.dumps(config, indent=1))
         run_splash_python(splash, SPLASH_PROBE, [tmp / "scene.json", tmp / "probe", tmp / "probe.npz",
@@ -294,10 +297,10 @@ def run_splishsplash(splash: Path, method: str, params: dict, dt_s: float, secon
             errors.append(np.maximum(rho / rho0 - 1.0, 0.0))
             again.append(np.maximum(ratios[0] - 1.0, 0.0))
             gaps.append([np.abs(ratio * rho0 - rho).max() / rho0 for ratio in ratios])
-    shown = ",".join(f"{k}={v}" for k, v in params.items() if k == "maxError" or v != SPLASH_METHODS[method][2][k])
     row = Row(
-        f"SPlisHSPlasH {name} {shown}", dt_s * 1e3, round(total_time / mean_dt), iterations, step_ms,
-        sum_ms / 1e3 / total_time, float(np.mean([e.mean() for e in errors])), float(max(e.max() for e in errors)),
+        f"SPlisHSPlasH {name} maxError={params['maxError']}", DT_S * 1e3, round(total_time / mean_dt), iterations,
+        step_ms, sum_ms / 1e3 / total_time, float(np.mean([e.mean() for e in errors])),
+        float(max(e.max() for e in errors)),
         number(rf"Average number: {name} - iterationsV"), float(np.mean([e.mean() for e in again])),
         float(max(e.max() for e in again)), len(left),
     )  # fmt: skip
@@ -350,14 +353,14 @@ def our_scene(spec: str):
     return load_scene(PRESET, overrides)
 
 
-def run_ours(spec: str, seconds: float) -> Row:
+def run_ours(spec: str) -> Row:
     scene, counter = our_scene(spec), IterationCount()
     sim = counter.sim = Simulation(scene, quiet=True, hook=counter)
     sim.step(2)  # compiles every kernel (both position buffers' orders); the run starts again from rest
     sim.reset()
     counter.iterations = counter.substeps = 0
     frame_s, means, maxima = [], [], []
-    for _ in range(round(seconds / scene.time.frame_dt_s)):
+    for _ in range(round(SECONDS / scene.time.frame_dt_s)):
         frame_s.append(timed(sim.step))  # the step alone, as SPlisHSPlasH's SimStep leaves out its exports
         stats = sim.stats()
         means.append(stats["mean_density_error"])
@@ -405,13 +408,7 @@ def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> 
     )
     config["Configuration"]["enableVTKExport"] = False
     config["RigidBodies"][0]["mapResolution"] = [40, 30, 20]
-    mode = {
-        "k": k,
-        "omega": omega,
-        "depth": float(size[1]),
-        "lower": list(water_lower - spacing / 2),
-        "amplitude": 0.01,
-    }
+    mode = dict(k=k, omega=omega, depth=float(size[1]), lower=list(water_lower - spacing / 2), amplitude=0.01)
     with tempfile.TemporaryDirectory() as tmp:
         path, result = Path(tmp) / "sloshing.json", Path(tmp) / "amplitudes.npy"
         path.write_text(json.dumps(config))
@@ -447,70 +444,34 @@ def line(r: Row) -> str:
     )
 
 
-def parse_param_sets(values: list[str] | None) -> list[dict]:
-    """Each ``--param`` is one SPlisHSPlasH variant: comma-separated KEY=VALUE of the methods' blocks."""
-    known = set().union(*(defaults for _, _, defaults in SPLASH_METHODS.values()))
-    sets = []
-    for text in values or ["maxError=0.01", "maxError=0.1"]:
-        variant = {}
-        for item in filter(None, (part.strip() for part in text.split(","))):
-            key, sep, value = (part.strip() for part in item.partition("="))
-            if not sep or key not in known:
-                raise ValueError(
-                    f"--param {text!r}: {item!r}; expected KEY=VALUE, KEY one of {', '.join(sorted(known))}"
-                )
-            variant[key] = json.loads(value.lower()) if value.lower() in ("true", "false") else (
-                int(value) if re.fullmatch(r"[-+]?\d+", value) else float(value))  # fmt: skip
-        sets.append(variant)
-    return sets
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--splash", type=Path, required=True, help="the splash script of a pysplishsplash 2.19 install")
     parser.add_argument("--methods", nargs="+", choices=sorted(SPLASH_METHODS), default=["dfsph", "pbf"])
-    parser.add_argument(
-        "--param",
-        action="append",
-        metavar="KEY=VALUE[,KEY=VALUE]",
-        help="one SPlisHSPlasH variant each (default: maxError=0.01 and maxError=0.1, in percent)",
-    )
-    parser.add_argument(
-        "--ours",
-        nargs="*",
-        default=["substeps=4,iterations=4", "substeps=2,iterations=4", "preset"],
-        help="our settings, each comma-separated overrides of the preset, or 'preset'",
-    )
-    parser.add_argument("--dt-ms", type=float, default=4.1667, help="SPlisHSPlasH's fixed step (default 4.1667)")
-    parser.add_argument("--seconds", type=float, default=1.0, help="simulated time of every run (default 1)")
+    ours = ["substeps=4,iterations=4", "substeps=2,iterations=4", "preset"]
+    parser.add_argument("--ours", nargs="*", default=ours, help="our settings: comma-separated overrides, or 'preset'")
     parser.add_argument("--threads", type=int, default=2, help="CPU threads for both simulators (default 2)")
-    parser.add_argument("--repeats", type=int, default=1, help="runs of each row, alternating; medians (default 1)")
+    parser.add_argument("--repeats", type=int, default=1, help="runs of each row, alternating; medians")
     parser.add_argument("--sloshing", action="store_true", help="instead: the standing wave's decay a period")
-    args = parser.parse_args(argv)  # fmt: skip
+    args = parser.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)
     if not args.splash.exists():
         parser.error(f"--splash: {args.splash} does not exist; install SPlisHSPlasH apart (see --help's module doc)")
-    if args.threads < 1 or args.repeats < 1 or args.seconds <= 0:
-        parser.error("--threads and --repeats must be positive integers, --seconds positive")
+    if args.threads < 1 or args.repeats < 1:
+        parser.error("--threads and --repeats: at least 1")
     try:
-        param_sets = parse_param_sets(args.param)
         for spec in args.ours:
             our_scene(spec)
-    except (ValueError, SceneError) as error:
+    except SceneError as error:
         parser.error(str(error))
     start_backend("cpu", cpu_threads=args.threads)
     if args.sloshing:
         return sloshing_comparison(args.splash, args.methods, args.threads)
     started = time.perf_counter()
-    print(f"SPlisHSPlasH: {args.splash}; {args.threads} threads; {args.seconds:g} simulated s; Δt {args.dt_ms:g} ms")
-    jobs = []  # in the order they run, alternating over repeats
-    for method in args.methods:
-        defaults = SPLASH_METHODS[method][2]
-        for variant in param_sets:
-            params = {**defaults, **{k: v for k, v in variant.items() if k in defaults}}
-            jobs.append(lambda m=method, p=params: run_splishsplash(args.splash, m, p, args.dt_ms / 1e3, args.seconds,
-                                                                    args.threads))  # fmt: skip
-    jobs += [lambda s=spec: run_ours(s, args.seconds) for spec in args.ours]
+    print(f"SPlisHSPlasH: {args.splash}; {args.threads} threads; {SECONDS:g} simulated s; Δt {DT_S * 1e3:.4g} ms")
+    variants = [(method, {**SPLASH_METHODS[method][2], "maxError": e}) for method in args.methods for e in MAX_ERRORS]
+    jobs = [partial(run_splishsplash, args.splash, method, params, args.threads) for method, params in variants]
+    jobs += [partial(run_ours, spec) for spec in args.ours]  # in this order, alternating over repeats
     results = [[] for _ in jobs]
     for _ in range(args.repeats):
         for runs, job in zip(results, jobs):

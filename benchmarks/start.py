@@ -1,22 +1,20 @@
 """How long a user waits before the first frame: cold and warm starts of every preset, each a fresh process.
 
-    python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
+    python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu]
     python -m benchmarks.bench start --first-calls [--presets hydrostatic ...]
 
 A start is ``pbf PRESET --stats-only --frames 1`` in a new process, timed by its own "kernels ready in"
 line; the ``.tic`` files it adds to its Taichi offline cache folder are the kernels it compiled. Per
 preset, in a folder of its own: ``cold`` (emptied first), ``warm`` (again), ``spacing`` (10% larger:
-another particle count and grid); then, unless ``--no-shared``, every preset in order in one shared
-folder. ``--first-calls``: per preset, in a fresh process with an empty cache, the Simulation built
-with settling off and one substep, each kernel's first call timed (front end, compile, one run).
+another particle count and grid). ``--first-calls``: per preset, in a fresh process with an empty
+cache, the Simulation built with settling off and one substep, each kernel's first call timed (front
+end, compile, one run).
 """
 
 from __future__ import annotations
 
-import csv
 import os
 import re
-import shutil
 import statistics
 import subprocess
 import sys
@@ -131,15 +129,14 @@ def cell(result: dict) -> str:
     return f"{result['ready_s']:.1f} s ({result['compiled']})"
 
 
-def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | None) -> list[dict]:
+def run(presets: list[str], arch: str | None) -> list[dict]:
     """Every start of the module docstring, printed as a table as they finish; returns the rows."""
     rows = []
-    root = Path(tempfile.mkdtemp(prefix="pbf-start-"))
-    try:
+    with tempfile.TemporaryDirectory(prefix="pbf-start-") as root:
         print("ready time of each start, in brackets the kernels it compiled (0: all from the cache)")
         print(f"{'preset':<20} {'cold':>16} {'warm':>16} {'spacing x1.1':>16}", flush=True)
         for preset in presets:
-            folder = root / preset
+            folder = Path(root) / preset
             folder.mkdir()
             row = {"preset": preset}
             for name, overrides in (("cold", []), ("warm", []), ("spacing", [spacing_override(preset)])):
@@ -147,31 +144,7 @@ def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | Non
             cells = " ".join(f"{cell(row[name]):>16}" for name in ("cold", "warm", "spacing"))
             print(f"{preset:<20} {cells}", flush=True)
             rows.append(row)
-        if shared:
-            folder = root / "shared"
-            folder.mkdir()
-            print("\nevery preset in order, one shared cache folder, emptied first")
-            for row in rows:
-                row["shared"] = one_start(row["preset"], folder, arch, [])
-                print(f"{row['preset']:<20} {cell(row['shared']):>16}", flush=True)
-        ready, warm = ([row[name]["ready_s"] for row in rows if not row[name]["error"]] for name in ("cold", "warm"))
-        if ready and warm:
-            print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
-    finally:
-        shutil.rmtree(root, ignore_errors=True)
-    if csv_path is not None:
-        write_csv(rows, csv_path)
+    ready, warm = ([row[name]["ready_s"] for row in rows if not row[name]["error"]] for name in ("cold", "warm"))
+    if ready and warm:
+        print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
     return rows
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    """One line per preset and start: ready and wall seconds, kernels compiled, error."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(["preset", "start", "ready_s", "wall_s", "compiled", "error"])
-        for row in rows:
-            for name, r in ((name, row[name]) for name in ("cold", "warm", "spacing", "shared") if name in row):
-                writer.writerow(
-                    [row["preset"], name, f"{r['ready_s']:.2f}", f"{r['wall_s']:.2f}", r["compiled"], r["error"]]
-                )
