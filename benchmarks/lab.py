@@ -72,8 +72,8 @@ def spread(values, digits: int = 2) -> str:
 
 def markdown(header, rows) -> str:
     """A Markdown table as the docs quote it: the first column left-aligned, the figures right."""
-    lines = [header, ["---"] + ["---:"] * (len(header) - 1), *rows]
-    return "\n".join("| " + " | ".join(map(str, cells)) + " |" for cells in lines)
+    lines = ["| " + " | ".join(map(str, cells)) + " |" for cells in [header, *rows]]
+    return "\n".join([lines[0], "|---|" + "---:|" * (len(header) - 1), *lines[1:]])
 
 
 def medians(pairs) -> tuple[float, ...]:
