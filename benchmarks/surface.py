@@ -14,14 +14,18 @@ with the defaults and each ``--candidate`` in alternating order: the enclosed vo
 import argparse
 import dataclasses
 import statistics
-import time
+import sys
+from pathlib import Path
 
 import numpy as np
 
-from pbf.app.mesh import Mesh, reconstruct
-from pbf.scene import from_dict, load_scene
-from pbf.solver import Simulation, start_backend
-from pbf.study.common import scaled
+if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
+    sys.path.append(str(Path(__file__).resolve().parent.parent))
+from benchmarks.lab import spread, timed  # noqa: E402
+from pbf.app.mesh import Mesh, reconstruct  # noqa: E402
+from pbf.scene import from_dict, load_scene  # noqa: E402
+from pbf.solver import Simulation, start_backend  # noqa: E402
+from pbf.study.common import scaled  # noqa: E402
 
 SEED_PARTICLES = 8000
 RESTING_COLUMN = {
@@ -34,10 +38,10 @@ RESTING_COLUMN = {
 """The resting column of tests/test_mesh.py: 12 × 12 × 12 particles against five walls."""
 
 
-def timed_ms(function) -> tuple[float, object]:
-    started = time.perf_counter()
-    result = function()
-    return (time.perf_counter() - started) * 1e3, result
+def timed_ms(function, *args) -> tuple[float, object]:
+    """Wall ms of ``function(*args)``, and its result."""
+    (wall, _), result = timed(function, *args)
+    return wall * 1e3, result
 
 
 def measure(particles: int, frames: int, every: int) -> None:
@@ -48,15 +52,13 @@ def measure(particles: int, frames: int, every: int) -> None:
     for frame in range(10, frames + 1, every):
         sim.step(frame - sim.frame)
         positions = sim.positions()
-        elapsed, mesh = timed_ms(lambda: reconstruct(positions, scene))
+        elapsed, mesh = timed_ms(reconstruct, positions, scene)
         mesh_ms.append(elapsed)
         triangles.append(len(mesh.triangles))
-        parallel_ms.append(timed_ms(lambda: reconstruct(positions, parallel))[0])
-    median = statistics.median
+        parallel_ms.append(timed_ms(reconstruct, positions, parallel)[0])
     print(
-        f"{sim.particle_count:>9,} particles, {len(mesh_ms)} frames: mesh {median(mesh_ms):7.1f} ms "
-        f"(deterministic; {min(mesh_ms):.1f}-{max(mesh_ms):.1f}), {median(parallel_ms):7.1f} ms parallel "
-        f"subdomains, {median(triangles):,.0f} triangles"
+        f"{sim.particle_count:>9,} particles, {len(mesh_ms)} frames: mesh {spread(mesh_ms, 1)} ms (deterministic), "
+        f"{statistics.median(parallel_ms):7.1f} ms parallel subdomains, {statistics.median(triangles):,.0f} triangles"
     )
 
 
@@ -83,14 +85,11 @@ def measure_volume(particles: int, frames: int, every: int, candidates: list[str
         positions, cells = sim.positions(), {}
         water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
         for name, function in variants if round_number % 2 == 0 else variants[::-1]:
-            elapsed, mesh = timed_ms(lambda: function(positions, sim.scene))
+            elapsed, mesh = timed_ms(function, positions, sim.scene)
             ratio = mesh.enclosed_volume_m3() / water_m3
             cells[name] = f"{ratio:>{width}.3f}{' ' if mesh.is_closed() else '!'}"
-            if label != "rest":
-                for key, value in zip(
-                    figures[name], (ratio, elapsed, len(mesh.triangles), wall_share(mesh, sim.scene))
-                ):
-                    figures[name][key].append(value)
+            for key, value in zip(figures[name], (ratio, elapsed, len(mesh.triangles), wall_share(mesh, sim.scene))):
+                figures[name][key] += [value] if label != "rest" else []
         print(f"{label:>6}" + "".join(cells[name] for name, _ in variants))
 
     print("enclosed volume / water's volume (! where not closed)")
@@ -125,12 +124,11 @@ def main(argv=None) -> None:
     parser.add_argument("--sizes", type=int, nargs="+", help="particle counts (8000 64000; --volume: 8000)")
     parser.add_argument("--frames", type=int, default=90)
     parser.add_argument("--every", type=int, default=10)
-    parser.add_argument("--arch", default="cpu")
     parser.add_argument("--volume", action="store_true", help="the volume the mesh holds, per frame, instead")
     parser.add_argument("--candidate", action="append", default=[], metavar="'KEY=VALUE ...'",
                         help="with --volume: [surface] overrides, e.g. 'surface.iso_level=0.55'")  # fmt: skip
     args = parser.parse_args(argv)
-    start_backend(args.arch, quiet=False)
+    start_backend("cpu", quiet=False)
     for particles in args.sizes or ([SEED_PARTICLES] if args.volume else [SEED_PARTICLES, 64000]):
         if args.volume:
             measure_volume(particles, args.frames, args.every, args.candidate)
