@@ -57,14 +57,8 @@ def jiggle(sim, rng: np.random.Generator) -> None:
     sim.restore(replace(state, positions_m=(state.positions_m + noise).astype(np.float32)))
 
 
-PRESET_STATISTICS = (
-    "mean_density_error",
-    "max_density_error",
-    "max_speed_m_s",
-    "kinetic_energy_j",
-    "mean_neighbours",
-    "iterations",
-)
+PRESET_STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j",
+                     "mean_neighbours", "iterations")  # fmt: skip
 
 
 def presets(args) -> list[dict]:
