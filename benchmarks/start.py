@@ -50,12 +50,8 @@ def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str])
     wall = time.perf_counter() - began
     ready = READY.search(done.stdout)
     error = "" if done.returncode == 0 and ready else (done.stderr.strip().splitlines() or ["no output"])[-1]
-    return {
-        "wall_s": wall,
-        "ready_s": float(ready.group(1)) if ready else float("nan"),
-        "compiled": len(cached_kernels(folder) - before),
-        "error": error,
-    }
+    ready_s, compiled = float(ready.group(1)) if ready else float("nan"), len(cached_kernels(folder) - before)
+    return {"wall_s": wall, "ready_s": ready_s, "compiled": compiled, "error": error}
 
 
 FIRST_CALLS_SHOWN = 8  # kernels each ``--first-calls`` table lists
@@ -70,9 +66,8 @@ def first_calls(presets: list[str], arch: str | None) -> None:
             path = os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), root]))
             env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder, PYTHONPATH=path)
             try:
-                done = subprocess.run(
-                    [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
-                )
+                done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                                      timeout=TIMEOUT_S)  # fmt: skip
             except subprocess.TimeoutExpired:
                 print(f"{preset}: over {TIMEOUT_S} s\n", flush=True)
                 continue
@@ -107,10 +102,8 @@ def first_calls_here(preset: str, arch: str | None) -> None:
         sim.substep()
         ti.sync()
         total = time.perf_counter() - began
-    firsts, kernels = sum(seconds.values()), len(seconds)
-    print(
-        f"{preset}: built and one substep in {total:.2f} s, {firsts:.2f} s of it the first calls of {kernels} kernels"
-    )
+    firsts = f"{sum(seconds.values()):.2f} s of it the first calls of {len(seconds)} kernels"
+    print(f"{preset}: built and one substep in {total:.2f} s, {firsts}")
     for name, value in sorted(seconds.items(), key=lambda item: -item[1])[:FIRST_CALLS_SHOWN]:
         print(f"  {value:6.2f} s  {name}")
 
@@ -124,9 +117,7 @@ def spacing_override(preset: str) -> str:
 
 def cell(result: dict) -> str:
     """A table cell: ready time and kernels compiled, or why the start failed."""
-    if result["error"]:
-        return f"failed: {result['error'][:60]}"
-    return f"{result['ready_s']:.1f} s ({result['compiled']})"
+    return f"failed: {result['error'][:60]}" if result["error"] else f"{result['ready_s']:.1f} s ({result['compiled']})"
 
 
 def run(presets: list[str], arch: str | None) -> list[dict]:

@@ -63,24 +63,22 @@ def x_server_cpu_s() -> float | None:
 
 
 class Phases:
-    """Wall and process CPU time, in ms, of the phases of one frame."""
+    """Wall and process CPU time, in ms, of the phases of one frame: ``spent[phase] = (wall, cpu)``."""
 
     def __init__(self):
         self.spent = {}
 
     def timed(self, phase, function):
+        """``function`` wrapped to add its time to ``phase`` at each call."""
+
         def run(*args, **kwargs):
             clock = Clock()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                self.add(phase, *clock.lap())
+            result = function(*args, **kwargs)
+            wall, cpu = (1e3 * t for t in clock.lap())
+            self.spent[phase] = tuple(a + b for a, b in zip(self.spent.get(phase, (0.0, 0.0)), (wall, cpu)))
+            return result
 
         return run
-
-    def add(self, phase, wall_s, cpu_s):
-        w, c = self.spent.get(phase, (0.0, 0.0))
-        self.spent[phase] = (w + 1e3 * wall_s, c + 1e3 * cpu_s)
 
 
 def make_offscreen(gui_window) -> None:
@@ -114,29 +112,27 @@ def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | No
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
 
-    def step():
-        sim.step()
-        ti.sync()
+    def frame():
+        if viewer.advance():
+            step()
+        viewer.show()
 
     clock = Phases()
-    viewer.draw = clock.timed("draw", viewer.draw)
-    viewer.panel = clock.timed("panel", viewer.panel)
+    step = clock.timed("sim", lambda: (sim.step(), ti.sync()))
+    frame = clock.timed("frame", frame)
+    for phase in ("draw", "panel"):
+        setattr(viewer, phase, clock.timed(phase, getattr(viewer, phase)))
     viewer.window.show = clock.timed("show", viewer.window.show)
     rows = []
-    x_start = cpu_start = None
     viewer.show()
-    for frame in range(warmup + frames):
-        if frame == warmup:
+    for number in range(warmup + frames):
+        if number == warmup:
             x_start = None if offscreen else x_server_cpu_s()
             cpu_start, wall_start = time.process_time(), time.perf_counter()
         clock.spent = {}
-        wall, cpu = time.perf_counter(), time.process_time()
-        if viewer.advance():
-            clock.timed("sim", step)()
-        viewer.show()
-        clock.add("frame", time.perf_counter() - wall, time.process_time() - cpu)
-        if frame >= warmup:
-            rows.append(dict(clock.spent))
+        frame()
+        if number >= warmup:
+            rows.append(clock.spent)
     elapsed = time.perf_counter() - wall_start
     x_end = None if offscreen else x_server_cpu_s()
     result = {
