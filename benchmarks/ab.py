@@ -26,7 +26,7 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import CHECKOUT, export, revision, spread  # noqa: E402
+from benchmarks.lab import CHECKOUT, at_least, export, revision, spread  # noqa: E402
 
 TIMER = Path(__file__).resolve().parent / "substep_time.py"
 RUN_TIMEOUT_S = 3600
@@ -40,18 +40,18 @@ PRESET_ROW = re.compile(
 
 
 class Version:
-    """A version as given, the folder its package is imported from, and what its runs printed."""
+    """A version as given, the folder its package is imported from, and what its runs printed: by size
+    asked, the particles its scene holds and a round's ms a substep and host CPU ms; the preset's figures.
+    (Not a dataclass: the tests load this file as a module of no package, which dataclasses refuse.)"""
 
     def __init__(self, given: str, folder: Path, label: str):
         self.given, self.folder, self.label = given, folder, label
-        self.particles: dict[int, int] = {}
-        """size asked → the particles its scene holds"""
-        self.ms: dict[int, list[float]] = {}
-        """size asked → ms per substep, a round each"""
-        self.host_cpu_ms: dict[int, list[float]] = {}
-        self.frames_per_s: list[float] = []
-        self.substeps: list[float] = []
-        self.errors: list[float] = []
+        self.particles, self.ms, self.host_cpu_ms = {}, {}, {}
+        self.frames_per_s, self.substeps, self.errors = [], [], []
+
+
+class RunFailed(Exception):
+    """A version's run that did not print its table."""
 
 
 def is_package_folder(path: Path) -> bool:
@@ -63,18 +63,13 @@ def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentP
     found = []
     for given in given_versions:
         path = Path(given).expanduser()
-        if path.is_dir():
-            if not is_package_folder(path):
-                parser.error(f"version {given!r}: the folder holds no pbf/__init__.py; give a checkout of the project")
-            found.append((given, path.resolve(), None))
-            continue
-        commit = revision(given)
-        if commit is None:
-            parser.error(
-                f"version {given!r}: neither a folder nor a git revision of {CHECKOUT}; give a checkout's "
-                "folder or a commit, branch or tag"
-            )
-        found.append((given, None, commit))
+        if path.is_dir() and not is_package_folder(path):
+            parser.error(f"version {given!r}: the folder holds no pbf/__init__.py; give a checkout of the project")
+        commit = None if path.is_dir() else revision(given)
+        if not path.is_dir() and commit is None:
+            parser.error(f"version {given!r}: neither a folder nor a git revision of {CHECKOUT}; give a checkout's "
+                         "folder or a commit, branch or tag")  # fmt: skip
+        found.append((given, path.resolve() if commit is None else None, commit))
     versions, exported = [], {}
     for n, (given, folder, commit) in enumerate(found):
         if folder is None:
@@ -86,39 +81,28 @@ def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentP
             folder = exported[commit]
             if not is_package_folder(folder):
                 parser.error(f"version {given!r}: commit {commit[:12]} holds no pbf/__init__.py")
-        label = chr(ord("A") + n)
-        versions.append(Version(given, folder, label))
+        versions.append(Version(given, folder, chr(ord("A") + n)))
     return versions
 
 
 def run_once(version: Version, timer_args: list[str], workdir: Path) -> str:
     """One fresh process of substep_time.py with ``version``'s package; its standard output."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(version.folder)] + [p for p in [env.get("PYTHONPATH")] if p])
+    name = f"version {version.label} ({version.given})"
+    path = os.pathsep.join([str(version.folder)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
+    command = [sys.executable, str(TIMER), *timer_args]
     try:
-        done = subprocess.run(
-            [sys.executable, str(TIMER), *timer_args],
-            cwd=workdir,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=RUN_TIMEOUT_S,
-        )
+        done = subprocess.run(command, cwd=workdir, env={**os.environ, "PYTHONPATH": path}, capture_output=True,
+                              text=True, timeout=RUN_TIMEOUT_S)  # fmt: skip
     except subprocess.TimeoutExpired:
-        raise RunFailed(f"version {version.label} ({version.given}): its run took over {RUN_TIMEOUT_S} s") from None
+        raise RunFailed(f"{name}: its run took over {RUN_TIMEOUT_S} s") from None
     if done.returncode != 0:
         last = [line for line in (done.stderr or done.stdout).splitlines() if line.strip()][-1:] or ["no output"]
-        raise RunFailed(f"version {version.label} ({version.given}): its run failed: {last[0].strip()}")
+        raise RunFailed(f"{name}: its run failed: {last[0].strip()}")
     return done.stdout
 
 
-class RunFailed(Exception):
-    """A version's run that did not print its table."""
-
-
 def record(version: Version, output: str, sizes: list[int], preset: str | None) -> None:
-    rows = [SIZE_ROW.match(line) for line in output.splitlines()]
-    rows = [row for row in rows if row]
+    rows = [row for row in map(SIZE_ROW.match, output.splitlines()) if row]
     if len(rows) != len(sizes):
         raise RunFailed(f"version {version.label} ({version.given}): {len(rows)} size rows printed, not {len(sizes)}")
     for size, row in zip(sizes, rows):
@@ -129,9 +113,8 @@ def record(version: Version, output: str, sizes: list[int], preset: str | None) 
         found = PRESET_ROW.search(output)
         if found is None:
             raise RunFailed(f"version {version.label} ({version.given}): no frame rate printed for {preset}")
-        version.frames_per_s.append(float(found.group(1)))
-        version.substeps.append(float(found.group(2)))
-        version.errors.append(float(found.group(3)))
+        for figures, value in zip((version.frames_per_s, version.substeps, version.errors), found.groups()):
+            figures.append(float(value))
 
 
 def paired_ratio(values: list[float], base: list[float]) -> str:
@@ -139,7 +122,7 @@ def paired_ratio(values: list[float], base: list[float]) -> str:
     return spread(v / b for v, b in zip(values, base))
 
 
-def report(versions: list[Version], sizes: list[int], preset: str | None, args) -> None:
+def report(versions: list[Version], args) -> None:
     base = versions[0]
     print()
     for version in versions:
@@ -148,51 +131,36 @@ def report(versions: list[Version], sizes: list[int], preset: str | None, args) 
         f"  {args.arch or 'the default backend'}; {args.rounds} rounds, alternated; a round's figure: the "
         f"median of {args.inner} stretches of {args.substeps} substeps"
     )
-    if sizes:
-        print()
-        ratio_head = f"ratio to {base.label} (range)"
-        print(f"{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
-        for size in sizes:
-            for version in versions:
-                ratio = paired_ratio(version.ms[size], base.ms[size])
-                print(
-                    f"{version.particles[size]:>10,} {version.label:<8} {spread(version.ms[size], 3):>26} "
-                    f"{statistics.median(version.host_cpu_ms[size]):>12.3f} {ratio:>20}"
-                )
-    if preset is not None:
-        print()
-        head = f"{'version':<8} {preset + ': frames/s (range)':>36} {'substeps a frame':>17} {'mean error':>11}"
-        print(head + f" {'ratio to ' + base.label + ' (range)':>20}")
-        for version in versions:
-            ratio = paired_ratio(version.frames_per_s, base.frames_per_s)
-            print(
-                f"{version.label:<8} {spread(version.frames_per_s, 1):>36} "
-                f"{statistics.median(version.substeps):>17.2f} {statistics.median(version.errors):>10.3f}% "
-                f"{ratio:>20}"
-            )
+    ratio_head = f"ratio to {base.label} (range)"
+    if args.sizes:
+        print(f"\n{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
+    for size in args.sizes:
+        for v in versions:
+            host_ms, ratio = statistics.median(v.host_cpu_ms[size]), paired_ratio(v.ms[size], base.ms[size])
+            print(f"{v.particles[size]:>10,} {v.label:<8} {spread(v.ms[size], 3):>26} {host_ms:>12.3f} {ratio:>20}")
+    if args.preset is not None:
+        head = f"{'version':<8} {args.preset + ': frames/s (range)':>36} {'substeps a frame':>17} {'mean error':>11}"
+        print(f"\n{head} {ratio_head:>20}")
+        for v in versions:
+            substeps, error = statistics.median(v.substeps), statistics.median(v.errors)
+            ratio = paired_ratio(v.frames_per_s, base.frames_per_s)
+            print(f"{v.label:<8} {spread(v.frames_per_s, 1):>36} {substeps:>17.2f} {error:>10.3f}% {ratio:>20}")
 
 
 def parse(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("versions", nargs="+", help="folders holding pbf/, or git revisions of this checkout")
     parser.add_argument("--arch", default=None, help="Taichi's backend for every run (default: as the program picks)")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[], help="the seed dam break scaled to these")
+    parser.add_argument("--sizes", type=at_least(1), nargs="+", default=[], help="the seed dam break scaled to these")
     parser.add_argument("--preset", default=None, help="also the frame rate of this preset")
-    parser.add_argument("--rounds", type=int, default=3, help="runs of each version, alternated (default 3)")
-    parser.add_argument("--inner", type=int, default=3, help="timed stretches in a run, their median kept")
-    parser.add_argument("--substeps", type=int, default=40, help="substeps of a timed stretch (default 40)")
+    parser.add_argument("--rounds", type=at_least(1), default=3, help="runs of each version, alternated (default 3)")
+    parser.add_argument("--inner", type=at_least(1), default=3, help="timed stretches in a run, their median kept")
+    parser.add_argument("--substeps", type=at_least(1), default=40, help="substeps of a timed stretch (default 40)")
     args = parser.parse_args(argv)
     if len(args.versions) < 2:
         parser.error("versions: give at least two to compare (the first is the base of the ratios)")
-    if len(args.versions) > 8:
-        parser.error("versions: at most 8 a comparison")
     if not args.sizes and args.preset is None:
         parser.error("give --sizes, --preset or both")
-    for name in ("rounds", "inner", "substeps"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name}: at least 1, not {getattr(args, name)}")
-    if any(size < 1 for size in args.sizes):
-        parser.error(f"--sizes: particle counts of at least 1, not {args.sizes}")
     from pbf.scene import SceneError, load_scene
     from pbf.solver.backend import ARCHES
 
@@ -211,16 +179,12 @@ def parse(argv=None):
 def main(argv=None) -> int:
     parser, args = parse(argv)
     timer_args = ["--rounds", str(args.inner), "--substeps", str(args.substeps)]
-    if args.arch is not None:
-        timer_args += ["--arch", args.arch]
-    if args.sizes:
-        timer_args += ["--sizes", *map(str, args.sizes)]
-    if args.preset is not None:
-        timer_args += ["--preset", args.preset]
+    timer_args += ["--arch", args.arch] if args.arch is not None else []
+    timer_args += ["--sizes", *map(str, args.sizes)] if args.sizes else []
+    timer_args += ["--preset", args.preset] if args.preset is not None else []
     with tempfile.TemporaryDirectory(prefix="pbf-ab-") as scratch:
-        scratch = Path(scratch)
-        versions = resolve(args.versions, scratch, parser)
-        workdir = scratch / "work"
+        versions = resolve(args.versions, Path(scratch), parser)
+        workdir = Path(scratch) / "work"
         workdir.mkdir()
         try:
             for round_ in range(args.rounds):
@@ -234,7 +198,7 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             print("ab: interrupted; nothing reported", file=sys.stderr)
             return 130
-    report(versions, args.sizes, args.preset, args)
+    report(versions, args)
     return 0
 
 

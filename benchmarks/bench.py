@@ -3,8 +3,7 @@
     python -m benchmarks.bench presets [--presets dam_break ...] [--frames 30] [--csv F]   (statistics)
     python -m benchmarks.bench compare CPU.csv ... OTHER.csv      (each other run against the CPU's spread)
     python -m benchmarks.bench counts [--sizes 8000] [--iterations 4 | --presets ...] [--gpu-blocks]  (launches)
-    python -m benchmarks.bench start [--presets dam_break ...] [--no-shared | --first-calls]    (benchmarks.start)
-    python -m benchmarks.bench frames [options of python -m benchmarks.frames]
+    python -m benchmarks.bench start [--presets dam_break ...] [--first-calls]    (benchmarks.start)
 
 ``presets``: every preset from its start, the means of its statistics over the second half of the
 frames, reads and launches a substep. ``compare``: per preset and statistic, whether each non-CPU run
@@ -16,7 +15,6 @@ import argparse
 import csv
 import platform
 import statistics
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -59,14 +57,8 @@ def jiggle(sim, rng: np.random.Generator) -> None:
     sim.restore(replace(state, positions_m=(state.positions_m + noise).astype(np.float32)))
 
 
-PRESET_STATISTICS = (
-    "mean_density_error",
-    "max_density_error",
-    "max_speed_m_s",
-    "kinetic_energy_j",
-    "mean_neighbours",
-    "iterations",
-)
+PRESET_STATISTICS = ("mean_density_error", "max_density_error", "max_speed_m_s", "kinetic_energy_j",
+                     "mean_neighbours", "iterations")  # fmt: skip
 
 
 def presets(args) -> list[dict]:
@@ -206,18 +198,11 @@ def build_parser() -> argparse.ArgumentParser:
     start = modes.add_parser("start")
     start.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
     start.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
-    start.add_argument("--csv", type=Path, default=None, help="write the table as CSV")
-    start.add_argument("--no-shared", action="store_true", help="leave out the starts in one shared cache")
     start.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
     return parser
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["frames"]:  # the headless frames' own benchmark, with its own options
-        from benchmarks import frames
-
-        return frames.main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     unread = {"presets": None, "device_decisions": False, "perturb": None, "perturb_each_frame": False}
@@ -236,7 +221,7 @@ def main(argv=None):
         names = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
         if args.first_calls:
             return start.first_calls(names, args.arch)
-        return start.run(names, args.arch, not args.no_shared, args.csv)
+        return start.run(names, args.arch)
     if args.mode == "counts" and args.presets and args.sizes:
         parser.error("--sizes: counts the seed scene scaled; with --presets each preset runs as shipped")
     if args.perturb_each_frame and args.perturb is None:

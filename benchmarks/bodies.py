@@ -15,7 +15,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from benchmarks.lab import markdown
 from pbf import Simulation, load_scene
+from pbf.solver import quaternion_matrix_np
 
 
 def main(frames: int = 20) -> None:
@@ -36,35 +38,28 @@ def main(frames: int = 20) -> None:
     h = sim.scene.kernel_radius_m
     near = 0
     for row, body in zip(sim.body_states(), sim.scene.bodies):
-        local = (x - row[0:3]) @ _rotation(row[3:7])
+        local = (x - row[0:3]) @ quaternion_matrix_np(row[3:7])
         gap = np.linalg.norm(np.maximum(np.abs(local) - body.half_extents(), 0.0), axis=1)
         near += int(np.sum(gap < h))
-    base = np.median(times["no bodies"])
-    print("| floating_boxes | particles | median ms/substep | per body | per particle within h of a body |")
-    print("|---|---|---|---|---|")
-    for name in sims:
-        t = np.median(times[name])
-        extra = (
-            "| |" if name == "no bodies" else f"| {1e3 * (t - base) / 4:.2f} ms | {1e6 * (t - base) / near:.2f} µs |"
-        )
-        print(f"| {name} | {sims[name].particle_count:,} | {1e3 * t:.2f} {extra}")
-    print(f"\nparticles within h of a body at the end: {near:,}")
+    base, more = np.median(times["no bodies"]), np.median(times["4 bodies"]) - np.median(times["no bodies"])
+    rows = [["no bodies", f"{sim.particle_count:,}", f"{1e3 * base:.2f}", "", ""]]
+    rows.append(["4 bodies", f"{sim.particle_count:,}", f"{1e3 * (base + more):.2f}", f"{1e3 * more / 4:.2f} ms",
+                 f"{1e6 * more / near:.2f} µs"])  # fmt: skip
+    head = ["floating_boxes", "particles", "median ms/substep", "per body", "per particle within h of a body"]
+    print(markdown(head, rows) + f"\n\nparticles within h of a body at the end: {near:,}")
 
 
 def momentum(frames: int = 24) -> None:
     sim, mass, body_mass, start = _momentum_scene()
-    print(
-        "| t (s) | box v_x (m/s) | water P_x / P0 | box P_x / P0 | reaction in flight / P0 | total / P0 |\n"
-        "|---|---|---|---|---|---|"
-    )
+    rows = []
     for frame in range(frames):
         sim.step()
         if frame % 3 == 2:
             water, box, flight = _momenta(sim, mass, body_mass)
-            print(
-                f"| {sim.time_s:.2f} | {box / body_mass:.3f} | {water / start:.3f} | {box / start:.3f} | "
-                f"{flight / start:.3f} | {(water + box + flight) / start:.3f} |"
-            )
+            shares = (f"{p / start:.3f}" for p in (water, box, flight, water + box + flight))
+            rows.append([f"{sim.time_s:.2f}", f"{box / body_mass:.3f}", *shares])
+    head = ["t (s)", "box v_x (m/s)", "water P_x / P0", "box P_x / P0", "reaction in flight / P0", "total / P0"]
+    print(markdown(head, rows))
 
 
 def _momenta(sim, mass: float, body_mass: float) -> tuple[float, float, float]:
@@ -88,11 +83,11 @@ def _floating(density: float, frames: int = 60, measured_from: int = 20) -> dict
         "container": {"max_m": [0.4, 0.4, 0.4]},
         "fluid": {"spacing_m": 0.025, "blocks": [{"min_m": [0, 0, 0], "max_m": [0.4, 0.2, 0.4]}]},
         "bodies": [
-            {
-                "size_m": list(HALF),
-                "density_kg_m3": density,
-                "position_m": [0.2, 0.2 + HALF[1] * (1 - 2 * density / 1000), 0.2],
-            }
+            dict(
+                size_m=list(HALF),
+                density_kg_m3=density,
+                position_m=[0.2, 0.2 + HALF[1] * (1 - 2 * density / 1000), 0.2],
+            )
         ],
         "solver": {"iterations": 10, "target_density_error": 0.001},
         "time": {"settle_s": 0.3},
@@ -115,28 +110,20 @@ def _floating(density: float, frames: int = 60, measured_from: int = 20) -> dict
         by_pressure.append((-intercept / slope - bottom) / height)
         speeds.append(float(np.linalg.norm(row[7:10])))
         fastest.append(float(np.linalg.norm(sim.velocities(), axis=1).max()))
-    return {
-        "volume": float(np.mean(by_volume)),
-        "volume_rms": float(np.std(by_volume)),
-        "pressure": float(np.mean(by_pressure)),
-        "speed": max(speeds),
-        "median_speed": float(np.median(speeds)),
-        "pool_fastest": float(np.median(fastest)),
-    }
+    return dict(volume=np.mean(by_volume), volume_rms=np.std(by_volume), pressure=np.mean(by_pressure),
+                speed=max(speeds), median_speed=np.median(speeds), pool_fastest=np.median(fastest))  # fmt: skip
 
 
 def archimedes() -> None:
-    print(
-        "| box kg/m³ | expected draft / height | draft (volume level) | error | draft (pressure level) | error "
-        "| body's fastest (m/s) | body's median / pool's fastest median |\n|---|---|---|---|---|---|---|---|"
-    )
+    rows = []
     for density in (300.0, 500.0, 700.0, 900.0):
         r, e = _floating(density), density / 1000
-        print(
-            f"| {density:.0f} | {e:.2f} | {r['volume']:.3f} ± {r['volume_rms']:.3f} | {r['volume'] / e - 1:+.1%} "
-            f"| {r['pressure']:.3f} | {r['pressure'] / e - 1:+.1%} | {r['speed']:.3f} "
-            f"| {r['median_speed'] / r['pool_fastest']:.2f} |"
-        )
+        by_volume = [f"{r['volume']:.3f} ± {r['volume_rms']:.3f}", f"{r['volume'] / e - 1:+.1%}"]
+        by_pressure = [f"{r['pressure']:.3f}", f"{r['pressure'] / e - 1:+.1%}"]
+        speeds = [f"{r['speed']:.3f}", f"{r['median_speed'] / r['pool_fastest']:.2f}"]
+        rows.append([f"{density:.0f}", f"{e:.2f}", *by_volume, *by_pressure, *speeds])
+    head = ["box kg/m³", "expected draft / height", "draft (volume level)", "error", "draft (pressure level)", "error"]
+    print(markdown([*head, "body's fastest (m/s)", "body's median / pool's fastest median"], rows))
 
 
 def _momentum_scene():
@@ -147,24 +134,13 @@ def _momentum_scene():
         "container": {"max_m": [1.0, 0.5, 0.5]},
         "fluid": {"spacing_m": spacing, "blocks": [{"min_m": [0.35, 0.1, 0.1], "max_m": [0.65, 0.4, 0.4]}]},
         "bodies": [
-            {
-                "size_m": [0.05, 0.06, 0.06],
-                "density_kg_m3": 1000,
-                "position_m": [0.25, 0.25, 0.25],
-                "velocity_m_s": [0.5, 0, 0],
-            }
+            dict(size_m=[0.05, 0.06, 0.06], density_kg_m3=1000, position_m=[0.25] * 3, velocity_m_s=[0.5, 0, 0])
         ],
         "solver": {"iterations": 10, "target_density_error": 0.001},
     }
     sim = Simulation(scene, quiet=True)
     mass, body_mass = sim.model.particle_mass_kg, 1000 * 0.1 * 0.12 * 0.12
     return sim, mass, body_mass, body_mass * 0.5
-
-
-def _rotation(q):
-    from pbf.solver import quaternion_matrix_np
-
-    return quaternion_matrix_np(q)
 
 
 if __name__ == "__main__":

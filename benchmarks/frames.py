@@ -2,9 +2,8 @@
 state, both styles, as frames a second and CPU milliseconds a frame (all threads: on the CPU backend
 the kernels' too); and ``look``, how the surface style reads (docs/RENDERING.md, "Measured").
 
-    python -m benchmarks.frames                      # the seed scene at t = 1 s, 1280×720
-    python -m benchmarks.frames --size 1920x1080 --arch cuda
-    python -m benchmarks.frames --whole 15 --rounds 5   # and whole frames, simulation included
+    python -m benchmarks.frames [--size 1920x1080] [--arch cuda]   # the seed scene at t = 1 s, 1280×720
+    python -m benchmarks.frames --whole 15 --rounds 5                # and whole frames, simulation included
     python -m benchmarks.frames look [--size 640x360] [--images out/look]
 
 The scene is stepped to ``--at-frame``; the two styles are then drawn alternately (a busy machine
@@ -20,12 +19,13 @@ the particles' own top, a cubic fitted to each column's highest particle), and a
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.lab import Clock, image_size, medians
+from benchmarks.lab import Clock, image_size, markdown, medians
 from pbf.study.common import run_command
 
 STYLES = ("particles", "surface")
@@ -133,12 +133,8 @@ def top_face(normals, water, depth, view, scene) -> dict:
     angles = tilt[face]
     if not angles.size:
         return {"pixels": 0, "flat": float("nan"), "median_deg": float("nan"), "p95_deg": float("nan")}
-    return {
-        "pixels": int(face.sum()),
-        "flat": float(np.mean(angles < FLAT_DEG)),
-        "median_deg": float(np.median(angles)),
-        "p95_deg": float(np.percentile(angles, 95)),
-    }
+    flat, median, p95 = float(np.mean(angles < FLAT_DEG)), float(np.median(angles)), float(np.percentile(angles, 95))
+    return {"pixels": int(face.sum()), "flat": flat, "median_deg": median, "p95_deg": p95}
 
 
 def particles_top(positions: np.ndarray, scene) -> dict:
@@ -238,48 +234,31 @@ def look(argv=None) -> int:
     backend = start_backend(args.arch)
     figures = look_figures(args.size, args.images, pour=POUR if args.images else None)
     shown = "the scenes' size" if args.size is None else f"{args.size[0]}×{args.size[1]}"
-    print(f"The surface style, {backend}, {shown}")
-    print()
-    print(
-        f"| settled pool | top-face pixels | within {FLAT_DEG:g}° of vertical | median | 95th percentile "
-        f"| the particles' top: within {FLAT_DEG:g}° | median |"
-    )
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    head = ["settled pool", "top-face pixels", f"within {FLAT_DEG:g}° of vertical", "median", "95th percentile"]
+    rows = []
     for (preset, frame), pool in figures["pools"].items():
-        top = pool["particles"]
-        print(
-            f"| {preset}, frame {frame} | {pool['pixels']:,} | {100 * pool['flat']:.1f}% | "
-            f"{pool['median_deg']:.2f}° | {pool['p95_deg']:.1f}° | "
-            f"{100 * top['flat']:.1f}% | {top['median_deg']:.2f}° |"
-        )
-    shares = list(figures["splash"].values())
+        cells = f"{pool['pixels']:,} {100 * pool['flat']:.1f}% {pool['median_deg']:.2f}° {pool['p95_deg']:.1f}°"
+        top = f"{100 * pool['particles']['flat']:.1f}% {pool['particles']['median_deg']:.2f}°"
+        rows.append([f"{preset}, frame {frame}", *cells.split(), *top.split()])
+    print(f"The surface style, {backend}, {shown}\n")
+    print(markdown([*head, f"the particles' top: within {FLAT_DEG:g}°", "median"], rows))
+    shares = np.array(list(figures["splash"].values())) * 100
     preset, frames = SPLASH
-    print()
-    print(f"| splash | speckle (normal > {SPECKLE_DEG:g}° from its neighbours'), mean | least | most |")
-    print("|---|---:|---:|---:|")
-    print(
-        f"| {preset}, frames {frames[0]}-{frames[-1]} | {100 * np.mean(shares):.1f}% | "
-        f"{100 * min(shares):.1f}% | {100 * max(shares):.1f}% |"
-    )
+    head = ["splash", f"speckle (normal > {SPECKLE_DEG:g}° from its neighbours'), mean", "least", "most"]
+    cells = [f"{value:.1f}%" for value in (shares.mean(), shares.min(), shares.max())]
+    print("\n" + markdown(head, [[f"{preset}, frames {frames[0]}-{frames[-1]}", *cells]]))
     return 0
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0].replace("\n", " "))
-    parser.add_argument("--scene", default="dam_break", help="preset or TOML file (default: dam_break)")
     parser.add_argument("--at-frame", type=int, default=60, help="frames stepped before timing (default: 60)")
     parser.add_argument("--size", type=image_size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=20, help="frames timed per style (default: 20)")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
-    parser.add_argument(
-        "--whole", type=int, default=0, help="also time N whole frames (simulation, draw, write) each way"
-    )
+    parser.add_argument("--whole", type=int, default=0, help="also N whole frames (simulate, draw, write) each way")
     parser.add_argument("--rounds", type=int, default=5, help="rounds of --whole, the ways alternating (default: 5)")
-    parser.add_argument("--style", choices=STYLES, default="particles", help="the style --whole draws")
-    if argv is None:
-        import sys
-
-        argv = sys.argv[1:]
+    argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["look"]:
         return look(argv[1:])
     args = parser.parse_args(argv)
@@ -290,7 +269,7 @@ def main(argv=None) -> int:
     from pbf.solver import Simulation, start_backend
 
     backend = start_backend(args.arch)
-    sim = Simulation(args.scene, quiet=True)
+    sim = Simulation("dam_break", quiet=True)
     width, height = args.size or (sim.scene.render.width_px, sim.scene.render.height_px)
     renderers = {style: SceneRenderer(sim, width, height, style=style) for style in STYLES}
     # The surface style's white water follows the run from its start (the last frames' updates timed).
@@ -334,21 +313,18 @@ def main(argv=None) -> int:
         print(f"With white water's update, {total:.2f}× their CPU time ({live:,} diffuse particles).")
     if args.whole:
         with tempfile.TemporaryDirectory() as folder:
-            times = whole_frames(sim, renderers[args.style], args.whole, args.rounds, Path(folder))
-        print()
+            times = whole_frames(sim, renderers["particles"], args.whole, args.rounds, Path(folder))
         print(
-            f"Whole frames from t = {args.at_frame * sim.scene.time.frame_dt_s:.2f} s, {args.style}: "
-            f"{args.whole} frames a round, {args.rounds} rounds, the ways alternating, medians"
+            f"\nWhole frames from t = {args.at_frame * sim.scene.time.frame_dt_s:.2f} s, particles: {args.whole} "
+            f"frames a round, {args.rounds} rounds, the ways alternating, medians\n"
         )
-        print()
-        print(
-            "| way | wall ms a frame | added to the simulation's | CPU ms a frame | added |\n|---|---:|---:|---:|---:|"
-        )
-        base = medians(times[WAYS[0]])
+        head = ["way", "wall ms a frame", "added to the simulation's", "CPU ms a frame", "added"]
+        base, rows = medians(times[WAYS[0]]), []
         for way in WAYS:
             (wall, cpu), first = medians(times[way]), way == WAYS[0]
             added = ("", "") if first else (f"{(wall - base[0]) * 1e3:.1f}", f"{(cpu - base[1]) * 1e3:.1f}")
-            print(f"| {way} | {wall * 1e3:.1f} | {added[0]} | {cpu * 1e3:.1f} | {added[1]} |")
+            rows.append([way, f"{wall * 1e3:.1f}", added[0], f"{cpu * 1e3:.1f}", added[1]])
+        print(markdown(head, rows))
     return 0
 
 

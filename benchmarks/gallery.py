@@ -62,19 +62,14 @@ DOCS = Path(__file__).resolve().parent.parent / "docs" / "presets.png"
 def parse(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     available = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
-    parser.add_argument(
-        "--presets", nargs="+", choices=available, default=None, help="which (default: all but dam_break_large)"
-    )
+    parser.add_argument("--presets", nargs="+", choices=available, help="which (default: all but dam_break_large)")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--out", type=Path, default=OUT, help=f"the sheet (PNG; default {OUT})")
-    where.add_argument(
-        "--docs", action="store_true", help=f"replace the README's picture, {DOCS.relative_to(DOCS.parents[1])}"
-    )
+    where.add_argument("--docs", action="store_true", help="replace the README's picture, docs/presets.png")
     parser.add_argument("--size", type=image_size, default=(480, 270), help="each frame, WxH pixels (default 480x270)")
     parser.add_argument("--columns", type=int, choices=range(1, 7), default=3, metavar="1-6", help="frames per row")
     args = parser.parse_args(argv)
-    if args.docs:
-        args.out = DOCS
+    args.out = DOCS if args.docs else args.out
     if args.out.suffix.lower() != ".png":
         parser.error(f"--out: expected a .png file, got {str(args.out)!r}")
     return args

@@ -1,21 +1,16 @@
 #!/usr/bin/env bash
-# The GPU figures docs/BENCHMARKS.md lacks, in one run on an NVIDIA machine (CUDA):
+# The GPU figures docs/BENCHMARKS.md lacks, in one run on an NVIDIA machine (CUDA), about 9 minutes:
 #
-#   bash benchmarks/gpu_run.sh [BASE]       # about 9 minutes; BUDGET=SECONDS caps it (default 520)
+#   bash benchmarks/gpu_run.sh [BASE]       # BUDGET=SECONDS caps it (default 520; a device run: timeout 560 s)
 #
-# BASE: an earlier version's folder to time this one against (benchmarks/ab.py; without git on the GPU
-# machine, export it here first: mkdir -p .gpu/base && git archive REV pbf | tar -x -C .gpu/base).
-# Where .gpu/whl holds wheels (../shared/gpu/prepare.sh), Taichi and the rest are installed from them
-# into a temporary folder first, as that machine reaches no package registry. Each step runs under its
-# own time limit, so one that fails or hangs leaves the others; everything lands in $OUT (default
-# out/gpu): summary.txt with each step's table, a log per step, cuda.npz (the physics, for
-# ../shared/gpu/judge.py here) and the Nsight Systems trace where nsys is installed.
-#
-# Steps: the physics on CUDA (tests/vulkan_run.py: kernel, prefix sums, the grid against brute force,
-# the seed scene's statistics, the pool at rest); the substep at 8,000, 64,000 and 1,000,000 particles
-# against BASE, alternated; Nsight Systems' timeline of a million particles' substeps, and the time the
-# device spent between its kernels (benchmarks/kernel_gaps.py); dam_break_large's frame rate; 10 M
-# particles; the launches a substep as CUDA counts them. A device run of it: timeout 560 s.
+# BASE: an earlier version's folder to time this one against (benchmarks/ab.py); without git there,
+# export it here first: mkdir -p .gpu/base && git archive REV pbf | tar -x -C .gpu/base. The packages
+# come from .gpu/whl where it holds wheels (../shared/gpu/prepare.sh: that machine reaches no registry).
+# Each step runs under its own limit, so one that fails or hangs leaves the others. In $OUT (default
+# out/gpu): summary.txt with each step's table, a log a step, cuda.npz (the physics, for
+# ../shared/gpu/judge.py) and Nsight Systems' trace where nsys is installed. The steps, most wanted
+# first: the physics (tests/vulkan_run.py), the substep against BASE, the gaps between kernels
+# (benchmarks/kernel_gaps.py), dam_break_large's frame rate, 10 M particles, CUDA's launch counts.
 set -u
 export PYTHONUNBUFFERED=1 TQDM_MININTERVAL=5
 BASE=${1:-}

@@ -33,12 +33,8 @@ def trace_csv(path: Path) -> str:
     if nsys is None:
         raise ValueError(f"{path}: an Nsight Systems report needs nsys on PATH to read (or give its CSV)")
     for report in ("cuda_gpu_trace", "gputrace"):  # the report's name since Nsight Systems 2021.5, and before
-        done = subprocess.run(
-            [nsys, "stats", "--report", report, "--format", "csv", "--output", "-", str(path)],
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
+        command = [nsys, "stats", "--report", report, "--format", "csv", "--output", "-", str(path)]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=600)
         if done.returncode == 0 and any(is_header(line) for line in done.stdout.splitlines()):
             return done.stdout
     raise ValueError(f"{path}: nsys stats gave no GPU trace: {(done.stderr or done.stdout).strip()[-300:]}")
@@ -46,8 +42,7 @@ def trace_csv(path: Path) -> str:
 
 def is_header(line: str) -> bool:
     cells = [cell.strip().strip('"') for cell in line.split(",")]
-    starts = any(c.startswith("Start") for c in cells)
-    return starts and "Name" in cells and any(c.startswith("Duration") for c in cells)
+    return "Name" in cells and all(any(c.startswith(word) for c in cells) for word in ("Start", "Duration"))
 
 
 def operations(text: str) -> list[tuple[float, float, str]]:
@@ -59,16 +54,12 @@ def operations(text: str) -> list[tuple[float, float, str]]:
         raise ValueError("no header with Start, Duration and Name columns: not a cuda_gpu_trace report")
     rows = csv.reader(io.StringIO("\n".join(lines[first:])))
     header = [cell.strip() for cell in next(rows)]
-    start = next(k for k, c in enumerate(header) if c.startswith("Start"))
-    duration = next(k for k, c in enumerate(header) if c.startswith("Duration"))
-    name = header.index("Name")
-    found = []
+    start, duration = (next(k for k, c in enumerate(header) if c.startswith(word)) for word in ("Start", "Duration"))
+    name, found = header.index("Name"), []
     for row in rows:
-        if len(row) <= max(start, duration, name):
-            continue
         try:
             found.append((float(row[start]), float(row[duration]), row[name].strip()))
-        except ValueError:  # a note or a blank line after the table
+        except (ValueError, IndexError):  # a note or a blank line after the table
             continue
     if not found:
         raise ValueError("the report holds no operations")
@@ -93,15 +84,9 @@ def analyse(ops: list[tuple[float, float, str]], last_ms: float | None) -> dict:
         if s + d > reach:
             busy += s + d - max(s, reach)
             reach, before = s + d, name
-    return {
-        "window": end - begin,
-        "busy": busy,
-        "idle": end - begin - busy,
-        "operations": len(ops),
-        "by_name": sorted(by_name.items(), key=lambda item: -item[1][1]),
-        "gaps": sorted(gaps, reverse=True)[:LONGEST],
-        "gap_count": len(gaps),
-    }
+    by_name = sorted(by_name.items(), key=lambda item: -item[1][1])
+    return dict(window=end - begin, busy=busy, idle=end - begin - busy, operations=len(ops), by_name=by_name,
+                gaps=sorted(gaps, reverse=True)[:LONGEST], gap_count=len(gaps))  # fmt: skip
 
 
 def report(result: dict, substeps: int | None) -> None:
@@ -110,19 +95,15 @@ def report(result: dict, substeps: int | None) -> None:
     def us(ns: float) -> str:
         return f"{ns / scale:,.1f} µs" + (" a substep" if substeps else "")
 
-    print(f"{result['operations']} operations in a window of {us(result['window'])}")
     idle_share = result["idle"] / result["window"] if result["window"] > 0 else 0.0
-    print(
-        f"  something ran: {us(result['busy'])}; nothing ran: {us(result['idle'])} ({idle_share:.0%} of the "
-        f"window, {result['gap_count']} gaps)"
-    )
-    print()
+    print(f"{result['operations']} operations in a window of {us(result['window'])}")
+    idle = f"{us(result['idle'])} ({idle_share:.0%} of the window, {result['gap_count']} gaps)"
+    print(f"  something ran: {us(result['busy'])}; nothing ran: {idle}\n")
     print(f"{'count':>7} {'total µs':>11} {'mean µs':>9}  operation")
     for name, (count, total) in result["by_name"]:
         shown = f"{count / (substeps or 1):g}" if substeps else f"{count}"
         print(f"{shown:>7} {total / scale:>11.1f} {total / count / 1e3:>9.1f}  {name[:100]}")
-    print()
-    print(f"the {len(result['gaps'])} longest gaps (µs): what ended → what began")
+    print(f"\nthe {len(result['gaps'])} longest gaps (µs): what ended → what began")
     for gap, before, after in result["gaps"]:
         print(f"{gap / 1e3:>9.1f}  {before[:60]} → {after[:60]}")
 
@@ -135,10 +116,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if not args.report.is_file():
         parser.error(f"report {str(args.report)!r}: no such file")
-    if args.last_ms is not None and not args.last_ms > 0:
-        parser.error(f"--last-ms: a positive length, not {args.last_ms}")
-    if args.substeps is not None and args.substeps < 1:
-        parser.error(f"--substeps: at least 1, not {args.substeps}")
+    if (args.last_ms is not None and not args.last_ms > 0) or (args.substeps is not None and args.substeps < 1):
+        parser.error(f"--last-ms {args.last_ms}, --substeps {args.substeps}: a positive length, at least 1")
     try:
         result = analyse(operations(trace_csv(args.report)), args.last_ms)
     except ValueError as error:

@@ -1,5 +1,5 @@
-"""What the lab's scripts share: an earlier commit's package, image sizes, medians with their range, and
-wall and CPU time taken together."""
+"""What the lab's scripts share: an earlier commit's package, image sizes, whole numbers of at least one,
+medians with their range, Markdown tables, and wall and CPU time taken together."""
 
 from __future__ import annotations
 
@@ -52,10 +52,28 @@ def image_size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def at_least(minimum: int):
+    """An argparse type: a whole number of at least ``minimum`` (rounds, repeats, threads)."""
+
+    def whole(text: str) -> int:
+        value = int(text) if text.lstrip("-").isdigit() else None
+        if value is None or value < minimum:
+            raise argparse.ArgumentTypeError(f"at least {minimum}, not {text!r}")
+        return value
+
+    return whole
+
+
 def spread(values, digits: int = 2) -> str:
     """``median (least-most)``."""
     values = list(values)
     return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f}-{max(values):.{digits}f})"
+
+
+def markdown(header, rows) -> str:
+    """A Markdown table as the docs quote it: the first column left-aligned, the figures right."""
+    lines = ["| " + " | ".join(map(str, cells)) + " |" for cells in [header, *rows]]
+    return "\n".join([lines[0], "|---|" + "---:|" * (len(header) - 1), *lines[1:]])
 
 
 def medians(pairs) -> tuple[float, ...]:

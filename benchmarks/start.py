@@ -1,22 +1,20 @@
 """How long a user waits before the first frame: cold and warm starts of every preset, each a fresh process.
 
-    python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu] [--csv F] [--no-shared]
+    python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu]
     python -m benchmarks.bench start --first-calls [--presets hydrostatic ...]
 
 A start is ``pbf PRESET --stats-only --frames 1`` in a new process, timed by its own "kernels ready in"
 line; the ``.tic`` files it adds to its Taichi offline cache folder are the kernels it compiled. Per
 preset, in a folder of its own: ``cold`` (emptied first), ``warm`` (again), ``spacing`` (10% larger:
-another particle count and grid); then, unless ``--no-shared``, every preset in order in one shared
-folder. ``--first-calls``: per preset, in a fresh process with an empty cache, the Simulation built
-with settling off and one substep, each kernel's first call timed (front end, compile, one run).
+another particle count and grid). ``--first-calls``: per preset, in a fresh process with an empty
+cache, the Simulation built with settling off and one substep, each kernel's first call timed (front
+end, compile, one run).
 """
 
 from __future__ import annotations
 
-import csv
 import os
 import re
-import shutil
 import statistics
 import subprocess
 import sys
@@ -52,12 +50,8 @@ def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str])
     wall = time.perf_counter() - began
     ready = READY.search(done.stdout)
     error = "" if done.returncode == 0 and ready else (done.stderr.strip().splitlines() or ["no output"])[-1]
-    return {
-        "wall_s": wall,
-        "ready_s": float(ready.group(1)) if ready else float("nan"),
-        "compiled": len(cached_kernels(folder) - before),
-        "error": error,
-    }
+    ready_s, compiled = float(ready.group(1)) if ready else float("nan"), len(cached_kernels(folder) - before)
+    return {"wall_s": wall, "ready_s": ready_s, "compiled": compiled, "error": error}
 
 
 FIRST_CALLS_SHOWN = 8  # kernels each ``--first-calls`` table lists
@@ -72,9 +66,8 @@ def first_calls(presets: list[str], arch: str | None) -> None:
             path = os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), root]))
             env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder, PYTHONPATH=path)
             try:
-                done = subprocess.run(
-                    [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=TIMEOUT_S
-                )
+                done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                                      timeout=TIMEOUT_S)  # fmt: skip
             except subprocess.TimeoutExpired:
                 print(f"{preset}: over {TIMEOUT_S} s\n", flush=True)
                 continue
@@ -109,10 +102,8 @@ def first_calls_here(preset: str, arch: str | None) -> None:
         sim.substep()
         ti.sync()
         total = time.perf_counter() - began
-    firsts, kernels = sum(seconds.values()), len(seconds)
-    print(
-        f"{preset}: built and one substep in {total:.2f} s, {firsts:.2f} s of it the first calls of {kernels} kernels"
-    )
+    firsts = f"{sum(seconds.values()):.2f} s of it the first calls of {len(seconds)} kernels"
+    print(f"{preset}: built and one substep in {total:.2f} s, {firsts}")
     for name, value in sorted(seconds.items(), key=lambda item: -item[1])[:FIRST_CALLS_SHOWN]:
         print(f"  {value:6.2f} s  {name}")
 
@@ -126,20 +117,17 @@ def spacing_override(preset: str) -> str:
 
 def cell(result: dict) -> str:
     """A table cell: ready time and kernels compiled, or why the start failed."""
-    if result["error"]:
-        return f"failed: {result['error'][:60]}"
-    return f"{result['ready_s']:.1f} s ({result['compiled']})"
+    return f"failed: {result['error'][:60]}" if result["error"] else f"{result['ready_s']:.1f} s ({result['compiled']})"
 
 
-def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | None) -> list[dict]:
+def run(presets: list[str], arch: str | None) -> list[dict]:
     """Every start of the module docstring, printed as a table as they finish; returns the rows."""
     rows = []
-    root = Path(tempfile.mkdtemp(prefix="pbf-start-"))
-    try:
+    with tempfile.TemporaryDirectory(prefix="pbf-start-") as root:
         print("ready time of each start, in brackets the kernels it compiled (0: all from the cache)")
         print(f"{'preset':<20} {'cold':>16} {'warm':>16} {'spacing x1.1':>16}", flush=True)
         for preset in presets:
-            folder = root / preset
+            folder = Path(root) / preset
             folder.mkdir()
             row = {"preset": preset}
             for name, overrides in (("cold", []), ("warm", []), ("spacing", [spacing_override(preset)])):
@@ -147,31 +135,7 @@ def run(presets: list[str], arch: str | None, shared: bool, csv_path: Path | Non
             cells = " ".join(f"{cell(row[name]):>16}" for name in ("cold", "warm", "spacing"))
             print(f"{preset:<20} {cells}", flush=True)
             rows.append(row)
-        if shared:
-            folder = root / "shared"
-            folder.mkdir()
-            print("\nevery preset in order, one shared cache folder, emptied first")
-            for row in rows:
-                row["shared"] = one_start(row["preset"], folder, arch, [])
-                print(f"{row['preset']:<20} {cell(row['shared']):>16}", flush=True)
-        ready, warm = ([row[name]["ready_s"] for row in rows if not row[name]["error"]] for name in ("cold", "warm"))
-        if ready and warm:
-            print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
-    finally:
-        shutil.rmtree(root, ignore_errors=True)
-    if csv_path is not None:
-        write_csv(rows, csv_path)
+    ready, warm = ([row[name]["ready_s"] for row in rows if not row[name]["error"]] for name in ("cold", "warm"))
+    if ready and warm:
+        print(f"\nmedian cold {statistics.median(ready):.1f} s, median warm {statistics.median(warm):.1f} s")
     return rows
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    """One line per preset and start: ready and wall seconds, kernels compiled, error."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as file:
-        writer = csv.writer(file)
-        writer.writerow(["preset", "start", "ready_s", "wall_s", "compiled", "error"])
-        for row in rows:
-            for name, r in ((name, row[name]) for name in ("cold", "warm", "spacing", "shared") if name in row):
-                writer.writerow(
-                    [row["preset"], name, f"{r['ready_s']:.2f}", f"{r['wall_s']:.2f}", r["compiled"], r["error"]]
-                )

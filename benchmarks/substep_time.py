@@ -49,13 +49,10 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
         host.append((issued - start) * 1e3 / substeps)
         whole.append((done - start) * 1e3 / substeps)
         cpu.append((thread_done - thread_start) * 1e3 / substeps)
-    return {
-        "particles": sim.particle_count,
-        "ms": statistics.median(whole),
-        "host_ms": statistics.median(host),
-        "host_cpu_ms": statistics.median(cpu),
-        "built_s": built,
-    }
+    median = statistics.median
+    return dict(
+        particles=sim.particle_count, ms=median(whole), host_ms=median(host), host_cpu_ms=median(cpu), built_s=built
+    )
 
 
 def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
@@ -90,16 +87,9 @@ def preset_rate(preset: str, overrides=(), frames: int = 30) -> dict:
         sim.step()
         errors.append(sim.stats()["mean_density_error"])
     x = sim.positions()
-    return {
-        "particles": sim.particle_count,
-        "frames_per_s": frames / seconds,
-        "substeps": substeps / frames,
-        "mean_error": statistics.fmean(errors),
-        "worst_error": max(errors),
-        "lowest_m": x.min(axis=0),
-        "highest_m": x.max(axis=0),
-        "built_s": start - began,
-    }
+    return dict(particles=sim.particle_count, frames_per_s=frames / seconds, substeps=substeps / frames,
+                mean_error=statistics.fmean(errors), worst_error=max(errors), lowest_m=x.min(axis=0),
+                highest_m=x.max(axis=0), built_s=start - began)  # fmt: skip
 
 
 def main(argv=None) -> None:
@@ -109,13 +99,7 @@ def main(argv=None) -> None:
     parser.add_argument("--substeps", type=int, default=40, help="substeps of one timed round")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--preset", default=None, help="a preset whose frame rate to measure")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="--preset: override a key of it, as run.py's --set (repeatable)",
-    )
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="--preset: a key of it")
     parser.add_argument("--profile", action="store_true", help="per task device times (Taichi's profiler)")
     args = parser.parse_args(argv)
     if not args.sizes and args.preset is None:
@@ -133,9 +117,6 @@ def main(argv=None) -> None:
         from benchmarks.instruments import start_profiled
 
         backend = start_profiled(args.arch, quiet=True)
-    else:
-        backend = start_backend(args.arch, quiet=True)
-    if args.profile:
         for particles in args.sizes:
             print(f"{particles:,} particles, {backend}: device time per task of a substep (Taichi's profiler)")
             rows = profile(particles)
@@ -143,17 +124,16 @@ def main(argv=None) -> None:
                 print(f"  {name:<64} {count:>3}x {micros:>9.1f} µs")
             print(f"  total {sum(count * micros for _, count, micros in rows) / 1e3:.3f} ms a substep")
         return
+    backend = start_backend(args.arch, quiet=True)
     if args.sizes:
         print(f"backend {backend}; {args.substeps} substeps a round, medians of {args.rounds} rounds")
-        header = f"{'particles':>10} {'ms/substep':>11} {'host issue ms':>14} {'host CPU ms':>12}"
-        print(f"{header} {'built and warmed s':>19}")
+        print(
+            f"{'particles':>10} {'ms/substep':>11} {'host issue ms':>14} {'host CPU ms':>12} {'built and warmed s':>19}"
+        )
         for particles in args.sizes:
             r = substep_times(particles, args.substeps, args.rounds)
-            print(
-                f"{r['particles']:>10,} {r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['host_cpu_ms']:>12.3f} "
-                f"{r['built_s']:>19.1f}",
-                flush=True,
-            )
+            times = f"{r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['host_cpu_ms']:>12.3f} {r['built_s']:>19.1f}"
+            print(f"{r['particles']:>10,} {times}", flush=True)
     if args.preset is not None:
         r = preset_rate(args.preset, args.set)
         lowest, highest = (r[k].astype(float).round(4).tolist() for k in ("lowest_m", "highest_m"))
@@ -161,9 +141,8 @@ def main(argv=None) -> None:
         print(
             f"{named}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
             f"simulation a second, {r['substeps']:.2f} substeps a frame; mean density error "
-            f"{r['mean_error']:.3%} (the worst frame {r['worst_error']:.3%}); particles from "
-            f"{lowest} to {highest} m; built and warmed "
-            f"in {r['built_s']:.1f} s"
+            f"{r['mean_error']:.3%} (the worst frame {r['worst_error']:.3%}); particles from {lowest} to {highest} m; "
+            f"built and warmed in {r['built_s']:.1f} s"
         )
 
 

@@ -4,9 +4,9 @@ rest, 1280 × 720, no input) and its variants (docs/BENCHMARKS.md, "The window")
 display (``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives both in software):
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
-        [--variants window,paused,surface] [--scene dam_break] [--warmup 30]
+        [--variants window,paused,surface] [--warmup 30]
     python benchmarks/window.py --offscreen --arch cuda --frames 300 --rounds 3 --variants window,surface,paused
-    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py --start [--rounds 3] [--scene dam_break]
+    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py --start [--rounds 3]
 
 Each variant runs in a fresh process, the variants alternating round by round; a figure is the median
 over the rounds of a round's median over its frames after ``--warmup``; ``fps`` is frames over their
@@ -29,13 +29,13 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import Clock, medians  # noqa: E402
+from benchmarks.lab import Clock, at_least, markdown, medians  # noqa: E402
 
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
 # in docs/HISTORY_BENCHMARKS.md, "The window: the levers".
 VARIANTS = {"window": {}, "paused": {"paused": True}, "surface": {"surface": True}}
-DEFAULT_VARIANTS = ("window", "paused")
+SCENE = "dam_break"  # the seed, as python run.py opens it
 WARMUP_FRAMES = 30
 """Frames before the measured ones by default: the kernels compile and the block reaches the floor."""
 PHASES = ("frame", "sim", "draw", "panel", "show")
@@ -63,24 +63,22 @@ def x_server_cpu_s() -> float | None:
 
 
 class Phases:
-    """Wall and process CPU time, in ms, of the phases of one frame."""
+    """Wall and process CPU time, in ms, of the phases of one frame: ``spent[phase] = (wall, cpu)``."""
 
     def __init__(self):
         self.spent = {}
 
     def timed(self, phase, function):
+        """``function`` wrapped to add its time to ``phase`` at each call."""
+
         def run(*args, **kwargs):
             clock = Clock()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                self.add(phase, *clock.lap())
+            result = function(*args, **kwargs)
+            wall, cpu = (1e3 * t for t in clock.lap())
+            self.spent[phase] = tuple(a + b for a, b in zip(self.spent.get(phase, (0.0, 0.0)), (wall, cpu)))
+            return result
 
         return run
-
-    def add(self, phase, wall_s, cpu_s):
-        w, c = self.spent.get(phase, (0.0, 0.0))
-        self.spent[phase] = (w + 1e3 * wall_s, c + 1e3 * cpu_s)
 
 
 def make_offscreen(gui_window) -> None:
@@ -93,9 +91,7 @@ def make_offscreen(gui_window) -> None:
     gui_window.get_cursor_pos = lambda: (0.5, 0.5)
 
 
-def measure(
-    name: str, frames: int, scene: str, warmup: int = WARMUP_FRAMES, offscreen: bool = False, arch: str | None = None
-) -> dict:
+def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | None) -> dict:
     """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
     import taichi as ti
@@ -104,15 +100,10 @@ def measure(
     from pbf.solver import Simulation, start_backend
 
     start_backend(arch, quiet=True)
-    sim = Simulation(scene, quiet=True)
+    sim = Simulation(SCENE, quiet=True)
+    size = sim.scene.render.width_px, sim.scene.render.height_px
     try:
-        gui_window = window.open_window(
-            "pbf benchmark",
-            sim.scene.render.width_px,
-            sim.scene.render.height_px,
-            vsync=not offscreen,
-            show_window=not offscreen,
-        )
+        gui_window = window.open_window("pbf benchmark", *size, vsync=not offscreen, show_window=not offscreen)
     except window.WindowUnavailable as reason:
         raise SystemExit(f"no window: {reason}") from None
     if offscreen:
@@ -121,29 +112,27 @@ def measure(
     viewer.surface = settings.get("surface", False)
     viewer.paused = settings.get("paused", False)
 
-    def step():
-        sim.step()
-        ti.sync()
+    def frame():
+        if viewer.advance():
+            step()
+        viewer.show()
 
     clock = Phases()
-    viewer.draw = clock.timed("draw", viewer.draw)
-    viewer.panel = clock.timed("panel", viewer.panel)
+    step = clock.timed("sim", lambda: (sim.step(), ti.sync()))
+    frame = clock.timed("frame", frame)
+    for phase in ("draw", "panel"):
+        setattr(viewer, phase, clock.timed(phase, getattr(viewer, phase)))
     viewer.window.show = clock.timed("show", viewer.window.show)
     rows = []
-    x_start = cpu_start = None
     viewer.show()
-    for frame in range(warmup + frames):
-        if frame == warmup:
+    for number in range(warmup + frames):
+        if number == warmup:
             x_start = None if offscreen else x_server_cpu_s()
             cpu_start, wall_start = time.process_time(), time.perf_counter()
         clock.spent = {}
-        wall, cpu = time.perf_counter(), time.process_time()
-        if viewer.advance():
-            clock.timed("sim", step)()
-        viewer.show()
-        clock.add("frame", time.perf_counter() - wall, time.process_time() - cpu)
-        if frame >= warmup:
-            rows.append(dict(clock.spent))
+        frame()
+        if number >= warmup:
+            rows.append(clock.spent)
     elapsed = time.perf_counter() - wall_start
     x_end = None if offscreen else x_server_cpu_s()
     result = {
@@ -160,31 +149,20 @@ def measure(
     return result
 
 
-def backend_name(arch: str | None) -> str:
-    """The backend the runs used, as the start line names it (started here only to be named)."""
-    from pbf.solver import start_backend
-
-    return start_backend(arch, quiet=True)
-
-
 def table(results: dict[str, list[dict]]) -> str:
-    def cell(rows, key):
-        values = [r[key] for r in rows if r[key] is not None]
-        return f"{statistics.median(values):.1f}" if values else "-"
+    """Per variant, the median over its rounds of each figure ("-" where none was measured)."""
 
-    header = (
-        "| variant | fps | frame ms | sim ms | draw ms | panel ms | show ms | "
-        "cpu ms/frame | X ms/frame | sim, draw, show cpu ms | load |"
-    )
-    lines = [header, "|---|" + "---:|" * (header.count("|") - 2)]
-    for name, rows in results.items():
-        lines.append(
-            f"| {name} | {cell(rows, 'fps')} | {cell(rows, 'frame')} | {cell(rows, 'sim')} | "
-            f"{cell(rows, 'draw')} | {cell(rows, 'panel')} | {cell(rows, 'show')} | {cell(rows, 'cpu')} | "
-            f"{cell(rows, 'X')} | {cell(rows, 'sim_cpu')}, {cell(rows, 'draw_cpu')}, "
-            f"{cell(rows, 'show_cpu')} | {cell(rows, 'load')} |"
-        )
-    return "\n".join(lines)
+    def cell(rows, *keys):
+        values = [[r[key] for r in rows if r[key] is not None] for key in keys]
+        return ", ".join(f"{statistics.median(v):.1f}" if v else "-" for v in values)
+
+    head = ["variant", "fps", "frame ms", "sim ms", "draw ms", "panel ms", "show ms", "cpu ms/frame", "X ms/frame"]
+    keys = ("fps", "frame", "sim", "draw", "panel", "show", "cpu", "X")
+    cpu = ("sim_cpu", "draw_cpu", "show_cpu")
+    rows = [
+        [name, *(cell(runs, k) for k in keys), cell(runs, *cpu), cell(runs, "load")] for name, runs in results.items()
+    ]
+    return markdown([*head, "sim, draw, show cpu ms", "load"], rows)
 
 
 RUN = Path(__file__).resolve().parent.parent / "run.py"
@@ -192,12 +170,12 @@ READY = "[pbf] kernels ready and the first frame drawn in "
 """The line ``python run.py`` prints once its first frame is drawn (``pbf.app.cli``)."""
 
 
-def first_frame_s(scene: str, window: bool, cache: Path, out: Path) -> tuple[float, float, int]:
+def first_frame_s(window: bool, cache: Path, out: Path) -> tuple[float, float, int]:
     """Start ``python run.py`` with the kernel cache in ``cache``; returns the seconds from its launch to
     the line saying the first frame is drawn, the seconds that line gives (from before the first kernel
     compiles), and the files the run added to the cache. The run is then stopped."""
     before = len(list(cache.rglob("*")))
-    command = [sys.executable, str(RUN), scene, "--frames", "1", "--out", str(out), "--overwrite"]
+    command = [sys.executable, str(RUN), SCENE, "--frames", "1", "--out", str(out), "--overwrite"]
     env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache), "MESA_SHADER_CACHE_DIR": str(cache / "mesa")}
     started = time.perf_counter()
     process = subprocess.Popen(
@@ -218,11 +196,11 @@ def first_frame_s(scene: str, window: bool, cache: Path, out: Path) -> tuple[flo
             raise SystemExit(line.strip())
     process.wait()  # one frame after the first: the process ends by itself
     if reported is None:
-        raise SystemExit(f"run.py {scene} ended without its first frame (status {process.returncode})")
+        raise SystemExit(f"run.py {SCENE} ended without its first frame (status {process.returncode})")
     return seconds, reported, len(list(cache.rglob("*"))) - before
 
 
-def start_times(scene: str, rounds: int) -> str:
+def start_times(rounds: int) -> str:
     """The table of ``--start``: medians over the rounds, the rounds' figures beside them."""
     rows = {(where, cache): [] for where in ("window", "headless") for cache in ("empty", "filled")}
     for round_ in range(rounds):
@@ -231,83 +209,68 @@ def start_times(scene: str, rounds: int) -> str:
                 cache, out = Path(folder) / "cache", Path(folder) / "out"
                 cache.mkdir()
                 for state in ("empty", "filled"):  # the first start fills the cache the second reads
-                    result = first_frame_s(scene, where == "window", cache, out)
+                    result = first_frame_s(where == "window", cache, out)
                     rows[where, state].append(result)
                     figures = f"first frame after {result[0]:.1f} s ({result[1]:.1f} s from the compile line)"
                     print(f"round {round_ + 1}/{rounds} {where}, cache {state}: {figures}, {result[2]} new cache files",
                           file=sys.stderr, flush=True)  # fmt: skip
-    lines = [
-        "| start | kernel cache | s to the first frame: median (runs) | s from the compile line | new cache files |",
-        "|---|---|---:|---:|---:|",
+    head = [
+        "start",
+        "kernel cache",
+        "s to the first frame: median (runs)",
+        "s from the compile line",
+        "new cache files",
     ]
+    lines = []
     for (where, state), results in rows.items():
         launch, reported, added = zip(*results)
         runs = ", ".join(f"{value:.1f}" for value in launch)
-        lines.append(
-            f"| {where} | {state} | **{statistics.median(launch):.1f}** ({runs}) | {statistics.median(reported):.1f} "
-            f"| {max(added)} |"
-        )
-    return "\n".join(lines)
+        median = f"**{statistics.median(launch):.1f}** ({runs})"
+        lines.append([where, state, median, f"{statistics.median(reported):.1f}", max(added)])
+    return markdown(head, lines)
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--frames", type=int, default=150, help="measured frames per run (default 150)")
-    parser.add_argument("--rounds", type=int, default=3, help="runs of each variant, alternated (default 3)")
-    parser.add_argument(
-        "--variants", default=",".join(DEFAULT_VARIANTS), help=f"comma-separated, from: {', '.join(VARIANTS)}"
-    )
-    parser.add_argument("--scene", default="dam_break")
-    parser.add_argument(
-        "--warmup", type=int, default=WARMUP_FRAMES, help=f"frames before the measured ones (default {WARMUP_FRAMES})"
-    )
-    parser.add_argument(
-        "--offscreen", action="store_true", help="draw offscreen (GGUI's show_window=False): Vulkan, no display"
-    )
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=at_least(1), default=150, help="measured frames per run (default 150)")
+    parser.add_argument("--rounds", type=at_least(1), default=3, help="runs of each variant, alternated (default 3)")
+    parser.add_argument("--variants", default="window,paused", help=f"comma-separated, from: {', '.join(VARIANTS)}")
+    parser.add_argument("--warmup", type=at_least(0), default=WARMUP_FRAMES, help="frames before the measured ones")
+    parser.add_argument("--offscreen", action="store_true", help="GGUI's show_window=False: Vulkan, no display")
     parser.add_argument("--arch", default=None, help="the simulation's and renderer's backend (default: auto)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
-    parser.add_argument(
-        "--start", action="store_true", help="time python run.py's start to its first frame, cache empty and filled"
-    )
+    parser.add_argument("--start", action="store_true", help="python run.py's start to its first frame, instead")
     args = parser.parse_args(argv)
-    if args.frames < 1 or args.rounds < 1 or args.warmup < 0:
-        parser.error(
-            f"--frames {args.frames}, --rounds {args.rounds}, --warmup {args.warmup}: allowed at least 1, 1 and 0"
-        )
     if args.one:
-        result = measure(args.one, args.frames, args.scene, args.warmup, args.offscreen, args.arch)
-        print(json.dumps(result), flush=True)
+        print(json.dumps(measure(args.one, args.frames, args.warmup, args.offscreen, args.arch)), flush=True)
         return
     if args.start:
-        load = os.getloadavg()[0]
-        print(f"{args.scene}: python run.py's start, {args.rounds} rounds (load at the start {load:.1f})")
-        print(start_times(args.scene, args.rounds))
+        print(f"{SCENE}: python run.py's start, {args.rounds} rounds (load at the start {os.getloadavg()[0]:.1f})")
+        print(start_times(args.rounds))
         return
     names = [name.strip() for name in args.variants.split(",") if name.strip()]
     unknown = [name for name in names if name not in VARIANTS]
     if unknown:
         parser.error(f"unknown variant {unknown[0]!r}; known: {', '.join(VARIANTS)}")
+    options = ["--frames", str(args.frames), "--warmup", str(args.warmup)] + ["--offscreen"] * args.offscreen
+    options += ["--arch", args.arch] if args.arch else []
     results = {name: [] for name in names}
     for round_ in range(args.rounds):
-        for name in names:
-            options = ["--frames", str(args.frames), "--scene", args.scene, "--warmup", str(args.warmup)]
-            options += (["--offscreen"] if args.offscreen else []) + (["--arch", args.arch] if args.arch else [])
+        for name in names:  # each run a fresh process, as a user's window
             run = subprocess.run([sys.executable, __file__, "--one", name, *options], capture_output=True, text=True)
             if run.returncode != 0:
                 raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
             result = json.loads(run.stdout.strip().splitlines()[-1])
             results[name].append(result)
-            phases = " + ".join(
-                f"{p} {result[p]:.1f}" for p in ("sim", "draw", "panel", "show") if result[p] is not None
-            )
+            phases = " + ".join(f"{p} {result[p]:.1f}" for p in PHASES[1:] if result[p] is not None)
             progress = f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps"
             print(f"{progress}, {phases} ms", file=sys.stderr, flush=True)
+    from pbf.solver import start_backend  # started here only to be named
+
     where = "offscreen (GGUI show_window=False; show = draw + read back)" if args.offscreen else "in a window"
+    backend = start_backend(args.arch, quiet=True)
     print(
-        f"{args.scene}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend_name(args.arch)}, "
-        f"medians (ms per frame; cpu: all threads)"
+        f"{SCENE}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend}, medians (ms; cpu: all threads)"
     )
     print(table(results))
 
