@@ -489,8 +489,8 @@ OPACITY_STEPS = 4096
 """Fixed-point steps of opacity in the sprites' sum (integer atomics: the same image on every run)."""
 WHITE_RGB = (0.96, 0.98, 1.0)
 FAINTEST = 8
-"""The least opacity sum (in OPACITY_STEPS) a corner of a cell needs for the blend to visit it: below it on
-every corner, 1 − exp(−Σ) is under half a level of an 8-bit channel, which the blend would round away."""
+"""The least opacity sum (in OPACITY_STEPS) one of the four coarse pixels around a frame's pixel needs for it
+to be whitened at all: below it on all four, 1 − exp(−Σ) is under half a level of an 8-bit channel."""
 
 
 @ti.func
@@ -517,7 +517,7 @@ class Sprites:
         self.width, self.height = int(width_px), int(height_px)
         self.opacity = ti.field(ti.i32, shape=(self.height, self.width))
         self.row_used = ti.field(ti.i32, shape=self.height)
-        """1 where a row of the sums holds any opacity: the blend passes over the rest in a read."""
+        """1 where a row of the sums holds any opacity: a frame's pixel between two other rows costs two reads."""
         self.per_item = per_item
         self.footprints = None
         self.constants = scene_constants(spacing=float(spacing_m))
