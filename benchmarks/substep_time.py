@@ -2,19 +2,16 @@
 
     python benchmarks/substep_time.py --arch cuda --sizes 8000 64000 1000000
     python benchmarks/substep_time.py --arch cuda --preset dam_break_large
-    python benchmarks/substep_time.py --arch cuda --sizes 8000 --profile     # Taichi's profiler, per task
 
 ``--sizes``: the seed dam break scaled to each (at most 4 iterations), after 5 frames ``--substeps``
 substeps timed whole, ``--rounds`` times: medians of ms a substep, of the host's time to issue them
 and of the issuing thread's CPU time. ``--preset``: 30 frames timed after 3, 30 more with the density
-error read. ``--profile``: each task's device time over 10 substeps.
+error read.
 """
 
 import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import taichi as ti
 
@@ -24,8 +21,6 @@ from pbf.solver import start_backend
 from pbf.study.common import dam_break
 
 WARMUP_FRAMES = 5
-if __package__ in (None, ""):  # run as a script: the checkout last on the path, for benchmarks.instruments
-    sys.path.append(str(Path(__file__).resolve().parent.parent))
 
 
 def substep_times(particles: int, substeps: int, rounds: int) -> dict:
@@ -51,21 +46,6 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
     return dict(
         particles=sim.particle_count, ms=median(whole), host_ms=median(host), host_cpu_ms=median(cpu), built_s=built
     )
-
-
-def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
-    """(task, launches per substep, µs each) of ``substeps`` substeps, the most device time first."""
-    from benchmarks.instruments import profiled_tasks
-
-    sim = Simulation(dam_break(particles, 4), quiet=True)
-    sim.step(WARMUP_FRAMES)
-    dt = sim.dt_s
-    ti.sync()
-    ti.profiler.clear_kernel_profiler_info()
-    for _ in range(substeps):
-        sim.substep(dt)
-    ti.sync()
-    return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in profiled_tasks().items()]
 
 
 def preset_rate(preset: str, frames: int = 30) -> dict:
@@ -97,28 +77,14 @@ def main(argv=None) -> None:
     parser.add_argument("--substeps", type=int, default=40, help="substeps of one timed round")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--preset", default=None, help="a preset whose frame rate to measure")
-    parser.add_argument("--profile", action="store_true", help="per task device times (Taichi's profiler)")
     args = parser.parse_args(argv)
     if not args.sizes and args.preset is None:
         parser.error("give --sizes, --preset or both")
-    if args.profile and (args.preset is not None or not args.sizes):
-        parser.error("--profile: profiles the substeps of --sizes, not a preset's frames; give --sizes alone")
     if args.preset is not None:
         try:  # before the backend starts
             load_scene(args.preset)
         except SceneError as error:
             parser.error(str(error))
-    if args.profile:  # the profiler is chosen when Taichi starts
-        from benchmarks.instruments import start_profiled
-
-        backend = start_profiled(args.arch, quiet=True)
-        for particles in args.sizes:
-            print(f"{particles:,} particles, {backend}: device time per task of a substep (Taichi's profiler)")
-            rows = profile(particles)
-            for name, count, micros in rows:
-                print(f"  {name:<64} {count:>3}x {micros:>9.1f} µs")
-            print(f"  total {sum(count * micros for _, count, micros in rows) / 1e3:.3f} ms a substep")
-        return
     backend = start_backend(args.arch, quiet=True)
     if args.sizes:
         print(f"backend {backend}; {args.substeps} substeps a round, medians of {args.rounds} rounds")

@@ -211,13 +211,6 @@ def test_substep_time_prints_its_table_and_a_presets_rate(capsys):
     assert "pour, cpu:" in out and "frames of simulation a second" in out
 
 
-def test_substep_time_refuses_a_profile_of_a_preset(capsys):
-    with pytest.raises(SystemExit) as stop:
-        script("substep_time").main(["--preset", "pour", "--profile"])
-    assert stop.value.code == 2
-    assert "--profile" in capsys.readouterr().err
-
-
 @pytest.mark.parametrize(
     "argv, message",
     [
