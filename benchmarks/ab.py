@@ -1,15 +1,13 @@
 """Versions of the simulator timed against each other, alternated in fresh processes: medians and ratios.
 
     python benchmarks/ab.py HEAD 3153ce8 --arch cpu --sizes 8000 64000 --rounds 5
-    python benchmarks/ab.py . ../base --arch cuda --sizes 8000 64000 1000000 --preset dam_break_large
+    python benchmarks/ab.py . ../base --arch cuda --sizes 8000 64000 1000000
 
-A version is a folder holding ``pbf/`` or a git revision of this checkout (exported with ``git
-archive`` into a temporary folder); the first is the base of the ratios. Each round runs every version
-once, in an order that rotates from round to round: this checkout's ``substep_time.py`` in a fresh
-process, the version's folder first on PYTHONPATH, from a scratch folder. Per version and size: the
-median over the rounds of ms a substep (each round's the median of ``--inner`` stretches of
-``--substeps``), its range, the host's CPU ms, and the median and range of the rounds' paired ratios
-to the base. ``--preset`` adds its frames simulated a second, substeps a frame and mean error.
+A version is a folder holding ``pbf/`` or a git revision of this checkout; the first is the base of
+the ratios. Each round runs every version once, the order rotating, as this checkout's
+``substep_time.py`` in a fresh process with the version's folder first on PYTHONPATH. Per version and
+size: the median over the rounds of ms a substep (a round's: the median of ``--inner`` stretches of
+``--substeps``), its range, the host's CPU ms, and the rounds' paired ratios to the base.
 """
 
 from __future__ import annotations
@@ -30,24 +28,20 @@ from benchmarks.lab import CHECKOUT, at_least, export, revision, spread  # noqa:
 
 TIMER = Path(__file__).resolve().parent / "substep_time.py"
 RUN_TIMEOUT_S = 3600
-"""One version's run of one round: a million particles on the CPU backend with a preset takes minutes."""
+"""One version's run of one round: a million particles on the CPU backend take minutes."""
 
 SIZE_ROW = re.compile(r"^\s*([\d,]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s*$")
 """substep_time.py's row for a size: particles, ms/substep, host issue ms, host CPU ms, built s."""
-PRESET_ROW = re.compile(
-    r"([\d.]+) frames of simulation a second, ([\d.]+) substeps a frame; mean density error ([\d.]+)%"
-)
 
 
 class Version:
     """A version as given, the folder its package is imported from, and what its runs printed: by size
-    asked, the particles its scene holds and a round's ms a substep and host CPU ms; the preset's figures.
+    asked, the particles its scene holds and a round's ms a substep and host CPU ms.
     (Not a dataclass: the tests load this file as a module of no package, which dataclasses refuse.)"""
 
     def __init__(self, given: str, folder: Path, label: str):
         self.given, self.folder, self.label = given, folder, label
         self.particles, self.ms, self.host_cpu_ms = {}, {}, {}
-        self.frames_per_s, self.substeps, self.errors = [], [], []
 
 
 class RunFailed(Exception):
@@ -101,7 +95,7 @@ def run_once(version: Version, timer_args: list[str], workdir: Path) -> str:
     return done.stdout
 
 
-def record(version: Version, output: str, sizes: list[int], preset: str | None) -> None:
+def record(version: Version, output: str, sizes: list[int]) -> None:
     rows = [row for row in map(SIZE_ROW.match, output.splitlines()) if row]
     if len(rows) != len(sizes):
         raise RunFailed(f"version {version.label} ({version.given}): {len(rows)} size rows printed, not {len(sizes)}")
@@ -109,12 +103,6 @@ def record(version: Version, output: str, sizes: list[int], preset: str | None) 
         version.particles[size] = int(row.group(1).replace(",", ""))
         version.ms.setdefault(size, []).append(float(row.group(2)))
         version.host_cpu_ms.setdefault(size, []).append(float(row.group(4)))
-    if preset is not None:
-        found = PRESET_ROW.search(output)
-        if found is None:
-            raise RunFailed(f"version {version.label} ({version.given}): no frame rate printed for {preset}")
-        for figures, value in zip((version.frames_per_s, version.substeps, version.errors), found.groups()):
-            figures.append(float(value))
 
 
 def paired_ratio(values: list[float], base: list[float]) -> str:
@@ -132,47 +120,28 @@ def report(versions: list[Version], args) -> None:
         f"median of {args.inner} stretches of {args.substeps} substeps"
     )
     ratio_head = f"ratio to {base.label} (range)"
-    if args.sizes:
-        print(f"\n{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
+    print(f"\n{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
     for size in args.sizes:
         for v in versions:
             host_ms, ratio = statistics.median(v.host_cpu_ms[size]), paired_ratio(v.ms[size], base.ms[size])
             print(f"{v.particles[size]:>10,} {v.label:<8} {spread(v.ms[size], 3):>26} {host_ms:>12.3f} {ratio:>20}")
-    if args.preset is not None:
-        head = f"{'version':<8} {args.preset + ': frames/s (range)':>36} {'substeps a frame':>17} {'mean error':>11}"
-        print(f"\n{head} {ratio_head:>20}")
-        for v in versions:
-            substeps, error = statistics.median(v.substeps), statistics.median(v.errors)
-            ratio = paired_ratio(v.frames_per_s, base.frames_per_s)
-            print(f"{v.label:<8} {spread(v.frames_per_s, 1):>36} {substeps:>17.2f} {error:>10.3f}% {ratio:>20}")
 
 
 def parse(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("versions", nargs="+", help="folders holding pbf/, or git revisions of this checkout")
     parser.add_argument("--arch", default=None, help="Taichi's backend for every run (default: as the program picks)")
-    parser.add_argument("--sizes", type=at_least(1), nargs="+", default=[], help="the seed dam break scaled to these")
-    parser.add_argument("--preset", default=None, help="also the frame rate of this preset")
+    parser.add_argument("--sizes", type=at_least(1), nargs="+", required=True, help="the seed dam break at these")
     parser.add_argument("--rounds", type=at_least(1), default=3, help="runs of each version, alternated (default 3)")
     parser.add_argument("--inner", type=at_least(1), default=3, help="timed stretches in a run, their median kept")
     parser.add_argument("--substeps", type=at_least(1), default=40, help="substeps of a timed stretch (default 40)")
     args = parser.parse_args(argv)
     if len(args.versions) < 2:
         parser.error("versions: give at least two to compare (the first is the base of the ratios)")
-    if not args.sizes and args.preset is None:
-        parser.error("give --sizes, --preset or both")
-    from pbf.scene import SceneError, load_scene
     from pbf.solver.backend import ARCHES
 
     if args.arch is not None and args.arch.lower() not in ARCHES:
         parser.error(f"--arch {args.arch!r}: unknown backend; allowed: {', '.join(ARCHES)}")
-    if args.preset is not None:
-        try:
-            load_scene(args.preset)
-        except SceneError as error:
-            parser.error(str(error))
-        if Path(args.preset).is_file():  # a scene file of the user's: the runs start in a scratch folder
-            args.preset = str(Path(args.preset).resolve())
     return parser, args
 
 
@@ -180,8 +149,7 @@ def main(argv=None) -> int:
     parser, args = parse(argv)
     timer_args = ["--rounds", str(args.inner), "--substeps", str(args.substeps)]
     timer_args += ["--arch", args.arch] if args.arch is not None else []
-    timer_args += ["--sizes", *map(str, args.sizes)] if args.sizes else []
-    timer_args += ["--preset", args.preset] if args.preset is not None else []
+    timer_args += ["--sizes", *map(str, args.sizes)]
     with tempfile.TemporaryDirectory(prefix="pbf-ab-") as scratch:
         versions = resolve(args.versions, Path(scratch), parser)
         workdir = Path(scratch) / "work"
@@ -191,7 +159,7 @@ def main(argv=None) -> int:
                 order = versions[round_ % len(versions) :] + versions[: round_ % len(versions)]
                 print(f"round {round_ + 1} of {args.rounds}: " + ", ".join(v.label for v in order), flush=True)
                 for version in order:
-                    record(version, run_once(version, timer_args, workdir), args.sizes, args.preset)
+                    record(version, run_once(version, timer_args, workdir), args.sizes)
         except RunFailed as failure:
             print(f"ab: {failure}", file=sys.stderr)
             return 1

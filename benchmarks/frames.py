@@ -1,19 +1,16 @@
-"""The headless frame's cost without the simulation: the renderer and the PNG writer alone on a fixed
-state, both styles, as frames a second and CPU milliseconds a frame (all threads: on the CPU backend
-the kernels' too); and ``look``, how the surface style reads (docs/RENDERING.md, "Measured").
+"""The headless frame's cost without the simulation: the renderers and the PNG writer alone on the seed
+at t = 1 s, both styles, in frames a second and CPU ms a frame (every thread's); and ``look``, how the
+surface style reads (docs/RENDERING.md, "Measured").
 
-    python -m benchmarks.frames [--size 1920x1080] [--arch cuda]   # the seed scene at t = 1 s, 1280×720
-    python -m benchmarks.frames --whole 15 --rounds 5                # and whole frames, simulation included
+    python -m benchmarks.frames [--size 1920x1080] [--arch cuda] [--repeats 20]
     python -m benchmarks.frames look [--size 640x360] [--images out/look]
 
-The scene is stepped to ``--at-frame``; the two styles are then drawn alternately (a busy machine
-slows both alike) until the image is on the host, medians reported; the PNG encoder and the threaded
-writer (``pbf.app.writer``) write those images. ``--whole N``: from the same state, N frames stepped
-and written each way, the ways alternating round by round. ``look``, from the renderer's normals and
-water mask (``SurfaceRenderer.surface``): a settled pool's *top face* (water pixels facing up within
-45°, two spacings inside the side walls: the share within 5° of vertical and the median angle, beside
-the particles' own top, a cubic fitted to each column's highest particle), and a splash's *speckle*
-(water pixels whose normal is over 30° from their same-surface neighbours' mean).
+The two styles are drawn alternately (a busy machine slows both alike) until the image is on the
+host, medians reported; the PNG encoder and the threaded writer (``pbf.app.writer``) write those
+images. ``look``, from the renderer's normals and water mask: a settled pool's *top face* (water
+pixels facing up within 45°, two spacings inside the side walls: the share within 5° of vertical and
+the median angle, beside the particles' own top) and a splash's *speckle* (water pixels whose normal
+is over 30° from their same-surface neighbours' mean).
 """
 
 from __future__ import annotations
@@ -62,34 +59,6 @@ def threaded(images: list, folder: Path) -> tuple[float, float, int]:
         files.submit(folder / f"frame_{number:05d}.png", image.copy())
     files.close()
     return *clock.lap(), files.workers
-
-
-WAYS = ("simulation only", "our PNG on the main thread", "threaded writer")
-
-
-def whole_frames(sim, renderer, frames: int, rounds: int, folder: Path) -> dict:
-    """Per way of writing: (wall, CPU) seconds a frame of each round, simulation included, every round
-    from the same state."""
-    import taichi as ti
-
-    from pbf.app.writer import FrameFiles, write_png
-
-    start, times = sim.snapshot(), {way: [] for way in WAYS}
-    for _ in range(rounds):
-        for way in WAYS:
-            sim.restore(start)
-            files = FrameFiles() if way == "threaded writer" else None
-            clock = Clock()
-            for number in range(frames):
-                sim.step()
-                if way != "simulation only":
-                    image, path = renderer.frame(), folder / f"frame_{number:05d}.png"
-                    files.submit(path, image) if files is not None else write_png(path, image)
-            if files is not None:
-                files.close()
-            ti.sync()
-            times[way].append(tuple(t / frames for t in clock.lap()))
-    return times
 
 
 def row(label: str, wall_s: float, cpu_s: float, extra: str = "") -> str:
@@ -256,8 +225,6 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=image_size, default=None, help="image size WIDTHxHEIGHT (default: the scene's)")
     parser.add_argument("--repeats", type=int, default=20, help="frames timed per style (default: 20)")
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
-    parser.add_argument("--whole", type=int, default=0, help="also N whole frames (simulate, draw, write) each way")
-    parser.add_argument("--rounds", type=int, default=5, help="rounds of --whole, the ways alternating (default: 5)")
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["look"]:
         return look(argv[1:])
@@ -311,20 +278,6 @@ def main(argv=None) -> int:
     if white_water is not None:
         total = (drawn["surface"][1] + update[1]) / drawn["particles"][1]
         print(f"With white water's update, {total:.2f}× their CPU time ({live:,} diffuse particles).")
-    if args.whole:
-        with tempfile.TemporaryDirectory() as folder:
-            times = whole_frames(sim, renderers["particles"], args.whole, args.rounds, Path(folder))
-        print(
-            f"\nWhole frames from t = {args.at_frame * sim.scene.time.frame_dt_s:.2f} s, particles: {args.whole} "
-            f"frames a round, {args.rounds} rounds, the ways alternating, medians\n"
-        )
-        head = ["way", "wall ms a frame", "added to the simulation's", "CPU ms a frame", "added"]
-        base, rows = medians(times[WAYS[0]]), []
-        for way in WAYS:
-            (wall, cpu), first = medians(times[way]), way == WAYS[0]
-            added = ("", "") if first else (f"{(wall - base[0]) * 1e3:.1f}", f"{(cpu - base[1]) * 1e3:.1f}")
-            rows.append([way, f"{wall * 1e3:.1f}", added[0], f"{cpu * 1e3:.1f}", added[1]])
-        print(markdown(head, rows))
     return 0
 
 

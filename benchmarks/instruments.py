@@ -1,12 +1,10 @@
-"""The lab's instruments, in one module that nothing in ``pbf`` imports: what Taichi launches, reads and
-compiles (:func:`watching`, :class:`TransferCounter`), and the tasks Taichi's kernel profiler timed
-(:func:`start_profiled`, :func:`profiled_tasks`, :func:`count_substeps`).
+"""The lab's instruments, which nothing in ``pbf`` imports: what Taichi launches, reads and compiles
+(:func:`watching`, :class:`TransferCounter`), and the tasks Taichi's kernel profiler timed.
 
-The profiler is read through Taichi's public ``ti.profiler``. Watching wraps Taichi's own classes and
-``pbf.solver.launch.Launcher._launch`` while an observer is inside :func:`watching`: Taichi's internals,
-on the Taichi ``pbf.solver.launch`` was written for only. A kernel call is one call of a ``@ti.kernel``;
-Taichi splits it into offloaded tasks (each top-level loop, and each run of statements outside loops, a
-one-thread ``serial`` task), each a launch on a GPU; the profiler lists them on the CPU alike.
+Watching wraps Taichi's own classes and ``pbf.solver.launch.Launcher._launch`` (Taichi's internals:
+the Taichi ``pbf.solver.launch`` was written for only). A kernel call is one call of a ``@ti.kernel``;
+Taichi splits it into offloaded tasks (each top-level loop, and each run of statements outside
+loops, a one-thread ``serial`` task), each a launch on a GPU.
 """
 
 from __future__ import annotations

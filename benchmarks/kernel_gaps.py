@@ -4,10 +4,8 @@
         --rounds 1 --substeps 40
     python benchmarks/kernel_gaps.py substeps.nsys-rep --last-ms 150 --substeps 40
 
-Reads the device's timeline (``nsys stats --report cuda_gpu_trace``, or that report as CSV), keeps the
-operations that began in its last ``--last-ms`` (the timed substeps come last), and prints the time
-some operation ran and the time none did, the operations by name (kernels, copies, fills) and the
-longest idle gaps with what ran on either side; ``--substeps``: every total a substep too.
+Of the operations that began in the trace's last ``--last-ms``: the time some ran and none did, the
+operations by name, and the longest idle gaps with what ran on either side (a substep's with ``--substeps``).
 """
 
 from __future__ import annotations

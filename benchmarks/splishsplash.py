@@ -1,26 +1,17 @@
-"""Our PBF against SPlisHSPlasH 2.19's DFSPH and PBF on the seed dam break: cost and density error.
+"""Our PBF against SPlisHSPlasH 2.19's DFSPH and PBF on the seed dam break, 1 s: cost and density error.
 
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash                    # the default rows
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --sloshing         # the standing wave's decay
     python benchmarks/splishsplash.py --splash /tmp/sphvenv/bin/splash --methods dfsph \\
         --ours "substeps=4,iterations=4" "substeps=4,target=0.001,max_iterations=30"
 
-SPlisHSPlasH is installed apart (it needs NumPy 1; its bundled libGLdispatch clashes with the system's,
-so it runs as its own process with the system library preloaded): ``python3 -m venv /tmp/sphvenv &&
-/tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``.
-
-Both run the ``dam_break`` preset for 1 s, measured at its 60 frames a second. SPlisHSPlasH: each
-``--methods`` (dfsph: simulationMethod 4; pbf: 2) at its shipped stopping rules with maxError 0.01% and
-0.1% (MAX_ERRORS), a fixed step of 4.17 ms (DT_S), Akinci boundary particles on the box,
-XSPH as ours, no viscosity or vorticity; its block starts one spacing inside the preset's, as it places
-particles. Its time is its own mean "SimStep", its iterations its own counters. The density error of
-every run is the mean over frames of the mean over particles of max(ρ/ρ0 − 1, 0), and the max of the
-max; SPlisHSPlasH's from the density it exports. Ours: each
-``--ours`` spec is ``--set`` overrides of the preset (short names in OUR_SHORT_KEYS; fixed iterations
-unless it sets a target; ``preset``: the preset's solver as shipped), vorticity off, the CFL limit at
-its most; its time is ``step()`` alone. ``--sloshing``: the standing wave of ``pbf.study.damping``
-(the ``sloshing`` preset's tank, settled 1 s, given its first mode at 10 mm) in each method and ours,
-the decay a period fitted alike. Times on a shared machine swing several-fold; the errors do not.
+SPlisHSPlasH needs NumPy 1, so it is installed apart and run as its own process: ``python3 -m venv
+/tmp/sphvenv && /tmp/sphvenv/bin/pip install pysplishsplash==2.19.0 "numpy<2"``. A row a run: its
+step, steps, iterations a step, ms a step (SPlisHSPlasH's own "SimStep", ours ``step()`` alone),
+compute seconds a simulated second, and the density error's mean and max over the frames (its from
+the density it exports). An ``--ours`` spec is overrides of the preset (short names in OUR_SHORT_KEYS;
+``preset``: as shipped). ``--sloshing``: the decay a period of ``pbf.study.damping``'s standing wave
+in each. The setups' differences: docs/BENCHMARKS.md, "Against SPlisHSPlasH's DFSPH".
 """
 
 from __future__ import annotations
@@ -46,6 +37,7 @@ from pbf.scene import SceneError, load_scene
 from pbf.solver import Simulation, start_backend
 from pbf.study.common import timed
 
+# Preloaded into SPlisHSPlasH's process: the libGLdispatch its wheel bundles clashes with the system's.
 SYSTEM_GLDISPATCH = "/lib/x86_64-linux-gnu/libGLdispatch.so.0"
 PRESET = "dam_break"
 SECONDS = 1.0  # simulated, every run
@@ -118,9 +110,6 @@ class Row:
     mean_error: float
     max_error: float
     divergence_iterations: float | None = None
-
-
-# ----------------------------------------------------------------------------- SPlisHSPlasH
 
 
 def splash_config(splash: Path, method: str, params: dict, dt_s: float, stop_s: float, scene, box, block) -> dict:
@@ -203,9 +192,6 @@ def run_splishsplash(splash: Path, method: str, params: dict, threads: int) -> R
     )  # fmt: skip
 
 
-# ----------------------------------------------------------------------------- ours
-
-
 class IterationCount:
     """A stage hook that adds up the solver iterations of every substep (one Python call per stage)."""
 
@@ -272,9 +258,6 @@ def medians(runs: list[Row]) -> Row:
     return first
 
 
-# ----------------------------------------------------------------------------- the standing wave
-
-
 def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> tuple[np.ndarray, np.ndarray]:
     """The standing wave in SPlisHSPlasH: (times, the mode's amplitude). Its container is one spacing
     wider in x and z, so that its wall particles stand one spacing from the water as in its dam break."""
@@ -315,9 +298,6 @@ def sloshing_comparison(splash: Path, methods: list[str], threads: int, periods:
         print(f"{'SPlisHSPlasH ' + SPLASH_METHODS[method][1]:<34} {decay:>16.1%} {period:>7.3f}s")
     ours = damping.sloshing(periods=periods)
     print(f"{'ours (the sloshing preset)':<34} {ours.decay_per_period:>16.1%} {ours.period_s:>7.3f}s")
-
-
-# ----------------------------------------------------------------------------- the command
 
 
 def line(r: Row) -> str:

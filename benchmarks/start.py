@@ -3,12 +3,9 @@
     python -m benchmarks.bench start [--presets dam_break ...] [--arch cpu]
     python -m benchmarks.bench start --first-calls [--presets hydrostatic ...]
 
-A start is ``pbf PRESET --stats-only --frames 1`` in a new process, timed by its own "kernels ready in"
-line; the ``.tic`` files it adds to its Taichi offline cache folder are the kernels it compiled. Per
-preset, in a folder of its own: ``cold`` (emptied first), ``warm`` (again), ``spacing`` (10% larger:
-another particle count and grid). ``--first-calls``: per preset, in a fresh process with an empty
-cache, the Simulation built with settling off and one substep, each kernel's first call timed (front
-end, compile, one run).
+A start is ``pbf PRESET --stats-only --frames 1`` timed by its "kernels ready in" line, the ``.tic``
+files it adds to its own cache folder the kernels it compiled: ``cold`` (empty), ``warm`` (again),
+``spacing`` (10% larger). ``--first-calls``: with an empty cache, each kernel's first call timed.
 """
 
 from __future__ import annotations

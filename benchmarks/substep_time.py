@@ -1,22 +1,17 @@
 """A substep timed whole on any backend, the host's share of it, and a preset's frame rate: the GPU's figures.
 
     python benchmarks/substep_time.py --arch cuda --sizes 8000 64000 1000000
-    python benchmarks/substep_time.py --arch cuda --preset dam_break_large [--set KEY=VALUE ...]
-    python benchmarks/substep_time.py --arch cuda --sizes 8000 --profile     # Taichi's profiler, per task
+    python benchmarks/substep_time.py --arch cuda --preset dam_break_large
 
-``--sizes``: the seed dam break scaled to each (``pbf.study.common.dam_break``, at most 4 iterations),
-5 frames to warm up, then ``--substeps`` substeps timed whole, the device synchronised at each end,
-``--rounds`` times: medians of ms a substep, of the host's time to issue them and of the issuing
-thread's CPU time (``benchmarks/ab.py`` runs it for versions against each other). ``--preset``: 3
-frames to warm up, 30 timed, 30 more with the density error read. ``--profile``: each task's device
-time over 10 substeps (the profiler is chosen when Taichi starts).
+``--sizes``: the seed dam break scaled to each (at most 4 iterations), after 5 frames ``--substeps``
+substeps timed whole, ``--rounds`` times: medians of ms a substep, of the host's time to issue them
+and of the issuing thread's CPU time. ``--preset``: 30 frames timed after 3, 30 more with the density
+error read.
 """
 
 import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import taichi as ti
 
@@ -26,8 +21,6 @@ from pbf.solver import start_backend
 from pbf.study.common import dam_break
 
 WARMUP_FRAMES = 5
-if __package__ in (None, ""):  # run as a script: the checkout last on the path, for benchmarks.instruments
-    sys.path.append(str(Path(__file__).resolve().parent.parent))
 
 
 def substep_times(particles: int, substeps: int, rounds: int) -> dict:
@@ -55,24 +48,9 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
     )
 
 
-def profile(particles: int, substeps: int = 10) -> list[tuple[str, int, float]]:
-    """(task, launches per substep, µs each) of ``substeps`` substeps, the most device time first."""
-    from benchmarks.instruments import profiled_tasks
-
-    sim = Simulation(dam_break(particles, 4), quiet=True)
-    sim.step(WARMUP_FRAMES)
-    dt = sim.dt_s
-    ti.sync()
-    ti.profiler.clear_kernel_profiler_info()
-    for _ in range(substeps):
-        sim.substep(dt)
-    ti.sync()
-    return [(name, count // substeps, 1e3 * ms / count) for name, (count, ms) in profiled_tasks().items()]
-
-
-def preset_rate(preset: str, overrides=(), frames: int = 30) -> dict:
+def preset_rate(preset: str, frames: int = 30) -> dict:
     began = time.perf_counter()
-    sim = Simulation(load_scene(preset, overrides), quiet=True)
+    sim = Simulation(load_scene(preset), quiet=True)
     sim.step(3)
     ti.sync()
     start = time.perf_counter()
@@ -99,31 +77,14 @@ def main(argv=None) -> None:
     parser.add_argument("--substeps", type=int, default=40, help="substeps of one timed round")
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--preset", default=None, help="a preset whose frame rate to measure")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="--preset: a key of it")
-    parser.add_argument("--profile", action="store_true", help="per task device times (Taichi's profiler)")
     args = parser.parse_args(argv)
     if not args.sizes and args.preset is None:
         parser.error("give --sizes, --preset or both")
-    if args.profile and (args.preset is not None or not args.sizes):
-        parser.error("--profile: profiles the substeps of --sizes, not a preset's frames; give --sizes alone")
-    if args.set and args.preset is None:
-        parser.error("--set: overrides a key of --preset; give --preset")
     if args.preset is not None:
         try:  # before the backend starts
-            load_scene(args.preset, args.set)
+            load_scene(args.preset)
         except SceneError as error:
             parser.error(str(error))
-    if args.profile:  # the profiler is chosen when Taichi starts
-        from benchmarks.instruments import start_profiled
-
-        backend = start_profiled(args.arch, quiet=True)
-        for particles in args.sizes:
-            print(f"{particles:,} particles, {backend}: device time per task of a substep (Taichi's profiler)")
-            rows = profile(particles)
-            for name, count, micros in rows:
-                print(f"  {name:<64} {count:>3}x {micros:>9.1f} µs")
-            print(f"  total {sum(count * micros for _, count, micros in rows) / 1e3:.3f} ms a substep")
-        return
     backend = start_backend(args.arch, quiet=True)
     if args.sizes:
         print(f"backend {backend}; {args.substeps} substeps a round, medians of {args.rounds} rounds")
@@ -135,11 +96,10 @@ def main(argv=None) -> None:
             times = f"{r['ms']:>11.3f} {r['host_ms']:>14.3f} {r['host_cpu_ms']:>12.3f} {r['built_s']:>19.1f}"
             print(f"{r['particles']:>10,} {times}", flush=True)
     if args.preset is not None:
-        r = preset_rate(args.preset, args.set)
+        r = preset_rate(args.preset)
         lowest, highest = (r[k].astype(float).round(4).tolist() for k in ("lowest_m", "highest_m"))
-        named = args.preset + "".join(f" --set {item}" for item in args.set)
         print(
-            f"{named}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
+            f"{args.preset}, {backend}: {r['particles']:,} particles, {r['frames_per_s']:.1f} frames of "
             f"simulation a second, {r['substeps']:.2f} substeps a frame; mean density error "
             f"{r['mean_error']:.3%} (the worst frame {r['worst_error']:.3%}); particles from {lowest} to {highest} m; "
             f"built and warmed in {r['built_s']:.1f} s"

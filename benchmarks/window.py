@@ -1,20 +1,14 @@
-"""Where a frame of the interactive window goes: the simulation's step, our renderer's draw, the panel
-and GGUI's show, in wall-clock and CPU ms, for the window as ``python run.py`` opens it (the seed from
-rest, 1280 × 720, no input) and its variants (docs/BENCHMARKS.md, "The window"). Needs Vulkan and a
-display (``apt-get install xvfb mesa-vulkan-drivers libvulkan1`` gives both in software):
+"""Where a frame of the window as ``python run.py`` opens it goes (the seed from rest, 1280 × 720, no
+input): the step, our draw, the panel and GGUI's show, wall and CPU ms (docs/BENCHMARKS.md, "The window").
 
     xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py [--frames 150] [--rounds 3]
         [--variants window,paused,surface] [--warmup 30]
-    python benchmarks/window.py --offscreen --arch cuda --frames 300 --rounds 3 --variants window,surface,paused
-    xvfb-run -a -s "-screen 0 1920x1080x24" python benchmarks/window.py --start [--rounds 3]
+    python benchmarks/window.py --offscreen --arch cuda --variants window,surface,paused   # no display
 
-Each variant runs in a fresh process, the variants alternating round by round; a figure is the median
-over the rounds of a round's median over its frames after ``--warmup``; ``fps`` is frames over their
-wall time, ``cpu`` the window process's CPU a frame (every thread), ``X`` the X server's. ``--offscreen``:
-GGUI draws into an offscreen image (``show_window=False``; no X server), ``show`` drawing it and reading
-it back. ``--start``: ``python run.py`` from its launch to the first frame, window and headless, with
-an empty kernel cache (and Mesa's shader cache) and again with the one it filled, and the files each
-start added to the cache.
+Each variant runs in a fresh process, alternated round by round; a figure is the median over the
+rounds of a round's median over its frames; ``cpu`` is the process's (every thread), ``X`` the X
+server's. ``--offscreen``: GGUI's ``show_window=False``, ``show`` drawing and reading the image back.
+Needs Vulkan and, but offscreen, a display: ``apt-get install xvfb mesa-vulkan-drivers libvulkan1``.
 """
 
 import argparse
@@ -23,7 +17,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -165,71 +158,6 @@ def table(results: dict[str, list[dict]]) -> str:
     return markdown([*head, "sim, draw, show cpu ms", "load"], rows)
 
 
-RUN = Path(__file__).resolve().parent.parent / "run.py"
-READY = "[pbf] kernels ready and the first frame drawn in "
-"""The line ``python run.py`` prints once its first frame is drawn (``pbf.app.cli``)."""
-
-
-def first_frame_s(window: bool, cache: Path, out: Path) -> tuple[float, float, int]:
-    """Start ``python run.py`` with the kernel cache in ``cache``; returns the seconds from its launch to
-    the line saying the first frame is drawn, the seconds that line gives (from before the first kernel
-    compiles), and the files the run added to the cache. The run is then stopped."""
-    before = len(list(cache.rglob("*")))
-    command = [sys.executable, str(RUN), SCENE, "--frames", "1", "--out", str(out), "--overwrite"]
-    env = {**os.environ, "TI_OFFLINE_CACHE_FILE_PATH": str(cache), "MESA_SHADER_CACHE_DIR": str(cache / "mesa")}
-    started = time.perf_counter()
-    process = subprocess.Popen(
-        command if window else [*command, "--headless"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-        env=env,
-    )
-    reported = None
-    for line in process.stdout:
-        if line.startswith(READY):
-            seconds = time.perf_counter() - started
-            reported = float(line[len(READY) :].split()[0])
-            break
-        if window and line.startswith("[pbf] no window"):
-            process.kill()
-            raise SystemExit(line.strip())
-    process.wait()  # one frame after the first: the process ends by itself
-    if reported is None:
-        raise SystemExit(f"run.py {SCENE} ended without its first frame (status {process.returncode})")
-    return seconds, reported, len(list(cache.rglob("*"))) - before
-
-
-def start_times(rounds: int) -> str:
-    """The table of ``--start``: medians over the rounds, the rounds' figures beside them."""
-    rows = {(where, cache): [] for where in ("window", "headless") for cache in ("empty", "filled")}
-    for round_ in range(rounds):
-        for where in ("window", "headless"):
-            with tempfile.TemporaryDirectory() as folder:
-                cache, out = Path(folder) / "cache", Path(folder) / "out"
-                cache.mkdir()
-                for state in ("empty", "filled"):  # the first start fills the cache the second reads
-                    result = first_frame_s(where == "window", cache, out)
-                    rows[where, state].append(result)
-                    figures = f"first frame after {result[0]:.1f} s ({result[1]:.1f} s from the compile line)"
-                    print(f"round {round_ + 1}/{rounds} {where}, cache {state}: {figures}, {result[2]} new cache files",
-                          file=sys.stderr, flush=True)  # fmt: skip
-    head = [
-        "start",
-        "kernel cache",
-        "s to the first frame: median (runs)",
-        "s from the compile line",
-        "new cache files",
-    ]
-    lines = []
-    for (where, state), results in rows.items():
-        launch, reported, added = zip(*results)
-        runs = ", ".join(f"{value:.1f}" for value in launch)
-        median = f"**{statistics.median(launch):.1f}** ({runs})"
-        lines.append([where, state, median, f"{statistics.median(reported):.1f}", max(added)])
-    return markdown(head, lines)
-
-
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=at_least(1), default=150, help="measured frames per run (default 150)")
@@ -239,14 +167,9 @@ def main(argv=None) -> None:
     parser.add_argument("--offscreen", action="store_true", help="GGUI's show_window=False: Vulkan, no display")
     parser.add_argument("--arch", default=None, help="the simulation's and renderer's backend (default: auto)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # a single run, in this process, printed as JSON
-    parser.add_argument("--start", action="store_true", help="python run.py's start to its first frame, instead")
     args = parser.parse_args(argv)
     if args.one:
         print(json.dumps(measure(args.one, args.frames, args.warmup, args.offscreen, args.arch)), flush=True)
-        return
-    if args.start:
-        print(f"{SCENE}: python run.py's start, {args.rounds} rounds (load at the start {os.getloadavg()[0]:.1f})")
-        print(start_times(args.rounds))
         return
     names = [name.strip() for name in args.variants.split(",") if name.strip()]
     unknown = [name for name in names if name not in VARIANTS]
