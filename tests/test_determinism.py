@@ -24,6 +24,9 @@ def test_runs_and_restored_snapshots_replay_bit_for_bit():
     assert np.array_equal(sim.positions(), first)
     assert sim.stats() == first_stats
     sim.reset()
+    at_rest = sim.stats()  # the maxima are this state's: none left over from the stats before (atomics)
+    assert at_rest["max_speed_m_s"] == pytest.approx(np.linalg.norm(sim.velocities(), axis=1).max(), rel=1e-6)
+    assert at_rest["max_speed_m_s"] < 0.1 * first_stats["max_speed_m_s"]
     sim.control.target_density_error = 0.002
     sim.step(26)
     assert np.array_equal(sim.positions(), first)

@@ -114,12 +114,34 @@ def _no_contact():
 
 
 @ti.data_oriented
-class Bodies:
+class SolidParts:
+    """What the bodies and the obstacles (``pbf.solver.boundary.Obstacles``) share as parts of ``Boundaries``:
+    their ghost, never the fluid's mirror image. A subclass has ``tables`` (``GhostTables``), ``constants``
+    (the container's and ``count``), ``count`` on the host and ``ghost_of(p, k)``, solid k's ghost."""
+
+    mirrored = False
+
+    @ti.func
+    def ghost(self, p):
+        """The solids' ghost density ρ/ρ0 at p and its gradient (1/m): ``ghost_of(p, k)`` summed over their
+        ``constants.count``, none without wall density."""
+        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
+        # A switch, not only a count: the box's 27 terms in a λ pass hold registers on a GPU even where no
+        # solid is (docs/BENCHMARKS.md, "Registers and occupancy").
+        if ti.static(self.count > 0):
+            if self.constants[None].wall_density:
+                for k in range(self.constants[None].count):
+                    d, g = self.ghost_of(p, k)
+                    density += d
+                    gradient += g
+        return density, gradient
+
+
+@ti.data_oriented
+class Bodies(SolidParts):
     """The rigid bodies: their state on the device, the boundary interface the fluid sees (``ghost``,
     ``project``, ``velocity``), the rigid step (:meth:`advance`) and the reaction (:meth:`gather`). The host
     writes and reads the state through one kernel each way: a from_numpy per field compiles a kernel each."""
-
-    mirrored = False
 
     def __init__(self, params: BoundaryParams, tables, obstacles, capacity: int):
         """``capacity``: the per-particle arrays' length (a bucket). The bodies' slots are a bucket too and
@@ -625,11 +647,6 @@ class Bodies:
             density, local_gradient = self.tables.box(r.transpose() @ (p - centre), -half, half)
             gradient = r @ local_gradient
         return density, gradient
-
-    @ti.func
-    def ghost(self, p):
-        """The bodies' ghost density ρ/ρ0 at p and its gradient (1/m)."""
-        return self.tables.summed(self, p)
 
     @ti.func
     def push_out(self, p):

@@ -15,7 +15,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import sph
-from pbf.solver.bodies import Bodies, component
+from pbf.solver.bodies import Bodies, SolidParts, component
 from pbf.solver.constants import array_loader, scene_constants
 from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
@@ -124,21 +124,6 @@ class GhostTables:
                     value, slope = self.half_spaces(active, d)
                     density += sign * value
                     gradient += sign * d_sign * slope
-        return density, gradient
-
-    @ti.func
-    def summed(self, solids: ti.template(), p):
-        """The ghost density ρ/ρ0 of a set of solids (the obstacles, the bodies) at p and its gradient
-        (1/m): ``solids.ghost_of(p, k)`` summed over their ``constants.count``, none without wall density."""
-        density, gradient = 0.0, ti.Vector([0.0, 0.0, 0.0])
-        # A switch, not only a count: the box's 27 terms in a λ pass hold registers on a GPU even where no
-        # obstacle is (docs/BENCHMARKS.md, "Registers and occupancy").
-        if ti.static(solids.count > 0):
-            if solids.constants[None].wall_density:
-                for k in range(solids.constants[None].count):
-                    d, g = solids.ghost_of(p, k)
-                    density += d
-                    gradient += g
         return density, gradient
 
     @ti.func
@@ -285,10 +270,8 @@ class Container:
 
 
 @ti.data_oriented
-class Obstacles:
+class Obstacles(SolidParts):
     """Static boxes inside the container that the water flows around."""
-
-    mirrored = False
 
     def __init__(self, params: BoundaryParams, tables: GhostTables):
         self.tables = tables
@@ -297,7 +280,7 @@ class Obstacles:
 
     def allocate(self) -> None:
         """The obstacles' arrays, in slots of a bucket as many for none as for a few (their count is data;
-        their code is compiled in only where there are obstacles, :meth:`GhostTables.summed`)."""
+        their code is compiled in only where there are obstacles, ``SolidParts.ghost``)."""
         params = self.params
         radius, count = params.particle_radius_m, len(params.obstacles)
         slots = allocation(count, 8)
@@ -333,7 +316,7 @@ class Obstacles:
         """p moved out of every obstacle grown by the particle radius, through the nearest open face: the one
         it came through, as obstacles are thicker than a substep's move."""
         q = p
-        if ti.static(self.count > 0):  # as in GhostTables.summed
+        if ti.static(self.count > 0):  # as in SolidParts.ghost
             for o in range(self.constants[None].count):
                 radius = self.constants[None].radius
                 lower = self.lower[o] - radius
@@ -348,11 +331,6 @@ class Obstacles:
                     if best < 1e30:
                         q[axis] = target
         return q
-
-    @ti.func
-    def ghost(self, p):
-        """The obstacles' ghost density ρ/ρ0 and its gradient (1/m)."""
-        return self.tables.summed(self, p)
 
     @ti.func
     def ghost_of(self, p, o):

@@ -305,11 +305,16 @@ class NeighbourGrid:
 
     def build_neighbours(self, x) -> None:
         """:meth:`build`, made again in a longer array if the compact list did not fit (tests and tools)."""
-        self.build(x)
+        self.build_fitting(lambda: self.build(x))
+
+    def build_fitting(self, build) -> None:
+        """``build()``, a build of the lists, made again in a longer array if the compact list did not fit;
+        the record of :attr:`status` starts afresh."""
+        build()
         most_entries, truncated = (int(v) for v in self.status.to_numpy())
         if truncated:
             self.settle_frame(most_entries, False)
-            self.build(x)
+            build()
         self.status.fill(0)
 
     def settle_frame(self, most_entries: int, truncated: bool) -> None:

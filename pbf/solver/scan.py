@@ -99,13 +99,10 @@ def _two_sum(a, b, zero):
 
 
 @ti.func
-def _accumulate(high, low, value_high, value_low, is_max: ti.template(), zero):
-    """(high, low) with one more value (value_high, value_low) added in, compensated, or its maximum taken."""
-    if ti.static(is_max):
-        high = ti.max(high, value_high)
-    else:
-        high, error = _two_sum(high, value_high, zero)
-        low += error + value_low
+def _accumulate(high, low, value_high, value_low, zero):
+    """(high, low) with one more value (value_high, value_low) added in, compensated."""
+    high, error = _two_sum(high, value_high, zero)
+    low += error + value_low
     return high, low
 
 
@@ -194,7 +191,7 @@ class ExclusiveScan:
 
 @ti.data_oriented
 class TreeSum:
-    """Compensated sums and maxima of float32 values: ``sums`` results, each the same bits on any thread
+    """Compensated sums of float32 values: ``sums`` results, each the same bits on any thread
     count, kept on the device (:attr:`high` + :attr:`low`) for kernels to use or the host to read."""
 
     def __init__(self, length: int, sums: int = 1, block: int | None = None, shared: bool = False, gpu: bool = False):
@@ -216,7 +213,7 @@ class TreeSum:
         self.scratch_high = ti.field(ti.f32, shape=scratch)
         self.scratch_low = ti.field(ti.f32, shape=scratch)
         self.high = ti.field(ti.f32, shape=sums)
-        """The results: sum ``slot`` is high[slot] + low[slot] (the low part 0 for a maximum)."""
+        """The results: sum ``slot`` is high[slot] + low[slot]."""
         self.low = ti.field(ti.f32, shape=sums)
         self.zero = ti.field(ti.i32, shape=())
         """Always 0; read in the kernels, so that the compiler cannot fold the TwoSum steps."""
@@ -225,7 +222,7 @@ class TreeSum:
     def sum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
         """high[slot] + low[slot] = Σ_{k < count} values[k] (``count``: an int or a 0-D field), at a kernel's
         top level."""
-        self._reduce(values, slot, count, False)
+        self._reduce(values, slot, count)
 
     @ti.func
     def total(self, slot: ti.template()):
@@ -233,12 +230,7 @@ class TreeSum:
         return self.high[slot] + self.low[slot]
 
     @ti.func
-    def maximum(self, values: ti.template(), slot: ti.template(), count: ti.template()):
-        """high[slot] = max(0, max_{k < count} values[k]) (low[slot] = 0): for non-negative values."""
-        self._reduce(values, slot, count, True)
-
-    @ti.func
-    def _reduce_in_blocks(self, values: Template, slot: Template, count: Template, is_max: Template):
+    def _reduce_in_blocks(self, values: Template, slot: Template, count: Template):
         # Thread t of block g adds up entries (g·per + j)·threads + t, j < per (a warp reads consecutive
         # entries), then the block halves its partial sums in shared memory: an order fixed by the length.
         threads = ti.static(GPU_SUM_THREADS)
@@ -263,19 +255,16 @@ class TreeSum:
                             value_high = values[k]
                         else:
                             value_high, value_low = self.scratch_high[k], self.scratch_low[k]
-                        high, low = _accumulate(high, low, value_high, value_low, is_max, zero)
+                        high, low = _accumulate(high, low, value_high, value_low, zero)
                 shared_high[t] = high
                 shared_low[t] = low
                 ti.simt.block.sync()
                 for halving in ti.static(range(int(math.log2(threads)))):
                     width = ti.static(threads >> (halving + 1))
                     if t < width:
-                        if ti.static(is_max):
-                            shared_high[t] = ti.max(shared_high[t], shared_high[t + width])
-                        else:
-                            total, error = _two_sum(shared_high[t], shared_high[t + width], zero)
-                            shared_high[t] = total
-                            shared_low[t] = shared_low[t] + shared_low[t + width] + error
+                        total, error = _two_sum(shared_high[t], shared_high[t + width], zero)
+                        shared_high[t] = total
+                        shared_low[t] = shared_low[t] + shared_low[t + width] + error
                     ti.simt.block.sync()
                 if t == 0:
                     if ti.static(top):
@@ -286,7 +275,7 @@ class TreeSum:
                         self.scratch_low[g] = shared_low[0]
 
     @ti.func
-    def _reduce_in_tree(self, values: Template, slot: Template, count: Template, is_max: Template):
+    def _reduce_in_tree(self, values: Template, slot: Template, count: Template):
         # Every level loops over all of its blocks and skips those past the live entries (as in
         # ExclusiveScan.scan); the top block always runs, so that it writes 0 when there is nothing to add.
         for level in ti.static(range(self.tree.top + 1)):
@@ -305,7 +294,7 @@ class TreeSum:
                         else:
                             value_high = self.scratch_high[self.tree.offsets[level] + k]
                             value_low = self.scratch_low[self.tree.offsets[level] + k]
-                        high, low = _accumulate(high, low, value_high, value_low, is_max, zero)
+                        high, low = _accumulate(high, low, value_high, value_low, zero)
                     if ti.static(level == self.tree.top):
                         self.high[slot] = high
                         self.low[slot] = low

@@ -405,14 +405,10 @@ class Simulation:
         self._find_neighbours_in_place()
 
     def _find_neighbours_in_place(self) -> None:
-        """The sort and the lists where the particles stand (Δt = 0); a list that did not fit grown and made again."""
-        features = Features.of(self.model, self.control)  # the substep's: one compile for both
-        self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
-        most_entries, truncated = (int(v) for v in self.grid.status.to_numpy())
-        if truncated:
-            self.grid.settle_frame(most_entries, False)
-            self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0)
-        self.grid.status.fill(0)  # the frames' record starts here
+        """The sort and the lists where the particles stand (Δt = 0), by the substep's kernel (one compile for
+        both); the frames' record of the lists starts here."""
+        features = Features.of(self.model, self.control)
+        self.grid.build_fitting(lambda: self.kernels.find_neighbours(0.0, (0.0, 0.0, 0.0), features, 0))
 
     @property
     def iterations_used(self) -> int:
