@@ -587,7 +587,8 @@ class Sprites:
             steps = ti.cast(peak * falloff * falloff * OPACITY_STEPS + 0.5, ti.i32)
             if steps > 0:
                 ti.atomic_add(self.opacity[row, col], steps)
-                self.row_used[row] = 1
+                if not self.row_used[row]:  # a read, not a write, once set: threads do not fight over the line
+                    self.row_used[row] = 1
 
     @ti.kernel
     def _splat(
