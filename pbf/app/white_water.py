@@ -520,6 +520,9 @@ class Sprites:
         """1 where a row of the sums holds any opacity: a frame's pixel between two other rows costs two reads."""
         self.per_item = per_item
         self.footprints = None
+        self.seen = None
+        """Per sprite on a GPU's path: its streak's ends on screen, σ and peak (``_sprite``'s), worked out once
+        for all the pixels of its rectangle (a body in front costs a ray cast)."""
         self.constants = scene_constants(spacing=float(spacing_m))
 
     @ti.func
@@ -613,11 +616,12 @@ class Sprites:
                 if sigma > 0.0:
                     c0, c1, r0, r1 = self._bounds(a, b, sigma)
                 self.footprints.set(p, c0, c1, r0, r1)
+                self.seen[p] = ti.Vector([a[0], a[1], b[0], b[1], sigma, peak])
             self.footprints.scan(live)
             for w in range(self.footprints.total(live)):
                 p, col, row = self.footprints.item(w, live)
-                a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
-                self._add(a, b, sigma, peak, row, col)
+                s = self.seen[p]
+                self._add(ti.Vector([s[0], s[1]]), ti.Vector([s[2], s[3]]), s[4], s[5], row, col)
         else:
             for p in range(live):
                 a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
@@ -678,4 +682,5 @@ class Sprites:
         focal = view.focal_px(self.height)  # of the coarse image
         if self.per_item and (self.footprints is None or self.footprints.capacity < white_water.position.shape[0]):
             self.footprints = Footprints(white_water.position.shape[0])
+            self.seen = ti.Vector.field(6, ti.f32, shape=white_water.position.shape[0])
         self._splat(white_water, front, eye, right, up, forward, focal, exposure_s)
