@@ -3,6 +3,7 @@ bits on any thread count."""
 
 import taichi as ti
 
+from pbf.solver import backend
 from pbf.solver.backend import Choices
 from pbf.solver.grid import MOST_ENTRIES, TRUNCATED, NeighbourList
 from pbf.solver.scan import TreeSum
@@ -52,7 +53,8 @@ class Diagnostics:
 
     def density_ratios(self, neighbours):
         """The field of ρ/ρ0 at the current positions, with the last substep's neighbour lists."""
-        self._density_ratios(neighbours)
+        with backend.light_compile():  # as in compute
+            self._density_ratios(neighbours)
         return self.density_ratio
 
     @ti.kernel
@@ -81,7 +83,11 @@ class Diagnostics:
 
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""
-        values = self._reduce(neighbours)
+        # Without Taichi's advanced IR optimisation: a density sum with every boundary's ghost inlined
+        # compiles in less than half the time, and runs once a frame in the same time with the same bits
+        # (docs/BENCHMARKS.md, "Start-up: cold and warm").
+        with backend.light_compile():
+            values = self._reduce(neighbours)
         sums = [float(values[k]) + float(values[3 + k]) for k in range(3)]
         n = max(self.state.count, 1)  # an empty box (before an emitter starts) has zero means
         return {
