@@ -30,11 +30,13 @@ a quarter of the pixels costs an eighth); only the composition is at full resolu
 4. *Shade.* Schlick's Fresnel term mixes the reflection of a sky gradient with the refracted view of
    a tiled floor (Snell's law, n = 1.33), tinted by Beer–Lambert absorption along the thickness:
    T = exp(−σ d) per colour channel, the absorbed part replaced by the colour of deep water.
-5. *Compose* at full resolution. A pixel's share of water is the bilinear interpolation of the
-   coarse pixels' coverage (1 water, 0 not), and it blends the water's colour, interpolated from the
-   coarse pixels that are water, over the view without water (floor and sky, computed once per
-   camera and kept): silhouettes are anti-aliased curves rather than 2-pixel steps. Where the share
-   reaches ½ the pixel has the water's depth, against which the lines are drawn.
+5. *Compose* at full resolution. A pixel's share of water is the interpolation of the coarse
+   pixels' coverage (1 water, 0 not): bilinear inside the water, by the cubic B-spline over the 4 × 4
+   around a pixel on an outline. It blends the water's colour, interpolated from the coarse pixels
+   that are water, over the view without water (floor and sky, computed once per camera and kept):
+   silhouettes are anti-aliased curves rather than 2-pixel steps (bilinear coverage alone left a
+   sawtooth along a block's straight edges). Where the bilinear coverage reaches ½ the pixel has the
+   water's depth, against which the lines are drawn.
 
 Everything reads positions as Taichi fields and writes an (H, W, 3) uint8 image; nothing here
 changes the simulation.
@@ -105,6 +107,14 @@ SEGMENT_FLOOR = 16
 edges fit, and with an obstacle's the next bucket, so most scenes share the line kernels' compile."""
 BODY_FLOOR = 8
 """The fewest rigid bodies the renderers allocate poses for (``pbf.solver.allocation``)."""
+
+
+@ti.func
+def _bspline(t):
+    """The uniform cubic B-spline's weights of the four samples around t ∈ [0, 1] (at −1, 0, 1, 2)."""
+    s = 1.0 - t
+    middle = ti.Vector([(3.0 * t - 6.0) * t * t + 4.0, ((-3.0 * t + 3.0) * t + 3.0) * t + 1.0])
+    return ti.Vector([s * s * s, middle[0], middle[1], t * t * t]) / 6.0
 
 
 @ti.data_oriented
@@ -695,7 +705,7 @@ class SurfaceRenderer:
         c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
         fy = ti.min(ti.max(y - r0, 0.0), 1.0)
         fx = ti.min(ti.max(x - c0, 0.0), 1.0)
-        coverage, depth = 0.0, 0.0
+        coverage, depth, corners = 0.0, 0.0, 0
         colour = ti.Vector([0.0, 0.0, 0.0])
         for dr, dc in ti.static(ti.ndrange(2, 2)):
             w = (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
@@ -704,10 +714,10 @@ class SurfaceRenderer:
                 coverage += w
                 depth += w * sample
                 colour += w * self.colour[r0 + dr, c0 + dc]
-        # The water's share of the pixel is the coverage itself: across an edge it ramps from 0 to 1
-        # over one coarse pixel (two image pixels), centred on the outline (coverage ½), so the
-        # outline is anti-aliased; a sharper ramp would show the coarse pixels' 2-pixel steps.
+                corners += 1
         share = coverage
+        if 0 < corners < 4:  # on an outline
+            share = self._outline_share(r0, c0, fy, fx, solid)
         white = self.sprites.share(r0, c0, fy, fx)  # white water, over and through the water alike
         if coverage == 0.0 and solid == FAR and white == 0.0:  # most pixels: the view without water, as it is
             self.image[row, col] = self.background[row, col]
@@ -723,6 +733,24 @@ class SurfaceRenderer:
         self.image_depth[row, col] = solid
         if coverage >= 0.5:
             self.image_depth[row, col] = depth / coverage
+
+    @ti.func
+    def _outline_share(self, r0, c0, fy, fx, solid):
+        """The water's share of a pixel on an outline: the coarse pixels' coverage (1 water nearer than
+        ``solid``, 0 not) over the 4 × 4 around it, weighted by the cubic B-spline. The bilinear weights of
+        the 2 × 2 around it would ramp from 0 to 1 over one coarse pixel too, but their ½ contour follows
+        every step of the coarse pixels, which showed as a sawtooth along a block's straight edges; the
+        B-spline's is as smooth as its weights (second derivatives continuous) and centred on the outline."""
+        wy, wx = _bspline(fy), _bspline(fx)
+        share = 0.0
+        for i in ti.static(range(4)):
+            r = ti.min(ti.max(r0 + i - 1, 0), self.coarse_height - 1)
+            across = 0.0
+            for j in ti.static(range(4)):
+                c = ti.min(ti.max(c0 + j - 1, 0), self.coarse_width - 1)
+                across += ti.select(self.smooth_depth[r, c] < solid, wx[j], 0.0)
+            share += wy[i] * across
+        return share
 
     def _project_segments(self, view, focal: float) -> None:
         """The segments clipped to the space in front of the eye and projected to the image, into
