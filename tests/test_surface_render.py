@@ -225,6 +225,13 @@ def test_the_outline_of_the_water_is_anti_aliased():
     assert partial.sum(axis=1).mean() >= 0.8  # about one pixel of every row on the edge is partly water
     edge = 100 + 0.3 * (np.arange(H) + 0.5)  # the true outline's column in each row
     assert np.abs(share.sum(axis=1) - edge).max() < 1.5  # each row's water adds up to the true width
+    # Where the share crosses ½ (to a fraction of a pixel) moves along the straight edge without steps of a
+    # pixel from one row to the next: the bilinear coverage of the coarse pixels alone stepped by 1.33 pixels.
+    crossing = []
+    for row in share[4:-4]:  # the rows the image's border leaves alone
+        k = np.nonzero((row[:-1] >= 0.5) & (row[1:] < 0.5))[0][0]
+        crossing.append(k + 0.5 + (row[k] - 0.5) / (row[k] - row[k + 1]))
+    assert np.abs(np.diff(crossing)).max() < 1.0
 
 
 @pytest.mark.slow
