@@ -13,7 +13,6 @@ size: the median over the rounds of ms a substep (a round's: the median of ``--i
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import statistics
 import subprocess
@@ -24,7 +23,7 @@ from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import CHECKOUT, at_least, export, revision, spread  # noqa: E402
+from benchmarks.lab import CHECKOUT, RunFailed, at_least, export, fresh, revision, spread  # noqa: E402
 
 TIMER = Path(__file__).resolve().parent / "substep_time.py"
 RUN_TIMEOUT_S = 3600
@@ -42,10 +41,6 @@ class Version:
     def __init__(self, given: str, folder: Path, label: str):
         self.given, self.folder, self.label = given, folder, label
         self.particles, self.ms, self.host_cpu_ms = {}, {}, {}
-
-
-class RunFailed(Exception):
-    """A version's run that did not print its table."""
 
 
 def is_package_folder(path: Path) -> bool:
@@ -81,18 +76,10 @@ def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentP
 
 def run_once(version: Version, timer_args: list[str], workdir: Path) -> str:
     """One fresh process of substep_time.py with ``version``'s package; its standard output."""
-    name = f"version {version.label} ({version.given})"
-    path = os.pathsep.join([str(version.folder)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
-    command = [sys.executable, str(TIMER), *timer_args]
     try:
-        done = subprocess.run(command, cwd=workdir, env={**os.environ, "PYTHONPATH": path}, capture_output=True,
-                              text=True, timeout=RUN_TIMEOUT_S)  # fmt: skip
-    except subprocess.TimeoutExpired:
-        raise RunFailed(f"{name}: its run took over {RUN_TIMEOUT_S} s") from None
-    if done.returncode != 0:
-        last = [line for line in (done.stderr or done.stdout).splitlines() if line.strip()][-1:] or ["no output"]
-        raise RunFailed(f"{name}: its run failed: {last[0].strip()}")
-    return done.stdout
+        return fresh([sys.executable, str(TIMER), *timer_args], [version.folder], RUN_TIMEOUT_S, workdir)
+    except RunFailed as failure:
+        raise RunFailed(f"version {version.label} ({version.given}): its run failed: {failure}") from None
 
 
 def record(version: Version, output: str, sizes: list[int]) -> None:
@@ -103,11 +90,6 @@ def record(version: Version, output: str, sizes: list[int]) -> None:
         version.particles[size] = int(row.group(1).replace(",", ""))
         version.ms.setdefault(size, []).append(float(row.group(2)))
         version.host_cpu_ms.setdefault(size, []).append(float(row.group(4)))
-
-
-def paired_ratio(values: list[float], base: list[float]) -> str:
-    """The median and range of round-by-round ratios (each round ran both, close in time)."""
-    return spread(v / b for v, b in zip(values, base))
 
 
 def report(versions: list[Version], args) -> None:
@@ -122,8 +104,9 @@ def report(versions: list[Version], args) -> None:
     ratio_head = f"ratio to {base.label} (range)"
     print(f"\n{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
     for size in args.sizes:
-        for v in versions:
-            host_ms, ratio = statistics.median(v.host_cpu_ms[size]), paired_ratio(v.ms[size], base.ms[size])
+        for v in versions:  # the ratios round by round: each round ran both, close in time
+            ratio = spread(a / b for a, b in zip(v.ms[size], base.ms[size]))
+            host_ms = statistics.median(v.host_cpu_ms[size])
             print(f"{v.particles[size]:>10,} {v.label:<8} {spread(v.ms[size], 3):>26} {host_ms:>12.3f} {ratio:>20}")
 
 

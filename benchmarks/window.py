@@ -15,14 +15,13 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import Clock, at_least, markdown, medians  # noqa: E402
+from benchmarks.lab import Clock, RunFailed, at_least, fresh, markdown, medians  # noqa: E402
 
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
@@ -34,22 +33,16 @@ WARMUP_FRAMES = 30
 PHASES = ("frame", "sim", "draw", "panel", "show")
 
 
-def process_cpu_s(pid: int) -> float:
-    """CPU seconds process ``pid`` has used (all its threads)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def x_server_cpu_s() -> float | None:
-    """CPU seconds the X server of $DISPLAY has used, if it is an Xvfb or Xorg process we can read."""
-    display = os.environ.get("DISPLAY", "")
-    for proc in Path("/proc").iterdir():
+    """CPU seconds the X server of $DISPLAY has used (all its threads), if it is an Xvfb or Xorg process
+    we can read."""
+    display = os.environ.get("DISPLAY", "").encode()
+    for proc in Path("/proc").glob("[0-9]*"):
         try:
-            if not proc.name.isdigit():
-                continue
             argv = (proc / "cmdline").read_bytes().split(b"\0")
-            if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display.encode() in argv:
-                return process_cpu_s(int(proc.name))
+            if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display in argv:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()  # user and system time
+                return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
         except (OSError, IndexError, UnicodeDecodeError):
             continue
     return None
@@ -180,10 +173,11 @@ def main(argv=None) -> None:
     results = {name: [] for name in names}
     for round_ in range(args.rounds):
         for name in names:  # each run a fresh process, as a user's window
-            run = subprocess.run([sys.executable, __file__, "--one", name, *options], capture_output=True, text=True)
-            if run.returncode != 0:
-                raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
-            result = json.loads(run.stdout.strip().splitlines()[-1])
+            try:
+                output = fresh([sys.executable, __file__, "--one", name, *options])
+            except RunFailed as failure:
+                raise SystemExit(f"{name}: {failure}") from None
+            result = json.loads(output.strip().splitlines()[-1])
             results[name].append(result)
             phases = " + ".join(f"{p} {result[p]:.1f}" for p in PHASES[1:] if result[p] is not None)
             progress = f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps"
