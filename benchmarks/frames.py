@@ -147,10 +147,10 @@ def speckle(normals, water, depth, surface_m: float) -> float:
     return float(np.sum(rough & water) / max(int(water.sum()), 1))
 
 
-def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLASH, pour=None) -> dict:
+def look_figures(size=None, images: Path | None = None) -> dict:
     """The pools' top faces and the splash's speckle (see ``look``), drawn at ``size`` (width, height;
     default: each scene's); with ``images`` each measured frame is written there as a PNG (the pools,
-    the splash's first frame and, when ``pour`` is given, that frame of ``pour``)."""
+    the splash's first frame), and ``POUR``'s."""
     from pbf.app.render import SceneRenderer
     from pbf.app.writer import write_png
     from pbf.solver import Simulation
@@ -165,14 +165,14 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
             write_png(images / f"{name}.png", image)
 
     figures = {"pools": {}, "splash": {}}
-    for preset, frame in pools:
+    for preset, frame in POOLS:
         sim = Simulation(preset, quiet=True)
         sim.step(frame)
         draw = renderer(sim)
         save(f"{preset}_{frame}", draw.frame())
         figures["pools"][(preset, frame)] = top_face(*draw.renderer.surface(), draw.view, sim.scene)
         figures["pools"][(preset, frame)]["particles"] = particles_top(sim.positions(), sim.scene)
-    preset, frames = splash
+    preset, frames = SPLASH
     sim = Simulation(preset, quiet=True)
     draw = renderer(sim)
     for frame in frames:
@@ -182,10 +182,10 @@ def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLA
             save(f"{preset}_{frame}", image)
         normals, water, depth = draw.renderer.surface()
         figures["splash"][frame] = speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m)
-    if pour is not None and images is not None:
-        sim = Simulation(pour[0], quiet=True)
-        sim.step(pour[1])
-        save(f"{pour[0]}_{pour[1]}", renderer(sim).frame())
+    if images is not None:
+        sim = Simulation(POUR[0], quiet=True)
+        sim.step(POUR[1])
+        save(f"{POUR[0]}_{POUR[1]}", renderer(sim).frame())
     return figures
 
 
@@ -201,7 +201,7 @@ def look(argv=None) -> int:
     from pbf.solver import start_backend
 
     backend = start_backend(args.arch)
-    figures = look_figures(args.size, args.images, pour=POUR if args.images else None)
+    figures = look_figures(args.size, args.images)
     shown = "the scenes' size" if args.size is None else f"{args.size[0]}×{args.size[1]}"
     head = ["settled pool", "top-face pixels", f"within {FLAT_DEG:g}° of vertical", "median", "95th percentile"]
     rows = []
