@@ -16,7 +16,6 @@ import json
 import os
 import statistics
 import sys
-import time
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
@@ -109,23 +108,20 @@ def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | No
     for phase in ("draw", "panel"):
         setattr(viewer, phase, clock.timed(phase, getattr(viewer, phase)))
     viewer.window.show = clock.timed("show", viewer.window.show)
-    rows = []
     viewer.show()
-    for number in range(warmup + frames):
-        if number == warmup:
-            x_start = None if offscreen else x_server_cpu_s()
-            cpu_start, wall_start = time.process_time(), time.perf_counter()
+    for _ in range(warmup):
+        frame()
+    x_start, whole, rows = None if offscreen else x_server_cpu_s(), Clock(), []
+    for _ in range(frames):
         clock.spent = {}
         frame()
-        if number >= warmup:
-            rows.append(clock.spent)
-    elapsed = time.perf_counter() - wall_start
-    x_end = None if offscreen else x_server_cpu_s()
+        rows.append(clock.spent)
+    (elapsed, cpu_s), x_end = whole.lap(), None if offscreen else x_server_cpu_s()
     result = {
         "variant": name,
         "fps": frames / elapsed,
         "load": os.getloadavg()[0],
-        "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
+        "cpu": 1e3 * cpu_s / frames,
         "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
     }
     for phase in PHASES:
