@@ -47,25 +47,6 @@ def x_server_cpu_s() -> float | None:
     return None
 
 
-class Phases:
-    """Wall and process CPU time, in ms, of the phases of one frame: ``spent[phase] = (wall, cpu)``."""
-
-    def __init__(self):
-        self.spent = {}
-
-    def timed(self, phase, function):
-        """``function`` wrapped to add its time to ``phase`` at each call."""
-
-        def run(*args, **kwargs):
-            clock = Clock()
-            result = function(*args, **kwargs)
-            wall, cpu = (1e3 * t for t in clock.lap())
-            self.spent[phase] = tuple(a + b for a, b in zip(self.spent.get(phase, (0.0, 0.0)), (wall, cpu)))
-            return result
-
-        return run
-
-
 def make_offscreen(gui_window) -> None:
     """A window without a display as the viewer uses one: its ``show`` draws the frame (GGUI draws it
     when its image is read), and its input, which GGUI refuses without a display, is none: no key, no
@@ -102,20 +83,30 @@ def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | No
             step()
         viewer.show()
 
-    clock = Phases()
-    step = clock.timed("sim", lambda: (sim.step(), ti.sync()))
-    frame = clock.timed("frame", frame)
+    spent = {}  # the frame's phases: (wall, CPU) ms, the process's CPU time (every thread's)
+
+    def timed(phase, function):  # ``function``, adding its time to ``phase`` at each call
+        def run(*args, **kwargs):
+            clock = Clock()
+            result = function(*args, **kwargs)
+            spent[phase] = tuple(a + 1e3 * b for a, b in zip(spent.get(phase, (0.0, 0.0)), clock.lap()))
+            return result
+
+        return run
+
+    step = timed("sim", lambda: (sim.step(), ti.sync()))
+    frame = timed("frame", frame)
     for phase in ("draw", "panel"):
-        setattr(viewer, phase, clock.timed(phase, getattr(viewer, phase)))
-    viewer.window.show = clock.timed("show", viewer.window.show)
+        setattr(viewer, phase, timed(phase, getattr(viewer, phase)))
+    viewer.window.show = timed("show", viewer.window.show)
     viewer.show()
     for _ in range(warmup):
         frame()
     x_start, whole, rows = None if offscreen else x_server_cpu_s(), Clock(), []
     for _ in range(frames):
-        clock.spent = {}
+        spent.clear()
         frame()
-        rows.append(clock.spent)
+        rows.append(dict(spent))
     (elapsed, cpu_s), x_end = whole.lap(), None if offscreen else x_server_cpu_s()
     result = {
         "variant": name,
