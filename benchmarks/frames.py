@@ -23,6 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.lab import Clock, image_size, markdown, medians
+from pbf.app.render import SceneRenderer
+from pbf.app.writer import FrameFiles, write_png
+from pbf.solver import Simulation, start_backend
 from pbf.study.common import run_command
 
 STYLES = ("particles", "surface")
@@ -41,8 +44,6 @@ def timed_frames(renderers: dict, repeats: int) -> dict:
 
 def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
     """Median wall and CPU seconds of one PNG of ``image`` (the writer's encoder), and its bytes."""
-    from pbf.app.writer import write_png
-
     path, clock, times = folder / "frame.png", Clock(), []
     for _ in range(repeats):
         write_png(path, image)
@@ -52,8 +53,6 @@ def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
 
 def threaded(images: list, folder: Path) -> tuple[float, float, int]:
     """Seconds and CPU seconds the threaded writer takes to write ``images`` (submit to close), its threads."""
-    from pbf.app.writer import FrameFiles
-
     files, clock = FrameFiles(), Clock()
     for number, image in enumerate(images):
         files.submit(folder / f"frame_{number:05d}.png", image.copy())
@@ -155,11 +154,6 @@ def look(argv=None) -> int:
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
     parser.add_argument("--images", type=Path, default=None, help="write the measured frames (and pour's) here")
     args = parser.parse_args(argv)
-
-    from pbf.app.render import SceneRenderer
-    from pbf.app.writer import write_png
-    from pbf.solver import Simulation, start_backend
-
     backend = start_backend(args.arch)
 
     def renderer(sim):  # the surface style at --size, else the scene's
@@ -217,10 +211,7 @@ def main(argv=None) -> int:
         return look(argv[1:])
     args = parser.parse_args(argv)
 
-    import taichi as ti
-
-    from pbf.app.render import SceneRenderer
-    from pbf.solver import Simulation, start_backend
+    import taichi as ti  # here, after pbf: it keeps Taichi's banner off
 
     backend = start_backend(args.arch)
     sim = Simulation("dam_break", quiet=True)

@@ -21,6 +21,8 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
 from benchmarks.lab import Clock, RunFailed, at_least, fresh, markdown, medians  # noqa: E402
+from pbf.app import window  # noqa: E402
+from pbf.solver import Simulation, start_backend  # noqa: E402
 
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
@@ -60,10 +62,7 @@ def make_offscreen(gui_window) -> None:
 def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | None) -> dict:
     """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
-    import taichi as ti
-
-    from pbf.app import window  # pbf first: it keeps Taichi's banner off
-    from pbf.solver import Simulation, start_backend
+    import taichi as ti  # here, after pbf: it keeps Taichi's banner off
 
     start_backend(arch, quiet=True)
     sim = Simulation(SCENE, quiet=True)
@@ -169,10 +168,8 @@ def main(argv=None) -> None:
             phases = " + ".join(f"{p} {result[p]:.1f}" for p in PHASES[1:] if result[p] is not None)
             progress = f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps"
             print(f"{progress}, {phases} ms", file=sys.stderr, flush=True)
-    from pbf.solver import start_backend  # started here only to be named
-
     where = "offscreen (GGUI show_window=False; show = draw + read back)" if args.offscreen else "in a window"
-    backend = start_backend(args.arch, quiet=True)
+    backend = start_backend(args.arch, quiet=True)  # started here only to be named
     print(
         f"{SCENE}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend}, medians (ms; cpu: all threads)"
     )
