@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from benchmarks import start
 from benchmarks.instruments import TransferCounter, count_substeps, counts_table
 from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
@@ -187,10 +188,10 @@ def build_parser() -> argparse.ArgumentParser:
     presets_mode.add_argument("--perturb", type=int, default=None, metavar="SEED", help="rounding-sized noise")
     presets_mode.add_argument("--perturb-each-frame", action="store_true", help="the noise again every frame")
     modes.add_parser("compare").add_argument("tables", nargs="+", type=Path, help="CSV tables of presets runs")
-    start = modes.add_parser("start")
-    start.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
-    start.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
-    start.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
+    start_mode = modes.add_parser("start")
+    start_mode.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    start_mode.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
+    start_mode.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
     return parser
 
 
@@ -205,8 +206,6 @@ def main(argv=None):
     if args.mode == "compare":
         return compare(args.tables)
     if args.mode == "start":  # each start a process of its own: this one starts no backend
-        from benchmarks import start
-
         names = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
         if args.first_calls:
             return start.first_calls(names, args.arch)

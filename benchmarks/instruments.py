@@ -175,13 +175,8 @@ def profiled_tasks() -> dict[str, tuple[int, float]]:
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
         ti.profiler.print_kernel_profiler_info("count")
-    tasks = {}
-    for line in printed.getvalue().splitlines():
-        row = _COUNT_ROW.match(line.strip())
-        if row:
-            runs = int(row.group(1))
-            tasks[row.group(3)] = (runs, runs * float(row.group(2)))
-    return tasks
+    rows = filter(None, (_COUNT_ROW.match(line.strip()) for line in printed.getvalue().splitlines()))
+    return {row.group(3): (int(row.group(1)), int(row.group(1)) * float(row.group(2))) for row in rows}
 
 
 ITERATION_KERNELS = ("_iterations_kernel",)

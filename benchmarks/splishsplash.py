@@ -35,6 +35,7 @@ import numpy as np
 
 from pbf.scene import SceneError, load_scene
 from pbf.solver import Simulation, start_backend
+from pbf.study import damping
 from pbf.study.common import timed
 
 # Preloaded into SPlisHSPlasH's process: the libGLdispatch its wheel bundles clashes with the system's.
@@ -254,8 +255,6 @@ def medians(runs: list[Row]) -> Row:
 def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> tuple[np.ndarray, np.ndarray]:
     """The standing wave in SPlisHSPlasH: (times, the mode's amplitude). Its container is one spacing
     wider in x and z, so that its wall particles stand one spacing from the water as in its dam break."""
-    from pbf.study import damping
-
     scene = load_scene(damping.PRESET)
     spacing, frame_dt, per_frame = scene.fluid.spacing_m, scene.time.frame_dt_s, scene.time.substeps
     dt, block = frame_dt / per_frame, scene.fluid.blocks[0]
@@ -281,8 +280,6 @@ def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> 
 
 def sloshing_comparison(splash: Path, methods: list[str], threads: int, periods: float = 3.0) -> None:
     """The standing wave's decay per period in SPlisHSPlasH's methods and in ours (``--sloshing``)."""
-    from pbf.study import damping
-
     theory = 2 * math.pi / damping.sloshing_mode(0.45, 0.195, 9.81)[1]
     print(f"{'run':<34} {'decay per period':>16} {'period':>8}   (linear theory: period {theory:.3f} s)")
     for method in methods:
