@@ -13,7 +13,6 @@ size: the median over the rounds of ms a substep (a round's: the median of ``--i
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import statistics
 import subprocess
@@ -21,10 +20,11 @@ import sys
 import tarfile
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import CHECKOUT, at_least, export, revision, spread  # noqa: E402
+from benchmarks.lab import CHECKOUT, RunFailed, at_least, export, fresh, revision, spread  # noqa: E402
 
 TIMER = Path(__file__).resolve().parent / "substep_time.py"
 RUN_TIMEOUT_S = 3600
@@ -34,26 +34,14 @@ SIZE_ROW = re.compile(r"^\s*([\d,]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)
 """substep_time.py's row for a size: particles, ms/substep, host issue ms, host CPU ms, built s."""
 
 
-class Version:
-    """A version as given, the folder its package is imported from, and what its runs printed: by size
-    asked, the particles its scene holds and a round's ms a substep and host CPU ms.
-    (Not a dataclass: the tests load this file as a module of no package, which dataclasses refuse.)"""
-
-    def __init__(self, given: str, folder: Path, label: str):
-        self.given, self.folder, self.label = given, folder, label
-        self.particles, self.ms, self.host_cpu_ms = {}, {}, {}
-
-
-class RunFailed(Exception):
-    """A version's run that did not print its table."""
-
-
 def is_package_folder(path: Path) -> bool:
     return (path / "pbf" / "__init__.py").is_file()
 
 
-def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentParser) -> list[Version]:
-    """Every version's folder, after checking them all (nothing is exported before every one is known)."""
+def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentParser) -> list[SimpleNamespace]:
+    """Every version: as given, its label, the folder its package is imported from, after checking them
+    all (nothing is exported before every one is known); and what its runs print: by size asked, the
+    particles its scene holds and a round's ms a substep and host CPU ms."""
     found = []
     for given in given_versions:
         path = Path(given).expanduser()
@@ -75,42 +63,28 @@ def resolve(given_versions: list[str], scratch: Path, parser: argparse.ArgumentP
             folder = exported[commit]
             if not is_package_folder(folder):
                 parser.error(f"version {given!r}: commit {commit[:12]} holds no pbf/__init__.py")
-        versions.append(Version(given, folder, chr(ord("A") + n)))
+        label = chr(ord("A") + n)
+        versions.append(SimpleNamespace(given=given, label=label, folder=folder, particles={}, ms={}, host_cpu_ms={}))
     return versions
 
 
-def run_once(version: Version, timer_args: list[str], workdir: Path) -> str:
-    """One fresh process of substep_time.py with ``version``'s package; its standard output."""
+def run_once(version: SimpleNamespace, timer_args: list[str], sizes: list[int], workdir: Path) -> None:
+    """One fresh process of substep_time.py with ``version``'s package, its rows recorded."""
     name = f"version {version.label} ({version.given})"
-    path = os.pathsep.join([str(version.folder)] + [p for p in [os.environ.get("PYTHONPATH")] if p])
-    command = [sys.executable, str(TIMER), *timer_args]
     try:
-        done = subprocess.run(command, cwd=workdir, env={**os.environ, "PYTHONPATH": path}, capture_output=True,
-                              text=True, timeout=RUN_TIMEOUT_S)  # fmt: skip
-    except subprocess.TimeoutExpired:
-        raise RunFailed(f"{name}: its run took over {RUN_TIMEOUT_S} s") from None
-    if done.returncode != 0:
-        last = [line for line in (done.stderr or done.stdout).splitlines() if line.strip()][-1:] or ["no output"]
-        raise RunFailed(f"{name}: its run failed: {last[0].strip()}")
-    return done.stdout
-
-
-def record(version: Version, output: str, sizes: list[int]) -> None:
+        output = fresh([sys.executable, str(TIMER), *timer_args], [version.folder], RUN_TIMEOUT_S, workdir)
+    except RunFailed as failure:
+        raise RunFailed(f"{name}: its run failed: {failure}") from None
     rows = [row for row in map(SIZE_ROW.match, output.splitlines()) if row]
     if len(rows) != len(sizes):
-        raise RunFailed(f"version {version.label} ({version.given}): {len(rows)} size rows printed, not {len(sizes)}")
+        raise RunFailed(f"{name}: {len(rows)} size rows printed, not {len(sizes)}")
     for size, row in zip(sizes, rows):
         version.particles[size] = int(row.group(1).replace(",", ""))
         version.ms.setdefault(size, []).append(float(row.group(2)))
         version.host_cpu_ms.setdefault(size, []).append(float(row.group(4)))
 
 
-def paired_ratio(values: list[float], base: list[float]) -> str:
-    """The median and range of round-by-round ratios (each round ran both, close in time)."""
-    return spread(v / b for v, b in zip(values, base))
-
-
-def report(versions: list[Version], args) -> None:
+def report(versions: list[SimpleNamespace], args) -> None:
     base = versions[0]
     print()
     for version in versions:
@@ -122,8 +96,9 @@ def report(versions: list[Version], args) -> None:
     ratio_head = f"ratio to {base.label} (range)"
     print(f"\n{'particles':>10} {'version':<8} {'ms/substep (range)':>26} {'host CPU ms':>12} {ratio_head:>20}")
     for size in args.sizes:
-        for v in versions:
-            host_ms, ratio = statistics.median(v.host_cpu_ms[size]), paired_ratio(v.ms[size], base.ms[size])
+        for v in versions:  # the ratios round by round: each round ran both, close in time
+            ratio = spread(a / b for a, b in zip(v.ms[size], base.ms[size]))
+            host_ms = statistics.median(v.host_cpu_ms[size])
             print(f"{v.particles[size]:>10,} {v.label:<8} {spread(v.ms[size], 3):>26} {host_ms:>12.3f} {ratio:>20}")
 
 
@@ -159,7 +134,7 @@ def main(argv=None) -> int:
                 order = versions[round_ % len(versions) :] + versions[: round_ % len(versions)]
                 print(f"round {round_ + 1} of {args.rounds}: " + ", ".join(v.label for v in order), flush=True)
                 for version in order:
-                    record(version, run_once(version, timer_args, workdir), args.sizes)
+                    run_once(version, timer_args, args.sizes, workdir)
         except RunFailed as failure:
             print(f"ab: {failure}", file=sys.stderr)
             return 1

@@ -10,8 +10,6 @@ before, the right after."""
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -21,7 +19,7 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
 from benchmarks.lab import CHECKOUT as ROOT  # noqa: E402
-from benchmarks.lab import export, image_size, revision  # noqa: E402
+from benchmarks.lab import export, fresh, image_size, revision  # noqa: E402
 
 DRAW = """
 import json, sys
@@ -45,11 +43,9 @@ np.save(out, np.stack(images))
 
 
 def draw(source: Path, shots, width: int, height: int, folder: Path) -> np.ndarray:
-    out = folder / f"{source.name}.npy"
-    script = folder / "draw.py"
+    out, script = folder / f"{source.name}.npy", folder / "draw.py"
     script.write_text(DRAW)
-    env = {**os.environ, "PYTHONPATH": str(source)}
-    subprocess.run([sys.executable, str(script), json.dumps([shots, width, height, str(out)])], check=True, env=env)
+    fresh([sys.executable, str(script), json.dumps([shots, width, height, str(out)])], [source])
     return np.load(out)
 
 

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks.instruments import TransferCounter, count_substeps, counts_table, start_profiled
+from benchmarks import start
+from benchmarks.instruments import TransferCounter, count_substeps, counts_table
 from pbf.scene import SCENES_DIR, SceneError, load_scene
 from pbf.solver import ARCHES, Simulation, start_backend
 from pbf.solver.backend import choices, describe, running_device
@@ -136,29 +137,24 @@ def compare(paths: list[Path]) -> list[dict]:
 
 def counts(args) -> list:
     """``counts``: kernel calls and offloaded tasks per substep (``benchmarks.instruments``)."""
-
-    def path(on_device):  # main started the backend: its choices, a GPU's where asked
-        device = True if on_device or args.device_decisions else None
-        return choices(decisions_on_device=device, gpu_blocks=True if args.gpu_blocks else None)
-
-    rows = []
+    cases = []  # (label, scene, a GPU's decisions, frames run first: past every kernel variant's compile)
     for name in args.presets or ():  # the presets as shipped, on each path
         scene = load_scene(name, args.set)
-        for label, on_device in ((name, False), (f"{name}, device decisions", True)):
-            sim = Simulation(scene, arch=args.backend, quiet=True, choices=path(on_device))
-            sim.step(3)  # past the compile of every kernel variant the counted substeps use
-            rows.append((label, count_substeps(sim, COUNTED_FRAMES)))
+        cases += [(name, scene, False, 3), (f"{name}, device decisions", scene, True, 3)]
     for particles in (args.sizes or [8000]) if not args.presets else ():
         fixed = dam_break(particles, args.iterations, ["solver.target_density_error=0", *args.set])
-        for name, scene, on_device in (
-            (f"{particles:,}, {args.iterations} iterations", fixed, False),
-            (f"{particles:,}, {args.iterations} its., device decisions", fixed, True),
-            (f"{particles:,}, the preset's error target", dam_break(particles, 10, args.set), False),
-            (f"{particles:,}, preset's target, device", dam_break(particles, 10, args.set), True),
-        ):
-            sim = Simulation(scene, arch=args.backend, quiet=True, choices=path(on_device))
-            sim.step(2)  # past the compile of every kernel variant the counted substeps use
-            rows.append((name, count_substeps(sim, COUNTED_FRAMES)))
+        n, target = f"{particles:,}", dam_break(particles, 10, args.set)
+        cases += [(f"{n}, {args.iterations} iterations", fixed, False, 2)]
+        cases += [(f"{n}, {args.iterations} its., device decisions", fixed, True, 2)]
+        cases += [(f"{n}, the preset's error target", target, False, 2)]
+        cases += [(f"{n}, preset's target, device", target, True, 2)]
+    rows = []
+    for label, scene, on_device, frames in cases:  # main started the backend: its choices, a GPU's where asked
+        device = True if on_device or args.device_decisions else None
+        path = choices(decisions_on_device=device, gpu_blocks=True if args.gpu_blocks else None)
+        sim = Simulation(scene, arch=args.backend, quiet=True, choices=path)
+        sim.step(frames)
+        rows.append((label, count_substeps(sim, COUNTED_FRAMES)))
     print(counts_table(rows))
     return rows
 
@@ -173,20 +169,17 @@ def _thread_count(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """``main``'s parser, a sub-command a mode, each with the options it reads."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    # What a mode without the option reads.
+    parser.set_defaults(presets=None, device_decisions=False, perturb=None, perturb_each_frame=False)
     modes = parser.add_subparsers(dest="mode", required=True)
-    common = {
-        "--arch": dict(choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)"),
-        "--threads": dict(type=_thread_count, default=None, metavar="N", help="the CPU backend's threads"),
-        "--fast-compile": dict(action="store_true", help="Taichi without its advanced optimisation"),
-        "--set": dict(action="append", default=[], metavar="KEY=VALUE", help="a scene key (repeatable)"),
-    }
-    for mode in ("presets", "counts"):
-        sub = modes.add_parser(mode)
-        for option, settings in common.items():
-            sub.add_argument(option, **settings)
-        sub.add_argument("--device-decisions", action="store_true", help="a GPU's decisions on any backend")
-        sub.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
-    counts_mode, presets_mode = modes.choices["counts"], modes.choices["presets"]
+    run = argparse.ArgumentParser(add_help=False)  # what the modes that run the solver here share
+    run.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend (default: $PBF_ARCH or auto)")
+    run.add_argument("--threads", type=_thread_count, default=None, metavar="N", help="the CPU backend's threads")
+    run.add_argument("--fast-compile", action="store_true", help="Taichi without its advanced optimisation")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a scene key (repeatable)")
+    run.add_argument("--device-decisions", action="store_true", help="a GPU's decisions on any backend")
+    run.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    presets_mode, counts_mode = (modes.add_parser(mode, parents=[run]) for mode in ("presets", "counts"))
     counts_mode.add_argument("--sizes", type=int, nargs="+", default=None, help="particle counts (default 8000)")
     counts_mode.add_argument("--iterations", type=int, default=4, help="solver iterations a substep")
     counts_mode.add_argument("--gpu-blocks", action="store_true", help="the sums in a GPU's blocks")
@@ -195,19 +188,16 @@ def build_parser() -> argparse.ArgumentParser:
     presets_mode.add_argument("--perturb", type=int, default=None, metavar="SEED", help="rounding-sized noise")
     presets_mode.add_argument("--perturb-each-frame", action="store_true", help="the noise again every frame")
     modes.add_parser("compare").add_argument("tables", nargs="+", type=Path, help="CSV tables of presets runs")
-    start = modes.add_parser("start")
-    start.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
-    start.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
-    start.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
+    start_mode = modes.add_parser("start")
+    start_mode.add_argument("--presets", nargs="+", default=None, help="which presets (default: all)")
+    start_mode.add_argument("--arch", choices=ARCHES, default=None, help="Taichi backend of the starts")
+    start_mode.add_argument("--first-calls", action="store_true", help="each kernel's first call instead, per preset")
     return parser
 
 
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    unread = {"presets": None, "device_decisions": False, "perturb": None, "perturb_each_frame": False}
-    for name, value in unread.items():
-        vars(args).setdefault(name, value)  # what a mode without the option reads
     for name in args.presets or ():  # every scene read before any runs
         try:
             load_scene(name)
@@ -216,8 +206,6 @@ def main(argv=None):
     if args.mode == "compare":
         return compare(args.tables)
     if args.mode == "start":  # each start a process of its own: this one starts no backend
-        from benchmarks import start
-
         names = args.presets or sorted(path.stem for path in SCENES_DIR.glob("*.toml"))
         if args.first_calls:
             return start.first_calls(names, args.arch)
@@ -226,8 +214,8 @@ def main(argv=None):
         parser.error("--sizes: counts the seed scene scaled; with --presets each preset runs as shipped")
     if args.perturb_each_frame and args.perturb is None:
         parser.error("--perturb-each-frame: needs --perturb SEED (the noise's seed)")
-    start = start_profiled if args.mode == "counts" else start_backend
-    args.backend = start(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile)
+    args.backend = start_backend(args.arch, quiet=True, cpu_threads=args.threads, fast_compile=args.fast_compile,
+                                 kernel_profiler=args.mode == "counts")  # fmt: skip
     if args.threads is not None and args.backend != "cpu":
         parser.error(f"--threads: sets the CPU backend's threads; the backend here is {args.backend}")
     args.variant = "+".join(

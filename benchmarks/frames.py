@@ -23,6 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.lab import Clock, image_size, markdown, medians
+from pbf.app.render import SceneRenderer
+from pbf.app.writer import FrameFiles, write_png
+from pbf.solver import Simulation, start_backend
 from pbf.study.common import run_command
 
 STYLES = ("particles", "surface")
@@ -41,8 +44,6 @@ def timed_frames(renderers: dict, repeats: int) -> dict:
 
 def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
     """Median wall and CPU seconds of one PNG of ``image`` (the writer's encoder), and its bytes."""
-    from pbf.app.writer import write_png
-
     path, clock, times = folder / "frame.png", Clock(), []
     for _ in range(repeats):
         write_png(path, image)
@@ -52,8 +53,6 @@ def encoded(image, repeats: int, folder: Path) -> tuple[float, float, int]:
 
 def threaded(images: list, folder: Path) -> tuple[float, float, int]:
     """Seconds and CPU seconds the threaded writer takes to write ``images`` (submit to close), its threads."""
-    from pbf.app.writer import FrameFiles
-
     files, clock = FrameFiles(), Clock()
     for number, image in enumerate(images):
         files.submit(folder / f"frame_{number:05d}.png", image.copy())
@@ -147,48 +146,6 @@ def speckle(normals, water, depth, surface_m: float) -> float:
     return float(np.sum(rough & water) / max(int(water.sum()), 1))
 
 
-def look_figures(size=None, images: Path | None = None, pools=POOLS, splash=SPLASH, pour=None) -> dict:
-    """The pools' top faces and the splash's speckle (see ``look``), drawn at ``size`` (width, height;
-    default: each scene's); with ``images`` each measured frame is written there as a PNG (the pools,
-    the splash's first frame and, when ``pour`` is given, that frame of ``pour``)."""
-    from pbf.app.render import SceneRenderer
-    from pbf.app.writer import write_png
-    from pbf.solver import Simulation
-
-    def renderer(sim):
-        width, height = size or (sim.scene.render.width_px, sim.scene.render.height_px)
-        return SceneRenderer(sim, width, height, style="surface")
-
-    def save(name, image):
-        if images is not None:
-            images.mkdir(parents=True, exist_ok=True)
-            write_png(images / f"{name}.png", image)
-
-    figures = {"pools": {}, "splash": {}}
-    for preset, frame in pools:
-        sim = Simulation(preset, quiet=True)
-        sim.step(frame)
-        draw = renderer(sim)
-        save(f"{preset}_{frame}", draw.frame())
-        figures["pools"][(preset, frame)] = top_face(*draw.renderer.surface(), draw.view, sim.scene)
-        figures["pools"][(preset, frame)]["particles"] = particles_top(sim.positions(), sim.scene)
-    preset, frames = splash
-    sim = Simulation(preset, quiet=True)
-    draw = renderer(sim)
-    for frame in frames:
-        sim.step(frame - sim.frame)
-        image = draw.frame()
-        if frame == frames[0]:
-            save(f"{preset}_{frame}", image)
-        normals, water, depth = draw.renderer.surface()
-        figures["splash"][frame] = speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m)
-    if pour is not None and images is not None:
-        sim = Simulation(pour[0], quiet=True)
-        sim.step(pour[1])
-        save(f"{pour[0]}_{pour[1]}", renderer(sim).frame())
-    return figures
-
-
 def look(argv=None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.frames look", description="how the surface style reads: settled pools, a splash"
@@ -197,24 +154,48 @@ def look(argv=None) -> int:
     parser.add_argument("--arch", default=None, help="Taichi backend (default: auto; see pbf --help)")
     parser.add_argument("--images", type=Path, default=None, help="write the measured frames (and pour's) here")
     args = parser.parse_args(argv)
-
-    from pbf.solver import start_backend
-
     backend = start_backend(args.arch)
-    figures = look_figures(args.size, args.images, pour=POUR if args.images else None)
+
+    def renderer(sim):  # the surface style at --size, else the scene's
+        width, height = args.size or (sim.scene.render.width_px, sim.scene.render.height_px)
+        return SceneRenderer(sim, width, height, style="surface")
+
+    def save(name, image):  # with --images: the pools, the splash's first frame and POUR's
+        if args.images is not None:
+            args.images.mkdir(parents=True, exist_ok=True)
+            write_png(args.images / f"{name}.png", image)
+
+    rows = []
+    for preset, frame in POOLS:
+        sim = Simulation(preset, quiet=True)
+        sim.step(frame)
+        draw = renderer(sim)
+        save(f"{preset}_{frame}", draw.frame())
+        pool, top = top_face(*draw.renderer.surface(), draw.view, sim.scene), particles_top(sim.positions(), sim.scene)
+        cells = f"{pool['pixels']:,} {100 * pool['flat']:.1f}% {pool['median_deg']:.2f}° {pool['p95_deg']:.1f}°"
+        rows.append(
+            [f"{preset}, frame {frame}", *cells.split(), f"{100 * top['flat']:.1f}%", f"{top['median_deg']:.2f}°"]
+        )
+    preset, frames = SPLASH
+    sim = Simulation(preset, quiet=True)
+    draw, shares = renderer(sim), []
+    for frame in frames:
+        sim.step(frame - sim.frame)
+        image = draw.frame()
+        if frame == frames[0]:
+            save(f"{preset}_{frame}", image)
+        normals, water, depth = draw.renderer.surface()
+        shares.append(100 * speckle(normals, water, depth, SAME_SURFACE_SPACINGS * sim.scene.fluid.spacing_m))
+    if args.images is not None:
+        sim = Simulation(POUR[0], quiet=True)
+        sim.step(POUR[1])
+        save(f"{POUR[0]}_{POUR[1]}", renderer(sim).frame())
     shown = "the scenes' size" if args.size is None else f"{args.size[0]}×{args.size[1]}"
     head = ["settled pool", "top-face pixels", f"within {FLAT_DEG:g}° of vertical", "median", "95th percentile"]
-    rows = []
-    for (preset, frame), pool in figures["pools"].items():
-        cells = f"{pool['pixels']:,} {100 * pool['flat']:.1f}% {pool['median_deg']:.2f}° {pool['p95_deg']:.1f}°"
-        top = f"{100 * pool['particles']['flat']:.1f}% {pool['particles']['median_deg']:.2f}°"
-        rows.append([f"{preset}, frame {frame}", *cells.split(), *top.split()])
     print(f"The surface style, {backend}, {shown}\n")
     print(markdown([*head, f"the particles' top: within {FLAT_DEG:g}°", "median"], rows))
-    shares = np.array(list(figures["splash"].values())) * 100
-    preset, frames = SPLASH
     head = ["splash", f"speckle (normal > {SPECKLE_DEG:g}° from its neighbours'), mean", "least", "most"]
-    cells = [f"{value:.1f}%" for value in (shares.mean(), shares.min(), shares.max())]
+    cells = [f"{value:.1f}%" for value in (np.mean(shares), min(shares), max(shares))]
     print("\n" + markdown(head, [[f"{preset}, frames {frames[0]}-{frames[-1]}", *cells]]))
     return 0
 
@@ -230,10 +211,7 @@ def main(argv=None) -> int:
         return look(argv[1:])
     args = parser.parse_args(argv)
 
-    import taichi as ti
-
-    from pbf.app.render import SceneRenderer
-    from pbf.solver import Simulation, start_backend
+    import taichi as ti  # here, after pbf: it keeps Taichi's banner off
 
     backend = start_backend(args.arch)
     sim = Simulation("dam_break", quiet=True)

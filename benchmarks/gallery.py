@@ -47,8 +47,7 @@ MOMENTS = {
 
 def frame_of(name: str, width: int, height: int):
     sim = Simulation(name, quiet=True)
-    seconds = MOMENTS.get(name, 1.0)
-    frames = round(seconds / sim.scene.time.frame_dt_s)
+    frames = round(MOMENTS.get(name, 1.0) / sim.scene.time.frame_dt_s)
     for _ in tqdm(range(frames), desc=name, unit="frame", leave=False):
         sim.step()
     return SceneRenderer(sim, width, height).frame(), sim.particle_count, frames * sim.scene.time.frame_dt_s

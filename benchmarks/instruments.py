@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from pbf.solver import launch, start_backend
+from pbf.solver import launch
 
 
 class Observer:
@@ -149,7 +149,6 @@ class TransferCounter(Observer):
     def __init__(self):
         self.launches = 0
         self.reads = 0
-        self._stack = contextlib.ExitStack()
 
     def launched(self, kernel: str, waits: bool) -> None:
         self.launches += 1
@@ -160,17 +159,11 @@ class TransferCounter(Observer):
         self.reads += read
 
     def __enter__(self):
-        self._stack.enter_context(watching(self))
-        return self
+        self._watch = watching(self)
+        return self._watch.__enter__()
 
     def __exit__(self, *exc):
-        self._stack.close()
-        return False
-
-
-def start_profiled(arch: str | None = "cpu", **options):
-    """The backend started with Taichi's kernel profiler on (it is chosen at ``ti.init``)."""
-    return start_backend(arch, kernel_profiler=True, **options)
+        return self._watch.__exit__(*exc)
 
 
 _COUNT_ROW = re.compile(r"^\[\s*[\d.]+%\s+[\d.]+ s\s+(\d+)x \|\s*[\d.]+\s+([\d.]+)\s+[\d.]+ ms\] (\S+)$")
@@ -182,13 +175,8 @@ def profiled_tasks() -> dict[str, tuple[int, float]]:
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
         ti.profiler.print_kernel_profiler_info("count")
-    tasks = {}
-    for line in printed.getvalue().splitlines():
-        row = _COUNT_ROW.match(line.strip())
-        if row:
-            runs = int(row.group(1))
-            tasks[row.group(3)] = (runs, runs * float(row.group(2)))
-    return tasks
+    rows = filter(None, (_COUNT_ROW.match(line.strip()) for line in printed.getvalue().splitlines()))
+    return {row.group(3): (int(row.group(1)), int(row.group(1)) * float(row.group(2))) for row in rows}
 
 
 ITERATION_KERNELS = ("_iterations_kernel",)
@@ -214,8 +202,8 @@ def kernel_of(task: str) -> str:
 
 
 def count_substeps(sim, substeps: int, dt: float | None = None) -> SubstepCounts:
-    """Run ``substeps`` substeps of ``sim`` and count what they launched (Taichi started by
-    :func:`start_profiled`)."""
+    """Run ``substeps`` substeps of ``sim`` and count what they launched (Taichi started with its kernel
+    profiler on: ``start_backend(..., kernel_profiler=True)``, chosen at ``ti.init``)."""
     ti.sync()
     ti.profiler.clear_kernel_profiler_info()
     with TransferCounter() as counter:

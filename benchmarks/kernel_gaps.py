@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import io
 import shutil
 import subprocess
 import sys
@@ -50,7 +49,7 @@ def operations(text: str) -> list[tuple[float, float, str]]:
     first = next((k for k, line in enumerate(lines) if is_header(line)), None)
     if first is None:
         raise ValueError("no header with Start, Duration and Name columns: not a cuda_gpu_trace report")
-    rows = csv.reader(io.StringIO("\n".join(lines[first:])))
+    rows = csv.reader(lines[first:])
     header = [cell.strip() for cell in next(rows)]
     start, duration = (next(k for k, c in enumerate(header) if c.startswith(word)) for word in ("Start", "Duration"))
     name, found = header.index("Name"), []

@@ -1,9 +1,11 @@
-"""What the lab's scripts share: an earlier commit's package, image sizes, whole numbers of at least one,
-medians with their range, Markdown tables, and wall and CPU time taken together."""
+"""What the lab's scripts share: an earlier commit's package, a run in a fresh process, image sizes,
+whole numbers of at least one, medians with their range, Markdown tables, and wall and CPU time taken
+together."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import tarfile
@@ -39,6 +41,29 @@ def export(commit: str, into: Path) -> Path:
             tar.extractall(folder)
     archive.unlink()
     return folder
+
+
+class RunFailed(Exception):
+    """A fresh process that failed or ran out of time: why, in a line, and what it printed before."""
+
+    def __init__(self, why: str, output: str = ""):
+        super().__init__(why)
+        self.output = output
+
+
+def fresh(command: list, first_on_path=(), timeout: float | None = None, cwd=None, **env) -> str:
+    """What ``command`` prints, run in a process of its own with the folders ``first_on_path`` ahead of
+    PYTHONPATH (a version's package, this checkout's lab) and ``env`` added to the environment."""
+    path = os.pathsep.join([*map(str, first_on_path), *filter(None, [os.environ.get("PYTHONPATH")])])
+    try:
+        done = subprocess.run(command, cwd=cwd, env={**os.environ, **env, "PYTHONPATH": path}, capture_output=True,
+                              text=True, timeout=timeout)  # fmt: skip
+    except subprocess.TimeoutExpired:
+        raise RunFailed(f"over {timeout:g} s") from None
+    if done.returncode != 0:
+        last = [line for line in (done.stderr or done.stdout).splitlines() if line.strip()][-1:] or ["no output"]
+        raise RunFailed(last[0].strip(), done.stdout)
+    return done.stdout
 
 
 def image_size(text: str) -> tuple[int, int]:
@@ -92,10 +117,3 @@ class Clock:
         wall, cpu = time.perf_counter(), time.process_time()
         spent, (self.wall, self.cpu) = (wall - self.wall, cpu - self.cpu), (wall, cpu)
         return spent
-
-
-def timed(function, *args) -> tuple[tuple[float, float], object]:
-    """(wall, CPU) seconds of ``function(*args)``, and its result."""
-    clock = Clock()
-    result = function(*args)
-    return clock.lap(), result

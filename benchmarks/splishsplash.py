@@ -35,6 +35,7 @@ import numpy as np
 
 from pbf.scene import SceneError, load_scene
 from pbf.solver import Simulation, start_backend
+from pbf.study import damping
 from pbf.study.common import timed
 
 # Preloaded into SPlisHSPlasH's process: the libGLdispatch its wheel bundles clashes with the system's.
@@ -156,15 +157,12 @@ def read_density(path: Path) -> np.ndarray:
 
 
 def run_splishsplash(splash: Path, method: str, params: dict, threads: int) -> Row:
-    scene = load_scene(PRESET)
-    spacing, block = scene.fluid.spacing_m, scene.fluid.blocks[0]
+    scene, name = load_scene(PRESET), SPLASH_METHODS[method][1]
     box = np.array(scene.container.min_m), np.array(scene.container.max_m)
-    name = SPLASH_METHODS[method][1]
+    block = scene.fluid.blocks[0].min_m, np.array(scene.fluid.blocks[0].max_m) + scene.fluid.spacing_m
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        config = splash_config(
-            splash, method, params, DT_S, SECONDS, scene, box, (block.min_m, np.array(block.max_m) + spacing)
-        )
+        config = splash_config(splash, method, params, DT_S, SECONDS, scene, box, block)
         (tmp / "scene.json").write_text(json.dumps(config, indent=1))
         log = run_splash_python(splash, "", ["--no-gui", "--no-initial-pause", "--output-dir", tmp / "out",
                                              tmp / "scene.json"], threads).stdout  # fmt: skip
@@ -198,28 +196,24 @@ class IterationCount:
     def __init__(self):
         self.sim, self.iterations, self.substeps = None, 0, 0
 
+    @contextlib.contextmanager
     def stage(self, name: str):
-        return self if name == "velocity, vorticity, XSPH, x = x*" else contextlib.nullcontext()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.iterations += self.sim.iterations_used
-        self.substeps += 1
+        yield
+        if name == "velocity, vorticity, XSPH, x = x*":  # the substep's last stage: its iterations are known
+            self.iterations += self.sim.iterations_used
+            self.substeps += 1
 
 
 def our_scene(spec: str):
     """The preset with the spec's overrides, vorticity off and the CFL limit at its most. A spec runs
     fixed iterations unless it sets a target; ``preset`` keeps the preset's solver settings."""
-    overrides = ["vorticity.epsilon=0"]
-    for item in filter(None, (part.strip() for part in ("" if spec.strip() == "preset" else spec).split(","))):
+    preset = spec.strip() == "preset"
+    overrides = ["vorticity.epsilon=0"] + ([] if preset else ["solver.target_density_error=0"])
+    for item in filter(None, (part.strip() for part in ("" if preset else spec).split(","))):
         key, sep, value = item.partition("=")
         if not sep:
             raise SceneError(f"--ours {spec!r}: expected KEY=VALUE, got {item!r}")
         overrides.append(f"{OUR_SHORT_KEYS.get(key.strip(), key.strip())}={value.strip()}")
-    if spec.strip() != "preset":
-        overrides.insert(1, "solver.target_density_error=0")
     if not any(o.startswith("time.max_cfl=") for o in overrides):
         overrides.append(f"time.max_cfl={min(load_scene(PRESET, overrides).solver.kernel_ratio, 4.0)!r}")
     return load_scene(PRESET, overrides)
@@ -261,8 +255,6 @@ def medians(runs: list[Row]) -> Row:
 def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> tuple[np.ndarray, np.ndarray]:
     """The standing wave in SPlisHSPlasH: (times, the mode's amplitude). Its container is one spacing
     wider in x and z, so that its wall particles stand one spacing from the water as in its dam break."""
-    from pbf.study import damping
-
     scene = load_scene(damping.PRESET)
     spacing, frame_dt, per_frame = scene.fluid.spacing_m, scene.time.frame_dt_s, scene.time.substeps
     dt, block = frame_dt / per_frame, scene.fluid.blocks[0]
@@ -272,9 +264,8 @@ def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> 
     stop = (settle + math.ceil(periods * 2 * math.pi / omega / dt) + 1) * dt
     water_lower = np.full(3, spacing)
     box = (np.zeros(3), np.array(scene.container.max_m) + [spacing, 0.0, spacing])
-    config = splash_config(
-        splash, method, SPLASH_METHODS[method][2], dt, stop, scene, box, (np.zeros(3), water_lower + size)
-    )
+    block = (np.zeros(3), water_lower + size)
+    config = splash_config(splash, method, SPLASH_METHODS[method][2], dt, stop, scene, box, block)
     config["Configuration"]["enableVTKExport"] = False
     config["RigidBodies"][0]["mapResolution"] = [40, 30, 20]
     mode = dict(k=k, omega=omega, depth=float(size[1]), lower=list(water_lower - spacing / 2), amplitude=0.01)
@@ -289,8 +280,6 @@ def splash_sloshing(splash: Path, method: str, periods: float, threads: int) -> 
 
 def sloshing_comparison(splash: Path, methods: list[str], threads: int, periods: float = 3.0) -> None:
     """The standing wave's decay per period in SPlisHSPlasH's methods and in ours (``--sloshing``)."""
-    from pbf.study import damping
-
     theory = 2 * math.pi / damping.sloshing_mode(0.45, 0.195, 9.81)[1]
     print(f"{'run':<34} {'decay per period':>16} {'period':>8}   (linear theory: period {theory:.3f} s)")
     for method in methods:

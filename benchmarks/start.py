@@ -10,14 +10,15 @@ files it adds to its own cache folder the kernels it compiled: ``cold`` (empty),
 
 from __future__ import annotations
 
-import os
 import re
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from benchmarks.lab import CHECKOUT, RunFailed, fresh
+from pbf.scene import load_scene
 
 SPACING_FACTOR = 1.1  # ``spacing``: the preset's spacing times this (fewer particles: never the slower run)
 READY = re.compile(r"kernels ready(?: and the first frame drawn)? in ([0-9.]+) s")
@@ -38,16 +39,14 @@ def one_start(preset: str, folder: Path, arch: str | None, overrides: list[str])
     command += ["--arch", arch] if arch else []
     for override in overrides:
         command += ["--set", override]
-    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(folder))
     began = time.perf_counter()
     try:
-        done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        return {"wall_s": float("nan"), "ready_s": float("nan"), "compiled": -1, "error": f"over {TIMEOUT_S} s"}
-    wall = time.perf_counter() - began
-    ready = READY.search(done.stdout)
-    error = "" if done.returncode == 0 and ready else (done.stderr.strip().splitlines() or ["no output"])[-1]
+        output, error = fresh(command, timeout=TIMEOUT_S, TI_OFFLINE_CACHE_FILE_PATH=str(folder)), ""
+    except RunFailed as failure:
+        output, error = failure.output, str(failure)
+    wall, ready = time.perf_counter() - began, READY.search(output)
     ready_s, compiled = float(ready.group(1)) if ready else float("nan"), len(cached_kernels(folder) - before)
+    error = error or ("" if ready else "no 'kernels ready' line")
     return {"wall_s": wall, "ready_s": ready_s, "compiled": compiled, "error": error}
 
 
@@ -59,19 +58,11 @@ def first_calls(presets: list[str], arch: str | None) -> None:
     for preset in presets:
         with tempfile.TemporaryDirectory(prefix="pbf-first-calls-") as folder:
             code = f"from benchmarks.start import first_calls_here; first_calls_here({preset!r}, {arch!r})"
-            root = str(Path(__file__).resolve().parent.parent)  # the checkout, where ``benchmarks`` is
-            path = os.pathsep.join(filter(None, [os.environ.get("PYTHONPATH"), root]))
-            env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=folder, PYTHONPATH=path)
-            try:
-                done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                                      timeout=TIMEOUT_S)  # fmt: skip
-            except subprocess.TimeoutExpired:
-                print(f"{preset}: over {TIMEOUT_S} s\n", flush=True)
-                continue
-            lines = done.stdout.strip().splitlines()
-            if done.returncode != 0:  # what it printed, then why it stopped
-                lines.append(f"{preset}: failed: {(done.stderr.strip().splitlines() or ['no output'])[-1]}")
-            print("\n".join(lines) + "\n", flush=True)
+            try:  # the checkout on the path, where ``benchmarks`` is
+                printed = fresh([sys.executable, "-c", code], [CHECKOUT], TIMEOUT_S, TI_OFFLINE_CACHE_FILE_PATH=folder)
+            except RunFailed as failure:  # what it printed, then why it stopped
+                printed = f"{failure.output.strip()}\n{preset}: failed: {failure}"
+            print(printed.strip() + "\n", flush=True)
 
 
 def first_calls_here(preset: str, arch: str | None) -> None:
@@ -81,7 +72,6 @@ def first_calls_here(preset: str, arch: str | None) -> None:
     import taichi as ti
 
     from benchmarks.instruments import Observer, watching
-    from pbf.scene import load_scene
     from pbf.solver import Simulation, start_backend
 
     start_backend(arch or "cpu", quiet=True)
@@ -105,13 +95,6 @@ def first_calls_here(preset: str, arch: str | None) -> None:
         print(f"  {value:6.2f} s  {name}")
 
 
-def spacing_override(preset: str) -> str:
-    """``fluid.spacing_m=...`` for the ``spacing`` start: the preset's spacing times SPACING_FACTOR."""
-    from pbf.scene import load_scene
-
-    return f"fluid.spacing_m={load_scene(preset).fluid.spacing_m * SPACING_FACTOR:.6g}"
-
-
 def cell(result: dict) -> str:
     """A table cell: ready time and kernels compiled, or why the start failed."""
     return f"failed: {result['error'][:60]}" if result["error"] else f"{result['ready_s']:.1f} s ({result['compiled']})"
@@ -126,8 +109,9 @@ def run(presets: list[str], arch: str | None) -> list[dict]:
         for preset in presets:
             folder = Path(root) / preset
             folder.mkdir()
+            spacing = f"fluid.spacing_m={load_scene(preset).fluid.spacing_m * SPACING_FACTOR:.6g}"
             row = {"preset": preset}
-            for name, overrides in (("cold", []), ("warm", []), ("spacing", [spacing_override(preset)])):
+            for name, overrides in (("cold", []), ("warm", []), ("spacing", [spacing])):
                 row[name] = one_start(preset, folder, arch, overrides)
             cells = " ".join(f"{cell(row[name]):>16}" for name in ("cold", "warm", "spacing"))
             print(f"{preset:<20} {cells}", flush=True)

@@ -30,7 +30,7 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
     dt = sim.dt_s
     ti.sync()
     built = time.perf_counter() - began
-    host, whole, cpu = [], [], []
+    rounds_ms = []  # each round's ms a substep: whole, the host's to issue them, the issuing thread's CPU
     for _ in range(rounds):
         ti.sync()
         start, thread_start = time.perf_counter(), time.thread_time()
@@ -38,14 +38,10 @@ def substep_times(particles: int, substeps: int, rounds: int) -> dict:
             sim.substep(dt)
         issued, thread_done = time.perf_counter(), time.thread_time()
         ti.sync()
-        done = time.perf_counter()
-        host.append((issued - start) * 1e3 / substeps)
-        whole.append((done - start) * 1e3 / substeps)
-        cpu.append((thread_done - thread_start) * 1e3 / substeps)
-    median = statistics.median
-    return dict(
-        particles=sim.particle_count, ms=median(whole), host_ms=median(host), host_cpu_ms=median(cpu), built_s=built
-    )
+        spent = (time.perf_counter() - start, issued - start, thread_done - thread_start)
+        rounds_ms.append([t * 1e3 / substeps for t in spent])
+    ms, host_ms, host_cpu_ms = (statistics.median(column) for column in zip(*rounds_ms))
+    return dict(particles=sim.particle_count, ms=ms, host_ms=host_ms, host_cpu_ms=host_cpu_ms, built_s=built)
 
 
 def preset_rate(preset: str, frames: int = 30) -> dict:

@@ -18,7 +18,7 @@ import numpy as np
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import timed  # noqa: E402
+from benchmarks.lab import Clock  # noqa: E402
 from pbf.app.mesh import Mesh, reconstruct  # noqa: E402
 from pbf.scene import from_dict  # noqa: E402
 from pbf.solver import Simulation, start_backend  # noqa: E402
@@ -33,12 +33,6 @@ RESTING_COLUMN = {
     "solver": {"iterations": 4},
 }
 """The resting column of tests/test_mesh.py: 12 × 12 × 12 particles against five walls."""
-
-
-def timed_ms(function, *args) -> tuple[float, object]:
-    """Wall ms of ``function(*args)``, and its result."""
-    (wall, _), result = timed(function, *args)
-    return wall * 1e3, result
 
 
 def wall_share(mesh: Mesh, scene) -> float:
@@ -56,7 +50,9 @@ def measure(particles: int, frames: int, every: int) -> None:
 
     def record(label: str, sim: Simulation) -> None:
         water_m3 = sim.particle_count * sim.model.particle_mass_kg / sim.scene.fluid.rest_density_kg_m3
-        (wall_s, _), mesh = timed(reconstruct, sim.positions(), sim.scene)
+        positions, clock = sim.positions(), Clock()
+        mesh = reconstruct(positions, sim.scene)
+        wall_s = clock.lap()[0]
         ratio = mesh.enclosed_volume_m3() / water_m3
         print(f"{label:>6} {ratio:>9.3f}{' ' if mesh.is_closed() else '!'}")
         if label != "rest":

@@ -15,14 +15,14 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the checkout on the path, for benchmarks.lab
     sys.path.append(str(Path(__file__).resolve().parent.parent))
-from benchmarks.lab import Clock, at_least, markdown, medians  # noqa: E402
+from benchmarks.lab import Clock, RunFailed, at_least, fresh, markdown, medians  # noqa: E402
+from pbf.app import window  # noqa: E402
+from pbf.solver import Simulation, start_backend  # noqa: E402
 
 # What each variant changes against "window" (the window as python run.py opens it). The levers tried
 # on it (the driver's and Taichi's threads, vsync, the statistics' rate, GGUI's own particles, ...) are
@@ -34,44 +34,19 @@ WARMUP_FRAMES = 30
 PHASES = ("frame", "sim", "draw", "panel", "show")
 
 
-def process_cpu_s(pid: int) -> float:
-    """CPU seconds process ``pid`` has used (all its threads)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def x_server_cpu_s() -> float | None:
-    """CPU seconds the X server of $DISPLAY has used, if it is an Xvfb or Xorg process we can read."""
-    display = os.environ.get("DISPLAY", "")
-    for proc in Path("/proc").iterdir():
+    """CPU seconds the X server of $DISPLAY has used (all its threads), if it is an Xvfb or Xorg process
+    we can read."""
+    display = os.environ.get("DISPLAY", "").encode()
+    for proc in Path("/proc").glob("[0-9]*"):
         try:
-            if not proc.name.isdigit():
-                continue
             argv = (proc / "cmdline").read_bytes().split(b"\0")
-            if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display.encode() in argv:
-                return process_cpu_s(int(proc.name))
+            if Path(argv[0].decode()).name in ("Xvfb", "Xorg") and display in argv:
+                fields = (proc / "stat").read_text().rsplit(")", 1)[1].split()  # user and system time
+                return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
         except (OSError, IndexError, UnicodeDecodeError):
             continue
     return None
-
-
-class Phases:
-    """Wall and process CPU time, in ms, of the phases of one frame: ``spent[phase] = (wall, cpu)``."""
-
-    def __init__(self):
-        self.spent = {}
-
-    def timed(self, phase, function):
-        """``function`` wrapped to add its time to ``phase`` at each call."""
-
-        def run(*args, **kwargs):
-            clock = Clock()
-            result = function(*args, **kwargs)
-            wall, cpu = (1e3 * t for t in clock.lap())
-            self.spent[phase] = tuple(a + b for a, b in zip(self.spent.get(phase, (0.0, 0.0)), (wall, cpu)))
-            return result
-
-        return run
 
 
 def make_offscreen(gui_window) -> None:
@@ -87,10 +62,7 @@ def make_offscreen(gui_window) -> None:
 def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | None) -> dict:
     """One variant in this process: the medians over ``frames`` frames after ``warmup`` frames."""
     settings = VARIANTS[name]
-    import taichi as ti
-
-    from pbf.app import window  # pbf first: it keeps Taichi's banner off
-    from pbf.solver import Simulation, start_backend
+    import taichi as ti  # here, after pbf: it keeps Taichi's banner off
 
     start_backend(arch, quiet=True)
     sim = Simulation(SCENE, quiet=True)
@@ -110,29 +82,36 @@ def measure(name: str, frames: int, warmup: int, offscreen: bool, arch: str | No
             step()
         viewer.show()
 
-    clock = Phases()
-    step = clock.timed("sim", lambda: (sim.step(), ti.sync()))
-    frame = clock.timed("frame", frame)
+    spent = {}  # the frame's phases: (wall, CPU) ms, the process's CPU time (every thread's)
+
+    def timed(phase, function):  # ``function``, adding its time to ``phase`` at each call
+        def run(*args, **kwargs):
+            clock = Clock()
+            result = function(*args, **kwargs)
+            spent[phase] = tuple(a + 1e3 * b for a, b in zip(spent.get(phase, (0.0, 0.0)), clock.lap()))
+            return result
+
+        return run
+
+    step = timed("sim", lambda: (sim.step(), ti.sync()))
+    frame = timed("frame", frame)
     for phase in ("draw", "panel"):
-        setattr(viewer, phase, clock.timed(phase, getattr(viewer, phase)))
-    viewer.window.show = clock.timed("show", viewer.window.show)
-    rows = []
+        setattr(viewer, phase, timed(phase, getattr(viewer, phase)))
+    viewer.window.show = timed("show", viewer.window.show)
     viewer.show()
-    for number in range(warmup + frames):
-        if number == warmup:
-            x_start = None if offscreen else x_server_cpu_s()
-            cpu_start, wall_start = time.process_time(), time.perf_counter()
-        clock.spent = {}
+    for _ in range(warmup):
         frame()
-        if number >= warmup:
-            rows.append(clock.spent)
-    elapsed = time.perf_counter() - wall_start
-    x_end = None if offscreen else x_server_cpu_s()
+    x_start, whole, rows = None if offscreen else x_server_cpu_s(), Clock(), []
+    for _ in range(frames):
+        spent.clear()
+        frame()
+        rows.append(dict(spent))
+    (elapsed, cpu_s), x_end = whole.lap(), None if offscreen else x_server_cpu_s()
     result = {
         "variant": name,
         "fps": frames / elapsed,
         "load": os.getloadavg()[0],
-        "cpu": 1e3 * (time.process_time() - cpu_start) / frames,
+        "cpu": 1e3 * cpu_s / frames,
         "X": None if x_start is None or x_end is None else 1e3 * (x_end - x_start) / frames,
     }
     for phase in PHASES:
@@ -180,18 +159,17 @@ def main(argv=None) -> None:
     results = {name: [] for name in names}
     for round_ in range(args.rounds):
         for name in names:  # each run a fresh process, as a user's window
-            run = subprocess.run([sys.executable, __file__, "--one", name, *options], capture_output=True, text=True)
-            if run.returncode != 0:
-                raise SystemExit(f"{name}: {(run.stderr or run.stdout).strip().splitlines()[-1]}")
-            result = json.loads(run.stdout.strip().splitlines()[-1])
+            try:
+                output = fresh([sys.executable, __file__, "--one", name, *options])
+            except RunFailed as failure:
+                raise SystemExit(f"{name}: {failure}") from None
+            result = json.loads(output.strip().splitlines()[-1])
             results[name].append(result)
             phases = " + ".join(f"{p} {result[p]:.1f}" for p in PHASES[1:] if result[p] is not None)
             progress = f"round {round_ + 1}/{args.rounds} {name} (load {result['load']:.1f}): {result['fps']:.1f} fps"
             print(f"{progress}, {phases} ms", file=sys.stderr, flush=True)
-    from pbf.solver import start_backend  # started here only to be named
-
     where = "offscreen (GGUI show_window=False; show = draw + read back)" if args.offscreen else "in a window"
-    backend = start_backend(args.arch, quiet=True)
+    backend = start_backend(args.arch, quiet=True)  # started here only to be named
     print(
         f"{SCENE}, {args.frames} frames × {args.rounds} rounds, {where}, on {backend}, medians (ms; cpu: all threads)"
     )
