@@ -66,9 +66,9 @@ def quaternion_multiply(a, b):
     )
 
 
-@ti.func
+@ti.pyfunc
 def quaternion_matrix(q):
-    """The rotation matrix of a unit quaternion (w, x, y, z)."""
+    """The rotation matrix of a unit quaternion (w, x, y, z), in a kernel or on the host (a ``ti.Matrix`` there)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     return ti.Matrix(
         [
@@ -80,15 +80,8 @@ def quaternion_matrix(q):
 
 
 def quaternion_matrix_np(q) -> np.ndarray:
-    """NumPy twin of :func:`quaternion_matrix` (renderers, exports, tests)."""
-    w, x, y, z = (float(c) for c in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """:func:`quaternion_matrix` on the host as a float64 NumPy array (renderers, exports, tests)."""
+    return quaternion_matrix([float(c) for c in q]).to_numpy()
 
 
 @ti.func
