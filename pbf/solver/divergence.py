@@ -12,7 +12,6 @@ import taichi as ti
 from pbf.solver.density import multiplier_denominator, pair_terms
 from pbf.solver.grid import named
 from pbf.solver.model import DensityParams
-from pbf.solver.scan import read_count
 from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_gradient
 
 
@@ -99,11 +98,10 @@ class DivergenceCorrection:
     def start(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), count: ti.template()):
         """For the top level of a kernel: v += Δv of the warm start, with min(C, 0), the denominators and the
         walls' gradient at the fixed positions; nothing if ``count`` is 0 (a restore, Δt = 0)."""
-        bound = ti.static(self.state.loop_bound)
-        for i in range(read_count(bound, 1)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None] and count > 0:
                 self.increment[i] = self.state.multiplier[i] * dt * dt
-        for i in range(read_count(bound, 1)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None] and count > 0:
                 self.state.v[i] += self.velocity_change(x, i, neighbours, dt, True)
 
@@ -113,11 +111,10 @@ class DivergenceCorrection:
     ):
         """For the top level of a kernel: iterations ``first`` … ``first + PER_CALL − 1`` of those below
         ``count``, each every δλ̂, then every Δv. The count is data: every count compiles the same code."""
-        bound = ti.static(self.state.loop_bound)
         for u in ti.static(range(self.PER_CALL)):
-            for i in range(read_count(bound, 1)):
+            for i in range(self.state.live_bound()):
                 if first + u < count and i < self.state.active[None]:
                     self.multiplier_increment(x, i, neighbours, dt)
-            for i in range(read_count(bound, 1)):
+            for i in range(self.state.live_bound()):
                 if first + u < count and i < self.state.active[None]:
                     self.state.v[i] += self.velocity_change(x, i, neighbours, dt, False)

@@ -166,8 +166,7 @@ class Simulation:
         self.iterations = JacobiIterations(
             self.density,
             weights=model.iteration_weights,
-            active=self.state.active,
-            loop_bound=self.state.loop_bound,
+            state=self.state,
             # A GPU's host never waits inside a substep: at 4 iterations lines 1-7, the iterations and
             # the end are 3 calls. The CPU reads the decision after each iteration.
             per_call=4 if on_device else 1,
