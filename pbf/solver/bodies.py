@@ -16,7 +16,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import backend
-from pbf.solver.constants import scene_constants
+from pbf.solver.constants import array_loader, scene_constants
 from pbf.solver.density import pressure, pressure_scales
 from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
@@ -194,7 +194,10 @@ class Bodies(SolidParts):
         pair_rows = np.zeros((pair_slots, 2), np.int32)
         if pairs:
             pair_rows[: len(pairs)] = pairs
-        self._describe(rows, pair_rows)
+        columns = (self.sphere, self.half, self.inverse_mass, self.inertia, self.bounding)  # rows' columns
+        array_loader((*columns, self.pair_first, self.pair_second))(
+            (rows[:, 0], rows[:, 1:4], rows[:, 4], rows[:, 5:8], rows[:, 8], pair_rows[:, 0], pair_rows[:, 1])
+        )
         self._rest_reach()
         self._launch_step = Launcher(self._step)  # past Taichi's per-call Python (pbf.solver.launch)
         self.held = False  # while True (settling before t = 0) advance leaves the bodies where they are
@@ -318,18 +321,6 @@ class Bodies(SolidParts):
             for b in range(count):
                 self.reach[b] = self.collision_reach(b, dt)
             self._set_fastest()
-
-    @ti.kernel
-    def _describe(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2), pairs: ti.types.ndarray(dtype=ti.i32, ndim=2)):
-        for b in range(rows.shape[0]):
-            self.sphere[b] = ti.cast(rows[b, 0], ti.i32)
-            self.half[b] = ti.Vector([rows[b, 1], rows[b, 2], rows[b, 3]])
-            self.inverse_mass[b] = rows[b, 4]
-            self.inertia[b] = ti.Vector([rows[b, 5], rows[b, 6], rows[b, 7]])
-            self.bounding[b] = rows[b, 8]
-        for k in range(pairs.shape[0]):
-            self.pair_first[k] = pairs[k, 0]
-            self.pair_second[k] = pairs[k, 1]
 
     @ti.kernel
     def _rest_reach(self):
