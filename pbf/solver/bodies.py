@@ -16,7 +16,7 @@ import numpy as np
 import taichi as ti
 
 from pbf.solver import backend
-from pbf.solver.constants import scene_constants
+from pbf.solver.constants import array_loader, scene_constants
 from pbf.solver.density import pressure, pressure_scales
 from pbf.solver.launch import Launcher
 from pbf.solver.model import BoundaryParams, allocation
@@ -66,9 +66,9 @@ def quaternion_multiply(a, b):
     )
 
 
-@ti.func
+@ti.pyfunc
 def quaternion_matrix(q):
-    """The rotation matrix of a unit quaternion (w, x, y, z)."""
+    """The rotation matrix of a unit quaternion (w, x, y, z), in a kernel or on the host (a ``ti.Matrix`` there)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     return ti.Matrix(
         [
@@ -80,15 +80,8 @@ def quaternion_matrix(q):
 
 
 def quaternion_matrix_np(q) -> np.ndarray:
-    """NumPy twin of :func:`quaternion_matrix` (renderers, exports, tests)."""
-    w, x, y, z = (float(c) for c in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """:func:`quaternion_matrix` on the host as a float64 NumPy array (renderers, exports, tests)."""
+    return quaternion_matrix([float(c) for c in q]).to_numpy()
 
 
 @ti.func
@@ -201,7 +194,10 @@ class Bodies(SolidParts):
         pair_rows = np.zeros((pair_slots, 2), np.int32)
         if pairs:
             pair_rows[: len(pairs)] = pairs
-        self._describe(rows, pair_rows)
+        columns = (self.sphere, self.half, self.inverse_mass, self.inertia, self.bounding)  # rows' columns
+        array_loader((*columns, self.pair_first, self.pair_second))(
+            (rows[:, 0], rows[:, 1:4], rows[:, 4], rows[:, 5:8], rows[:, 8], pair_rows[:, 0], pair_rows[:, 1])
+        )
         self._rest_reach()
         self._launch_step = Launcher(self._step)  # past Taichi's per-call Python (pbf.solver.launch)
         self.held = False  # while True (settling before t = 0) advance leaves the bodies where they are
@@ -325,18 +321,6 @@ class Bodies(SolidParts):
             for b in range(count):
                 self.reach[b] = self.collision_reach(b, dt)
             self._set_fastest()
-
-    @ti.kernel
-    def _describe(self, rows: ti.types.ndarray(dtype=ti.f32, ndim=2), pairs: ti.types.ndarray(dtype=ti.i32, ndim=2)):
-        for b in range(rows.shape[0]):
-            self.sphere[b] = ti.cast(rows[b, 0], ti.i32)
-            self.half[b] = ti.Vector([rows[b, 1], rows[b, 2], rows[b, 3]])
-            self.inverse_mass[b] = rows[b, 4]
-            self.inertia[b] = ti.Vector([rows[b, 5], rows[b, 6], rows[b, 7]])
-            self.bounding[b] = rows[b, 8]
-        for k in range(pairs.shape[0]):
-            self.pair_first[k] = pairs[k, 0]
-            self.pair_second[k] = pairs[k, 1]
 
     @ti.kernel
     def _rest_reach(self):

@@ -376,36 +376,30 @@ class Boundaries:
 
     @ti.func
     def project(self, p):
-        """p moved inside the fluid's domain: into the container, out of every solid (line 15)."""
-        q = p
-        for k in ti.static(range(len(self.parts))):
-            q = self.parts[k].project(q)
-        if ti.static(self.with_bodies):
-            q = self.container.project(q)  # a body at a wall may have pushed p through it
-        return q
+        """p moved inside the fluid's domain: into the container, out of every solid (line 15); the
+        projection of :meth:`project_recorded`, recorded nowhere."""
+        return self.project_recorded(p, 0, "", 0.0)
 
     @ti.func
     def project_recorded(self, p, i, stage: ti.template(), amount):
-        """:meth:`project` for particle i's x* at ``stage`` "start", "iteration" (of weight ``amount``) or
+        """p projected for particle i's x* at ``stage`` "start", "iteration" (of weight ``amount``) or
         "between" (stepped back by ``amount``); with bodies, their push, less what the container took back
         (a particle caught between a body and a wall lifts no body), goes on the record their reaction reads
         (``Bodies.record_start``, ``record_iteration``, ``record_between``)."""
         q = p
+        for k in ti.static(range(len(self.parts) - int(self.with_bodies))):  # the bodies' push last
+            q = self.parts[k].project(q)
         if ti.static(self.with_bodies):
-            for k in ti.static(range(len(self.parts) - 1)):
-                q = self.parts[k].project(q)
             before = q
             q, pusher = self.bodies.push_out(q)
-            q = self.container.project(q)
+            q = self.container.project(q)  # a body at a wall may have pushed p through it
             pushed = q - before
             if ti.static(stage == "start"):
                 self.bodies.record_start(i, pushed, pusher)
             elif ti.static(stage == "iteration"):
                 self.bodies.record_iteration(i, pushed, pusher, amount)
-            else:
+            elif ti.static(stage == "between"):
                 self.bodies.record_between(i, pushed, pusher, amount)
-        else:
-            q = self.project(p)
         return q
 
     @ti.func

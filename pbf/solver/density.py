@@ -194,8 +194,7 @@ class DensityConstraint:
             if near.sum() > 0:
                 # A walk of its own for the particles at a wall: the images' code in the common walk
                 # would slow every particle's pairs, the few at a wall or not.
-                w_self, g, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, gradients)
-                g_self = g
+                w_self, g_self, reflected_self = self.image_sums(xi, xi, near, plane, h, scale, gradients)
                 sums[0] = volume * (scaled_kernel(0.0, scale) + w_self)
                 self.grid.for_each_neighbour(i, neighbours, self.mirrored_density_pair, p)
             else:
@@ -268,13 +267,10 @@ class DensityConstraint:
             self.surface[i] = self.surface_ghost(first, i, neighbours)
             c = self.plain_error[i]
         else:
-            xi = first[i]
-            if from_second:
-                xi = second[i]
+            x = ti.static((first, second, from_second))
+            xi = position(x, i)
             wall = self.walls(i, xi)
-            ratio, gradient_i, sum_sq, own_images = self.pair_sums(
-                (first, second, from_second), xi, i, neighbours, False
-            )
+            ratio, gradient_i, sum_sq, own_images = self.pair_sums(x, xi, i, neighbours, False)
             c = ratio + wall - 1.0
         self.lagrange_multiplier(i, c + self.surface[i], k == 0, weight)
 

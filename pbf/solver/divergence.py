@@ -12,8 +12,7 @@ import taichi as ti
 from pbf.solver.density import multiplier_denominator, pair_terms
 from pbf.solver.grid import named
 from pbf.solver.model import DensityParams
-from pbf.solver.scan import read_count
-from pbf.solver.sph import kernel_scale, scaled_kernel, scaled_kernel_gradient
+from pbf.solver.sph import scaled_kernel, scaled_kernel_gradient
 
 
 @ti.data_oriented
@@ -51,8 +50,7 @@ class DivergenceCorrection:
     @ti.func
     def velocity_change(self, x: ti.template(), i, neighbours: ti.template(), dt, start: ti.template()):
         """Δv_i from the increments δλ̂ (Eq. 12's Δx over Δt); at the ``start`` also min(C_i, 0) and the denominator."""
-        h, volume = self.constants[None].h, self.constants[None].volume
-        scale = kernel_scale(h)  # once per particle, not per neighbour
+        h, volume, scale = self.density.particle_constants()
         sums = ti.Vector([volume * scaled_kernel(0.0, scale), 0.0, 0.0, 0.0, 0.0])
         dv = ti.Vector([0.0, 0.0, 0.0])
         increment_i = self.increment[i]
@@ -62,8 +60,7 @@ class DivergenceCorrection:
         self.grid.for_each_neighbour(i, neighbours, self.change_pair, p)
         wall_gradient = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(start):
-            wall, at_start = self.density.ghost(x[i], True)
-            wall_gradient = at_start
+            wall, wall_gradient = self.density.ghost(x[i], True)
             self.wall_gradient[i] = wall_gradient
             gradient_i = ti.Vector([sums[1], sums[2], sums[3]])
             self.deficit[i] = ti.min(sums[0] + wall - 1.0, 0.0)
@@ -82,8 +79,8 @@ class DivergenceCorrection:
     @ti.func
     def multiplier_increment(self, x: ti.template(), i, neighbours: ti.template(), dt):
         """δλ̂_i of an iteration from the current v (Λ_i kept as a pressure in ``State.multiplier``)."""
-        h, volume, omega = self.constants[None].h, self.constants[None].volume, self.constants[None].omega
-        scale = kernel_scale(h)  # once per particle, not per neighbour
+        h, volume, scale = self.density.particle_constants()
+        omega = self.constants[None].omega
         xi, vi = x[i], self.state.v[i]
         rate = 0.0
         p = ti.static(named(x=x, xi=xi, vi=vi, h=h, volume=volume, scale=scale, rate=rate))
@@ -99,11 +96,10 @@ class DivergenceCorrection:
     def start(self, x: ti.template(), neighbours: ti.template(), dt: ti.template(), count: ti.template()):
         """For the top level of a kernel: v += Δv of the warm start, with min(C, 0), the denominators and the
         walls' gradient at the fixed positions; nothing if ``count`` is 0 (a restore, Δt = 0)."""
-        bound = ti.static(self.state.loop_bound)
-        for i in range(read_count(bound, 1)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None] and count > 0:
                 self.increment[i] = self.state.multiplier[i] * dt * dt
-        for i in range(read_count(bound, 1)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None] and count > 0:
                 self.state.v[i] += self.velocity_change(x, i, neighbours, dt, True)
 
@@ -113,11 +109,10 @@ class DivergenceCorrection:
     ):
         """For the top level of a kernel: iterations ``first`` … ``first + PER_CALL − 1`` of those below
         ``count``, each every δλ̂, then every Δv. The count is data: every count compiles the same code."""
-        bound = ti.static(self.state.loop_bound)
         for u in ti.static(range(self.PER_CALL)):
-            for i in range(read_count(bound, 1)):
+            for i in range(self.state.live_bound()):
                 if first + u < count and i < self.state.active[None]:
                     self.multiplier_increment(x, i, neighbours, dt)
-            for i in range(read_count(bound, 1)):
+            for i in range(self.state.live_bound()):
                 if first + u < count and i < self.state.active[None]:
                     self.state.v[i] += self.velocity_change(x, i, neighbours, dt, False)

@@ -6,8 +6,6 @@ backend"); the host's loop over a pass's calls, :func:`calls` (the density's and
 import numpy as np
 import taichi as ti
 
-from pbf.solver.scan import read_count
-
 DONE, WEIGHT_INDEX, USED, IN_SECOND, STEPPING_BACK = range(5)
 """Entries of ``JacobiIterations.flags``."""
 LAST_ERROR, FRACTION = range(2)
@@ -31,10 +29,9 @@ def calls(call, first: int, end: int, per_call: int, done=None) -> int:
 class JacobiIterations:
     """A substep's iterations as loops for ``pbf.solver.substep``'s kernels, steered on the device."""
 
-    def __init__(self, density, weights: tuple[float, ...], active, loop_bound, per_call: int, reads_decisions: bool):
+    def __init__(self, density, weights: tuple[float, ...], state, per_call: int, reads_decisions: bool):
         self.density = density
-        self.active = active
-        self.loop_bound = loop_bound
+        self.state = state  # its live particles: the loops' bound, the count
         self.per_call = per_call  # iterations a kernel call runs (each a copy of an iteration's code)
         self.reads_decisions = reads_decisions  # the host reads after each call whether the target was met
         # The first iteration weighs its λ by 1 (DensityConstraint.multiplier_pass starts L afresh there).
@@ -83,18 +80,18 @@ class JacobiIterations:
         x*_i += Δx_i (lines 12-17); with a target Σ max(C_i, 0), then the rules (:meth:`decide`)."""
         density = self.density
         for u in ti.static(range(self.per_call)):
-            for i in range(read_count(self.loop_bound, 1)):
+            for i in range(self.state.live_bound()):
                 k = run.start + u
                 running, from_second, index = self._loop_state(run.measure, k)
-                if k < run.iterations and i < self.active[None] * running:
+                if k < run.iterations and i < self.state.active[None] * running:
                     density.multiplier_pass(first, second, from_second, i, neighbours, k, self._weight(index))
-            for i in range(read_count(self.loop_bound, 1)):
+            for i in range(self.state.live_bound()):
                 k = run.start + u
                 running, from_second, index = self._loop_state(run.measure, k)
-                if k < run.iterations and i < self.active[None] * running:
+                if k < run.iterations and i < self.state.active[None] * running:
                     density.jacobi_step(first, second, from_second, i, neighbours, self._weight(index))
             if ti.static(run.measure):
-                density.error_sum.sum(density.error, 0, self.active)
+                density.error_sum.sum(density.error, 0, self.state.active)
                 for _ in range(1):  # one thread
                     self.decide(run.start + u, density.error_sum.total(0), run)
 
@@ -106,7 +103,7 @@ class JacobiIterations:
         iterations, target, min_iterations, step_back = run.iterations, run.target, run.min_iterations, run.step_back
         running, from_second, index = self._loop_state(True, k)
         if running and k < iterations:
-            error = total / ti.cast(ti.max(self.active[None], 1), ti.f32)
+            error = total / ti.cast(ti.max(self.state.active[None], 1), ti.f32)
             last = ti.math.inf
             if k > 0:
                 last = self.values[LAST_ERROR]
@@ -128,12 +125,12 @@ class JacobiIterations:
     @ti.func
     def settle(self, first: ti.template(), second: ti.template(), run: ti.template()):
         """x* into the first buffer after the iterations (stepped back, or copied from the second)."""
-        for i in range(read_count(self.loop_bound, 1)):
+        for i in range(self.state.live_bound()):
             in_second, stepping_back, fraction = run.iterations % 2, 0, 0.0
             if ti.static(run.measure):
                 in_second, stepping_back = self.flags[IN_SECOND], self.flags[STEPPING_BACK]
                 fraction = self.values[FRACTION]
-            if i < self.active[None] and (in_second or stepping_back):
+            if i < self.state.active[None] and (in_second or stepping_back):
                 if stepping_back:
                     self.density.between(first, second, in_second, fraction, i)
                 else:

@@ -24,7 +24,7 @@ from pbf.scene import (
     Vorticity,
     block_counts,
 )
-from pbf.scene.schema import _num, _show
+from pbf.scene.schema import _finite_float, _is_number, _num, _show
 from pbf.solver import acceleration, backend, sph
 
 Vec3 = tuple[float, float, float]
@@ -314,17 +314,10 @@ def _checked_number(
     lowest, highest = bounds
     interval = f"{'(' if above_lowest else '['}{_num(lowest)}, {_num(highest)}]"
     allowed = f"{'an integer' if kind is int else 'a finite number'} in {interval} ({meaning})"
-    numeric = numbers.Integral if kind is int else numbers.Real
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numeric):
+    if not _is_number(value) or (kind is int and not isinstance(value, numbers.Integral)):
         raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
-    if kind is int:
-        converted = int(value)
-    else:
-        try:
-            converted = float(value)
-        except OverflowError:
-            converted = math.inf
-    inside = math.isfinite(converted) and lowest <= converted <= highest and not (above_lowest and converted == lowest)
+    converted = int(value) if kind is int else _finite_float(value)
+    inside = converted is not None and lowest <= converted <= highest and not (above_lowest and converted == lowest)
     if not inside:
         raise ValueError(f"{label}: expected {allowed}, got {_show(value)}")
     return converted
@@ -333,17 +326,10 @@ def _checked_number(
 def _checked_vector(label: str, value, largest: float, meaning: str = "m or m/s") -> Vec3:
     """Three finite numbers each within ±``largest``, as a tuple of floats, or TypeError/ValueError."""
     allowed = f"three finite numbers [x, y, z] within ±{_num(largest)} ({meaning})"
-    if (
-        not isinstance(value, (tuple, list, np.ndarray))
-        or len(value) != 3
-        or any(isinstance(c, (bool, np.bool_)) or not isinstance(c, numbers.Real) for c in value)
-    ):
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 3 or not all(map(_is_number, value)):
         raise TypeError(f"{label}: expected {allowed}, got {_given(value)}")
-    try:
-        converted = tuple(float(c) for c in value)
-    except OverflowError:
-        converted = (math.inf,)
-    if not all(math.isfinite(c) and abs(c) <= largest for c in converted):
+    converted = tuple(_finite_float(c) for c in value)
+    if not all(c is not None and abs(c) <= largest for c in converted):
         raise ValueError(f"{label}: expected {allowed}, got {_show(value)}")
     return converted
 

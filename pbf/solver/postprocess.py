@@ -20,7 +20,6 @@ from pbf.solver.constants import scene_constants
 from pbf.solver.density import pressure
 from pbf.solver.grid import named
 from pbf.solver.model import VelocityParams
-from pbf.solver.scan import read_count
 from pbf.solver.sph import kernel_scale, scaled_kernel_and_gradient, scaled_kernel_gradient
 
 
@@ -72,8 +71,7 @@ class VelocityPostprocess:
         and XSPH (c = ``run.xsph_c``), v capped at ``run.max_speed`` (0: no cap), x = x*; and the pressure
         of the multipliers ``impulse`` (L) and Λ, at ``run.pressure_per_impulse`` Pa per unit of L, added
         to ``State.pressure_sum`` (restarted at the ``run.first_of_frame`` substep)."""
-        bound = ti.static(self.state.loop_bound)
-        for i in range(read_count(bound, 1)):  # line 21, v_i kept for the pass below; Eq. 13
+        for i in range(self.state.live_bound()):  # line 21, v_i kept for the pass below; Eq. 13
             if i < self.state.active[None]:
                 h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
                 if ti.static(run.vorticity):
@@ -86,7 +84,7 @@ class VelocityPostprocess:
                     self.omega_norm[i] = omega.norm()
                 self.velocity_now[i] = vi
         # Eqs. 14-15 and line 23: the pairs read v_j as kept above, never x_j, so x moves in the same pass.
-        for i in range(read_count(bound, 1)):
+        for i in range(self.state.live_bound()):
             if i < self.state.active[None]:
                 h, volume, scale, inverse_dt, xi, vi = self.particle(x_pred, i, run)
                 dv = ti.Vector([0.0, 0.0, 0.0])

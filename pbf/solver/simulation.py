@@ -99,8 +99,9 @@ class Solids:
     """(slots,) matrix(3, 3, f32) field: body to world."""
 
 
-def _particle_array(name: str, values) -> np.ndarray:
-    """A snapshot's per-particle array as float32, or a TypeError for what holds no real numbers."""
+def _particle_array(name: str, values, shape: tuple | None = None, whence: str = "") -> np.ndarray:
+    """A snapshot's array as float32, or a TypeError for what holds no real numbers; with ``shape``, a
+    ValueError for another (``whence``: where that shape comes from, for the message)."""
     try:
         array = np.asarray(values)
     except (ValueError, TypeError) as error:  # ragged lists
@@ -109,6 +110,8 @@ def _particle_array(name: str, values) -> np.ndarray:
         ) from None
     if array.dtype.kind not in "fiu" or array.dtype == np.float16:
         raise TypeError(f"restore: {name}: expected an array of real numbers, got dtype {array.dtype}")
+    if shape is not None and array.shape != shape:
+        raise ValueError(f"restore: expected {name} of shape {shape}{whence}, got {array.shape}")
     with np.errstate(over="ignore"):  # beyond float32: inf, refused as not finite
         return array.astype(np.float32, copy=False)
 
@@ -166,8 +169,7 @@ class Simulation:
         self.iterations = JacobiIterations(
             self.density,
             weights=model.iteration_weights,
-            active=self.state.active,
-            loop_bound=self.state.loop_bound,
+            state=self.state,
             # A GPU's host never waits inside a substep: at 4 iterations lines 1-7, the iterations and
             # the end are 3 calls. The CPU reads the decision after each iteration.
             per_call=4 if on_device else 1,
@@ -290,10 +292,8 @@ class Simulation:
                 raise ValueError(
                     f"restore: unknown particle field {name!r} in the snapshot; kept fields: {', '.join(kept)}"
                 )
-            fields[name] = _particle_array(f"fields[{name!r}]", values)
             shape = positions.shape[:1] + (() if spec.components == 1 else (spec.components,))
-            if fields[name].shape != shape:
-                raise ValueError(f"restore: expected fields[{name!r}] of shape {shape}, got {fields[name].shape}")
+            fields[name] = _particle_array(f"fields[{name!r}]", values, shape)
         count = len(positions)
         if count > self.model.capacity:
             raise ValueError(
@@ -330,12 +330,8 @@ class Simulation:
             return None
         if snapshot.bodies is None:
             return self.bodies.initial_state()
-        bodies = _particle_array("bodies", snapshot.bodies)
-        if bodies.shape != (self.bodies.count, STATE_WIDTH):
-            raise ValueError(
-                f"restore: expected bodies of shape ({self.bodies.count}, {STATE_WIDTH}) "
-                f"(pbf.solver.bodies.STATE_LAYOUT), got {bodies.shape}"
-            )
+        shape = (self.bodies.count, STATE_WIDTH)
+        bodies = _particle_array("bodies", snapshot.bodies, shape, " (pbf.solver.bodies.STATE_LAYOUT)")
         if not np.isfinite(bodies).all():
             raise ValueError("restore: the bodies' states hold a value that is not finite")
         return bodies

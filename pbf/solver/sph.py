@@ -58,8 +58,7 @@ def scaled_kernel_gradient(r: ti.template(), k):
 @ti.func
 def kernel_gradient(r: ti.template(), h: ti.f32):
     """∇W(r, h) = W'(|r|) r/|r|; zero at r = 0 (no self-force)."""
-    _, gradient = kernel_and_gradient(r, h)
-    return gradient
+    return scaled_kernel_gradient(r, kernel_scale(h))
 
 
 def kernel_np(r, h):
