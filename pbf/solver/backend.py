@@ -294,7 +294,8 @@ def choices(decisions_on_device: bool | None = None, gpu_blocks: bool | None = N
 
 @contextlib.contextmanager
 def light_compile():
-    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is all they cost."""
+    """Kernels first called inside skip the advanced IR optimisation: for those whose compile is most of what
+    they cost (a measurement decides: the same time a call, and the bits checked)."""
     config = compile_config()
     before = config.advanced_optimization
     config.advanced_optimization = False
