@@ -226,7 +226,8 @@ def test_the_outline_of_the_water_is_anti_aliased():
     edge = 100 + 0.3 * (np.arange(H) + 0.5)  # the true outline's column in each row
     assert np.abs(share.sum(axis=1) - edge).max() < 1.5  # each row's water adds up to the true width
     # Where the share crosses ½ (to a fraction of a pixel) moves along the straight edge without steps of a
-    # pixel from one row to the next: the bilinear coverage of the coarse pixels alone stepped by 1.33 pixels.
+    # pixel from one row to the next: the bilinear coverage of the coarse pixels alone steps by more
+    # (docs/RENDERING.md, "Straight edges").
     crossing = []
     for row in share[4:-4]:  # the rows the image's border leaves alone
         k = np.nonzero((row[:-1] >= 0.5) & (row[1:] < 0.5))[0][0]
