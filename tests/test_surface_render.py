@@ -206,6 +206,44 @@ def test_the_floor_blends_its_tiles_where_they_are_smaller_than_a_pixel():
     assert np.percentile(lum[near], 95) - np.percentile(lum[near], 5) > 0.6 * 255 * (0.80 - 0.63)
 
 
+def aim(renderer):
+    """A camera for the composition alone (no bodies: it reads none of it)."""
+    axes = [ti.Vector(v) for v in ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0])]
+    renderer._aim(*axes, 100.0, 50.0, ti.Vector([0.0, 1.0, 0.0]))
+
+
+def test_the_composition_changes_only_the_pixels_with_water_or_white_water_around():
+    # Patches of water and of white water (sprites' sums) apart, on a random background: a pixel shows
+    # the background as it is exactly where none of its four coarse pixels holds water or visible white,
+    # and every pixel next to a coarse pixel of white alone is whitened (the rows' spans take in both).
+    renderer = SurfaceRenderer(W, H, SPACING, SPACING**3, 0.0, 0.1, (2.0, 0.7, 0.35), (0.05, 0.3, 0.45), (0.9,) * 3)
+    shape = (renderer.coarse_height, renderer.coarse_width)
+    rng = np.random.default_rng(3)
+    water = np.zeros(shape, bool)
+    water[20:30, 40:70] = water[90:95, 5:9] = True
+    white = np.zeros(shape, np.int32)
+    white[60:62, 100:103] = 4096
+    white[10, 150] = 4096
+    renderer.smooth_depth.from_numpy(np.where(water, 1.0, FAR).astype(np.float32))
+    renderer.colour.from_numpy(rng.random(shape + (3,), np.float32))
+    background = rng.integers(0, 256, (H, W, 3), np.uint8)
+    renderer.background.from_numpy(background)
+    renderer.sprites.opacity.from_numpy(white)
+    renderer.sprites.row_used.from_numpy(white.any(axis=1).astype(np.int32))
+    aim(renderer)
+    renderer._compose()
+    image = renderer.image.to_numpy()
+    # The four coarse pixels around each image pixel (COARSE = 2; the edges clamped as the composition does).
+    first = lambda n, coarse: np.clip(np.floor((np.arange(n) + 0.5) / 2 - 0.5), 0, coarse - 2).astype(int)  # noqa: E731
+    rows, cols = first(H, shape[0])[:, None], first(W, shape[1])[None, :]
+    around = lambda mask: mask[rows, cols] | mask[rows + 1, cols] | mask[rows, cols + 1] | mask[rows + 1, cols + 1]  # noqa: E731
+    near_water, near_white = around(water), around(white > 0)
+    changed = (image != background).any(axis=2)
+    assert not changed[~near_water & ~near_white].any()
+    assert changed[near_white & ~near_water].all()
+    assert changed[near_water].mean() > 0.9  # water of random colours over a random background
+
+
 def test_the_outline_of_the_water_is_anti_aliased():
     # The composition at full resolution, alone: white water on a black background, its edge the line
     # x = 100 + 0.3 y (pixels) as the coarse pixels see it. Each image pixel takes the water's share
@@ -217,8 +255,8 @@ def test_the_outline_of_the_water_is_anti_aliased():
     renderer.smooth_depth.from_numpy(np.where(inside, 1.0, FAR).astype(np.float32))
     renderer.colour.from_numpy(np.ones(inside.shape + (3,), np.float32))
     renderer.background.from_numpy(np.zeros((H, W, 3), np.uint8))
-    camera = [ti.Vector([0.0, 0.0, 0.0]), ti.Vector([1.0, 0.0, 0.0]), ti.Vector([0.0, 1.0, 0.0])]
-    renderer._compose(*camera, ti.Vector([0.0, 0.0, -1.0]), 100.0, ti.Vector([0.0, 1.0, 0.0]))  # no bodies: unused
+    aim(renderer)
+    renderer._compose()
     share = renderer.image.to_numpy()[..., 0] / 255.0
     assert np.all(np.diff(share, axis=1) <= 1e-6)
     partial = (share > 0.1) & (share < 0.9)

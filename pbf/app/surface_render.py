@@ -200,6 +200,15 @@ class SurfaceRenderer:
         self.normal = ti.Vector.field(3, ti.f32, shape=coarse)
         """World-space unit normal of the smoothed surface (zero where there is no water)."""
         self.colour = ti.Vector.field(3, ti.f32, shape=coarse)
+        self.camera = ti.Struct.field(
+            dict(eye=vec3, right=vec3, up=vec3, forward=vec3, focal=ti.f32, coarse_focal=ti.f32, light=vec3), shape=()
+        )
+        """The current draw's view (eye, its unit axes, the focal length in pixels of the frame and of the coarse
+        image) and light, set once a draw (:meth:`_aim`) for its kernels: a vector passed to each kernel cost the
+        host more than its launch."""
+        self.span = ti.Vector.field(2, ti.i32, shape=self.coarse_height)
+        """Per coarse row, the first and last column of water or white water (first > last: none), from
+        which :meth:`_compose` tells the pixels that show the background alone."""
         full = (self.height, self.width)
         self.background = ti.Vector.field(3, ti.u8, shape=full)
         self.background_view = None
@@ -342,6 +351,18 @@ class SurfaceRenderer:
             self.solid_position[b] = position[b]
             self.solid_rotation[b] = rotation[b]
 
+    @ti.kernel
+    def _aim(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, coarse_focal: ti.f32, light: vec3):
+        self.camera[None] = ti.Struct(
+            eye=eye, right=right, up=up, forward=forward, focal=focal, coarse_focal=coarse_focal, light=light
+        )
+
+    @ti.func
+    def view(self):
+        """The draw's eye, its unit axes and the coarse image's focal length (:meth:`_aim`)."""
+        cam = self.camera[None]
+        return cam.eye, cam.right, cam.up, cam.forward, cam.coarse_focal
+
     @ti.func
     def front_depth(self, row, col, eye, right, up, forward, focal):
         """The view depth of the nearest water or body at coarse pixel (row, col) (FAR where there is
@@ -358,8 +379,10 @@ class SurfaceRenderer:
         return self.constants[None].body_colour * (BODY_AMBIENT + (1.0 - BODY_AMBIENT) * ti.max(normal.dot(light), 0.0))
 
     @ti.kernel
-    def _environment_image(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
+    def _environment_image(self):
         for row, col in self.background:
+            cam = self.camera[None]
+            eye, right, up, forward, focal = cam.eye, cam.right, cam.up, cam.forward, cam.focal
             ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
             # A pixel spans 1/focal in the image plane at unit depth: 1/(focal |ray|²) radians off axis.
             colour = self._environment(eye, ray.normalized(), 1.0 / (focal * ray.norm_sqr()), 0.0)
@@ -369,7 +392,7 @@ class SurfaceRenderer:
 
     @ti.kernel
     def _clear(self):
-        for row, col in self.depth:
+        for row, col in ti.ndrange(self.coarse_height, self.coarse_width):
             self.depth[row, col] = FAR
             self.thickness_steps[row, col] = 0
 
@@ -424,9 +447,7 @@ class SurfaceRenderer:
         return splats.chord[i] * self.constants[None].chord_scale * self.constants[None].inverse_quantum
 
     @ti.kernel
-    def _splat(
-        self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
-    ):
+    def _splat(self, splats: ti.template(), count: ti.i32):
         """The CPU backend's splat: a thread per band of ``BAND_ROWS`` coarse rows, which walks the splats
         in order and, of those whose bounding disc reaches into its band, the rows within the band and on
         each the columns within the splat's outline (:meth:`_row`). A thread alone writes its band's
@@ -437,6 +458,7 @@ class SurfaceRenderer:
         share: a hit and a miss side by side defeat the branch predictor."""
         height = self.coarse_height
         for i in range(count):
+            eye, right, up, forward, focal = self.view()
             row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
             r0, r1 = 0, 0
             if extent > 0.0:
@@ -444,6 +466,7 @@ class SurfaceRenderer:
             self.splat_rows[i] = ti.Vector([r0, r1])
         for band in range((height + BAND_ROWS - 1) // BAND_ROWS):
             low, high = band * BAND_ROWS, ti.min((band + 1) * BAND_ROWS, height)
+            eye, right, up, forward, focal = self.view()
             for i in range(count):
                 rows = self.splat_rows[i]
                 if rows[0] < high and rows[1] > low:
@@ -460,13 +483,12 @@ class SurfaceRenderer:
                                 self.thickness_steps[r, c] = steps
 
     @ti.kernel
-    def _splat_items(
-        self, splats: ti.template(), count: ti.i32, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32
-    ):
+    def _splat_items(self, splats: ti.template(), count: ti.i32):
         """:meth:`_splat` on a GPU backend: a thread per (particle, pixel) of each particle's bounding
         square (``pbf.app.splat``), by atomics; the same tests and integer sums, so the same image."""
         width, height = self.coarse_width, self.coarse_height
         for i in range(count):
+            eye, right, up, forward, focal = self.view()
             row, col, extent = self._bound(splats, i, eye, right, up, forward, focal)
             c0, c1, r0, r1 = 0, 0, 0, 0
             if extent > 0.0:
@@ -476,6 +498,7 @@ class SurfaceRenderer:
         self.footprints.scan(count)
         for item in range(self.footprints.total(count)):
             i, c, r = self.footprints.item(item, count)
+            eye, right, up, forward, focal = self.view()
             # The CPU's bands visit only the columns within the splat's outline; so does this.
             seen = splats.frame(i, eye, right, up, forward)
             a, b, d, w, c0, c1 = self._row(splats, seen, r, focal)
@@ -500,7 +523,7 @@ class SurfaceRenderer:
         Gaussian over the thickness when ``with_thickness``. ``follow_slope``: the range is centred on
         the plane through the centre pixel with the slope of its nearest neighbours along the pass (for
         a smoothed input; on the splat's raw depth one pixel's slope is the bumps of single spheres)."""
-        for row, col in depth_in:
+        for row, col in ti.ndrange(self.coarse_height, self.coarse_width):
             spacing = self.constants[None].spacing
             mu = THRESHOLD_SPACINGS * spacing
             z = depth_in[row, col]
@@ -600,10 +623,11 @@ class SurfaceRenderer:
         return best
 
     @ti.kernel
-    def _normals(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
-        for row, col in self.smooth_depth:
+    def _normals(self):
+        for row, col in ti.ndrange(self.coarse_height, self.coarse_width):
             normal = ti.Vector([0.0, 0.0, 0.0])
             if self.smooth_depth[row, col] < FAR:
+                eye, right, up, forward, focal = self.view()
                 along_row = self._difference(row, col, 0, 1, eye, right, up, forward, focal)
                 along_col = self._difference(row, col, -1, 0, eye, right, up, forward, focal)
                 normal = along_row.cross(along_col)
@@ -618,11 +642,13 @@ class SurfaceRenderer:
     # ------------------------------------------------------------------ full resolution
 
     @ti.kernel
-    def _shade(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, light: vec3):
+    def _shade(self):
         """The colour of every coarse pixel of water."""
-        for row, col in self.smooth_depth:
+        for row, col in ti.ndrange(self.coarse_height, self.coarse_width):
             z = self.smooth_depth[row, col]
             if z < FAR:
+                eye, right, up, forward, focal = self.view()
+                light = self.camera[None].light
                 normal = self.normal[row, col]
                 direction = self._ray(row, col, right, up, forward, focal, self.coarse_width, self.coarse_height)
                 point = eye + z * direction
@@ -673,38 +699,60 @@ class SurfaceRenderer:
                 self.colour[row, col] = (1.0 - fresnel) * transmitted + fresnel * reflected + 0.8 * specular
 
     @ti.kernel
-    def _compose(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, light: vec3):
+    def _compose(self):
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
         depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
         where one is nearer than the water; all of it whitened by the white water's sprites. Then the
         sprites' sums cleared for the next frame."""
+        for r in self.span:  # the columns each coarse row holds water or white water in
+            first, last = self.coarse_width, -1
+            for c in range(self.coarse_width):
+                if self.smooth_depth[r, c] < FAR or self.sprites.visible(r, c):
+                    first = ti.min(first, c)
+                    last = c
+            self.span[r] = ti.Vector([first, last])
         if ti.static(self.per_item):  # a GPU backend: a thread per pixel
             for row, col in self.image:
-                self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+                self._compose_pixel(row, col, self.camera[None])
         else:
             # The CPU backend: a thread per row, along it in order, which costs less than a loop over the
             # field's pixels for this light work per pixel (docs/RENDERING.md, "Cost").
             for row in range(self.height):
+                cam = self.camera[None]
                 for col in range(self.width):
-                    self._compose_pixel(row, col, eye, right, up, forward, focal, light)
+                    self._compose_pixel(row, col, cam)
         self.sprites.clear()
 
     @ti.func
-    def _compose_pixel(self, row, col, eye, right, up, forward, focal, light):
-        """:meth:`_compose` at one pixel."""
-        solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
-        if ti.static(self.with_solids):
-            ray = self._ray(row, col, right, up, forward, focal, self.width, self.height)
-            hit_normal = ti.Vector([0.0, 1.0, 0.0])
-            solid, hit_normal = self._hit_solid(eye, ray)  # t along a ray of forward part 1: view depth
-            solid_colour = self._solid_colour(hit_normal, light)
+    def _compose_pixel(self, row, col, cam):
+        """:meth:`_compose` at one pixel; ``cam`` the draw's (``camera``)."""
         # The four coarse pixels around this pixel's centre, and their bilinear weights.
         y = (row + 0.5) / COARSE - 0.5
         x = (col + 0.5) / COARSE - 0.5
         r0 = ti.min(ti.max(ti.cast(ti.floor(y), ti.i32), 0), self.coarse_height - 2)
         c0 = ti.min(ti.max(ti.cast(ti.floor(x), ti.i32), 0), self.coarse_width - 2)
-        fy = ti.min(ti.max(y - r0, 0.0), 1.0)
-        fx = ti.min(ti.max(x - c0, 0.0), 1.0)
+        near = 1  # with bodies, every pixel: a body may lie anywhere, and the pixel casts its ray
+        if ti.static(not self.with_solids):  # most pixels have neither water nor white water around them
+            first = ti.min(self.span[r0][0], self.span[r0 + 1][0])
+            near = first <= c0 + 1 and c0 <= ti.max(self.span[r0][1], self.span[r0 + 1][1])
+        if not near:  # the view without water, as it is
+            self.image[row, col] = self.background[row, col]
+            self.image_depth[row, col] = FAR
+        else:
+            self._compose_near(row, col, r0, c0, y - r0, x - c0, cam)
+
+    @ti.func
+    def _compose_near(self, row, col, r0, c0, fy, fx, cam):
+        """:meth:`_compose` at a pixel (row, col) with water, white water or a body near: (r0, c0) the first
+        of the four coarse pixels around it, (fy, fx) its place between them."""
+        solid, solid_colour = FAR, ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(self.with_solids):
+            ray = self._ray(row, col, cam.right, cam.up, cam.forward, cam.focal, self.width, self.height)
+            hit_normal = ti.Vector([0.0, 1.0, 0.0])
+            solid, hit_normal = self._hit_solid(cam.eye, ray)  # t along a ray of forward part 1: view depth
+            solid_colour = self._solid_colour(hit_normal, cam.light)
+        fy = ti.min(ti.max(fy, 0.0), 1.0)
+        fx = ti.min(ti.max(fx, 0.0), 1.0)
         coverage, depth, corners = 0.0, 0.0, 0
         colour = ti.Vector([0.0, 0.0, 0.0])
         for dr, dc in ti.static(ti.ndrange(2, 2)):
@@ -719,7 +767,7 @@ class SurfaceRenderer:
         if 0 < corners < 4:  # on an outline
             share = self._outline_share(r0, c0, fy, fx, solid)
         white = self.sprites.share(r0, c0, fy, fx)  # white water, over and through the water alike
-        if coverage == 0.0 and solid == FAR and white == 0.0:  # most pixels: the view without water, as it is
+        if coverage == 0.0 and solid == FAR and white == 0.0:
             self.image[row, col] = self.background[row, col]
         else:
             background = ti.cast(self.background[row, col], ti.f32) / 255.0
@@ -903,9 +951,11 @@ class SurfaceRenderer:
         eye = ti.Vector(view.eye.astype(np.float32))
         focal = view.focal_px(self.height)
         coarse_focal = view.focal_px(self.coarse_height)
+        light = ti.Vector(np.asarray(light_direction, np.float32))
+        self._aim(eye, right, up, forward, focal, coarse_focal, light)
         key = (tuple(view.eye), tuple(view.target), view.fov_deg)
         if key != self.background_view:  # the view without water and the lines: once per camera
-            self._environment_image(eye, right, up, forward, focal)
+            self._environment_image()
             self._project_segments(view, focal)
             self.background_view = key
         if self.with_solids:
@@ -920,9 +970,9 @@ class SurfaceRenderer:
         if count and self.per_item:
             if self.footprints is None or self.footprints.capacity < positions.shape[0]:
                 self.footprints = Footprints(positions.shape[0])
-            self._splat_items(self.splats, count, eye, right, up, forward, coarse_focal)
+            self._splat_items(self.splats, count)
         elif count:
-            self._splat(self.splats, count, eye, right, up, forward, coarse_focal)
+            self._splat(self.splats, count)
         # The thickness is smoothed in the first round only: it needs no edges kept, and one round of
         # σ/√rounds is smooth enough for a tint. Every pass but the first follows the surface's slope: the
         # splat's raw depth has the bumps of single spheres, a row-smoothed one no longer along rows.
@@ -958,11 +1008,10 @@ class SurfaceRenderer:
                 self._filter(
                     source, target, step_row, step_col, coarse_focal, self.thickness, 1.0, self.thickness, False, True
                 )
-        light = ti.Vector(np.asarray(light_direction, np.float32))
-        self._normals(eye, right, up, forward, coarse_focal)
-        self._shade(eye, right, up, forward, coarse_focal, light)
+        self._normals()
+        self._shade()
         if white_water is not None:
-            self.sprites.splat(white_water, self, view, self.exposure)
-        self._compose(eye, right, up, forward, focal, light)
+            self.sprites.splat(white_water, self, self.exposure)
+        self._compose()
         if len(self.segment_points):
             self._lines()

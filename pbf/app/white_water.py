@@ -594,23 +594,14 @@ class Sprites:
                     self.row_used[row] = 1
 
     @ti.kernel
-    def _splat(
-        self,
-        ww: ti.template(),
-        front: ti.template(),
-        eye: vec3,
-        right: vec3,
-        up: vec3,
-        forward: vec3,
-        focal: ti.f32,
-        exposure: ti.f32,
-    ):
+    def _splat(self, ww: ti.template(), front: ti.template(), exposure: ti.f32):
         """Every sprite's opacity into the sums. On the CPU a thread per sprite walks its rows, each over the
         columns its streak can reach there (a diagonal streak's rectangle is mostly empty); on a GPU a thread
         per (sprite, pixel) of the sprites' rectangles (``pbf.app.splat.Footprints``)."""
         live = ww.live[None]
         if ti.static(self.per_item):
             for p in range(live):
+                eye, right, up, forward, focal = front.view()
                 a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 c0, c1, r0, r1 = 0, 0, 0, 0
                 if sigma > 0.0:
@@ -624,6 +615,7 @@ class Sprites:
                 self._add(ti.Vector([s[0], s[1]]), ti.Vector([s[2], s[3]]), s[4], s[5], row, col)
         else:
             for p in range(live):
+                eye, right, up, forward, focal = front.view()
                 a, b, sigma, peak = self._sprite(ww, front, p, eye, right, up, forward, focal, exposure)
                 if sigma > 0.0:
                     c0, c1, r0, r1 = self._bounds(a, b, sigma)
@@ -659,6 +651,11 @@ class Sprites:
         return white
 
     @ti.func
+    def visible(self, row, col):
+        """Whether coarse pixel (row, col) holds enough white for a frame's pixel next to it to show any."""
+        return self.row_used[row] != 0 and self.opacity[row, col] >= FAINTEST
+
+    @ti.func
     def whiten(self, colour, white):
         """``colour`` (RGB in [0, 1]) whitened by the share ``white`` (:meth:`share`)."""
         return colour + white * (ti.Vector(WHITE_RGB) - colour)
@@ -673,14 +670,12 @@ class Sprites:
                     self.opacity[row, col] = 0
                 self.row_used[row] = 0
 
-    def splat(self, white_water: WhiteWater, front, view, exposure_s: float) -> None:
-        """The live diffuse particles of ``white_water`` into the sums, seen through ``view``, in front of
-        or behind the nearest water or body of ``front`` (a renderer with a ``front_depth`` function of a
-        coarse pixel, ``pbf.app.surface_render.SurfaceRenderer``)."""
-        right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
-        eye = ti.Vector(view.eye.astype(np.float32))
-        focal = view.focal_px(self.height)  # of the coarse image
+    def splat(self, white_water: WhiteWater, front, exposure_s: float) -> None:
+        """The live diffuse particles of ``white_water`` into the sums, seen through the view of ``front``'s
+        draw, in front of or behind the nearest water or body there (``front``: a renderer whose ``view``
+        function gives its draw's eye, axes and the coarse image's focal length, and whose ``front_depth``
+        the depth at a coarse pixel, ``pbf.app.surface_render.SurfaceRenderer``)."""
         if self.per_item and (self.footprints is None or self.footprints.capacity < white_water.position.shape[0]):
             self.footprints = Footprints(white_water.position.shape[0])
             self.seen = ti.Vector.field(6, ti.f32, shape=white_water.position.shape[0])
-        self._splat(white_water, front, eye, right, up, forward, focal, exposure_s)
+        self._splat(white_water, front, exposure_s)
