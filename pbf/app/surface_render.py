@@ -702,9 +702,10 @@ class SurfaceRenderer:
     def _compose(self):
         """Full resolution: water where the coarse coverage interpolates to ½ or more, its colour and
         depth interpolated from the coarse pixels of water; elsewhere the background, or a rigid body
-        where one is nearer than the water; all of it whitened by the white water's sprites. Then the
-        sprites' sums cleared for the next frame."""
-        for r in self.span:  # the columns each coarse row holds water or white water in
+        where one is nearer than the water; all of it whitened by the white water's sprites. First each
+        coarse row's span of water and white water, so that a pixel far from both copies the background
+        at once; last the sprites' sums cleared for the next frame."""
+        for r in range(self.coarse_height):
             first, last = self.coarse_width, -1
             for c in range(self.coarse_width):
                 if self.smooth_depth[r, c] < FAR or self.sprites.visible(r, c):
