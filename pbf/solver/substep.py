@@ -22,7 +22,7 @@ class SubstepKernels:
         self.density, self.divergence, self.iterations, self.postprocess = density, divergence, iterations, postprocess
         self.prepare_apart = prepare_apart
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
-        self._prepare = Launcher(self._prepare_kernel)
+        self._prepare = Launcher(self._prepare_kernel) if prepare_apart else None
         self._iterations = Launcher(self._iterations_kernel)
         self._divergence = Launcher(self._divergence_kernel)
 
