@@ -1,5 +1,6 @@
 """The substep's three kernels, the same on every backend, composed of the stages' ``@ti.func`` loops
-(docs/METHOD.md, "One substep on every backend")."""
+(docs/METHOD.md, "One substep on every backend"); on the host's path with solids the first kernel's
+denominators are a fourth (``SubstepKernels.prepare_apart``)."""
 
 import taichi as ti
 
@@ -12,10 +13,16 @@ from pbf.solver.launch import Launcher
 class SubstepKernels:
     """The kernels that run the stages given, each a ``pbf.solver`` stage object."""
 
-    def __init__(self, state, integrator, grid, divergence, density, iterations, postprocess):
+    def __init__(self, state, integrator, grid, divergence, density, iterations, postprocess, prepare_apart=False):
+        """``prepare_apart``: the denominators at x* in a call of their own after lines 1-7's, not in the same
+        kernel: a shorter cold start where they hold a solid's 27-term ghost, Taichi's whole-kernel analyses
+        growing faster than a kernel's length (docs/BENCHMARKS.md, "Start-up: cold and warm"); for the host's
+        path, where a call costs little. The same loops either way, the same results bit for bit."""
         self.state, self.integrator, self.grid = state, integrator, grid
         self.density, self.divergence, self.iterations, self.postprocess = density, divergence, iterations, postprocess
+        self.prepare_apart = prepare_apart
         self._find_neighbours = Launcher(self._find_neighbours_kernel)
+        self._prepare = Launcher(self._prepare_kernel) if prepare_apart else None
         self._iterations = Launcher(self._iterations_kernel)
         self._divergence = Launcher(self._divergence_kernel)
 
@@ -28,6 +35,8 @@ class SubstepKernels:
         count = divergence_iterations if features.divergence else 0  # 0: a restore runs none
         entries = self.grid.neighbours
         self._find_neighbours(entries=entries, dt=dt, gx=gx, gy=gy, gz=gz, features=features, count=count)
+        if self.prepare_apart:
+            self._prepare(entries, dt, features.divergence, count)
         per_call = self.divergence.PER_CALL
         calls(lambda it: self._divergence(entries, dt, it, count), per_call, count, per_call)
 
@@ -90,7 +99,13 @@ class SubstepKernels:
         if ti.static(features.divergence):  # ours: v made divergence-free at x, its first iterations,
             self.divergence.start(state.x, entries, dt, count)
             self.divergence.iterate(state.x, entries, dt, 0, count)
-        self._predict_and_prepare(entries, dt, features.divergence, 0, count)
+        if ti.static(not self.prepare_apart):
+            self._predict_and_prepare(entries, dt, features.divergence, 0, count)
+
+    @ti.kernel
+    def _prepare_kernel(self, entries: NeighbourList, dt: ti.f32, divergence: ti.template(), count: ti.i32):
+        """The end of the first kernel's work as a call of its own (``prepare_apart``)."""
+        self._predict_and_prepare(entries, dt, divergence, 0, count)
 
     @ti.kernel
     def _divergence_kernel(self, entries: NeighbourList, dt: ti.f32, first: ti.i32, count: ti.i32):
