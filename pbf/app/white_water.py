@@ -41,7 +41,6 @@ from pbf.app.splat import Footprints, PrefixSum
 from pbf.solver import NeighbourList, scene_constants
 from pbf.solver import allocation as bucket
 
-vec3 = ti.types.vector(3, ti.f32)
 SPRAY, FOAM, BUBBLE = 0, 1, 2
 """The kinds of diffuse particle (``kind``)."""
 TRAPPED_AIR = (1.0, 4.0)
