@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import taichi as ti
 
-from pbf.app import cli
+from pbf.app import cli, pinhole
 from pbf.app.render import LIGHT_DIRECTION, View
 from pbf.app.surface_render import FAR, SPLAT_RADIUS_SPACINGS, SurfaceRenderer
 
@@ -208,8 +208,7 @@ def test_the_floor_blends_its_tiles_where_they_are_smaller_than_a_pixel():
 
 def aim(renderer):
     """A camera for the composition alone (no bodies: it reads none of it)."""
-    axes = [ti.Vector(v) for v in ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0])]
-    renderer._aim(*axes, 100.0, 50.0, ti.Vector([0.0, 1.0, 0.0]))
+    pinhole.aim(renderer.camera, View(np.zeros(3), np.array([0.0, 0.0, -1.0]), 60.0), H, (0.0, 1.0, 0.0))
 
 
 def test_the_composition_changes_only_the_pixels_with_water_or_white_water_around():

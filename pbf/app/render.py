@@ -24,7 +24,7 @@ import taichi as ti
 
 from pbf.app.constants import colour, padded
 from pbf.app.legend import draw_legend
-from pbf.app.pinhole import to_pixel
+from pbf.app.pinhole import aim, camera_field, to_pixel
 from pbf.app.splat import Footprints, per_item
 from pbf.app.surface_render import BODY_FLOOR, SEGMENT_FLOOR, SurfaceRenderer
 from pbf.app.white_water import WhiteWater
@@ -35,7 +35,6 @@ from pbf.solver import quaternion_matrix_np, scene_constants
 EMPTY = np.iinfo(np.int64).max
 LIGHT_DIRECTION = np.array([0.35, 0.8, 0.5]) / np.linalg.norm([0.35, 0.8, 0.5])
 LUT_SIZE = 256
-vec3 = ti.types.vector(3, ti.f32)
 BODY_POINT_FLOOR = 2**12
 """The fewest rigid-body surface points :class:`BodyPoints` allocates."""
 
@@ -205,18 +204,8 @@ class SphereRenderer:
         self.per_item = per_item()
         """Splat a thread per (particle, pixel) (``pbf.app.splat``; GPU backends), else per particle."""
         self.footprints = None
-        self.camera = ti.Struct.field(
-            {"eye": vec3, "right": vec3, "up": vec3, "forward": vec3, "focal": ti.f32}, shape=()
-        )
-        """The view of the current draw (eye, its unit axes, the focal length in pixels), set once a draw."""
-
-    @ti.kernel
-    def _aim(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32):
-        self.camera[None].eye = eye
-        self.camera[None].right = right
-        self.camera[None].up = up
-        self.camera[None].forward = forward
-        self.camera[None].focal = focal
+        self.camera = camera_field()
+        """The view and light of the current draw (``pbf.app.pinhole.aim``), set once a draw."""
 
     def _allocate(self, capacity: int) -> None:
         if capacity > self.capacity:
@@ -376,10 +365,10 @@ class SphereRenderer:
         x: ti.template(),
         colours: ti.template(),
         radius: ti.f32,
-        light: vec3,
         out: ti.types.ndarray(dtype=ti.u32, ndim=2),
     ):
         cam = self.camera[None]
+        light = cam.light
         for col, y in self.keys:
             key = self.keys[col, y]
             word = pack_rgba(self.constants[None].background)  # the same for all: most pixels are background
@@ -463,9 +452,7 @@ class SphereRenderer:
 
     def _draw(self, view: View, positions, colours, count: int, radius_m: float) -> None:
         """The image into ``image`` (on the device on a GPU backend)."""
-        right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
-        eye = ti.Vector(view.eye.astype(np.float32))
-        self._aim(eye, right, up, forward, view.focal_px(self.height))
+        aim(self.camera, view, self.height, LIGHT_DIRECTION)
         self._clear()
         if count:
             self._allocate(positions.shape[0])
@@ -474,7 +461,7 @@ class SphereRenderer:
             else:
                 self._identity(count)
             self._splat(positions, count, radius_m)
-        self._shade(positions, colours, radius_m, ti.Vector(LIGHT_DIRECTION.astype(np.float32)), self.image)
+        self._shade(positions, colours, radius_m, self.image)
         if self.segment_count:
             self._lines(self.image)
 

@@ -48,12 +48,11 @@ import numpy as np
 import taichi as ti
 
 from pbf.app.constants import colour
+from pbf.app.pinhole import aim, camera_field
 from pbf.app.splat import Ellipsoids, Footprints, per_item
 from pbf.app.white_water import Sprites
 from pbf.solver import allocation as bucket
 from pbf.solver import scene_constants
-
-vec3 = ti.types.vector(3, ti.f32)
 
 FAR = 1e30
 """Depth of a pixel no water covers, m."""
@@ -200,12 +199,9 @@ class SurfaceRenderer:
         self.normal = ti.Vector.field(3, ti.f32, shape=coarse)
         """World-space unit normal of the smoothed surface (zero where there is no water)."""
         self.colour = ti.Vector.field(3, ti.f32, shape=coarse)
-        self.camera = ti.Struct.field(
-            dict(eye=vec3, right=vec3, up=vec3, forward=vec3, focal=ti.f32, coarse_focal=ti.f32, light=vec3), shape=()
-        )
-        """The current draw's view (eye, its unit axes, the focal length in pixels of the frame and of the coarse
-        image) and light, set once a draw (:meth:`_aim`) for its kernels: a vector passed to each kernel cost the
-        host more than its launch."""
+        self.camera = camera_field()
+        """The view (the focal lengths of the frame and of the coarse image) and light of the current draw
+        (``pbf.app.pinhole.aim``), set once a draw for its kernels and the white water's sprites."""
         self.span = ti.Vector.field(2, ti.i32, shape=self.coarse_height)
         """Per coarse row, the first and last column of water or white water (first > last: none), from
         which :meth:`_compose` tells the pixels that show the background alone."""
@@ -351,15 +347,9 @@ class SurfaceRenderer:
             self.solid_position[b] = position[b]
             self.solid_rotation[b] = rotation[b]
 
-    @ti.kernel
-    def _aim(self, eye: vec3, right: vec3, up: vec3, forward: vec3, focal: ti.f32, coarse_focal: ti.f32, light: vec3):
-        self.camera[None] = ti.Struct(
-            eye=eye, right=right, up=up, forward=forward, focal=focal, coarse_focal=coarse_focal, light=light
-        )
-
     @ti.func
     def view(self):
-        """The draw's eye, its unit axes and the coarse image's focal length (:meth:`_aim`)."""
+        """The draw's eye, its unit axes and the coarse image's focal length (``camera``)."""
         cam = self.camera[None]
         return cam.eye, cam.right, cam.up, cam.forward, cam.coarse_focal
 
@@ -948,12 +938,9 @@ class SurfaceRenderer:
         self, view, positions, count: int, light_direction, neighbourhood=None, velocities=None, white_water=None
     ) -> None:
         """Like :meth:`render`, into the device field ``image`` only (row 0 at the top)."""
-        right, up, forward = (ti.Vector(v.astype(np.float32)) for v in view.basis())
-        eye = ti.Vector(view.eye.astype(np.float32))
         focal = view.focal_px(self.height)
         coarse_focal = view.focal_px(self.coarse_height)
-        light = ti.Vector(np.asarray(light_direction, np.float32))
-        self._aim(eye, right, up, forward, focal, coarse_focal, light)
+        aim(self.camera, view, self.height, light_direction, self.coarse_height)
         key = (tuple(view.eye), tuple(view.target), view.fov_deg)
         if key != self.background_view:  # the view without water and the lines: once per camera
             self._environment_image()

@@ -84,8 +84,8 @@ class Diagnostics:
     def compute(self, neighbours) -> dict:
         """Density error (max(ρ/ρ0 − 1, 0), mean and max), speed, kinetic energy and neighbour counts."""
         # Without Taichi's advanced IR optimisation: a density sum with every boundary's ghost inlined
-        # compiles in less than half the time, and runs once a frame in the same time with the same bits
-        # (docs/BENCHMARKS.md, "Start-up: cold and warm").
+        # compiles much faster, and runs once a frame in the same time with the same bits (measured:
+        # docs/BENCHMARKS.md, "Start-up: cold and warm").
         with backend.light_compile():
             values = self._reduce(neighbours)
         sums = [float(values[k]) + float(values[3 + k]) for k in range(3)]
